@@ -1,0 +1,61 @@
+"""Typed errors: every error loceval raises on purpose derives from :class:`LocevalError`.
+
+Messages are one sentence that names the offending value and says what to do; the CLI
+prints them without a traceback (exit code 1) and the service maps them to 4xx problems.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+__all__ = [
+    "AlignmentError",
+    "AssociationError",
+    "InputError",
+    "LocevalError",
+    "MetricError",
+    "ReaderError",
+    "TrajectoryError",
+]
+
+
+class LocevalError(Exception):
+    """Base for every error this project raises on purpose."""
+
+    code: ClassVar[str] = "error"
+
+
+class InputError(LocevalError):
+    """User data or options that cannot be used."""
+
+    code: ClassVar[str] = "input.invalid"
+
+
+class ReaderError(InputError):
+    """A file, bag, topic or column that cannot be read."""
+
+    code: ClassVar[str] = "input.unreadable"
+
+
+class TrajectoryError(InputError):
+    """Arrays that do not form a valid trajectory (shape, NaN, too few poses)."""
+
+    code: ClassVar[str] = "input.trajectory"
+
+
+class AssociationError(LocevalError):
+    """Reference and estimate cannot be matched in time."""
+
+    code: ClassVar[str] = "association.no_matches"
+
+
+class AlignmentError(LocevalError):
+    """The spatial alignment is undetermined (degenerate geometry, too few poses)."""
+
+    code: ClassVar[str] = "alignment.degenerate"
+
+
+class MetricError(LocevalError):
+    """A metric cannot be computed with the given parameters."""
+
+    code: ClassVar[str] = "metric.invalid"

@@ -1,0 +1,539 @@
+"""The one evaluation pipeline: associate, align, measure; used by the CLI, service and jobs."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+
+import numpy as np
+
+from loceval import __version__
+from loceval._typing import BoolArray, IntArray
+from loceval.alignment import Alignment, AlignMethod, AlignWindow, align
+from loceval.association import (
+    DEFAULT_MAX_DT_NS,
+    DEFAULT_MAX_GAP_NS,
+    Association,
+    AssociationMethod,
+    associate,
+)
+from loceval.errors import InputError
+from loceval.geometry import SimilarityTransform
+from loceval.metrics import (
+    DEFAULT_THRESHOLDS_M,
+    ErrorSeries,
+    RPEUnit,
+    WorstPose,
+    compute_ate,
+    compute_drift,
+    compute_rpe,
+    greatest_errors,
+    rpe_pairs,
+    share_within,
+)
+from loceval.trajectory import Trajectory
+
+__all__ = [
+    "EstimateResult",
+    "EvaluationConfig",
+    "EvaluationResult",
+    "FailingSpan",
+    "Tolerance",
+    "Verdict",
+    "evaluate",
+    "parse_offset",
+]
+
+_NS_PER_S = 1_000_000_000
+
+ProgressCallback = Callable[[str, float], None]
+"""Called with a stage name and the fraction of the evaluation done (0..1)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Tolerance:
+    """An application tolerance: ``share`` of the poses within ``distance_m``.
+
+    ``Tolerance(0.10, 0.95)`` reads "95 % of poses within 0.10 m" (CLI ``0.10@95``).
+    """
+
+    distance_m: float
+    share: float
+
+    def __post_init__(self) -> None:
+        """Check the values."""
+        if not (np.isfinite(self.distance_m) and self.distance_m > 0):
+            msg = f"The tolerance distance must be positive metres, got {self.distance_m!r}."
+            raise InputError(msg)
+        if not (0.0 < self.share <= 1.0):
+            msg = f"The tolerance share must be in (0, 100] percent, got {self.share * 100!r}."
+            raise InputError(msg)
+
+    @classmethod
+    def parse(cls, text: str) -> Tolerance:
+        """Parse ``"0.10@95"`` (metres @ percent); a bare ``"0.10"`` means 95 %.
+
+        Raises:
+            InputError: the text has another form.
+        """
+        match = re.fullmatch(r"\s*([0-9.eE+-]+)\s*(?:m)?\s*(?:@\s*([0-9.eE+-]+)\s*%?)?\s*", text)
+        try:
+            if match is None:
+                raise ValueError(text)  # noqa: TRY301  (one message for every bad form)
+            distance = float(match.group(1))
+            share = float(match.group(2)) / 100.0 if match.group(2) else 0.95
+        except ValueError:
+            msg = (
+                f"--tolerance takes METRES@PERCENT like 0.10@95 (95 % of poses within "
+                f"0.10 m), got {text!r}."
+            )
+            raise InputError(msg) from None
+        return cls(distance, share)
+
+    def __str__(self) -> str:
+        """Return the words a non-expert reads."""
+        return f"{self.share * 100:g} % of poses within {self.distance_m:g} m"
+
+
+@dataclass(frozen=True, slots=True)
+class FailingSpan:
+    """A stretch of consecutive matched poses whose error exceeds the tolerance."""
+
+    start_s: float
+    end_s: float
+    poses: int
+    max_error_m: float
+    max_error_position_xyz: tuple[float, float, float]
+
+    def to_dict(self) -> dict[str, object]:
+        """Return the JSON form."""
+        return {
+            "start_s": self.start_s,
+            "end_s": self.end_s,
+            "poses": self.poses,
+            "max_error_m": self.max_error_m,
+            "max_error_position": list(self.max_error_position_xyz),
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """Pass or fail against a tolerance, and where on the path it fails."""
+
+    tolerance: Tolerance
+    share_within: float
+    passed: bool
+    failing_spans: tuple[FailingSpan, ...]
+
+    @property
+    def summary(self) -> str:
+        """One sentence for a non-expert."""
+        verb = "PASS" if self.passed else "FAIL"
+        return (
+            f"{verb}: {self.share_within * 100:.1f} % of poses are within "
+            f"{self.tolerance.distance_m:g} m (required: {self.tolerance.share * 100:g} %)."
+        )
+
+    def to_dict(self) -> dict[str, object]:
+        """Return the JSON form."""
+        return {
+            "tolerance_m": self.tolerance.distance_m,
+            "required_share": self.tolerance.share,
+            "share_within": self.share_within,
+            "passed": self.passed,
+            "summary": self.summary,
+            "failing_spans": [s.to_dict() for s in self.failing_spans],
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class EvaluationConfig:
+    """Every option of an evaluation (the CLI's and the service's options).
+
+    Attributes:
+        association: how poses are matched in time.
+        max_dt_s: nearest matching's tolerance, seconds.
+        max_gap_s: longest reference interval bridged by interpolation, seconds.
+        time_offset_s: added to every estimate's stamps, seconds.
+        align: the alignment method.
+        align_first: the leading window that estimates the alignment.
+        calibrate_at_s: for ``calibrate``, seconds after the first matched pose.
+        reference_offset: rigid-body -> sensor offset applied to the reference poses.
+        rpe_delta: RPE step.
+        rpe_unit: what the RPE step counts.
+        rpe_all_pairs: every pose starts an RPE pair (default: consecutive segments).
+        thresholds_m: distances for the "share within" figures.
+        tolerance: the application tolerance for the verdict, if any.
+        worst_count: how many greatest errors to list.
+    """
+
+    association: AssociationMethod = AssociationMethod.INTERPOLATE
+    max_dt_s: float = DEFAULT_MAX_DT_NS / _NS_PER_S
+    max_gap_s: float = DEFAULT_MAX_GAP_NS / _NS_PER_S
+    time_offset_s: float = 0.0
+    align: AlignMethod = AlignMethod.SE3
+    align_first: AlignWindow = field(default_factory=AlignWindow)
+    calibrate_at_s: float | None = None
+    reference_offset: SimilarityTransform | None = None
+    rpe_delta: float = 1
+    rpe_unit: RPEUnit = RPEUnit.FRAMES
+    rpe_all_pairs: bool = False
+    thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
+    tolerance: Tolerance | None = None
+    worst_count: int = 10
+
+    def __post_init__(self) -> None:
+        """Check the values a user can get wrong."""
+        for name in ("max_dt_s", "max_gap_s", "time_offset_s"):
+            value = getattr(self, name)
+            if not np.isfinite(value):
+                msg = f"{name} must be a finite number of seconds, got {value!r}."
+                raise InputError(msg)
+        if self.max_dt_s < 0 or self.max_gap_s <= 0:
+            msg = (
+                f"--max-dt must not be negative and --max-gap must be positive, got "
+                f"{self.max_dt_s!r} and {self.max_gap_s!r}."
+            )
+            raise InputError(msg)
+        if any(not (np.isfinite(t) and t > 0) for t in self.thresholds_m):
+            msg = f"--thresholds must be positive metres, got {self.thresholds_m!r}."
+            raise InputError(msg)
+        if self.worst_count < 0:
+            msg = f"worst_count must not be negative, got {self.worst_count!r}."
+            raise InputError(msg)
+
+    def to_dict(self) -> dict[str, object]:
+        """Return the options as JSON (for the report's provenance)."""
+        return {
+            "association": self.association.value,
+            "max_dt_s": self.max_dt_s,
+            "max_gap_s": self.max_gap_s,
+            "time_offset_s": self.time_offset_s,
+            "align": self.align.value,
+            "align_first": str(self.align_first),
+            "calibrate_at_s": self.calibrate_at_s,
+            "reference_offset": None
+            if self.reference_offset is None
+            else self.reference_offset.to_dict(),
+            "rpe_delta": self.rpe_delta,
+            "rpe_unit": self.rpe_unit.value,
+            "rpe_all_pairs": self.rpe_all_pairs,
+            "thresholds_m": list(self.thresholds_m),
+            "tolerance": None
+            if self.tolerance is None
+            else {"distance_m": self.tolerance.distance_m, "share": self.tolerance.share},
+        }
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class EstimateResult:
+    """Everything measured for one estimate.
+
+    Attributes:
+        estimate: the estimate as read.
+        association: the matched pairs (reference interpolated at the estimate's stamps).
+        alignment: the transform found.
+        aligned: the matched estimate poses after alignment (same stamps as
+            ``association.reference``).
+        ate_translation: ATE per matched pose, metres.
+        ate_rotation: ATE rotation per matched pose, degrees (None: position-only).
+        rpe_translation: RPE per pair, metres.
+        rpe_rotation: RPE rotation per pair, degrees (None: position-only).
+        rpe_index: (K, 2) matched-pose indices of each RPE pair.
+        drift: drift per segment, percent (None: path too short).
+        within: share of ATE translation errors ≤ each threshold.
+        worst: the greatest ATE translation errors, largest first.
+        verdict: pass/fail against the tolerance, if one was given.
+        warnings: what the user should know (dropped poses, gaps, reader notes).
+    """
+
+    estimate: Trajectory
+    association: Association
+    alignment: Alignment
+    aligned: Trajectory
+    ate_translation: ErrorSeries
+    ate_rotation: ErrorSeries | None
+    rpe_translation: ErrorSeries
+    rpe_rotation: ErrorSeries | None
+    rpe_index: IntArray
+    drift: ErrorSeries | None
+    within: Mapping[float, float]
+    worst: tuple[WorstPose, ...]
+    verdict: Verdict | None
+    warnings: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        """Return the estimate's name."""
+        return self.estimate.name
+
+    @property
+    def reference(self) -> Trajectory:
+        """Return the reference at the matched stamps."""
+        return self.association.reference
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class EvaluationResult:
+    """A whole evaluation: one reference, one or more estimates, and how it was made."""
+
+    reference: Trajectory
+    estimates: tuple[EstimateResult, ...]
+    config: EvaluationConfig
+    reference_warnings: tuple[str, ...]
+    created_at: str
+    loceval_version: str = __version__
+    inputs: tuple[Mapping[str, object], ...] = ()
+
+    def to_dict(self) -> dict[str, object]:
+        """Return the CLI's ``--json`` document (also the service's result schema)."""
+        ref = self.reference
+        return {
+            "loceval_version": self.loceval_version,
+            "created_at": self.created_at,
+            "options": self.config.to_dict(),
+            "inputs": [dict(i) for i in self.inputs],
+            "reference": {
+                "name": ref.name,
+                "source": ref.source,
+                "poses": len(ref),
+                "duration_s": ref.duration_s,
+                "length_m": ref.length_m,
+                "rate_hz": ref.rate_hz,
+                "frame_id": ref.frame_id,
+                "gaps": [
+                    {
+                        "start_s": (a - int(ref.stamps_ns[0])) / _NS_PER_S,
+                        "duration_s": (b - a) / _NS_PER_S,
+                    }
+                    for a, b in ref.gaps(round(self.config.max_gap_s * _NS_PER_S))
+                ],
+                "warnings": list(self.reference_warnings),
+            },
+            "estimates": [_estimate_dict(e, self.config) for e in self.estimates],
+        }
+
+
+def parse_offset(text: str) -> SimilarityTransform:
+    """Parse ``"x y z qx qy qz qw"`` (or ``"x y z"``) into a rigid offset.
+
+    Raises:
+        InputError: not 3 or 7 numbers, or a quaternion that is not unit.
+    """
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        values = []
+    if len(values) not in (3, 7) or not np.isfinite(values).all():
+        msg = (
+            f'--offset takes "x y z qx qy qz qw" in metres and a unit quaternion '
+            f'(or just "x y z"), got {text!r}.'
+        )
+        raise InputError(msg)
+    quat = np.array(values[3:] if len(values) == 7 else [0.0, 0.0, 0.0, 1.0])
+    norm = float(np.linalg.norm(quat))
+    if abs(norm - 1.0) > 1e-3:
+        msg = f"--offset quaternion must be unit (x y z w), its norm is {norm:.6g}."
+        raise InputError(msg)
+    return SimilarityTransform.from_pose(np.array(values[:3]), quat / norm)
+
+
+def evaluate(
+    reference: Trajectory,
+    estimates: Sequence[Trajectory],
+    config: EvaluationConfig | None = None,
+    *,
+    inputs: Sequence[Mapping[str, object]] = (),
+    progress: ProgressCallback | None = None,
+) -> EvaluationResult:
+    """Evaluate one or more estimates against a reference.
+
+    Args:
+        reference: the ground truth.
+        estimates: the systems under evaluation (names should differ).
+        config: the options; defaults as on the CLI.
+        inputs: provenance of the input files (path, sha256, bytes) for the result.
+        progress: called with (stage, fraction done).
+
+    Returns:
+        The evaluation result.
+
+    Raises:
+        InputError: no estimate given.
+        AssociationError: an estimate does not overlap the reference in time.
+        AlignmentError: the alignment is undetermined.
+        MetricError: a metric cannot be computed (RPE delta too long).
+    """
+    config = config or EvaluationConfig()
+    if not estimates:
+        msg = "Give at least one estimate to evaluate against the reference."
+        raise InputError(msg)
+    report = progress or (lambda _stage, _fraction: None)
+    ref_notes = list(reference.warnings)
+    if config.reference_offset is not None:
+        reference = reference.with_body_offset(config.reference_offset)
+        ref_notes.append("Device offset applied to the reference (rigid body -> sensor).")
+    gaps = reference.gaps(round(config.max_gap_s * _NS_PER_S))
+    if gaps:
+        longest = max(b - a for a, b in gaps) / _NS_PER_S
+        ref_notes.append(
+            f"The reference has {len(gaps)} gaps longer than {config.max_gap_s:g} s "
+            f"(tracking loss; longest {longest:.3f} s); estimate poses in them are not "
+            "evaluated."
+        )
+    results = []
+    for k, estimate in enumerate(estimates):
+        report(f"evaluating {estimate.name or k}", k / len(estimates))
+        results.append(_evaluate_one(reference, estimate, config))
+    report("done", 1.0)
+    return EvaluationResult(
+        reference=reference,
+        estimates=tuple(results),
+        config=config,
+        reference_warnings=tuple(ref_notes),
+        created_at=datetime.now(UTC).isoformat(timespec="seconds"),
+        inputs=tuple(inputs),
+    )
+
+
+def _evaluate_one(
+    reference: Trajectory, estimate: Trajectory, config: EvaluationConfig
+) -> EstimateResult:
+    notes = list(estimate.warnings)
+    matched = associate(
+        reference,
+        estimate,
+        method=config.association,
+        max_dt_ns=round(config.max_dt_s * _NS_PER_S),
+        max_gap_ns=round(config.max_gap_s * _NS_PER_S),
+        offset_ns=round(config.time_offset_s * _NS_PER_S),
+    )
+    notes.extend(_association_notes(matched, len(estimate)))
+    alignment = align(
+        matched.reference,
+        matched.estimate,
+        method=config.align,
+        window=config.align_first,
+        calibrate_at_s=config.calibrate_at_s,
+    )
+    notes.extend(alignment.warnings)
+    aligned = matched.estimate.transformed(alignment.transform)
+    ref = matched.reference
+    ate_t, ate_r = compute_ate(ref, aligned)
+    if ate_r is None:
+        side = "reference" if ref.quat_xyzw is None else "estimate"
+        notes.append(f"Rotation errors not computed: the {side} has no orientations.")
+    i, j = rpe_pairs(
+        ref, delta=config.rpe_delta, unit=config.rpe_unit, all_pairs=config.rpe_all_pairs
+    )
+    rpe_t, rpe_r = compute_rpe(
+        ref, aligned, delta=config.rpe_delta, unit=config.rpe_unit, pairs=(i, j)
+    )
+    drift = compute_drift(ref, aligned)
+    verdict = None if config.tolerance is None else _verdict(ate_t, ref, config.tolerance)
+    return EstimateResult(
+        estimate=estimate,
+        association=matched,
+        alignment=alignment,
+        aligned=aligned,
+        ate_translation=ate_t,
+        ate_rotation=ate_r,
+        rpe_translation=rpe_t,
+        rpe_rotation=rpe_r,
+        rpe_index=np.stack([i, j], axis=1),
+        drift=drift,
+        within=share_within(ate_t, config.thresholds_m),
+        worst=greatest_errors(ate_t, ref, count=config.worst_count),
+        verdict=verdict,
+        warnings=tuple(notes),
+    )
+
+
+def _association_notes(matched: Association, total: int) -> list[str]:
+    notes = []
+    if matched.dropped_outside:
+        notes.append(
+            f"{matched.dropped_outside} of {total} estimate poses lie outside the "
+            "reference's time range and were not evaluated."
+        )
+    if matched.dropped_gap:
+        notes.append(
+            f"{matched.dropped_gap} of {total} estimate poses fall in reference gaps longer "
+            f"than {matched.max_gap_ns / _NS_PER_S:g} s (tracking loss) and were not evaluated."
+        )
+    if matched.dropped_unmatched:
+        notes.append(
+            f"{matched.dropped_unmatched} of {total} estimate poses have no reference pose "
+            f"within {matched.max_dt_ns / _NS_PER_S:g} s and were not evaluated."
+        )
+    return notes
+
+
+def _verdict(ate: ErrorSeries, reference: Trajectory, tolerance: Tolerance) -> Verdict:
+    share = share_within(ate, [tolerance.distance_m])[tolerance.distance_m]
+    over: BoolArray = ate.values > tolerance.distance_m
+    spans = []
+    if over.any():
+        edges = np.diff(np.concatenate(([0], over.astype(np.int8), [0])))
+        starts = np.flatnonzero(edges == 1)
+        ends = np.flatnonzero(edges == -1)  # exclusive
+        t0 = int(reference.stamps_ns[0])
+        for a, b in zip(starts, ends, strict=True):  # one iteration per failing stretch
+            k = a + int(np.argmax(ate.values[a:b]))
+            pos = reference.positions_xyz[k]
+            spans.append(
+                FailingSpan(
+                    start_s=(int(ate.stamps_ns[a]) - t0) / _NS_PER_S,
+                    end_s=(int(ate.stamps_ns[b - 1]) - t0) / _NS_PER_S,
+                    poses=int(b - a),
+                    max_error_m=float(ate.values[k]),
+                    max_error_position_xyz=(float(pos[0]), float(pos[1]), float(pos[2])),
+                )
+            )
+    spans.sort(key=lambda s: s.max_error_m, reverse=True)
+    return Verdict(
+        tolerance=tolerance,
+        share_within=share,
+        passed=share >= tolerance.share,
+        failing_spans=tuple(spans),
+    )
+
+
+def _stats_or_none(series: ErrorSeries | None) -> dict[str, float | int] | None:
+    return None if series is None else series.stats.to_dict()
+
+
+def _estimate_dict(e: EstimateResult, config: EvaluationConfig) -> dict[str, object]:
+    matched = e.association
+    return {
+        "name": e.estimate.name,
+        "source": e.estimate.source,
+        "poses": len(e.estimate),
+        "matched": len(matched),
+        "dropped": {
+            "outside": matched.dropped_outside,
+            "gap": matched.dropped_gap,
+            "unmatched": matched.dropped_unmatched,
+        },
+        "time_offset_s": matched.offset_ns / _NS_PER_S,
+        "alignment": e.alignment.to_dict(),
+        "ate": {
+            "translation_m": e.ate_translation.stats.to_dict(),
+            "rotation_deg": _stats_or_none(e.ate_rotation),
+        },
+        "rpe": {
+            "delta": config.rpe_delta,
+            "unit": config.rpe_unit.value,
+            "all_pairs": config.rpe_all_pairs,
+            "pairs": len(e.rpe_translation),
+            "translation_m": e.rpe_translation.stats.to_dict(),
+            "rotation_deg": _stats_or_none(e.rpe_rotation),
+        },
+        "within": {f"{t:g}": share for t, share in e.within.items()},
+        "worst": [w.to_dict() for w in e.worst],
+        "drift_pct": _stats_or_none(e.drift),
+        "verdict": None if e.verdict is None else e.verdict.to_dict(),
+        "warnings": list(e.warnings),
+    }

@@ -1,0 +1,407 @@
+"""Error metrics: ATE, RPE, drift, statistics, CDF, thresholds and the greatest errors.
+
+Every error series is a plain array with the stamps it belongs to, and its statistics are
+the reference-system paper's Pathcompare set (rmse, mean, median, std, var, min, max, sse,
+n). ``std`` and ``var`` are population figures (``rmse² = mean² + std²``), as in the
+TUM tools and evo.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from loceval._typing import FloatArray, IntArray, StampsNs
+from loceval.errors import MetricError
+from loceval.geometry import relative_angle_deg
+from loceval.trajectory import Trajectory
+
+__all__ = [
+    "DEFAULT_THRESHOLDS_M",
+    "ErrorSeries",
+    "ErrorStats",
+    "RPEUnit",
+    "WorstPose",
+    "compute_ate",
+    "compute_drift",
+    "compute_rpe",
+    "drift_segment_lengths_m",
+    "greatest_errors",
+    "rpe_pairs",
+    "share_within",
+]
+
+DEFAULT_THRESHOLDS_M: tuple[float, ...] = (0.05, 0.10, 0.15)
+"""The reference-system paper's Fig. 7 thresholds."""
+
+_NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorStats:
+    """Summary statistics of an error series (the reference-system paper's Pathcompare)."""
+
+    rmse: float
+    mean: float
+    median: float
+    std: float
+    var: float
+    min: float
+    max: float
+    sse: float
+    n: int
+
+    @classmethod
+    def of(cls, values: FloatArray) -> ErrorStats:
+        """Return the statistics of ``values`` (N,).
+
+        Raises:
+            MetricError: the series is empty.
+        """
+        if values.size == 0:
+            msg = "No errors to summarize; the evaluation matched no poses for this metric."
+            raise MetricError(msg)
+        sse = float(np.dot(values, values))
+        mean = float(values.mean())
+        var = float(values.var())
+        return cls(
+            rmse=float(np.sqrt(sse / values.size)),
+            mean=mean,
+            median=float(np.median(values)),
+            std=float(np.sqrt(var)),
+            var=var,
+            min=float(values.min()),
+            max=float(values.max()),
+            sse=sse,
+            n=int(values.size),
+        )
+
+    def to_dict(self) -> dict[str, float | int]:
+        """Return the statistics as ``{"rmse", "mean", ..., "n"}``."""
+        return {
+            "rmse": self.rmse,
+            "mean": self.mean,
+            "median": self.median,
+            "std": self.std,
+            "var": self.var,
+            "min": self.min,
+            "max": self.max,
+            "sse": self.sse,
+            "n": self.n,
+        }
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ErrorSeries:
+    """Errors with the stamps they belong to.
+
+    Attributes:
+        values: (N,) errors (metres, degrees or percent: see ``unit``).
+        stamps_ns: (N,) stamps; for RPE and drift, the stamp of the pair's first pose.
+        unit: "m", "deg" or "%".
+    """
+
+    values: FloatArray
+    stamps_ns: StampsNs
+    unit: str
+
+    def __post_init__(self) -> None:
+        """Make the arrays read-only copies."""
+        values = np.array(self.values, dtype=np.float64)
+        stamps = np.array(self.stamps_ns, dtype=np.int64)
+        values.flags.writeable = False
+        stamps.flags.writeable = False
+        object.__setattr__(self, "values", values)
+        object.__setattr__(self, "stamps_ns", stamps)
+
+    def __len__(self) -> int:
+        """Return the number of errors."""
+        return int(self.values.shape[0])
+
+    @property
+    def stats(self) -> ErrorStats:
+        """Return the summary statistics."""
+        return ErrorStats.of(self.values)
+
+    def cdf(self) -> tuple[FloatArray, FloatArray]:
+        """Return the empirical CDF: sorted errors and the share of errors ≤ each, (N,)."""
+        sorted_values = np.sort(self.values)
+        shares = np.arange(1, sorted_values.size + 1, dtype=np.float64) / sorted_values.size
+        return sorted_values, shares
+
+
+class RPEUnit(StrEnum):
+    """What the RPE delta counts."""
+
+    FRAMES = "frames"
+    METRES = "m"
+    SECONDS = "s"
+
+
+@dataclass(frozen=True, slots=True)
+class WorstPose:
+    """One of the greatest errors: where and when.
+
+    Attributes:
+        stamp_ns: stamp of the pose.
+        t_s: seconds since the first matched pose.
+        error: the error (metres).
+        position_xyz: the reference position there, metres.
+        index: index in the matched series.
+    """
+
+    stamp_ns: int
+    t_s: float
+    error: float
+    position_xyz: tuple[float, float, float]
+    index: int
+
+    def to_dict(self) -> dict[str, object]:
+        """Return the JSON form."""
+        return {
+            "stamp_ns": self.stamp_ns,
+            "t_s": self.t_s,
+            "error_m": self.error,
+            "position": list(self.position_xyz),
+            "index": self.index,
+        }
+
+
+def compute_ate(
+    reference: Trajectory, aligned: Trajectory
+) -> tuple[ErrorSeries, ErrorSeries | None]:
+    """Absolute trajectory error per matched pose.
+
+    The framework paper's eq. 1, ``F_i = Q_i^-1 S P_i``: its translation norm (metres) and,
+    when both sides have orientations, its rotation angle (degrees).
+
+    Args:
+        reference: matched reference poses Q.
+        aligned: matched estimate poses already mapped by the alignment S.
+
+    Returns:
+        Translation errors and rotation errors (None for position-only sources).
+    """
+    _require_matched(reference, aligned)
+    translation = np.linalg.norm(aligned.positions_xyz - reference.positions_xyz, axis=1)
+    ate_t = ErrorSeries(translation, reference.stamps_ns, "m")
+    if reference.quat_xyzw is None or aligned.quat_xyzw is None:
+        return ate_t, None
+    angles = relative_angle_deg(reference.quat_xyzw, aligned.quat_xyzw)
+    return ate_t, ErrorSeries(angles, reference.stamps_ns, "deg")
+
+
+def rpe_pairs(
+    reference: Trajectory, *, delta: float, unit: RPEUnit, all_pairs: bool = False
+) -> tuple[IntArray, IntArray]:
+    """Index pairs ``(i, j)`` for the relative pose error.
+
+    Frames: ``j = i + delta``. Metres and seconds: ``j`` is the first pose at least
+    ``delta`` metres travelled (on the reference) or seconds after ``i``. Without
+    ``all_pairs`` the pairs are consecutive, non-overlapping segments starting at the first
+    pose (each pair starts where the last one ended), as KITTI and evo do; with it, every
+    pose starts a pair.
+
+    Raises:
+        MetricError: ``delta`` is not positive, or a whole number of frames.
+    """
+    n = len(reference)
+    if not (np.isfinite(delta) and delta > 0):
+        msg = f"The RPE delta must be positive, got {delta!r}."
+        raise MetricError(msg)
+    if unit is RPEUnit.FRAMES:
+        if delta != int(delta):
+            msg = f"An RPE delta in frames must be a whole number, got {delta!r}."
+            raise MetricError(msg)
+        step = int(delta)
+        starts = np.arange(0, n - step, 1 if all_pairs else step)
+        return starts, starts + step
+    if unit is RPEUnit.METRES:
+        axis = reference.distances_m()
+        reach = np.searchsorted(axis, axis + delta, side="left")
+    else:
+        axis_ns = reference.stamps_ns
+        reach = np.searchsorted(axis_ns, axis_ns + round(delta * _NS_PER_S), side="left")
+    if all_pairs:
+        starts = np.flatnonzero(reach < n)
+        return starts, reach[starts]
+    # Consecutive segments: follow the chain 0 -> reach[0] -> ...; the loop runs once per
+    # segment (the path length over delta), not once per pose.
+    firsts: list[int] = []
+    i = 0
+    reach_list = reach.tolist()
+    while i < n and reach_list[i] < n:
+        firsts.append(i)
+        i = reach_list[i]
+    starts = np.asarray(firsts, dtype=np.intp)
+    return starts, reach[starts]
+
+
+def compute_rpe(
+    reference: Trajectory,
+    aligned: Trajectory,
+    *,
+    delta: float = 1,
+    unit: RPEUnit = RPEUnit.FRAMES,
+    all_pairs: bool = False,
+    pairs: tuple[IntArray, IntArray] | None = None,
+) -> tuple[ErrorSeries, ErrorSeries | None]:
+    """Relative pose error between pose ``i`` and the pose ``delta`` later.
+
+    With orientations: ``E_ij = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j)``; its translation norm and
+    rotation angle. Position-only: the norm of the difference of the displacement vectors
+    ``(p_j - p_i) - (q_j - q_i)`` in the reference frame (no rotation error).
+
+    Args:
+        reference: matched reference poses Q.
+        aligned: matched, aligned estimate poses P.
+        delta: the step, in ``unit``.
+        unit: frames, metres travelled on the reference, or seconds.
+        all_pairs: every pose starts a pair (see :func:`rpe_pairs`).
+        pairs: the ``(i, j)`` index pairs, when the caller has them from :func:`rpe_pairs`.
+
+    Returns:
+        Translation errors (m) and rotation errors (deg, None for position-only sources),
+        stamped with each pair's first pose.
+
+    Raises:
+        MetricError: the delta yields no pair.
+    """
+    _require_matched(reference, aligned)
+    i, j = pairs or rpe_pairs(reference, delta=delta, unit=unit, all_pairs=all_pairs)
+    if i.size == 0:
+        msg = (
+            f"The RPE delta {delta:g} {unit.value} is longer than the matched trajectory "
+            f"({len(reference)} poses, {reference.length_m:.2f} m, "
+            f"{reference.duration_s:.2f} s); choose a smaller --rpe-delta."
+        )
+        raise MetricError(msg)
+    stamps = reference.stamps_ns[i]
+    q_pos, p_pos = reference.positions_xyz, aligned.positions_xyz
+    if reference.quat_xyzw is None or aligned.quat_xyzw is None:
+        diff = (p_pos[j] - p_pos[i]) - (q_pos[j] - q_pos[i])
+        return ErrorSeries(np.linalg.norm(diff, axis=1), stamps, "m"), None
+    rq = Rotation.from_quat(reference.quat_xyzw)
+    rp = Rotation.from_quat(aligned.quat_xyzw)
+    rq_i_inv, rp_i_inv = rq[i].inv(), rp[i].inv()
+    # Relative motions in the frame of pose i: R_i^-1 R_j and R_i^-1 (p_j - p_i).
+    dq_rot = rq_i_inv * rq[j]
+    dp_rot = rp_i_inv * rp[j]
+    dq_t = rq_i_inv.apply(q_pos[j] - q_pos[i])
+    dp_t = rp_i_inv.apply(p_pos[j] - p_pos[i])
+    # E = dQ^-1 dP: translation dQ_R^T (dp_t - dq_t), rotation dQ_R^T dP_R.
+    err_t = np.linalg.norm(dq_rot.inv().apply(dp_t - dq_t), axis=1)
+    err_r = np.degrees((dq_rot.inv() * dp_rot).magnitude())
+    return ErrorSeries(err_t, stamps, "m"), ErrorSeries(err_r, stamps, "deg")
+
+
+def drift_segment_lengths_m(length_m: float) -> tuple[float, ...]:
+    """Segment lengths for drift: KITTI's 100..800 m, or 10 %..80 % of a path under 1 km."""
+    if length_m >= 1000.0:
+        return tuple(float(x) for x in range(100, 801, 100))
+    return tuple(length_m * f for f in (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8))
+
+
+def compute_drift(
+    reference: Trajectory,
+    aligned: Trajectory,
+    *,
+    lengths_m: Sequence[float] | None = None,
+    max_starts: int = 1000,
+) -> ErrorSeries | None:
+    """Translation drift in percent of the distance travelled, KITTI style.
+
+    For segments of each length starting at (at most ``max_starts``, evenly spaced) poses,
+    the relative-pose translation error over the segment divided by the distance the
+    reference travelled over it (KITTI divides by the nominal length, which overstates
+    drift when poses are sparse).
+
+    Args:
+        reference: matched reference poses.
+        aligned: matched, aligned estimate poses.
+        lengths_m: segment lengths; by default :func:`drift_segment_lengths_m`.
+        max_starts: cap on segment start poses (statistics need no more).
+
+    Returns:
+        Drift per segment in percent, or None when the path is too short for any segment
+        (a stationary recording).
+    """
+    _require_matched(reference, aligned)
+    distances = reference.distances_m()
+    total = float(distances[-1])
+    if total <= 0.0:
+        return None
+    lengths = tuple(lengths_m) if lengths_m is not None else drift_segment_lengths_m(total)
+    n = len(reference)
+    step = max(1, n // max_starts)
+    starts = np.arange(0, n, step)
+    all_i: list[IntArray] = []
+    all_j: list[IntArray] = []
+    for length in lengths:  # a handful of lengths, each vectorized over the starts
+        j = np.searchsorted(distances, distances[starts] + length, side="left")
+        ok = j < n
+        all_i.append(starts[ok])
+        all_j.append(j[ok])
+    i_idx = np.concatenate(all_i)
+    if i_idx.size == 0:
+        return None
+    j_idx = np.concatenate(all_j)
+    # Divide by the distance actually travelled from i to j (>= the nominal length).
+    seg_len = distances[j_idx] - distances[i_idx]
+    q_pos, p_pos = reference.positions_xyz, aligned.positions_xyz
+    dq_t = q_pos[j_idx] - q_pos[i_idx]
+    dp_t = p_pos[j_idx] - p_pos[i_idx]
+    if reference.quat_xyzw is not None and aligned.quat_xyzw is not None:
+        rq_i_inv = Rotation.from_quat(reference.quat_xyzw[i_idx]).inv()
+        rp_i_inv = Rotation.from_quat(aligned.quat_xyzw[i_idx]).inv()
+        dq_rot = rq_i_inv * Rotation.from_quat(reference.quat_xyzw[j_idx])
+        err = np.linalg.norm(
+            dq_rot.inv().apply(rp_i_inv.apply(dp_t) - rq_i_inv.apply(dq_t)), axis=1
+        )
+    else:
+        err = np.linalg.norm(dp_t - dq_t, axis=1)
+    order = np.argsort(reference.stamps_ns[i_idx], kind="stable")
+    return ErrorSeries((100.0 * err / seg_len)[order], reference.stamps_ns[i_idx][order], "%")
+
+
+def share_within(errors: ErrorSeries, thresholds: Sequence[float]) -> dict[float, float]:
+    """Fraction of errors ≤ each threshold (the reference-system paper's "96.3 % ≤ 15 cm")."""
+    values = np.sort(errors.values)
+    counts = np.searchsorted(values, np.asarray(thresholds, dtype=np.float64), side="right")
+    return {float(t): float(c) / values.size for t, c in zip(thresholds, counts, strict=True)}
+
+
+def greatest_errors(
+    errors: ErrorSeries, reference: Trajectory, *, count: int = 10
+) -> tuple[WorstPose, ...]:
+    """The ``count`` greatest errors, largest first, with time and reference position."""
+    k = min(count, len(errors))
+    if k == 0:
+        return ()
+    idx = np.argpartition(-errors.values, k - 1)[:k]
+    idx = idx[np.argsort(-errors.values[idx], kind="stable")]
+    t0 = int(reference.stamps_ns[0])
+    return tuple(
+        WorstPose(
+            stamp_ns=int(errors.stamps_ns[i]),
+            t_s=(int(errors.stamps_ns[i]) - t0) / _NS_PER_S,
+            error=float(errors.values[i]),
+            position_xyz=(
+                float(reference.positions_xyz[i, 0]),
+                float(reference.positions_xyz[i, 1]),
+                float(reference.positions_xyz[i, 2]),
+            ),
+            index=int(i),
+        )
+        for i in idx
+    )
+
+
+def _require_matched(reference: Trajectory, estimate: Trajectory) -> None:
+    if len(reference) != len(estimate):
+        msg = f"Metrics need matched poses, got {len(reference)} and {len(estimate)}."
+        raise MetricError(msg)

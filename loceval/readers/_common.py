@@ -1,0 +1,118 @@
+"""What every reader does once it has raw arrays: validate, normalize, sort, de-duplicate."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from loceval._typing import FloatArray, IntArray, StampsNs
+from loceval.errors import ReaderError
+from loceval.trajectory import MIN_POSES, Trajectory
+
+__all__ = ["QUAT_NORM_TOLERANCE", "build_trajectory", "seconds_to_ns"]
+
+QUAT_NORM_TOLERANCE = 1e-3
+"""Quaternions whose norm is within this of 1 are normalized; others are rejected."""
+
+
+def seconds_to_ns(seconds: FloatArray) -> StampsNs:
+    """Convert float seconds to int64 nanoseconds, rounding to the nearest nanosecond."""
+    out: StampsNs = np.rint(np.asarray(seconds, dtype=np.float64) * 1e9).astype(np.int64)
+    return out
+
+
+def build_trajectory(
+    stamps_ns: StampsNs,
+    positions_xyz: FloatArray,
+    quat_xyzw: FloatArray | None,
+    *,
+    where: str,
+    line_numbers: IntArray | None = None,
+    name: str = "",
+    source: str = "",
+    frame_id: str = "",
+    child_frame_id: str = "",
+    warnings: tuple[str, ...] = (),
+) -> Trajectory:
+    """Turn raw reader arrays into a :class:`Trajectory`.
+
+    Rejects NaN/inf and bad quaternions naming the line, normalizes quaternions within
+    :data:`QUAT_NORM_TOLERANCE`, sorts unsorted stamps and drops duplicate stamps (both
+    reported as warnings), and requires at least :data:`MIN_POSES` poses.
+
+    Args:
+        stamps_ns: (N,) int64 nanoseconds, in file order.
+        positions_xyz: (N, 3) metres.
+        quat_xyzw: (N, 4) quaternions x y z w, or None.
+        where: the file (or topic) named in messages.
+        line_numbers: (N,) 1-based line (or message) numbers for messages; defaults to 1..N.
+        name: trajectory name.
+        source: source selector.
+        frame_id: frame of the poses.
+        child_frame_id: frame whose poses these are.
+        warnings: warnings the reader already collected.
+
+    Returns:
+        The validated trajectory.
+
+    Raises:
+        ReaderError: a value is NaN/inf, a quaternion is not unit, or fewer than three poses.
+    """
+    n = int(stamps_ns.shape[0])
+    lines = np.arange(1, n + 1) if line_numbers is None else line_numbers
+    notes = list(warnings)
+    _reject_nonfinite(positions_xyz, lines, where=where, what="position")
+    if quat_xyzw is not None:
+        _reject_nonfinite(quat_xyzw, lines, where=where, what="quaternion")
+        norms = np.linalg.norm(quat_xyzw, axis=1)
+        bad = np.flatnonzero(np.abs(norms - 1.0) > QUAT_NORM_TOLERANCE)
+        if bad.size:
+            i = int(bad[0])
+            msg = (
+                f"{where}, line {int(lines[i])}: quaternion has norm {norms[i]:.6g}, not 1 "
+                f"({bad.size} such rows); check the column order (x y z w) and the format."
+            )
+            raise ReaderError(msg)
+        quat_xyzw = quat_xyzw / norms[:, None]
+    if n > 1 and not (np.diff(stamps_ns) >= 0).all():
+        order = np.argsort(stamps_ns, kind="stable")
+        stamps_ns, positions_xyz, lines = stamps_ns[order], positions_xyz[order], lines[order]
+        if quat_xyzw is not None:
+            quat_xyzw = quat_xyzw[order]
+        notes.append(f"{where}: stamps were not in order; {n} poses sorted by time.")
+    if n > 1:
+        keep = np.concatenate(([True], np.diff(stamps_ns) != 0))
+        dropped = int(n - keep.sum())
+        if dropped:
+            stamps_ns, positions_xyz = stamps_ns[keep], positions_xyz[keep]
+            if quat_xyzw is not None:
+                quat_xyzw = quat_xyzw[keep]
+            notes.append(
+                f"{where}: {dropped} poses with a duplicate stamp dropped (first one kept)."
+            )
+    if stamps_ns.shape[0] < MIN_POSES:
+        msg = (
+            f"{where}: {stamps_ns.shape[0]} poses, but at least {MIN_POSES} are needed; "
+            "check that the file or topic holds the whole recording."
+        )
+        raise ReaderError(msg)
+    return Trajectory(
+        stamps_ns=stamps_ns,
+        positions_xyz=positions_xyz,
+        quat_xyzw=quat_xyzw,
+        name=name,
+        source=source,
+        frame_id=frame_id,
+        child_frame_id=child_frame_id,
+        warnings=tuple(notes),
+    )
+
+
+def _reject_nonfinite(values: FloatArray, lines: IntArray, *, where: str, what: str) -> None:
+    bad_rows = np.flatnonzero(~np.isfinite(values).all(axis=1))
+    if bad_rows.size:
+        i = int(bad_rows[0])
+        msg = (
+            f"{where}, line {int(lines[i])}: {what} is NaN or inf ({bad_rows.size} such rows); "
+            "remove those rows or re-export the file."
+        )
+        raise ReaderError(msg)

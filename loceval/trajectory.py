@@ -1,0 +1,205 @@
+"""The trajectory value type: stamped positions with optional orientations."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
+from loceval.errors import TrajectoryError
+from loceval.geometry import SimilarityTransform
+
+__all__ = ["MIN_POSES", "Trajectory"]
+
+MIN_POSES = 3
+"""Fewest poses a trajectory may have: alignment and RPE need at least three."""
+
+_NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Trajectory:
+    """An immutable stamped trajectory.
+
+    The arrays are copied and made read-only on construction; every operation returns a
+    new trajectory. Stamps are strictly increasing (readers sort and de-duplicate).
+
+    Attributes:
+        stamps_ns: (N,) int64 nanoseconds, strictly increasing.
+        positions_xyz: (N, 3) float64 metres, REP 103 (x forward, y left, z up).
+        quat_xyzw: (N, 4) float64 unit quaternions x y z w, or None for position-only
+            systems (UWB, BLE, 2D planners).
+        name: what the user calls it ("ground truth", "RTAB-Map").
+        source: where it came from (path, topic or tf chain selector).
+        frame_id: the frame the poses are expressed in, if known.
+        child_frame_id: the frame whose poses these are, if known.
+        warnings: what the reader noticed (sorted stamps, dropped rows, axis conversion).
+    """
+
+    stamps_ns: StampsNs
+    positions_xyz: FloatArray
+    quat_xyzw: FloatArray | None = None
+    name: str = ""
+    source: str = ""
+    frame_id: str = ""
+    child_frame_id: str = ""
+    warnings: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        """Copy the arrays, make them read-only and check shape, dtype and values."""
+        stamps = np.array(self.stamps_ns, copy=True)
+        if stamps.ndim != 1 or not np.issubdtype(stamps.dtype, np.integer):
+            msg = (
+                f"Trajectory {self.name!r}: stamps must be a 1-D integer array of nanoseconds, "
+                f"got dtype {stamps.dtype} and shape {stamps.shape!r}."
+            )
+            raise TrajectoryError(msg)
+        stamps = stamps.astype(np.int64, copy=False)
+        n = stamps.shape[0]
+        positions = np.array(self.positions_xyz, dtype=np.float64, copy=True)
+        if positions.shape != (n, 3):
+            msg = (
+                f"Trajectory {self.name!r}: positions must have shape ({n}, 3), "
+                f"got {positions.shape!r}."
+            )
+            raise TrajectoryError(msg)
+        if not np.isfinite(positions).all():
+            msg = f"Trajectory {self.name!r}: positions contain NaN or inf."
+            raise TrajectoryError(msg)
+        if n > 1 and not (np.diff(stamps) > 0).all():
+            msg = f"Trajectory {self.name!r}: stamps must be strictly increasing."
+            raise TrajectoryError(msg)
+        stamps.flags.writeable = False
+        positions.flags.writeable = False
+        object.__setattr__(self, "stamps_ns", stamps)
+        object.__setattr__(self, "positions_xyz", positions)
+        if self.quat_xyzw is not None:
+            quat = np.array(self.quat_xyzw, dtype=np.float64, copy=True)
+            if quat.shape != (n, 4):
+                msg = (
+                    f"Trajectory {self.name!r}: orientations must have shape ({n}, 4), "
+                    f"got {quat.shape!r}."
+                )
+                raise TrajectoryError(msg)
+            norms = np.linalg.norm(quat, axis=1)
+            if not np.isfinite(quat).all() or not np.allclose(norms, 1.0, rtol=0, atol=1e-6):
+                msg = (
+                    f"Trajectory {self.name!r}: orientations must be finite unit quaternions "
+                    "(readers normalize them)."
+                )
+                raise TrajectoryError(msg)
+            quat.flags.writeable = False
+            object.__setattr__(self, "quat_xyzw", quat)
+        object.__setattr__(self, "warnings", tuple(self.warnings))
+
+    def __len__(self) -> int:
+        """Return the number of poses."""
+        return int(self.stamps_ns.shape[0])
+
+    @property
+    def has_orientation(self) -> bool:
+        """Whether the trajectory carries orientations."""
+        return self.quat_xyzw is not None
+
+    @property
+    def duration_s(self) -> float:
+        """Time from the first to the last pose, in seconds."""
+        if len(self) == 0:
+            return 0.0
+        return float(self.stamps_ns[-1] - self.stamps_ns[0]) / _NS_PER_S
+
+    @property
+    def length_m(self) -> float:
+        """Path length: sum of the distances between consecutive positions, in metres."""
+        return float(self.step_lengths_m().sum())
+
+    @property
+    def rate_hz(self) -> float:
+        """Median pose rate in Hz (0 when it cannot be told)."""
+        if len(self) < 2:
+            return 0.0
+        median_dt_ns = float(np.median(np.diff(self.stamps_ns)))
+        return _NS_PER_S / median_dt_ns if median_dt_ns > 0 else 0.0
+
+    def step_lengths_m(self) -> FloatArray:
+        """Return the (N - 1,) distances between consecutive positions, in metres."""
+        out: FloatArray = np.linalg.norm(np.diff(self.positions_xyz, axis=0), axis=1)
+        return out
+
+    def distances_m(self) -> FloatArray:
+        """Return the (N,) distance travelled from the first pose, in metres."""
+        out: FloatArray = np.concatenate(([0.0], np.cumsum(self.step_lengths_m())))
+        return out
+
+    def times_s(self) -> FloatArray:
+        """Return the (N,) seconds since the first pose (float; for plots and outputs)."""
+        if len(self) == 0:
+            return np.zeros(0)
+        out: FloatArray = (self.stamps_ns - self.stamps_ns[0]).astype(np.float64) / _NS_PER_S
+        return out
+
+    def gaps(self, max_gap_ns: int) -> list[tuple[int, int]]:
+        """Return the ``(start_ns, end_ns)`` of every interval between poses longer than max gap.
+
+        Args:
+            max_gap_ns: longest interval that is not a gap, in nanoseconds.
+        """
+        if len(self) < 2:
+            return []
+        dt = np.diff(self.stamps_ns)
+        idx = np.flatnonzero(dt > max_gap_ns)
+        return [(int(self.stamps_ns[i]), int(self.stamps_ns[i + 1])) for i in idx]
+
+    def select(self, index: IntArray | BoolArray) -> Trajectory:
+        """Return the poses at ``index`` (an increasing integer index or a boolean mask)."""
+        quat = None if self.quat_xyzw is None else self.quat_xyzw[index]
+        return replace(
+            self,
+            stamps_ns=self.stamps_ns[index],
+            positions_xyz=self.positions_xyz[index],
+            quat_xyzw=quat,
+        )
+
+    def shifted(self, offset_ns: int) -> Trajectory:
+        """Return the trajectory with ``offset_ns`` added to every stamp."""
+        return replace(self, stamps_ns=self.stamps_ns + np.int64(offset_ns))
+
+    def transformed(self, transform: SimilarityTransform) -> Trajectory:
+        """Return the trajectory mapped by ``transform`` (world frame change)."""
+        quat = None if self.quat_xyzw is None else transform.apply_orientations(self.quat_xyzw)
+        return replace(
+            self, positions_xyz=transform.apply_positions(self.positions_xyz), quat_xyzw=quat
+        )
+
+    def with_body_offset(self, offset: SimilarityTransform) -> Trajectory:
+        """Return the poses of a frame rigidly attached to the body: ``T_world_body · offset``.
+
+        Used for the framework paper's device offset (rigid body origin -> camera centre).
+
+        Raises:
+            TrajectoryError: the trajectory has no orientations but the offset has a
+                translation (the offset's direction would be unknown).
+        """
+        if self.quat_xyzw is None:
+            if np.allclose(offset.translation, 0.0):
+                return self
+            msg = (
+                f"Trajectory {self.name!r} has no orientations, so a device offset with a "
+                "translation cannot be applied; record the rigid body's orientation or drop "
+                "the offset."
+            )
+            raise TrajectoryError(msg)
+        r_world_body = Rotation.from_quat(self.quat_xyzw)
+        positions = self.positions_xyz + r_world_body.apply(np.array(offset.translation))
+        quat = (r_world_body * Rotation.from_matrix(offset.rotation)).as_quat()
+        return replace(self, positions_xyz=positions, quat_xyzw=quat)
+
+    def with_warnings(self, *warnings: str) -> Trajectory:
+        """Return the trajectory with ``warnings`` appended."""
+        return replace(self, warnings=(*self.warnings, *warnings))
+
+    def without_orientation(self) -> Trajectory:
+        """Return the positions only."""
+        return replace(self, quat_xyzw=None)

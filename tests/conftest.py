@@ -1,0 +1,62 @@
+"""Shared fixtures: the seeded RNG, the public recordings, and system tools."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, settings
+
+settings.register_profile(
+    "ci", deadline=None, max_examples=60, suppress_health_check=[HealthCheck.too_slow]
+)
+settings.register_profile("dev", deadline=None, max_examples=30)
+settings.load_profile("ci" if os.environ.get("CI") else "dev")
+
+PUBLIC_DATA = Path(
+    os.environ.get(
+        "LOCEVAL_PUBLIC_DATA",
+        Path(__file__).resolve().parents[1].parent / "shared" / "data" / "public",
+    )
+)
+
+
+def in_ci() -> bool:
+    """Whether the CI variable is set: missing data or tools then fail instead of skipping."""
+    return bool(os.environ.get("CI"))
+
+
+def skip_or_fail(reason: str) -> None:
+    """Skip with ``reason`` on a user's machine; fail in CI, where everything must be there."""
+    if in_ci():
+        pytest.fail(f"{reason} (CI is set, so this is a failure, not a skip)")
+    pytest.skip(reason)
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    """Return the one seeded random generator tests use."""
+    return np.random.default_rng(20240601)
+
+
+@pytest.fixture(scope="session")
+def public_data() -> Path:
+    """Return the folder of public recordings, or skip (fail in CI) when it is absent."""
+    if not (PUBLIC_DATA / "README.md").is_file():
+        skip_or_fail(
+            f"public recordings not found at {PUBLIC_DATA}; set LOCEVAL_PUBLIC_DATA to "
+            "the shared/data/public folder"
+        )
+    return PUBLIC_DATA
+
+
+def require_tool(name: str) -> str:
+    """Return the path of a system tool, or skip (fail in CI) when it is not installed."""
+    path = shutil.which(name)
+    if path is None:
+        skip_or_fail(f"{name!r} is not installed (see .ci/run for the package that has it)")
+    assert path is not None
+    return path
