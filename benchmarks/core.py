@@ -32,11 +32,11 @@ def write_pair(folder: Path, n_ref: int, n_est: int) -> tuple[Path, Path]:
     t = 1_700_000_000.0 + np.arange(n_ref) / 200.0
     s = np.linspace(0, 40 * np.pi, n_ref)
     xyz = np.stack([10 * np.cos(s / 7), 6 * np.sin(s / 5), 1.2 + 0.2 * np.sin(s)], 1)
-    quat = Rotation.from_euler("z", s).as_quat()
+    quat = Rotation.from_euler("z", s[:, None]).as_quat()
     np.savetxt(ref_path, np.column_stack([t, xyz, quat]), fmt="%.9f")
     idx = np.sort(rng.choice(n_ref, n_est, replace=False))
     frame = Rotation.from_euler("z", 25, degrees=True)
-    est_xyz = frame.apply(xyz[idx] + rng.normal(0, 0.03, (n_est, 3))) + [1.0, 2.0, 0.0]
+    est_xyz = frame.apply(xyz[idx] + rng.normal(0, 0.03, (n_est, 3))) + np.array([1.0, 2.0, 0.0])
     est_quat = (frame * Rotation.from_quat(quat[idx])).as_quat()
     np.savetxt(est_path, np.column_stack([t[idx], est_xyz, est_quat]), fmt="%.9f")
     return ref_path, est_path

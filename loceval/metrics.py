@@ -287,15 +287,15 @@ def compute_rpe(
         return ErrorSeries(np.linalg.norm(diff, axis=1), stamps, "m"), None
     rq = Rotation.from_quat(reference.quat_xyzw)
     rp = Rotation.from_quat(aligned.quat_xyzw)
-    rq_i_inv, rp_i_inv = rq[i].inv(), rp[i].inv()
-    # Relative motions in the frame of pose i: R_i^-1 R_j and R_i^-1 (p_j - p_i).
-    dq_rot = rq_i_inv * rq[j]
-    dp_rot = rp_i_inv * rp[j]
-    dq_t = rq_i_inv.apply(q_pos[j] - q_pos[i])
-    dp_t = rp_i_inv.apply(p_pos[j] - p_pos[i])
-    # E = dQ^-1 dP: translation dQ_R^T (dp_t - dq_t), rotation dQ_R^T dP_R.
-    err_t = np.linalg.norm(dq_rot.inv().apply(dp_t - dq_t), axis=1)
-    err_r = np.degrees((dq_rot.inv() * dp_rot).magnitude())
+    # E = dQ^-1 dP with dQ = Q_i^-1 Q_j, dP = P_i^-1 P_j. Its translation is
+    # R(dQ)^T (t(dP) - t(dQ)), whose norm is |t(dP) - t(dQ)| (a rotation keeps lengths), and
+    # its rotation R_qj^-1 (R_qi R_pi^-1) R_pj is conjugate to W_i W_j^-1 with W = R_q R_p^-1,
+    # so it has the same angle: one composition over the poses, one over the pairs.
+    dq_t = rq[i].apply(q_pos[j] - q_pos[i], inverse=True)
+    dp_t = rp[i].apply(p_pos[j] - p_pos[i], inverse=True)
+    err_t = np.linalg.norm(dp_t - dq_t, axis=1)
+    w = rq * rp.inv()
+    err_r = np.degrees((w[i] * w[j].inv()).magnitude())
     return ErrorSeries(err_t, stamps, "m"), ErrorSeries(err_r, stamps, "deg")
 
 
@@ -356,12 +356,10 @@ def compute_drift(
     dq_t = q_pos[j_idx] - q_pos[i_idx]
     dp_t = p_pos[j_idx] - p_pos[i_idx]
     if reference.quat_xyzw is not None and aligned.quat_xyzw is not None:
-        rq_i_inv = Rotation.from_quat(reference.quat_xyzw[i_idx]).inv()
-        rp_i_inv = Rotation.from_quat(aligned.quat_xyzw[i_idx]).inv()
-        dq_rot = rq_i_inv * Rotation.from_quat(reference.quat_xyzw[j_idx])
-        err = np.linalg.norm(
-            dq_rot.inv().apply(rp_i_inv.apply(dp_t) - rq_i_inv.apply(dq_t)), axis=1
-        )
+        # The relative pose's translation error, as in compute_rpe (norm kept by rotation).
+        dq_body = Rotation.from_quat(reference.quat_xyzw[i_idx]).apply(dq_t, inverse=True)
+        dp_body = Rotation.from_quat(aligned.quat_xyzw[i_idx]).apply(dp_t, inverse=True)
+        err = np.linalg.norm(dp_body - dq_body, axis=1)
     else:
         err = np.linalg.norm(dp_t - dq_t, axis=1)
     order = np.argsort(reference.stamps_ns[i_idx], kind="stable")

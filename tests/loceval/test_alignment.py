@@ -49,14 +49,18 @@ def test_yaw_only_rotates_about_z(truth: Trajectory) -> None:
     T = SimilarityTransform(Rotation.from_euler("z", -120, degrees=True).as_matrix(), np.ones(3))
     found = align(truth, _moved(truth, T), method=AlignMethod.YAW)
     np.testing.assert_allclose(found.transform.as_matrix(), T.inverse().as_matrix(), atol=1e-9)
-    tilted = SimilarityTransform(Rotation.from_euler("x", 10, degrees=True).as_matrix(), np.zeros(3))
+    tilted = SimilarityTransform(
+        Rotation.from_euler("x", 10, degrees=True).as_matrix(), np.zeros(3)
+    )
     R = align(truth, _moved(truth, tilted), method=AlignMethod.YAW).transform.rotation
     np.testing.assert_allclose(R[2], [0, 0, 1], atol=1e-12)
 
 
 def test_origin_and_calibrate_make_the_first_poses_coincide(truth: Trajectory) -> None:
     """T_C = Q_0 · P_0^-1 maps the first estimate pose onto the first reference pose."""
-    T = SimilarityTransform(Rotation.from_euler("xyz", [1, 2, 3]).as_matrix(), np.array([4.0, 5, 6]))
+    T = SimilarityTransform(
+        Rotation.from_euler("xyz", [1, 2, 3]).as_matrix(), np.array([4.0, 5, 6])
+    )
     est = _moved(truth, T)
     for method in (AlignMethod.ORIGIN, AlignMethod.CALIBRATE):
         found = align(truth, est, method=method)

@@ -61,7 +61,9 @@ def test_transformed_maps_positions_and_orientations(truth: Trajectory) -> None:
     )
     assert truth.quat_xyzw is not None
     assert moved.quat_xyzw is not None
-    angles = relative_angle_deg(moved.quat_xyzw, (rot * Rotation.from_quat(truth.quat_xyzw)).as_quat())
+    angles = relative_angle_deg(
+        moved.quat_xyzw, (rot * Rotation.from_quat(truth.quat_xyzw)).as_quat()
+    )
     assert angles.max() < 1e-6
 
 

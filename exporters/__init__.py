@@ -1,0 +1,158 @@
+"""Turn an evaluation result into files: reports, tables and CAD overlays.
+
+Every artifact is produced by one function ``(result, options) -> bytes``; the CLI and the
+service look them up in :data:`ARTIFACTS` by file name. Format modules are imported only
+when their artifact is asked for, so the CLI starts fast without matplotlib or CAD libraries.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import shutil
+import tempfile
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final, cast
+
+from exporters.errors import ExportError, ExportOptionsError, ExportUnavailableError
+from exporters.options import ExportOptions, Units
+from loceval.evaluation import EvaluationResult
+
+__all__ = [
+    "ARTIFACTS",
+    "ArtifactSpec",
+    "ExportOptions",
+    "Units",
+    "export_result_json",
+    "render_artifact",
+    "write_artifacts",
+]
+
+Exporter = Callable[[EvaluationResult, ExportOptions], bytes]
+
+
+@dataclass(frozen=True, slots=True)
+class ArtifactSpec:
+    """One downloadable file of an evaluation.
+
+    Attributes:
+        name: the file name (``report.pdf``).
+        media_type: its MIME type.
+        target: ``"module:function"`` of the exporter, imported on first use.
+        requires: the distribution extra that provides its libraries.
+    """
+
+    name: str
+    media_type: str
+    target: str
+    requires: str
+
+    def load(self) -> Exporter:
+        """Import and return the exporter function.
+
+        Raises:
+            ExportUnavailableError: a library the format needs is not installed.
+        """
+        module_name, _, func_name = self.target.partition(":")
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError as err:
+            msg = (
+                f"{self.name} needs the Python package {err.name!r}, which is not installed; "
+                f"install loceval[{self.requires}] or leave {self.name} out."
+            )
+            raise ExportUnavailableError(msg) from err
+        return cast("Exporter", getattr(module, func_name))
+
+
+ARTIFACTS: Final[Mapping[str, ArtifactSpec]] = {
+    spec.name: spec
+    for spec in (
+        ArtifactSpec("result.json", "application/json", "exporters:export_result_json", "all"),
+        ArtifactSpec("errors.csv", "text/csv", "exporters.tables:export_errors_csv", "all"),
+        ArtifactSpec("report.html", "text/html", "exporters.report:render_report_html", "report"),
+        ArtifactSpec(
+            "report.pdf", "application/pdf", "exporters.report:render_report_pdf", "report"
+        ),
+        ArtifactSpec("paths.dxf", "image/vnd.dxf", "exporters.dxf:export_dxf", "cad"),
+        ArtifactSpec("paths.3dm", "model/vnd.3dm", "exporters.rhino:export_3dm", "cad"),
+        ArtifactSpec(
+            "paths.3dm.json", "application/json", "exporters.rhino:export_3dm_json", "cad"
+        ),
+        ArtifactSpec("paths.glb", "model/gltf-binary", "exporters.gltf:export_glb", "cad"),
+    )
+}
+"""Every artifact, by file name, in the order they are written."""
+
+
+def export_result_json(result: EvaluationResult, options: ExportOptions) -> bytes:
+    """Return the ``--json`` document, with the evaluation id, as UTF-8 bytes."""
+    document = {"evaluation_id": options.evaluation_id, **result.to_dict()}
+    return (json.dumps(document, indent=2, allow_nan=False) + "\n").encode()
+
+
+def render_artifact(name: str, result: EvaluationResult, options: ExportOptions) -> bytes:
+    """Produce one artifact by file name.
+
+    Raises:
+        ExportOptionsError: the name is not an artifact.
+        ExportUnavailableError: its libraries are not installed.
+        ExportError: the exporter failed.
+    """
+    spec = ARTIFACTS.get(name)
+    if spec is None:
+        msg = f"No artifact named {name!r}; choose from {', '.join(ARTIFACTS)}."
+        raise ExportOptionsError(msg)
+    return spec.load()(result, options)
+
+
+def write_artifacts(
+    result: EvaluationResult,
+    out_dir: Path,
+    options: ExportOptions,
+    *,
+    names: Iterable[str] | None = None,
+) -> list[Path]:
+    """Write artifacts into ``out_dir``, all or nothing.
+
+    Everything is rendered into a staging folder beside ``out_dir`` first and moved into
+    place only when every artifact succeeded, so a failure leaves no half-written files.
+
+    Args:
+        result: the evaluation.
+        out_dir: the destination folder (created if missing).
+        options: placement and report options.
+        names: the artifacts to write (default: all of :data:`ARTIFACTS`).
+
+    Returns:
+        The paths written.
+
+    Raises:
+        ExportError: an artifact could not be produced (nothing is moved into place).
+        ExportOptionsError: an unknown artifact name.
+    """
+    wanted = list(ARTIFACTS) if names is None else list(dict.fromkeys(names))
+    for name in wanted:
+        if name not in ARTIFACTS:
+            msg = f"No artifact named {name!r}; choose from {', '.join(ARTIFACTS)}."
+            raise ExportOptionsError(msg)
+    out_dir = out_dir.resolve()
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+    try:
+        for name in wanted:
+            data = render_artifact(name, result, options)
+            (staging / name).write_bytes(data)
+        out_dir.mkdir(exist_ok=True)
+        written = []
+        for name in wanted:
+            (staging / name).replace(out_dir / name)
+            written.append(out_dir / name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return written
+
+
+__all__ += ["ExportError", "ExportOptionsError", "ExportUnavailableError"]

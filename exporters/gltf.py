@@ -1,0 +1,234 @@
+"""glTF 2.0 binary (GLB) export: one node, mesh and material per trajectory, LINE_STRIP.
+
+Conventions (glTF 2.0 §3.4): distances are metres and +Y is up, whatever ``--units`` says
+(the DXF and 3DM files follow ``--units``; glTF importers such as Rhino's and Blender's
+expect metres and convert to the document's units themselves). Each node's matrix is
+
+    M = [[R, R @ b], [0, 1]],   R: (x, y, z) -> (x, z, -y)   (-90° about X, Z-up -> Y-up)
+
+with ``b`` the base point (the reference's bounding-box centre in model coordinates, rounded
+to whole metres).
+Positions are float32 and local (model metres minus ``b``), so a path 500 km from the
+model origin keeps millimetre precision; the offset lives in the node matrix, written in
+full double precision in the JSON. Primitives are ``LINE_STRIP`` (mode 3), not ``LINES``:
+importers turn each ``LINES`` pair into its own curve.
+
+A building mesh (OBJ, PLY, STL or GLB, read by trimesh) joins the same scene as a
+``TRIANGLES`` mesh. OBJ, PLY and STL are taken to be in model coordinates, in the output
+units, Z up (as CAD programs export them); a GLB building is taken to follow glTF (metres,
+Y up) in model coordinates. Either way it gets the same base point and Z-up -> Y-up matrix.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+import pygltflib
+import trimesh
+from numpy.typing import NDArray
+
+from exporters.errors import ExportError, ExportOptionsError
+from exporters.options import ExportOptions, Units
+from exporters.placement import place_evaluation
+from loceval._typing import FloatArray
+from loceval.evaluation import EvaluationResult
+
+__all__ = ["Z_UP_TO_Y_UP", "export_glb", "node_matrix"]
+
+Z_UP_TO_Y_UP: Final = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+"""(3, 3) rotation -90° about X: REP 103 / CAD Z-up to glTF Y-up, (x, y, z) -> (x, z, -y)."""
+_UNLIT: Final = "KHR_materials_unlit"  # lines have no normals: draw them in flat colour
+_BUILDING_RGBA: Final = (0.75, 0.75, 0.75, 0.35)
+
+
+def node_matrix(base_point_m: FloatArray) -> list[float]:
+    """Return a node matrix (column-major, 16 numbers): Z-up -> Y-up, then the base point.
+
+    Args:
+        base_point_m: (3,) model coordinates (Z up, metres) of the local origin.
+    """
+    m = np.eye(4)
+    m[:3, :3] = Z_UP_TO_Y_UP
+    m[:3, 3] = Z_UP_TO_Y_UP @ np.asarray(base_point_m, dtype=np.float64)
+    return [float(v) for v in m.T.reshape(-1)]  # glTF stores matrices column by column
+
+
+def export_glb(result: EvaluationResult, options: ExportOptions) -> bytes:
+    """Write the evaluation's trajectories (and the building, if given) as a GLB.
+
+    Args:
+        result: the evaluation.
+        options: site transform, simplification, ids, and the optional building mesh.
+
+    Returns:
+        The GLB file.
+
+    Raises:
+        ExportOptionsError: unusable placement options, or a building file that is
+            missing, unreadable or of an unsupported format.
+        ExportError: pygltflib could not serialize the scene.
+    """
+    placement = place_evaluation(result, options)
+    scene = _SceneBuilder(node_matrix(placement.base_point_m))
+    per_metre = placement.units.per_metre
+    for path in placement.paths:
+        local_m = (path.local_vertices / per_metre).astype(np.float32)
+        extras = {**path.metadata(), "units": "m", "output_units": placement.units.value}
+        scene.add_lines(path.name, local_m, _linear_rgba(path.color_rgb), extras)
+    if options.building is not None:
+        vertices_m, faces = _read_building(options.building, placement.units)
+        local_m = (vertices_m - placement.base_point_m).astype(np.float32)
+        scene.add_building(options.building, local_m, faces)
+    meta = placement.metadata()
+    meta.update(
+        units="m",
+        output_units=placement.units.value,
+        base_point=placement.base_point_m.tolist(),
+        gltf_convention="metres, Y up; node matrix = base point ∘ (Z-up -> Y-up)",
+    )
+    try:
+        return b"".join(scene.build(meta).save_to_bytes())
+    except (ValueError, TypeError) as err:
+        msg = f"pygltflib could not serialize the glTF scene ({err}); please report this."
+        raise ExportError(msg) from err
+
+
+def _linear_rgba(rgb: tuple[int, int, int]) -> list[float]:
+    """Convert 0-255 sRGB to linear RGBA (glTF's baseColorFactor is linear)."""
+    c = np.asarray(rgb, dtype=np.float64) / 255.0
+    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    return [*(round(float(v), 6) for v in linear), 1.0]
+
+
+def _read_building(path: Path, units: Units) -> tuple[FloatArray, NDArray[np.uint32]]:
+    """Return the building's vertices in model metres, Z up, and its (F, 3) faces."""
+    suffix = path.suffix.lower()  # the suffix and existence were checked by check_options
+    try:
+        mesh = trimesh.load(str(path), force="mesh")
+    except Exception as err:  # trimesh's many parsers raise anything
+        msg = f"--building {str(path)!r} cannot be read as {suffix} ({err}); check the file."
+        raise ExportOptionsError(msg) from err
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        msg = f"--building {str(path)!r} holds no triangles; export the model as a mesh."
+        raise ExportOptionsError(msg)
+    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    # a GLB is Y up in metres: back to Z up (v @ R is R^-1 v, R being orthogonal)
+    vertices = vertices @ Z_UP_TO_Y_UP if suffix == ".glb" else vertices / units.per_metre
+    return vertices, np.asarray(mesh.faces, dtype=np.uint32)
+
+
+@dataclass
+class _SceneBuilder:
+    """Collects nodes, meshes, materials and one binary buffer."""
+
+    matrix: list[float]
+    gltf: pygltflib.GLTF2 = field(default_factory=pygltflib.GLTF2)
+    blob: bytearray = field(default_factory=bytearray)
+
+    def _view(self, data: bytes, target: int) -> int:
+        self.blob.extend(b"\0" * (-len(self.blob) % 4))  # 4-byte alignment of every view
+        view = pygltflib.BufferView(
+            buffer=0, byteOffset=len(self.blob), byteLength=len(data), target=target
+        )
+        self.blob.extend(data)
+        self.gltf.bufferViews.append(view)
+        return len(self.gltf.bufferViews) - 1
+
+    def _positions(self, positions: NDArray[np.float32]) -> int:
+        view = self._view(positions.tobytes(), pygltflib.ARRAY_BUFFER)
+        accessor = pygltflib.Accessor(
+            bufferView=view,
+            componentType=pygltflib.FLOAT,
+            count=len(positions),
+            type=pygltflib.VEC3,
+            min=[float(v) for v in positions.min(axis=0)],  # the validator checks both
+            max=[float(v) for v in positions.max(axis=0)],
+        )
+        self.gltf.accessors.append(accessor)
+        return len(self.gltf.accessors) - 1
+
+    def _node(self, name: str, mesh: pygltflib.Mesh, extras: dict[str, object]) -> None:
+        self.gltf.meshes.append(mesh)
+        self.gltf.nodes.append(
+            pygltflib.Node(
+                name=name, mesh=len(self.gltf.meshes) - 1, matrix=self.matrix, extras=extras
+            )
+        )
+
+    def add_lines(
+        self,
+        name: str,
+        positions: NDArray[np.float32],
+        rgba: list[float],
+        extras: dict[str, object],
+    ) -> None:
+        """Add a trajectory: LINE_STRIP mesh, its unlit material and its node."""
+        self.gltf.materials.append(
+            pygltflib.Material(
+                name=name,
+                pbrMetallicRoughness=pygltflib.PbrMetallicRoughness(
+                    baseColorFactor=rgba, metallicFactor=0.0, roughnessFactor=1.0
+                ),
+                extensions={_UNLIT: {}},
+            )
+        )
+        primitive = pygltflib.Primitive(
+            attributes=pygltflib.Attributes(POSITION=self._positions(positions)),
+            material=len(self.gltf.materials) - 1,
+            mode=pygltflib.LINE_STRIP,
+        )
+        self._node(name, pygltflib.Mesh(name=name, primitives=[primitive]), extras)
+
+    def add_building(
+        self, source: Path, positions: NDArray[np.float32], faces: NDArray[np.uint32]
+    ) -> None:
+        """Add the building: TRIANGLES mesh with a translucent grey material."""
+        self.gltf.materials.append(
+            pygltflib.Material(
+                name="building",
+                pbrMetallicRoughness=pygltflib.PbrMetallicRoughness(
+                    baseColorFactor=list(_BUILDING_RGBA), metallicFactor=0.0, roughnessFactor=0.9
+                ),
+                alphaMode=pygltflib.BLEND,
+                doubleSided=True,
+            )
+        )
+        indices = self._view(faces.reshape(-1).tobytes(), pygltflib.ELEMENT_ARRAY_BUFFER)
+        self.gltf.accessors.append(
+            pygltflib.Accessor(
+                bufferView=indices,
+                componentType=pygltflib.UNSIGNED_INT,
+                count=int(faces.size),
+                type=pygltflib.SCALAR,
+            )
+        )
+        index_accessor = len(self.gltf.accessors) - 1
+        primitive = pygltflib.Primitive(
+            attributes=pygltflib.Attributes(POSITION=self._positions(positions)),
+            indices=index_accessor,
+            material=len(self.gltf.materials) - 1,
+            mode=pygltflib.TRIANGLES,
+        )
+        extras: dict[str, object] = {"kind": "building", "source": source.name}
+        self._node("building", pygltflib.Mesh(name="building", primitives=[primitive]), extras)
+
+    def build(self, metadata: dict[str, object]) -> pygltflib.GLTF2:
+        """Return the finished glTF with its one scene and buffer."""
+        gltf = self.gltf
+        gltf.asset = pygltflib.Asset(version="2.0", generator=str(metadata["generator"]))
+        gltf.extensionsUsed = [_UNLIT]
+        gltf.scenes = [
+            pygltflib.Scene(
+                name=str(metadata["title"]),
+                nodes=list(range(len(gltf.nodes))),
+                extras=metadata,
+            )
+        ]
+        gltf.scene = 0
+        self.blob.extend(b"\0" * (-len(self.blob) % 4))
+        gltf.buffers = [pygltflib.Buffer(byteLength=len(self.blob))]
+        gltf.set_binary_blob(bytes(self.blob))
+        return gltf

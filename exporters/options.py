@@ -1,0 +1,49 @@
+"""Options shared by the exporters: model placement for CAD files, report settings."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+
+from loceval.geometry import SimilarityTransform
+
+__all__ = ["ExportOptions", "Units"]
+
+
+class Units(StrEnum):
+    """Length units of CAD output."""
+
+    MM = "mm"
+    CM = "cm"
+    M = "m"
+
+    @property
+    def per_metre(self) -> float:
+        """How many of these units make a metre."""
+        return {"mm": 1000.0, "cm": 100.0, "m": 1.0}[self.value]
+
+
+@dataclass(frozen=True, slots=True)
+class ExportOptions:
+    """How an evaluation becomes files.
+
+    Attributes:
+        units: output length units of CAD files.
+        site: maps the evaluation frame (the reference's frame, REP 103 Z-up metres) onto
+            the building model's coordinates (metres); identity by default.
+        simplify_m: largest deviation, in metres, that polyline simplification may
+            introduce (0 keeps every vertex).
+        building: a building mesh (OBJ/PLY/STL/GLB) to put in the glTF scene, if any.
+        evaluation_id: the id named in every file's metadata.
+        title: a human title for reports and file metadata.
+        templates_dir: where the report templates live (``templates/`` by default).
+    """
+
+    units: Units = Units.MM
+    site: SimilarityTransform = field(default_factory=SimilarityTransform.identity)
+    simplify_m: float = 0.001
+    building: Path | None = None
+    evaluation_id: str = "local"
+    title: str = "loceval evaluation"
+    templates_dir: Path | None = None

@@ -1,0 +1,669 @@
+"""Model placement shared by the CAD exporters: site transform, units, simplification.
+
+Every CAD file shows the same thing: the reference and each aligned estimate as one
+polyline, mapped from the evaluation frame (the reference's frame, REP 103, Z up, metres)
+into the building model's coordinates by the site transform, scaled to the output units and
+thinned by Ramer-Douglas-Peucker within a tolerance. :func:`place_evaluation` computes that
+view once; ``dxf``, ``rhino`` and ``gltf`` only encode it.
+
+Large site coordinates (a national grid easting of 500 km) stay exact: the geometry is also
+kept relative to a base point (the centre of the reference's bounding box in model
+coordinates, rounded to whole metres), which the formats with single-precision vertices
+(glTF) carry in a node matrix. DXF and 3DM store
+doubles and get absolute model coordinates, so they drop onto the building model as they are.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import json
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+from pathlib import Path
+from typing import Final, TypeAlias
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from exporters.errors import ExportOptionsError
+from exporters.options import ExportOptions, Units
+from loceval import __version__
+from loceval._typing import FloatArray, IntArray, StampsNs
+from loceval.errors import InputError
+from loceval.evaluation import EstimateResult, EvaluationResult
+from loceval.geometry import SimilarityTransform
+
+__all__ = [
+    "BUILDING_SUFFIXES",
+    "PALETTE",
+    "ATEBin",
+    "Marker",
+    "PathKind",
+    "PlacedPath",
+    "Placement",
+    "ate_bins",
+    "check_options",
+    "layer_name",
+    "palette_color",
+    "parse_site",
+    "parse_units",
+    "place_evaluation",
+    "polyline_distances",
+    "read_site_matrix",
+    "simplify_rdp",
+]
+
+RGB: TypeAlias = tuple[int, int, int]
+
+PALETTE: Final[tuple[RGB, ...]] = (
+    (0, 255, 255),  # ground truth: cyan, as in the framework paper's Fig. 5
+    (255, 0, 255),  # first estimate: magenta (RTAB-Map in Fig. 5)
+    (0, 200, 0),  # second estimate: green (ISAAC in Fig. 5)
+    (255, 140, 0),  # orange
+    (0, 90, 255),  # blue
+    (220, 20, 60),  # crimson
+    (150, 90, 40),  # brown
+    (140, 60, 255),  # violet
+    (200, 180, 0),  # olive yellow
+    (110, 110, 110),  # grey
+)
+"""Trajectory colours in order: the reference first, then the estimates."""
+
+SITE_FORMAT: Final = '"tx ty tz yaw_deg"'
+BUILDING_SUFFIXES: Final = (".obj", ".ply", ".stl", ".glb")
+"""Building mesh formats accepted for the glTF scene (read with trimesh)."""
+_NS_PER_S: Final = 1_000_000_000
+_WORST_SEPARATION_S: Final = 2.0  # greatest errors closer in time than this share a marker
+_INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f]+')
+_BIN_COLORS: Final[tuple[RGB, ...]] = ((0, 170, 0), (230, 200, 0), (255, 120, 0), (220, 0, 0))
+_CHUNK: Final = 4_000_000  # point-segment pairs per vectorized block (about 100 MB)
+
+
+class PathKind(StrEnum):
+    """What a placed polyline shows."""
+
+    REFERENCE = "reference"
+    ESTIMATE = "estimate"
+
+
+# --- options -------------------------------------------------------------------------------
+
+
+def parse_units(text: str) -> Units:
+    """Parse ``--units`` (``mm``, ``cm`` or ``m``).
+
+    Raises:
+        ExportOptionsError: another unit.
+    """
+    try:
+        return Units(text.strip().lower())
+    except ValueError:
+        choices = ", ".join(u.value for u in Units)
+        msg = f"--units must be one of {choices}, got {text!r}."
+        raise ExportOptionsError(msg) from None
+
+
+def parse_site(text: str) -> SimilarityTransform:
+    """Parse ``--site "tx ty tz yaw_deg"`` into the evaluation-frame -> model transform.
+
+    The translation is in metres (model coordinates of the evaluation frame's origin) and
+    the yaw is a rotation about Z in degrees, counter-clockwise seen from above. ``"tx ty
+    tz"`` alone means no rotation. Commas may separate the numbers.
+
+    Raises:
+        ExportOptionsError: not three or four finite numbers.
+    """
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        values = []
+    if len(values) not in (3, 4) or not all(math.isfinite(v) for v in values):
+        msg = (
+            f"--site takes {SITE_FORMAT} (metres, degrees about Z), for example "
+            f'"512340.0 5403210.5 112.3 37.5", got {text!r}.'
+        )
+        raise ExportOptionsError(msg)
+    yaw_deg = values[3] if len(values) == 4 else 0.0
+    rotation = Rotation.from_euler("z", yaw_deg, degrees=True).as_matrix()
+    return SimilarityTransform(rotation, np.array(values[:3]), 1.0)
+
+
+def read_site_matrix(path: Path) -> SimilarityTransform:
+    """Read a 4x4 evaluation-frame -> model matrix from a text or JSON file.
+
+    Accepted forms, all row-major ``[[sR, t], [0, 0, 0, 1]]`` with ``t`` in metres: 16
+    numbers in a text file (whitespace, comma or semicolon separated, ``#`` comments), or a
+    JSON array of 4 rows, a flat JSON array of 16, or a JSON object with either under
+    ``"matrix"``. A uniform scale is allowed; shear, reflection and singular matrices are not.
+
+    Raises:
+        ExportOptionsError: the file is unreadable or the matrix is not a similarity transform.
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        msg = f"Cannot read the site matrix file {str(path)!r} ({err}); check the path."
+        raise ExportOptionsError(msg) from err
+    values = _matrix_numbers(text)
+    if values is None or len(values) != 16 or not all(math.isfinite(v) for v in values):
+        msg = (
+            f"The site matrix file {str(path)!r} must hold 16 numbers (a 4x4 row-major "
+            "matrix, or JSON [[...], [...], [...], [...]]); check its contents."
+        )
+        raise ExportOptionsError(msg)
+    matrix = np.array(values, dtype=np.float64).reshape(4, 4)
+    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]) and np.allclose(
+        matrix[:, 3], [0.0, 0.0, 0.0, 1.0]
+    ):
+        msg = (
+            f"The site matrix in {str(path)!r} looks column-major (glTF/three.js order); "
+            "write it row by row with the translation in the last column."
+        )
+        raise ExportOptionsError(msg)
+    det = float(np.linalg.det(matrix[:3, :3]))
+    if abs(det) < 1e-12:
+        msg = f"The site matrix in {str(path)!r} is singular (det={det:.3g}); check its values."
+        raise ExportOptionsError(msg)
+    try:
+        return SimilarityTransform.from_matrix(matrix)
+    except InputError as err:
+        msg = (
+            f"The site matrix in {str(path)!r} is not a rotation with uniform scale and a "
+            f"translation ({err}); check its values."
+        )
+        raise ExportOptionsError(msg) from err
+
+
+def _matrix_numbers(text: str) -> list[float] | None:
+    stripped = text.strip()
+    if stripped.startswith(("[", "{")):
+        try:
+            document = json.loads(stripped)
+        except json.JSONDecodeError:
+            return None
+        if isinstance(document, dict):
+            document = document.get("matrix")
+        flat = np.asarray(document, dtype=object).reshape(-1).tolist() if document else []
+        try:
+            return [float(v) for v in flat]
+        except (TypeError, ValueError):
+            return None
+    lines = (line.split("#", 1)[0] for line in text.splitlines())
+    tokens = re.split(r"[\s,;]+", " ".join(lines).strip())
+    try:
+        return [float(t) for t in tokens if t]
+    except ValueError:
+        return None
+
+
+def check_options(options: ExportOptions) -> None:
+    """Check the placement options a user can get wrong (cheap: reads no file).
+
+    Raises:
+        ExportOptionsError: unknown units, a negative or non-finite simplification, or a
+            building file that is missing or not an OBJ, PLY, STL or GLB.
+    """
+    parse_units(str(options.units))  # a plain string passed for Units must still be valid
+    if not (math.isfinite(options.simplify_m) and options.simplify_m >= 0.0):
+        msg = (
+            f"--simplify must be zero or a positive number of metres, got "
+            f"{options.simplify_m!r}; use 0 to keep every pose."
+        )
+        raise ExportOptionsError(msg)
+    building = options.building
+    if building is not None:
+        if building.suffix.lower() not in BUILDING_SUFFIXES:
+            kinds = ", ".join(s.lstrip(".").upper() for s in BUILDING_SUFFIXES)
+            msg = f"--building {str(building)!r} is not a supported mesh; export it as {kinds}."
+            raise ExportOptionsError(msg)
+        if not building.is_file():
+            msg = f"--building {str(building)!r} does not exist; check the path."
+            raise ExportOptionsError(msg)
+
+
+# --- simplification ------------------------------------------------------------------------
+
+
+def simplify_rdp(points_xyz: FloatArray, tolerance: float) -> tuple[IntArray, float]:
+    """Ramer-Douglas-Peucker simplification of a 3D polyline.
+
+    Iterative and vectorized: every pending segment of one refinement level is measured in
+    a single numpy pass (a work list instead of recursion, so no recursion limit and no
+    Python loop over points). Distances are to the segment, not the infinite line, so
+    closed loops (first point == last point) simplify correctly.
+
+    The returned deviation is the largest distance from a dropped vertex to the simplified
+    segment that replaces it. Because the distance to a segment is convex, this is also the
+    largest distance from any point of the original polyline to the simplified one.
+
+    Args:
+        points_xyz: (N, 3) vertices.
+        tolerance: largest allowed deviation, in the points' units; 0 keeps every vertex.
+
+    Returns:
+        The (M,) increasing indices of the kept vertices (first and last always kept), and
+        the largest deviation introduced (0.0 when nothing was dropped).
+    """
+    points = np.asarray(points_xyz, dtype=np.float64)
+    n = points.shape[0]
+    if n <= 2 or tolerance <= 0.0:
+        return np.arange(n, dtype=np.intp), 0.0
+    keep = np.zeros(n, dtype=bool)
+    keep[[0, n - 1]] = True
+    starts = np.array([0], dtype=np.intp)
+    ends = np.array([n - 1], dtype=np.intp)
+    deviation = 0.0
+    while starts.size:
+        counts = ends - starts - 1
+        nonempty = counts > 0
+        starts, ends, counts = starts[nonempty], ends[nonempty], counts[nonempty]
+        if not starts.size:
+            break
+        first = np.cumsum(counts) - counts  # where each segment's interior starts
+        segment = np.repeat(np.arange(starts.size), counts)
+        inner = starts[segment] + 1 + (np.arange(int(counts.sum())) - first[segment])
+        dist = _segment_distances(points[inner], points[starts][segment], points[ends][segment])
+        peak = np.maximum.reduceat(dist, first)
+        at_peak = np.flatnonzero(dist == peak[segment])
+        # on ties (zigzags, quantized data) split nearest the middle: the work list then
+        # halves each level instead of peeling off one vertex per level
+        off_centre = np.abs(2 * inner[at_peak] - (starts + ends)[segment[at_peak]])
+        at_peak = at_peak[np.lexsort((off_centre, segment[at_peak]))]
+        argmax = at_peak[np.unique(segment[at_peak], return_index=True)[1]]
+        split = peak > tolerance
+        if (~split).any():
+            deviation = max(deviation, float(peak[~split].max()))
+        cut = inner[argmax[split]]
+        keep[cut] = True
+        starts = np.concatenate([starts[split], cut])
+        ends = np.concatenate([cut, ends[split]])
+    return np.flatnonzero(keep), deviation
+
+
+def _segment_distances(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+    """Distances of (K, 3) points to the (K, 3) segments ``a``-``b`` row by row."""
+    ab = b - a
+    length2 = np.einsum("ij,ij->i", ab, ab)
+    along = np.einsum("ij,ij->i", p - a, ab)
+    t = np.divide(along, length2, out=np.zeros_like(along), where=length2 > 0.0)
+    diff = p - a - np.clip(t, 0.0, 1.0)[:, None] * ab
+    out: FloatArray = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+    return out
+
+
+def polyline_distances(points_xyz: FloatArray, vertices_xyz: FloatArray) -> FloatArray:
+    """Distance from each point to the nearest segment of a polyline (brute force, chunked).
+
+    Used to check a simplified or re-read polyline against the poses it stands for.
+
+    Args:
+        points_xyz: (N, 3) points.
+        vertices_xyz: (M, 3) polyline vertices, M >= 1.
+
+    Returns:
+        (N,) distances in the points' units.
+    """
+    points = np.asarray(points_xyz, dtype=np.float64)
+    vertices = np.asarray(vertices_xyz, dtype=np.float64)
+    a = vertices[:-1] if len(vertices) > 1 else vertices
+    b = vertices[1:] if len(vertices) > 1 else vertices
+    out = np.empty(len(points))
+    step = max(1, _CHUNK // max(1, len(a)))
+    for k in range(0, len(points), step):  # one iteration per ~4M point-segment pairs
+        p = points[k : k + step]
+        ab = b - a
+        length2 = np.einsum("ij,ij->i", ab, ab)
+        ap = p[:, None, :] - a[None, :, :]
+        t = np.divide(
+            np.einsum("kij,ij->ki", ap, ab),
+            length2,
+            out=np.zeros((len(p), len(a))),
+            where=length2 > 0.0,
+        )
+        diff = ap - np.clip(t, 0.0, 1.0)[..., None] * ab
+        out[k : k + step] = np.sqrt(np.einsum("kij,kij->ki", diff, diff).min(axis=1))
+    return out
+
+
+# --- names and colours -----------------------------------------------------------------
+
+
+def palette_color(index: int) -> RGB:
+    """Return colour ``index`` of the palette (0: the reference), inventing distinct ones after.
+
+    Colours past the fixed palette step around the hue circle by the golden angle.
+    """
+    if index < len(PALETTE):
+        return PALETTE[index]
+    hue = (index * 0.618033988749895) % 1.0
+    r, g, b = colorsys.hsv_to_rgb(hue, 0.85, 0.85)
+    return round(r * 255), round(g * 255), round(b * 255)
+
+
+def layer_name(name: str) -> str:
+    r"""Return ``name`` made valid as a DXF, Rhino and glTF layer/node name.
+
+    Characters that DXF forbids in table names (``<>/\\":;?*|=,```) or that Rhino uses in
+    layer paths (``::``, brackets, braces) become ``_``; the result is at most 200
+    characters and never empty.
+    """
+    cleaned = _INVALID_LAYER_CHARS.sub("_", name).strip()[:200].strip()
+    return cleaned or "unnamed"
+
+
+def _unique_names(names: Sequence[str]) -> list[str]:
+    """Make layer names unique, ignoring case (DXF layer names are case-insensitive)."""
+    seen: set[str] = set()
+    out = []
+    for name in names:
+        candidate, k = name, 2
+        while candidate.casefold() in seen:
+            candidate = f"{name} ({k})"
+            k += 1
+        seen.add(candidate.casefold())
+        out.append(candidate)
+    return out
+
+
+# --- the placed view -------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PlacedPath:
+    """One trajectory as a polyline in model coordinates.
+
+    Attributes:
+        name: the trajectory's name, unique among the paths of a placement.
+        kind: reference or estimate.
+        source: where the trajectory came from (file, topic or tf chain).
+        layer: ``name`` made valid as a layer name in every format.
+        color_rgb: 0-255 sRGB colour from the palette.
+        stamps_ns: (M,) stamps of the kept vertices.
+        vertices: (M, 3) float64 model coordinates in the output units.
+        local_vertices: (M, 3) float64 ``vertices`` minus the placement's base point.
+        errors_m: (M,) ATE translation at the kept vertices (None for the reference).
+        poses: vertex count before simplification.
+        max_deviation_m: largest deviation the simplification introduced, metres.
+        estimate: the estimate's result (None for the reference).
+    """
+
+    name: str
+    kind: PathKind
+    source: str
+    layer: str
+    color_rgb: RGB
+    stamps_ns: StampsNs
+    vertices: FloatArray
+    local_vertices: FloatArray
+    errors_m: FloatArray | None
+    poses: int
+    max_deviation_m: float
+    estimate: EstimateResult | None
+
+    @property
+    def color_hex(self) -> str:
+        """Return the colour as ``#rrggbb``."""
+        r, g, b = self.color_rgb
+        return f"#{r:02x}{g:02x}{b:02x}"
+
+    def metadata(self) -> dict[str, object]:
+        """Return what every format stores about this path (JSON-ready)."""
+        ate = None if self.estimate is None else self.estimate.ate_translation.stats.to_dict()
+        return {
+            "name": self.name,
+            "kind": self.kind.value,
+            "source": self.source,
+            "layer": self.layer,
+            "color": list(self.color_rgb),
+            "color_hex": self.color_hex,
+            "poses": self.poses,
+            "vertices": len(self.vertices),
+            "max_deviation_m": self.max_deviation_m,
+            "ate_translation_m": ate,
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class Marker:
+    """A point worth labelling: a greatest error or a tracking loss.
+
+    Attributes:
+        path: name of the path it belongs to.
+        kind: ``"worst"`` (a greatest ATE, at the estimate pose) or ``"gap"`` (the last
+            pose before a tracking loss).
+        position: (x, y, z) model coordinates in the output units.
+        target: for ``"worst"``, the reference position the error is measured to.
+        label: the text to show.
+    """
+
+    path: str
+    kind: str
+    position: tuple[float, float, float]
+    target: tuple[float, float, float] | None
+    label: str
+
+
+@dataclass(frozen=True, slots=True)
+class ATEBin:
+    """A range of ATE translation errors drawn in one colour.
+
+    Attributes:
+        low_m: lower bound (exclusive, except 0), metres.
+        high_m: upper bound (inclusive), metres; ``inf`` for the last bin.
+        color_rgb: its colour.
+        label: legend text (``"0.05-0.10 m"``).
+    """
+
+    low_m: float
+    high_m: float
+    color_rgb: RGB
+    label: str
+
+
+def ate_bins(thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
+    """Return the error bins of the evaluation's thresholds, green (small) to red (large)."""
+    edges = sorted({float(t) for t in thresholds_m})
+    bounds = [0.0, *edges, math.inf]
+    count = len(bounds) - 1
+    bins = []
+    for k in range(count):
+        # spread the bins over the green -> red ramp, first and last fixed
+        pos = 0.0 if count == 1 else k * (len(_BIN_COLORS) - 1) / (count - 1)
+        color = _BIN_COLORS[round(pos)]
+        low, high = bounds[k], bounds[k + 1]
+        if k == 0:
+            label = f"<= {high:g} m"
+        elif math.isinf(high):
+            label = f"> {low:g} m"
+        else:
+            label = f"{low:g}-{high:g} m"
+        bins.append(ATEBin(low, high, color, label))
+    return tuple(bins)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Placement:
+    """The polylines of one evaluation in model coordinates (what every CAD file shows).
+
+    Attributes:
+        result: the evaluation.
+        units: output length units.
+        site: evaluation frame (metres) -> model coordinates (metres).
+        base_point_m: (3,) model coordinates, metres, that local vertices are relative to
+            (the reference's bounding-box centre rounded to whole metres).
+        simplify_m: the simplification tolerance, metres.
+        evaluation_id: the evaluation's id.
+        title: a human title.
+        paths: the reference first, then the estimates in evaluation order.
+    """
+
+    result: EvaluationResult
+    units: Units
+    site: SimilarityTransform
+    base_point_m: FloatArray
+    simplify_m: float
+    evaluation_id: str
+    title: str
+    paths: tuple[PlacedPath, ...]
+
+    @property
+    def base_point(self) -> FloatArray:
+        """Return the base point in model coordinates, output units, (3,)."""
+        out: FloatArray = self.base_point_m * self.units.per_metre
+        return out
+
+    @property
+    def max_deviation_m(self) -> float:
+        """Return the largest simplification deviation over all paths, metres."""
+        return max((p.max_deviation_m for p in self.paths), default=0.0)
+
+    @property
+    def frame(self) -> str:
+        """Return the evaluation frame's name (the reference's frame)."""
+        return self.result.reference.frame_id or "reference frame"
+
+    def to_model(self, positions_xyz: FloatArray) -> FloatArray:
+        """Map (N, 3) evaluation-frame metres to model coordinates in the output units."""
+        out: FloatArray = self.site.apply_positions(positions_xyz) * self.units.per_metre
+        return out
+
+    def metadata(self) -> dict[str, object]:
+        """Return the file-level metadata every format stores (JSON-ready)."""
+        return {
+            "generator": f"loceval {__version__}",
+            "evaluation_id": self.evaluation_id,
+            "title": self.title,
+            "created_at": self.result.created_at,
+            "units": self.units.value,
+            "frame": {
+                "evaluation_frame": self.frame,
+                "convention": "REP 103: x forward, y left, z up, metres",
+                "model": "building model coordinates, z up",
+                "site_matrix_m": self.site.as_matrix().tolist(),
+            },
+            "base_point": self.base_point.tolist(),
+            "simplify_tolerance_m": self.simplify_m,
+            "max_deviation_m": self.max_deviation_m,
+            "paths": [p.name for p in self.paths],
+        }
+
+    def markers(self) -> list[Marker]:
+        """Return the greatest-error and tracking-loss markers of every path.
+
+        Greatest errors closer than 2 s to a greater one are left out: they belong to the
+        same excursion, and their labels would only pile up.
+        """
+        out: list[Marker] = []
+        max_gap_ns = round(self.result.config.max_gap_s * _NS_PER_S)
+        t0 = int(self.result.reference.stamps_ns[0])
+        for path in self.paths:
+            est = path.estimate
+            trajectory = self.result.reference if est is None else est.aligned
+            for start, end in trajectory.gaps(max_gap_ns):
+                k = int(np.searchsorted(trajectory.stamps_ns, start))
+                out.append(
+                    Marker(
+                        path=path.name,
+                        kind="gap",
+                        position=_xyz(self.to_model(trajectory.positions_xyz[k : k + 1])[0]),
+                        target=None,
+                        label=(
+                            f"{path.name}: no pose for {(end - start) / _NS_PER_S:.1f} s "
+                            f"from t={(start - t0) / _NS_PER_S:.1f} s"
+                        ),
+                    )
+                )
+            if est is None:
+                continue
+            labelled: list[float] = []
+            for rank, worst in enumerate(est.worst, start=1):
+                # the greatest errors come in bursts of neighbouring poses: one marker each
+                if any(abs(worst.t_s - t) < _WORST_SEPARATION_S for t in labelled):
+                    continue
+                labelled.append(worst.t_s)
+                here = self.to_model(est.aligned.positions_xyz[worst.index : worst.index + 1])
+                there = self.to_model(np.array([worst.position_xyz]))
+                out.append(
+                    Marker(
+                        path=path.name,
+                        kind="worst",
+                        position=_xyz(here[0]),
+                        target=_xyz(there[0]),
+                        label=(
+                            f"{path.name} #{rank}: ATE {worst.error:.3f} m at t={worst.t_s:.1f} s"
+                        ),
+                    )
+                )
+        return out
+
+
+def _xyz(row: FloatArray) -> tuple[float, float, float]:
+    return float(row[0]), float(row[1]), float(row[2])
+
+
+def place_evaluation(result: EvaluationResult, options: ExportOptions) -> Placement:
+    """Map, scale and simplify every trajectory of an evaluation for the CAD exporters.
+
+    The reference comes first (cyan), then each aligned estimate (magenta, green, ...). Each
+    is mapped by ``options.site``, simplified in model metres within ``options.simplify_m``
+    and scaled to ``options.units``.
+
+    Args:
+        result: the evaluation.
+        options: units, site transform, tolerance, ids.
+
+    Returns:
+        The placement.
+
+    Raises:
+        ExportOptionsError: unknown units or a negative tolerance.
+    """
+    check_options(options)
+    units = Units(options.units)
+    site = options.site
+    # the base point: the reference's bounding-box centre in model metres, rounded so it
+    # reads well in metadata; it works for a far site translation and for a reference
+    # already given in a national grid alike
+    ref_model_m = site.apply_positions(result.reference.positions_xyz)
+    base_m = np.round((ref_model_m.min(axis=0) + ref_model_m.max(axis=0)) / 2.0)
+    reference = result.reference
+    sources = [(reference, None), *((e.aligned, e) for e in result.estimates)]
+    names = [reference.name or "reference"]
+    names += [e.name or f"estimate {k}" for k, e in enumerate(result.estimates, start=1)]
+    layers = _unique_names([layer_name(n) for n in names])
+    paths = []
+    for k, ((trajectory, est), layer) in enumerate(zip(sources, layers, strict=True)):
+        model_m = site.apply_positions(trajectory.positions_xyz)
+        kept, deviation = simplify_rdp(model_m, options.simplify_m)
+        vertices = model_m[kept] * units.per_metre
+        local = (model_m[kept] - base_m) * units.per_metre
+        name = names[k] if layer == layer_name(names[k]) else layer
+        paths.append(
+            PlacedPath(
+                name=name,
+                kind=PathKind.REFERENCE if est is None else PathKind.ESTIMATE,
+                source=trajectory.source if est is None else est.estimate.source,
+                layer=layer,
+                color_rgb=palette_color(k),
+                stamps_ns=trajectory.stamps_ns[kept],
+                vertices=vertices,
+                local_vertices=local,
+                errors_m=None if est is None else est.ate_translation.values[kept],
+                poses=len(trajectory),
+                max_deviation_m=deviation,
+                estimate=est,
+            )
+        )
+    return Placement(
+        result=result,
+        units=units,
+        site=site,
+        base_point_m=base_m,
+        simplify_m=float(options.simplify_m),
+        evaluation_id=options.evaluation_id,
+        title=options.title,
+        paths=tuple(paths),
+    )

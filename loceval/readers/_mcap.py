@@ -1,0 +1,217 @@
+"""Read a few channels of an indexed MCAP file without reading the rest.
+
+A camera bag is mostly image payload; the tf messages are a fraction of a percent of it.
+rosbags reads (and for compressed files decompresses) every chunk that holds a wanted
+message, which costs more than reading the whole file. When the MCAP file is indexed and the
+chunks that hold the wanted messages are stored uncompressed (rosbags' writer does so unless
+asked to compress), the MCAP summary says where every message of a channel is: the chunk
+indexes point to message index records, which hold each message's offset inside its chunk.
+:func:`read_indexed_messages` follows them and reads only those records.
+
+Anything unexpected (no summary, no chunk index, compressed chunks, a record that does not
+match its index) makes it return None, and the caller reads the file through rosbags, which
+then reports a damaged file properly. Record layouts follow the MCAP specification
+(https://mcap.dev/spec).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+__all__ = ["read_indexed_messages"]
+
+_MAGIC = b"\x89MCAP0\r\n"
+_OP_FOOTER, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK_INDEX, _OP_MESSAGE_INDEX = 0x02, 4, 5, 8, 7
+_OP_SCHEMA = 0x03
+_FOOTER_SIZE = 1 + 8 + 20 + len(_MAGIC)
+_FIRST_READ = 512
+"""Bytes read past a message's start; most tf messages fit, larger ones take a second read."""
+_MAX_RUN_GAP = 64 * 1024
+"""Messages closer than this are read with one call (skipping the bytes between)."""
+_MAX_RUN = 1024**2
+"""Longest stretch read with one call."""
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_RECORD_HEAD = struct.Struct("<BQ")
+_MESSAGE_HEAD = struct.Struct("<BQHIQQ")
+_CHUNK_INDEX_HEAD = struct.Struct("<QQQQ")
+
+
+class _NotServableError(Exception):
+    """The file cannot be served from its index; read it the ordinary way."""
+
+
+def read_indexed_messages(
+    path: Path, wanted: Sequence[tuple[str, str]]
+) -> list[tuple[int, int, bytes]] | None:
+    """Return every message of the wanted channels, or None when the index cannot serve them.
+
+    Args:
+        path: an ``.mcap`` file.
+        wanted: ``(topic, msgtype)`` pairs to read.
+
+    Returns:
+        ``(log_time_ns, index into wanted, data)`` per message, sorted by log time; or
+        None: the file has no usable summary or chunk index, a chunk that holds a wanted
+        message is compressed, or a record disagrees with the index.
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return None
+    try:
+        return _read(fd, {key: i for i, key in enumerate(wanted)})
+    except (_NotServableError, struct.error, UnicodeDecodeError, OSError):
+        return None
+    finally:
+        os.close(fd)
+
+
+def _read(fd: int, wanted: dict[tuple[str, str], int]) -> list[tuple[int, int, bytes]]:
+    schemas, channels, chunk_indexes = _read_summary(fd)
+    wanted_channels: dict[int, int] = {}
+    for channel_id, (topic, schema_id, encoding) in channels.items():
+        key = (topic, schemas.get(schema_id, ""))
+        if key in wanted:
+            if encoding != "cdr":
+                raise _NotServableError
+            wanted_channels[channel_id] = wanted[key]
+    entries: list[tuple[int, int, int]] = []
+    for chunk_start, index_offsets, compression in chunk_indexes:
+        offsets = [(cid, off) for cid, off in index_offsets.items() if cid in wanted_channels]
+        if offsets and compression:
+            raise _NotServableError
+        # Chunk record: opcode, length, start, end, uncompressed size, crc, compression
+        # string (empty here), records length; the records follow.
+        records_start = chunk_start + 1 + 8 + 8 + 8 + 8 + 4 + 4 + 8
+        for channel_id, index_offset in offsets:
+            entries.extend(
+                (records_start + offset, log_time, channel_id)
+                for log_time, offset in _read_message_index(fd, index_offset, channel_id)
+            )
+    entries.sort()
+    messages: list[tuple[int, int, bytes]] = []
+    for run in _runs(entries):
+        start = run[0][0]
+        block = os.pread(fd, run[-1][0] + _FIRST_READ - start, start)
+        for position, log_time, channel_id in run:
+            data = _message_data(
+                fd,
+                block,
+                at=position - start,
+                position=position,
+                channel_id=channel_id,
+                log_time=log_time,
+            )
+            messages.append((log_time, wanted_channels[channel_id], data))
+    messages.sort(key=lambda m: m[0])
+    return messages
+
+
+def _runs(entries: list[tuple[int, int, int]]) -> Iterator[list[tuple[int, int, int]]]:
+    """Group position-sorted entries into runs that one read covers."""
+    run: list[tuple[int, int, int]] = []
+    for entry in entries:
+        if run and (
+            entry[0] - run[-1][0] > _MAX_RUN_GAP or entry[0] + _FIRST_READ - run[0][0] > _MAX_RUN
+        ):
+            yield run
+            run = []
+        run.append(entry)
+    if run:
+        yield run
+
+
+def _read_summary(
+    fd: int,
+) -> tuple[dict[int, str], dict[int, tuple[str, int, str]], list[tuple[int, dict[int, int], str]]]:
+    size = os.fstat(fd).st_size
+    if size < 2 * len(_MAGIC) + _FOOTER_SIZE or os.pread(fd, 8, 0) != _MAGIC:
+        raise _NotServableError
+    footer = os.pread(fd, _FOOTER_SIZE, size - _FOOTER_SIZE)
+    if footer[-8:] != _MAGIC or footer[0] != _OP_FOOTER:
+        raise _NotServableError
+    summary_start, summary_offset_start = struct.unpack_from("<QQ", footer, 9)
+    summary_end = summary_offset_start or size - _FOOTER_SIZE
+    if not 0 < summary_start < summary_end <= size - _FOOTER_SIZE:
+        raise _NotServableError
+    summary = os.pread(fd, summary_end - summary_start, summary_start)
+    schemas, channels, chunk_indexes = _parse_summary(summary)
+    if not chunk_indexes:
+        raise _NotServableError
+    return schemas, channels, chunk_indexes
+
+
+def _message_data(
+    fd: int, block: bytes, *, at: int, position: int, channel_id: int, log_time: int
+) -> bytes:
+    """Return a message record's data from ``block`` (read more when it runs past it)."""
+    opcode, length, record_channel, _, record_time, _ = _MESSAGE_HEAD.unpack_from(block, at)
+    if opcode != _OP_MESSAGE or record_channel != channel_id or record_time != log_time:
+        raise _NotServableError
+    data_size = length - 22
+    start = at + _MESSAGE_HEAD.size
+    if start + data_size <= len(block):
+        return block[start : start + data_size]
+    data = os.pread(fd, data_size, position + _MESSAGE_HEAD.size)
+    if len(data) != data_size:
+        raise _NotServableError
+    return data
+
+
+def _parse_summary(
+    summary: bytes,
+) -> tuple[dict[int, str], dict[int, tuple[str, int, str]], list[tuple[int, dict[int, int], str]]]:
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, int, str]] = {}
+    chunk_indexes: list[tuple[int, dict[int, int], str]] = []
+    pos = 0
+    while pos < len(summary):
+        opcode, length = _RECORD_HEAD.unpack_from(summary, pos)
+        body = pos + _RECORD_HEAD.size
+        pos = body + length
+        if pos > len(summary):
+            raise _NotServableError
+        if opcode == _OP_SCHEMA:
+            (schema_id,) = _U16.unpack_from(summary, body)
+            name, _ = _string(summary, body + 2)
+            schemas[schema_id] = name
+        elif opcode == _OP_CHANNEL:
+            channel_id, schema_id = struct.unpack_from("<HH", summary, body)
+            topic, at = _string(summary, body + 4)
+            encoding, _ = _string(summary, at)
+            channels[channel_id] = (topic, schema_id, encoding)
+        elif opcode == _OP_CHUNK_INDEX:
+            _, _, chunk_start, _ = _CHUNK_INDEX_HEAD.unpack_from(summary, body)
+            at = body + _CHUNK_INDEX_HEAD.size
+            (map_size,) = _U32.unpack_from(summary, at)
+            at += 4
+            index_offsets = dict(struct.iter_unpack("<HQ", summary[at : at + map_size]))
+            at += map_size + 8
+            compression, _ = _string(summary, at)
+            chunk_indexes.append((chunk_start, index_offsets, compression))
+    return schemas, channels, chunk_indexes
+
+
+def _read_message_index(fd: int, offset: int, channel_id: int) -> list[tuple[int, int]]:
+    head = os.pread(fd, 1 + 8 + 2 + 4, offset)
+    opcode, _ = _RECORD_HEAD.unpack_from(head)
+    (record_channel,) = _U16.unpack_from(head, 9)
+    (size,) = _U32.unpack_from(head, 11)
+    if opcode != _OP_MESSAGE_INDEX or record_channel != channel_id or size % 16:
+        raise _NotServableError
+    body = os.pread(fd, size, offset + len(head))
+    if len(body) != size:
+        raise _NotServableError
+    return list(struct.iter_unpack("<QQ", body))
+
+
+def _string(buffer: bytes, pos: int) -> tuple[str, int]:
+    (length,) = _U32.unpack_from(buffer, pos)
+    end = pos + 4 + length
+    if end > len(buffer):
+        raise _NotServableError
+    return buffer[pos + 4 : end].decode(), end

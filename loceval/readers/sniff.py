@@ -1,0 +1,285 @@
+r"""Name a trajectory source and tell its format from its content.
+
+A source is written ``[FORMAT:]PATH[@SELECTOR]``:
+
+- ``FORMAT:`` is optional and only counts when it is one of :class:`TrajectoryFormat`'s
+  values (``tum``, ``euroc``, ``kitti``, ``csv``, ``motive``, ``bag``), so ``C:\data`` or
+  ``run:2.txt`` stay paths. Without it the format is sniffed from the content.
+- ``@SELECTOR`` is optional: comma-separated items, where ``KEY=VALUE`` items are options
+  and at most one plain item is the selector. What each format accepts:
+
+  - ``bag``: a topic or a tf chain, ``run.mcap@/amcl_pose``, ``run.bag@tf:map:base_link``.
+  - ``motive``: the rigid body, ``motive:take.csv@RigidBody1``; option ``up=y|z`` for the
+    export's up axis, ``motive:take.csv@Drone,up=z``.
+  - ``kitti``: the times file, ``kitti:00.txt@times=times.txt`` (a relative times path
+    that does not exist as given is looked up next to the poses file).
+  - ``csv``: column mappings ``KEY=HEADER`` for the keys ``t x y z qx qy qz qw``, plus
+    ``time_unit=s|ms|us|ns`` and ``length_unit=m|cm|mm``, e.g.
+    ``csv:log.csv@t=time_s,x=px,y=py,z=pz``. Unmapped keys use the recognised names.
+  - ``tum`` and ``euroc`` take nothing after ``@``.
+
+Existing paths win over this syntax: a file literally named ``tum:a@b.txt`` is read as
+that file, and ``data@2024/run.txt@/odom`` splits at the last ``@`` whose left side exists.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from types import MappingProxyType
+from typing import Final
+
+from loceval.errors import ReaderError
+
+__all__ = ["SourceSpec", "TrajectoryFormat", "missing_file_error", "parse_source", "sniff_format"]
+
+_HEAD_BYTES: Final = 64 * 1024
+_BAG_MAGICS: Final = (
+    b"#ROSBAG V2.0",  # ROS 1 bag
+    b"\x89MCAP0\r\n",  # MCAP (ROS 2)
+    b"SQLite format 3\x00",  # ROS 2 sqlite3 storage (.db3)
+    b"PK\x03\x04",  # zip of a bag
+)
+_CSV_DELIMITERS: Final = (",", ";", "\t")
+
+
+class TrajectoryFormat(StrEnum):
+    """The trajectory formats :func:`loceval.readers.read_trajectory` reads."""
+
+    TUM = "tum"
+    """Whitespace-separated ``t x y z qx qy qz qw`` (seconds), or ``t x y z`` / ``t x y``."""
+    EUROC = "euroc"
+    """EuRoC ground-truth CSV: nanosecond stamps, ``x y z`` then ``qw qx qy qz``."""
+    KITTI = "kitti"
+    """KITTI odometry poses: 12 numbers per line (3x4 row-major), optional times file."""
+    CSV = "csv"
+    """A CSV with a header row, read through a column mapping."""
+    MOTIVE = "motive"
+    """An OptiTrack Motive CSV export."""
+    BAG = "bag"
+    """A ROS 1 bag, ROS 2 bag (directory, .db3, .mcap) or a zip of one."""
+
+
+_WHITESPACE_FORMATS: Final[Mapping[int, TrajectoryFormat]] = {
+    3: TrajectoryFormat.TUM,
+    4: TrajectoryFormat.TUM,
+    8: TrajectoryFormat.TUM,
+    12: TrajectoryFormat.KITTI,
+}
+"""Rows of whitespace-separated numbers: format by the count per row."""
+
+
+@dataclass(frozen=True, slots=True)
+class SourceSpec:
+    """A parsed ``[FORMAT:]PATH[@SELECTOR]`` source.
+
+    Attributes:
+        format: the format named by the prefix (or the default), None to sniff it.
+        path: the file or bag directory.
+        selector: the topic, tf chain or rigid body name, if given.
+        options: ``KEY=VALUE`` items after ``@`` (read-only).
+    """
+
+    format: TrajectoryFormat | None
+    path: Path
+    selector: str | None = None
+    options: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        """Store the options as a read-only copy."""
+        object.__setattr__(self, "path", Path(self.path))
+        object.__setattr__(self, "options", MappingProxyType(dict(self.options)))
+
+    def __str__(self) -> str:
+        """Return the source in the syntax :func:`parse_source` reads."""
+        prefix = f"{self.format.value}:" if self.format is not None else ""
+        items = [self.selector] if self.selector else []
+        items += [f"{key}={value}" for key, value in self.options.items()]
+        suffix = "@" + ",".join(items) if items else ""
+        return f"{prefix}{self.path}{suffix}"
+
+
+def parse_source(text: str, *, default_format: TrajectoryFormat | None = None) -> SourceSpec:
+    """Parse ``[FORMAT:]PATH[@SELECTOR]`` (see the module docstring for the syntax).
+
+    Args:
+        text: the source as the user wrote it.
+        default_format: the format when the text has no ``FORMAT:`` prefix; None to
+            sniff it from the content later.
+
+    Returns:
+        The parsed source. The path is not checked here, except to tell a path that
+        contains ``:`` or ``@`` from the syntax.
+
+    Raises:
+        ReaderError: the text is empty, or the part after ``@`` holds two selectors.
+    """
+    if not text.strip():
+        msg = "Empty source; give a file, e.g. tum:groundtruth.txt or run.mcap@/odom."
+        raise ReaderError(msg)
+    if _exists(text):
+        return SourceSpec(default_format, Path(text))
+    fmt = default_format
+    rest = text
+    head, colon, tail = text.partition(":")
+    if colon and head.lower() in {f.value for f in TrajectoryFormat}:
+        fmt = TrajectoryFormat(head.lower())
+        rest = tail
+    path_text, suffix = _split_selector(rest)
+    if not path_text.strip():
+        msg = f"Source {text!r} names no file; give one, e.g. tum:groundtruth.txt."
+        raise ReaderError(msg)
+    selector, options = _parse_suffix(suffix, text=text)
+    return SourceSpec(fmt, Path(path_text), selector, options)
+
+
+def _exists(text: str) -> bool:
+    """Whether a path exists; names the OS cannot even look up (too long, NUL) do not."""
+    try:
+        return bool(text) and Path(text).exists()
+    except (OSError, ValueError):
+        return False
+
+
+def _split_selector(rest: str) -> tuple[str, str | None]:
+    """Split ``PATH@SUFFIX`` at the last ``@`` whose left side exists, else the first."""
+    if "@" not in rest or _exists(rest):
+        return rest, None
+    positions = [i for i, char in enumerate(rest) if char == "@"]
+    for i in reversed(positions):
+        if _exists(rest[:i]):
+            return rest[:i], rest[i + 1 :]
+    return rest[: positions[0]], rest[positions[0] + 1 :]
+
+
+def _parse_suffix(suffix: str | None, *, text: str) -> tuple[str | None, dict[str, str]]:
+    if suffix is None:
+        return None, {}
+    selector: str | None = None
+    options: dict[str, str] = {}
+    for raw in suffix.split(","):
+        item = raw.strip()
+        if not item:
+            continue
+        key, equals, value = item.partition("=")
+        if equals:
+            options[key.strip().lower()] = value.strip()
+        elif selector is None:
+            selector = item
+        else:
+            msg = (
+                f"Source {text!r} names two selectors, {selector!r} and {item!r}; "
+                "give one topic, tf chain or rigid body after '@'."
+            )
+            raise ReaderError(msg)
+    return selector, options
+
+
+def missing_file_error(path: Path) -> ReaderError:
+    """Return the error for a path that does not exist."""
+    return ReaderError(f"No such file: {str(path)!r}; check the path.")
+
+
+def sniff_format(path: Path) -> TrajectoryFormat:
+    """Tell a file's trajectory format from its content (never from its name).
+
+    Bags are recognised by their magic bytes (ROS 1 ``#ROSBAG V2.0``, MCAP, SQLite, zip) or,
+    for directories, by a ``metadata.yaml`` (a ``metadata.yaml`` itself is a bag too, as for
+    the bag reader); text files by their first lines: a Motive
+    ``Format Version`` line, a EuRoC ``#timestamp`` header or comma-separated rows with
+    integer nanosecond stamps, rows of 12 numbers (KITTI), rows of 8, 4 or 3 numbers (TUM),
+    or a header row followed by numbers (generic CSV).
+
+    Args:
+        path: the file or directory.
+
+    Returns:
+        The format.
+
+    Raises:
+        ReaderError: the path does not exist, is empty, or its content matches no format.
+    """
+    path = Path(path)
+    if path.name == "metadata.yaml":
+        return TrajectoryFormat.BAG  # the metadata of a ROS 2 bag names the bag
+    if path.is_dir():
+        if (path / "metadata.yaml").is_file():
+            return TrajectoryFormat.BAG
+        msg = (
+            f"{str(path)!r} is a folder without a metadata.yaml, so not a ROS 2 bag; "
+            "name a trajectory file or a bag folder."
+        )
+        raise ReaderError(msg)
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(_HEAD_BYTES)
+    except FileNotFoundError as err:
+        raise missing_file_error(path) from err
+    except OSError as err:
+        msg = f"Cannot read {str(path)!r} ({err.strerror}); check the path and its permissions."
+        raise ReaderError(msg) from err
+    if head.startswith(_BAG_MAGICS):
+        return TrajectoryFormat.BAG
+    fmt = _sniff_text(head)
+    if fmt is None:
+        msg = (
+            f"Cannot tell the format of {str(path)!r} from its first lines; name it with a "
+            f"prefix, e.g. tum:{path} (one of {', '.join(f.value for f in TrajectoryFormat)})."
+        )
+        raise ReaderError(msg)
+    return fmt
+
+
+def _sniff_text(head: bytes) -> TrajectoryFormat | None:
+    if not head.strip() or b"\x00" in head:
+        return None
+    text = head.decode("utf-8-sig", errors="replace")
+    if len(head) == _HEAD_BYTES and "\n" in text:
+        text = text[: text.rindex("\n")]  # drop the cut-off last line
+    lines = [line.strip() for line in text.split("\n") if line.strip()]
+    first = lines[0]
+    if first.split(",", 1)[0].strip().lower() == "format version":
+        return TrajectoryFormat.MOTIVE
+    if _is_euroc_header(first):
+        return TrajectoryFormat.EUROC
+    data = [line for line in lines if not line.startswith("#")]
+    if not data:
+        return None
+    words = data[0].split()
+    if "," not in data[0] and ";" not in data[0] and _all_numbers(words):
+        return _WHITESPACE_FORMATS.get(len(words))
+    comments = [line for line in lines[: lines.index(data[0])] if line.startswith("#")]
+    return _sniff_delimited(data, comments[-1] if comments else None)
+
+
+def _sniff_delimited(data: list[str], last_comment: str | None) -> TrajectoryFormat | None:
+    """Tell rows that are not whitespace-separated numbers: CSV with a header, or EuRoC."""
+    row = data[0]
+    delimiter = max(_CSV_DELIMITERS, key=row.count)
+    if not row.count(delimiter):
+        # a whitespace-separated header row ("t x y z") over rows of numbers
+        header_over_numbers = len(data) > 1 and _all_numbers(data[1].split())
+        return TrajectoryFormat.CSV if header_over_numbers else None
+    cells = [cell.strip() for cell in row.split(delimiter)]
+    if not _all_numbers(cells):
+        return TrajectoryFormat.EUROC if _is_euroc_header(row) else TrajectoryFormat.CSV
+    if last_comment is not None and delimiter in last_comment:
+        return TrajectoryFormat.CSV  # a '#'-prefixed header row
+    headerless_euroc = delimiter == "," and len(cells) >= 8 and cells[0].isdigit()
+    return TrajectoryFormat.EUROC if headerless_euroc else None
+
+
+def _is_euroc_header(line: str) -> bool:
+    cells = [cell.strip().lower() for cell in line.lstrip("#").split(",")]
+    return len(cells) >= 4 and cells[0].startswith("timestamp") and "p_rs_r_x" in cells[1]
+
+
+def _all_numbers(cells: list[str]) -> bool:
+    try:
+        for cell in cells:
+            float(cell)
+    except ValueError:
+        return False
+    return bool(cells)

@@ -1,0 +1,744 @@
+"""Readers for whitespace and comma-separated trajectory files: TUM, EuRoC and KITTI.
+
+Also holds what the text readers share: :func:`load_text` (file errors, encodings) and
+:func:`parse_table`, which parses a table of numbers with NumPy's C parser
+(``np.loadtxt``) and, only when that fails, walks the lines in Python to name the exact
+line, cell and problem. Every reader finishes through
+:func:`loceval.readers._common.build_trajectory` (NaN/inf, quaternion norms, sorting,
+duplicates, at least three poses).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
+from loceval.errors import ReaderError
+from loceval.readers._common import build_trajectory, seconds_to_ns
+from loceval.readers.sniff import SourceSpec, TrajectoryFormat, missing_file_error
+from loceval.trajectory import Trajectory
+
+__all__ = [
+    "KITTI_ROTATION_TOLERANCE",
+    "NumericTable",
+    "load_text",
+    "parse_table",
+    "read_euroc",
+    "read_kitti",
+    "read_tum",
+    "stamps_from_values",
+]
+
+KITTI_ROTATION_TOLERANCE: Final = 1e-2
+"""Largest ``|R Rᵀ - I|`` entry and ``|det R - 1|`` accepted in a KITTI pose; scipy
+projects smaller deviations (print rounding) onto the nearest rotation."""
+
+_NS_PER_S: Final = 1_000_000_000
+_INT64_MAX: Final = float(np.iinfo(np.int64).max)
+_NAN_SPELLINGS: Final = ("nan", "NaN", "NAN", "Nan")
+_TUM_HINT: Final = "every TUM line holds t x y z qx qy qz qw (8 values), t x y z (4) or t x y (3)"
+_KITTI_HINT: Final = "every KITTI line holds the 12 numbers of a 3x4 [R|t] matrix, row by row"
+_EUROC_NAMES: Final = ("timestamp", "p_x", "p_y", "p_z", "q_w", "q_x", "q_y", "q_z")
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class NumericTable:
+    """Numbers parsed from a text table, with the file line of every row.
+
+    Attributes:
+        values: (N, K) float64; NaN where a cell was empty (when empty cells are allowed).
+        lines: (N,) 1-based line numbers in the file.
+        empty: (N,) whether the row had an empty cell (all False unless allowed).
+        first_int: (N,) the first column parsed exactly as int64, when asked for and every
+            cell of it is an integer; else None.
+    """
+
+    values: FloatArray
+    lines: IntArray
+    empty: BoolArray
+    first_int: StampsNs | None = None
+
+    def __len__(self) -> int:
+        """Return the number of rows."""
+        return int(self.values.shape[0])
+
+
+def load_text(path: Path) -> str:
+    """Read a text file as UTF-8 (with or without BOM), falling back to Latin-1.
+
+    Args:
+        path: the file.
+
+    Returns:
+        The content, with old Mac CR-only line ends turned into LF.
+
+    Raises:
+        ReaderError: the file is missing, a folder, unreadable, or binary.
+    """
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError as err:
+        raise missing_file_error(path) from err
+    except IsADirectoryError as err:
+        msg = (
+            f"{str(path)!r} is a folder, not a trajectory file; name the file, or use "
+            f"bag:{path}@TOPIC for a ROS 2 bag folder."
+        )
+        raise ReaderError(msg) from err
+    except OSError as err:
+        msg = f"Cannot read {str(path)!r} ({err.strerror}); check the path and its permissions."
+        raise ReaderError(msg) from err
+    if b"\x00" in raw[:4096]:
+        msg = (
+            f"{str(path)!r} is a binary file, not a text trajectory; for a bag name a topic, "
+            f"e.g. bag:{path}@/odom."
+        )
+        raise ReaderError(msg)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    if "\r" in text and "\n" not in text:
+        text = text.replace("\r", "\n")
+    return text
+
+
+def parse_table(
+    text: str,
+    *,
+    where: str,
+    delimiter: str | None,
+    hint: str,
+    skip_lines: int = 0,
+    usecols: Sequence[int] | None = None,
+    names: Sequence[str] | None = None,
+    comments: str | None = None,
+    empty_cells: bool = False,
+    int_first: bool = False,
+) -> NumericTable:
+    """Parse a table of numbers; on bad input, name the line and the cell.
+
+    Blank lines, and with ``comments`` comment lines and trailing comments, are skipped.
+
+    Args:
+        text: the whole file.
+        where: the file name used in messages.
+        delimiter: the cell delimiter, or None for runs of whitespace.
+        hint: what a line of this format holds, for the column-count message.
+        skip_lines: lines at the top to skip (headers).
+        usecols: the 0-based cells to read, in this order; None reads every cell and
+            requires the same number on every line.
+        names: the names of the read columns, for messages.
+        comments: the comment character, or None.
+        empty_cells: read empty cells as NaN and flag their rows (tracking lost) instead
+            of rejecting them.
+        int_first: also parse the first read column exactly as int64 (nanosecond stamps).
+
+    Returns:
+        The parsed table.
+
+    Raises:
+        ReaderError: a line has the wrong number of cells or a cell is not a number.
+    """
+    first_line, first_pos = _skip_leading_lines(text, skip_lines, comments)
+    # Without comments below the leading block the C parser need not look for them.
+    body_comments = comments if comments and text.find(comments, first_pos) >= 0 else None
+    fill = empty_cells and delimiter is not None
+    # With empty cells written as NaN, a literal NaN would pass for one: the line pass
+    # tells them apart.
+    if not (fill and any(text.find(nan, first_pos) >= 0 for nan in _NAN_SPELLINGS)):
+        source = _fill_empty_cells(text, delimiter) if fill and delimiter else text
+        parsed = _parse_fast(
+            source,
+            delimiter=delimiter,
+            skip_lines=first_line,
+            usecols=usecols,
+            comments=body_comments,
+            int_first=int_first,
+        )
+        if parsed is not None:
+            values, first_int = parsed
+            lines = _data_line_numbers(text, first_line, first_pos, body_comments, len(values))
+            if lines is not None:
+                empty: BoolArray = np.zeros(len(values), dtype=bool)
+                if fill:
+                    empty = np.isnan(values).sum(axis=1) > 0
+                return NumericTable(values, lines, empty, first_int)
+    return _parse_slow(
+        text,
+        where=where,
+        delimiter=delimiter,
+        hint=hint,
+        skip_lines=skip_lines,
+        usecols=usecols,
+        names=names,
+        comments=comments,
+        empty_cells=empty_cells,
+        int_first=int_first,
+    )
+
+
+def stamps_from_values(
+    values: FloatArray, *, ns_per_unit: float, lines: IntArray, where: str, unit: str
+) -> StampsNs:
+    """Convert float stamps in some unit to int64 nanoseconds, rejecting NaN and overflow.
+
+    Args:
+        values: (N,) stamps in ``unit``.
+        ns_per_unit: nanoseconds per unit (1e9 for seconds).
+        lines: (N,) line numbers for messages.
+        where: the file name for messages.
+        unit: the unit's name for messages.
+
+    Returns:
+        (N,) int64 nanoseconds, rounded to the nearest nanosecond.
+
+    Raises:
+        ReaderError: a stamp is NaN, inf, or beyond the int64 nanosecond range.
+    """
+    limit = _INT64_MAX / ns_per_unit
+    bad = np.flatnonzero(~(np.abs(values) < limit))
+    if bad.size:
+        i = int(bad[0])
+        msg = (
+            f"{where}, line {int(lines[i])}: stamp {float(values[i])!r} {unit} is not a "
+            "usable time; fix that line or name the time unit."
+        )
+        raise ReaderError(msg)
+    if ns_per_unit == _NS_PER_S:
+        return seconds_to_ns(values)
+    out: StampsNs = np.rint(values * ns_per_unit).astype(np.int64)
+    return out
+
+
+# --- TUM -----------------------------------------------------------------------------
+
+
+def read_tum(path: Path, *, name: str = "") -> Trajectory:
+    """Read a TUM trajectory: ``t x y z qx qy qz qw`` per line, stamps in seconds.
+
+    ``#`` comments and blank lines are skipped. Position-only files with ``t x y z`` or
+    ``t x y`` (z = 0) lines are accepted; every line must have the same number of values.
+
+    Args:
+        path: the file.
+        name: the trajectory's name.
+
+    Returns:
+        The trajectory; ``source`` is ``tum:PATH``.
+
+    Raises:
+        ReaderError: the file is missing or unreadable, a line has the wrong number of
+            values or a non-number, a value is NaN/inf, a quaternion is not unit, or
+            fewer than three poses remain.
+    """
+    path = Path(path)
+    where = str(path)
+    table = parse_table(load_text(path), where=where, delimiter=None, hint=_TUM_HINT, comments="#")
+    values = table.values
+    width = values.shape[1] if values.ndim == 2 else 0
+    if len(table) and width not in {3, 4, 8}:
+        msg = (
+            f"{where}, line {int(table.lines[0])}: {width} values per line, but {_TUM_HINT}; "
+            "check the file or name its format with a prefix."
+        )
+        raise ReaderError(msg)
+    stamps = stamps_from_values(
+        values[:, 0] if len(table) else np.zeros(0),
+        ns_per_unit=_NS_PER_S,
+        lines=table.lines,
+        where=where,
+        unit="s",
+    )
+    positions, quat = _positions_and_quat(values, width, quat_cols=[4, 5, 6, 7])
+    return build_trajectory(
+        stamps,
+        positions,
+        quat,
+        where=where,
+        line_numbers=table.lines,
+        name=name,
+        source=str(SourceSpec(TrajectoryFormat.TUM, path)),
+    )
+
+
+# --- EuRoC ---------------------------------------------------------------------------
+
+
+def read_euroc(path: Path, *, name: str = "") -> Trajectory:
+    """Read a EuRoC ground-truth or estimate CSV.
+
+    Columns are ``timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z`` followed by any
+    number of ignored columns (velocities, biases); the quaternion is w-first in the file
+    and x y z w in the result. Stamps are parsed exactly as int64 nanoseconds. A ``#``
+    header (or one header row without ``#``) is skipped. Position-only files with
+    ``timestamp, x, y, z`` or ``timestamp, x, y`` rows are accepted.
+
+    Args:
+        path: the file.
+        name: the trajectory's name.
+
+    Returns:
+        The trajectory; ``source`` is ``euroc:PATH``.
+
+    Raises:
+        ReaderError: the file is missing or unreadable, a row is too short or holds a
+            non-number, a value is NaN/inf, a quaternion is not unit, or fewer than three
+            poses remain.
+    """
+    path = Path(path)
+    where = str(path)
+    text = load_text(path)
+    skip, first = _skip_header_row(text)
+    width = first.count(",") + 1 if first else 0
+    if first and width not in {3, 4} and width < 8:
+        msg = (
+            f"{where}, line {skip + 1}: {width} columns, but a EuRoC row holds "
+            "timestamp, p_x, p_y, p_z, q_w, q_x, q_y, q_z (8 or more) or timestamp, x, y[, z]; "
+            "check the file or name its format with a prefix."
+        )
+        raise ReaderError(msg)
+    used = min(8, width)
+    hint = "a EuRoC row holds timestamp, p_x, p_y, p_z, q_w, q_x, q_y, q_z"
+    table = parse_table(
+        text,
+        where=where,
+        delimiter=",",
+        hint=hint,
+        skip_lines=skip,
+        usecols=range(used),
+        names=_EUROC_NAMES[:used],
+        comments="#",
+        int_first=True,
+    )
+    notes: list[str] = []
+    if table.first_int is not None:
+        stamps = table.first_int
+    else:
+        stamps = stamps_from_values(
+            table.values[:, 0] if len(table) else np.zeros(0),
+            ns_per_unit=1.0,
+            lines=table.lines,
+            where=where,
+            unit="ns",
+        )
+        if len(table):
+            notes.append(
+                f"{where}: stamps are not integer nanoseconds; they were rounded to the "
+                "nearest nanosecond."
+            )
+    positions, quat_wxyz = _positions_and_quat(table.values, used, quat_cols=[4, 5, 6, 7])
+    quat = None if quat_wxyz is None else quat_wxyz[:, [1, 2, 3, 0]]
+    return build_trajectory(
+        stamps,
+        positions,
+        quat,
+        where=where,
+        line_numbers=table.lines,
+        name=name,
+        source=str(SourceSpec(TrajectoryFormat.EUROC, path)),
+        warnings=tuple(notes),
+    )
+
+
+# --- KITTI ---------------------------------------------------------------------------
+
+
+def read_kitti(path: Path, *, times: Path | None = None, name: str = "") -> Trajectory:
+    """Read KITTI odometry poses: 12 numbers per line, the 3x4 matrix ``[R|t]`` row by row.
+
+    Poses stay in the KITTI camera frame (x right, y down, z forward). With a times file
+    (one time in seconds per line, as KITTI's ``times.txt``) pose i is stamped with line i.
+    Without one, pose i is stamped i seconds and a warning says so: two KITTI files without
+    times then pair by index, which is what KITTI evaluation does.
+
+    Args:
+        path: the poses file.
+        times: the times file, or None.
+        name: the trajectory's name.
+
+    Returns:
+        The trajectory; ``source`` is ``kitti:PATH`` or ``kitti:PATH@times=TIMES``.
+
+    Raises:
+        ReaderError: a file is missing or unreadable, a line does not hold 12 numbers, a
+            rotation is far from orthonormal, the times and poses differ in number, or
+            fewer than three poses remain.
+    """
+    path = Path(path)
+    where = str(path)
+    table = parse_table(
+        load_text(path), where=where, delimiter=None, hint=_KITTI_HINT, comments="#"
+    )
+    n = len(table)
+    width = table.values.shape[1] if n else 12
+    if width != 12:
+        msg = (
+            f"{where}, line {int(table.lines[0])}: {width} values per line, but "
+            f"{_KITTI_HINT}; check the file or name its format with a prefix."
+        )
+        raise ReaderError(msg)
+    matrices = table.values.reshape(n, 3, 4)
+    bad_rows = np.flatnonzero(~np.isfinite(table.values).all(axis=1))
+    if bad_rows.size:
+        msg = (
+            f"{where}, line {int(table.lines[bad_rows[0]])}: the pose holds NaN or inf; "
+            "remove that line or re-export the file."
+        )
+        raise ReaderError(msg)
+    rotations = matrices[:, :, :3]
+    _check_rotations(rotations, table.lines, where=where)
+    quat = Rotation.from_matrix(rotations).as_quat() if n else np.zeros((0, 4))
+    positions = matrices[:, :, 3]
+    notes: list[str] = []
+    options: dict[str, str] = {}
+    if times is None:
+        stamps = np.arange(n, dtype=np.int64) * _NS_PER_S
+        notes.append(
+            f"{where}: no times file, so pose i is stamped i seconds and poses are matched "
+            "by index; give one with kitti:PATH@times=TIMES for real stamps."
+        )
+    else:
+        times = Path(times)
+        options["times"] = str(times)
+        stamps = _read_kitti_times(times, n, poses_where=where)
+    return build_trajectory(
+        stamps,
+        positions,
+        quat,
+        where=where,
+        line_numbers=table.lines,
+        name=name,
+        source=str(SourceSpec(TrajectoryFormat.KITTI, path, None, options)),
+        warnings=tuple(notes),
+    )
+
+
+def _read_kitti_times(times: Path, n_poses: int, *, poses_where: str) -> StampsNs:
+    where = str(times)
+    hint = "a KITTI times file holds one time in seconds per line"
+    table = parse_table(load_text(times), where=where, delimiter=None, hint=hint, comments="#")
+    if len(table) and table.values.shape[1] != 1:
+        msg = (
+            f"{where}, line {int(table.lines[0])}: {table.values.shape[1]} values, but {hint}; "
+            "check that this is the times file."
+        )
+        raise ReaderError(msg)
+    if len(table) != n_poses:
+        msg = (
+            f"{where} holds {len(table)} times but {poses_where} holds {n_poses} poses; "
+            "use the times file of this sequence."
+        )
+        raise ReaderError(msg)
+    seconds = table.values[:, 0] if len(table) else np.zeros(0)
+    return stamps_from_values(
+        seconds, ns_per_unit=_NS_PER_S, lines=table.lines, where=where, unit="s"
+    )
+
+
+def _check_rotations(rotations: FloatArray, lines: IntArray, *, where: str) -> None:
+    if not len(rotations):
+        return
+    gram_error = np.abs(rotations @ rotations.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2))
+    det = np.linalg.det(rotations)
+    bad = np.flatnonzero(
+        (gram_error > KITTI_ROTATION_TOLERANCE) | (np.abs(det - 1.0) > KITTI_ROTATION_TOLERANCE)
+    )
+    if bad.size:
+        i = int(bad[0])
+        msg = (
+            f"{where}, line {int(lines[i])}: the 3x3 block is not a rotation (determinant "
+            f"{float(det[i]):.6g}, {bad.size} such lines); check that the file holds KITTI "
+            "poses [R|t] row by row."
+        )
+        raise ReaderError(msg)
+
+
+# --- Shared helpers ------------------------------------------------------------------
+
+
+def _positions_and_quat(
+    values: FloatArray, width: int, *, quat_cols: list[int]
+) -> tuple[FloatArray, FloatArray | None]:
+    """Split ``t x y [z] [q...]`` rows into (N, 3) positions and (N, 4) quaternions or None."""
+    n = values.shape[0] if values.ndim == 2 else 0
+    positions = np.zeros((n, 3))
+    if n:
+        xyz = min(width - 1, 3)
+        positions[:, :xyz] = values[:, 1 : 1 + xyz]
+    quat = values[:, quat_cols] if n and width >= 8 else None
+    return positions, quat
+
+
+def _skip_header_row(text: str) -> tuple[int, str]:
+    """Return (lines to skip, first data line) for a CSV whose first row may be a header."""
+    for index, raw in enumerate(io.StringIO(text)):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        first_cell = line.split(",", 1)[0].strip()
+        try:
+            float(first_cell)
+        except ValueError:
+            return index + 1, _next_data_line(text, index + 1)
+        return 0, line
+    return 0, ""
+
+
+def _next_data_line(text: str, start: int) -> str:
+    for index, raw in enumerate(io.StringIO(text)):
+        line = raw.strip()
+        if index >= start and line and not line.startswith("#"):
+            return line
+    return ""
+
+
+def _fill_empty_cells(text: str, delimiter: str) -> str:
+    """Write ``nan`` into empty cells so the C parser reads them (no literal NaN is present)."""
+    d = delimiter
+    out = text.replace(d + d, d + "nan" + d).replace(d + d, d + "nan" + d)
+    out = out.replace("\n" + d, "\nnan" + d)
+    out = out.replace(d + "\r\n", d + "nan\r\n").replace(d + "\n", d + "nan\n")
+    if out.startswith(d):
+        out = "nan" + out
+    if out.endswith(d):
+        out += "nan"
+    return out
+
+
+def _parse_fast(
+    text: str,
+    *,
+    delimiter: str | None,
+    skip_lines: int,
+    usecols: Sequence[int] | None,
+    comments: str | None,
+    int_first: bool,
+) -> tuple[FloatArray, StampsNs | None] | None:
+    """Parse with ``np.loadtxt`` (C); None when it fails (then the line pass explains why)."""
+    cols = list(usecols) if usecols is not None else None
+    attempts = [True, False] if int_first else [False]
+    encoded = text.encode()  # the C parser reads bytes faster than a StringIO's UCS-4
+    for exact in attempts:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")  # "input contained no data" is a UserWarning
+                if exact:
+                    k = len(cols) if cols is not None else _count_cells(text, skip_lines, delimiter)
+                    dtype = np.dtype([("i", np.int64), ("v", np.float64, (k - 1,))])
+                    rec = np.loadtxt(
+                        io.BytesIO(encoded),
+                        dtype=dtype,
+                        delimiter=delimiter,
+                        comments=comments,
+                        skiprows=skip_lines,
+                        usecols=cols,
+                        quotechar='"' if delimiter else None,
+                        ndmin=1,
+                    )
+                    ints: StampsNs = np.ascontiguousarray(rec["i"])
+                    values = np.column_stack([ints.astype(np.float64), rec["v"]])
+                    return values, ints
+                values = np.loadtxt(
+                    io.BytesIO(encoded),
+                    dtype=np.float64,
+                    delimiter=delimiter,
+                    comments=comments,
+                    skiprows=skip_lines,
+                    usecols=cols,
+                    quotechar='"' if delimiter else None,
+                    ndmin=2,
+                )
+                return values, None
+        except (ValueError, UserWarning):
+            continue
+    return None
+
+
+def _count_cells(text: str, skip_lines: int, delimiter: str | None) -> int:
+    for index, raw in enumerate(io.StringIO(text)):
+        line = raw.strip()
+        if index >= skip_lines and line and not line.startswith("#"):
+            return len(line.split(delimiter))
+    return 1
+
+
+def _skip_leading_lines(text: str, skip_lines: int, comments: str | None) -> tuple[int, int]:
+    """Return (0-based line, offset) of the first line after ``skip_lines`` with data.
+
+    Blank and comment lines right after the skipped ones (TUM headers) are passed over here,
+    so that the data below them can often be numbered without a pass over every line.
+    """
+    pos = 0
+    for _ in range(skip_lines):
+        pos = text.find("\n", pos) + 1
+        if pos == 0:
+            return skip_lines, len(text)
+    line_index = skip_lines
+    while pos < len(text):
+        end = text.find("\n", pos)
+        end = len(text) if end < 0 else end
+        line = text[pos:end]
+        if comments is not None:
+            line = line.split(comments, 1)[0]
+        if line.strip():
+            break
+        pos, line_index = end + 1, line_index + 1
+    return line_index, pos
+
+
+def _data_line_numbers(
+    text: str, first_line: int, first_pos: int, comments: str | None, n_rows: int
+) -> IntArray | None:
+    """Return the 1-based line of each parsed row; None if it cannot be told for sure."""
+    stop = len(text)
+    while stop > first_pos and text[stop - 1].isspace():
+        stop -= 1
+    lines_left = text.count("\n", first_pos, stop) + 1 if first_pos < stop else 0
+    if lines_left == n_rows:
+        out: IntArray = np.arange(first_line + 1, first_line + 1 + n_rows, dtype=np.intp)
+        return out
+    # Blank or comment lines among the data: find the data lines one by one.
+    kept = [
+        i
+        for i, line in enumerate(text[first_pos:stop].split("\n"))
+        if (line.split(comments, 1)[0] if comments is not None else line).strip()
+    ]
+    if len(kept) != n_rows:
+        return None
+    out = np.asarray(kept, dtype=np.intp)
+    return out + (first_line + 1)
+
+
+def _parse_slow(
+    text: str,
+    *,
+    where: str,
+    delimiter: str | None,
+    hint: str,
+    skip_lines: int,
+    usecols: Sequence[int] | None,
+    names: Sequence[str] | None,
+    comments: str | None,
+    empty_cells: bool,
+    int_first: bool,
+) -> NumericTable:
+    """Parse line by line in Python, raising on the first bad line."""
+    cols = list(usecols) if usecols is not None else None
+    rows: list[list[float]] = []
+    line_numbers: list[int] = []
+    empty_rows: list[bool] = []
+    ints: list[int] | None = [] if int_first else None
+    expected: tuple[int, int] | None = None  # (cells per line, first line)
+    for lineno, raw in enumerate(text.split("\n")[skip_lines:], start=skip_lines + 1):
+        line = raw.split(comments, 1)[0] if comments is not None else raw
+        if not line.strip():
+            continue
+        cells = _split_cells(line.rstrip("\r"), delimiter)
+        if expected is None:
+            expected = (len(cells), lineno)
+        picked = _pick_cells(
+            cells, cols, names, where=where, lineno=lineno, expected=expected, hint=hint
+        )
+        row, has_empty = _convert_cells(
+            picked, where=where, lineno=lineno, names=names, empty_cells=empty_cells
+        )
+        if ints is not None:
+            try:
+                ints.append(int(picked[0].strip()))
+            except ValueError:
+                ints = None
+        rows.append(row)
+        line_numbers.append(lineno)
+        empty_rows.append(has_empty)
+    width = len(cols) if cols is not None else (expected[0] if expected else 0)
+    values = np.array(rows, dtype=np.float64).reshape(len(rows), width)
+    first_int = None
+    if ints is not None and rows:
+        try:
+            first_int = np.array(ints, dtype=np.int64)
+        except OverflowError:
+            first_int = None
+    return NumericTable(
+        values,
+        np.array(line_numbers, dtype=np.intp),
+        np.array(empty_rows, dtype=bool),
+        first_int,
+    )
+
+
+def _pick_cells(
+    cells: list[str],
+    cols: list[int] | None,
+    names: Sequence[str] | None,
+    *,
+    where: str,
+    lineno: int,
+    expected: tuple[int, int],
+    hint: str,
+) -> list[str]:
+    """Return the used cells of a line; without ``cols`` every line needs the same count."""
+    if cols is None:
+        if len(cells) != expected[0]:
+            msg = (
+                f"{where}, line {lineno}: {len(cells)} values, but line {expected[1]} has "
+                f"{expected[0]} and {hint}; fix that line."
+            )
+            raise ReaderError(msg)
+        return cells
+    if len(cells) <= max(cols):
+        missing = next(j for j, c in enumerate(cols) if c >= len(cells))
+        msg = (
+            f"{where}, line {lineno}: {len(cells)} cells, but column "
+            f"{_column_name(names, missing)!r} is cell {cols[missing] + 1}; "
+            "check the delimiter and that line."
+        )
+        raise ReaderError(msg)
+    return [cells[c] for c in cols]
+
+
+def _split_cells(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:
+        return line.split()
+    return next(csv.reader([line], delimiter=delimiter))
+
+
+def _convert_cells(
+    cells: list[str], *, where: str, lineno: int, names: Sequence[str] | None, empty_cells: bool
+) -> tuple[list[float], bool]:
+    row: list[float] = []
+    has_empty = False
+    for j, raw in enumerate(cells):
+        cell = raw.strip()
+        if not cell:
+            if not empty_cells:
+                msg = (
+                    f"{where}, line {lineno}: column {_column_name(names, j)!r} is empty; "
+                    "fill it or remove that line."
+                )
+                raise ReaderError(msg)
+            has_empty = True
+            row.append(float("nan"))
+            continue
+        try:
+            row.append(float(cell))
+        except ValueError:
+            msg = (
+                f"{where}, line {lineno}: {cell!r} in column {_column_name(names, j)!r} is not "
+                "a number; fix or remove that line."
+            )
+            raise ReaderError(msg) from None
+    return row, has_empty
+
+
+def _column_name(names: Sequence[str] | None, j: int) -> str:
+    return names[j] if names is not None and j < len(names) else str(j + 1)

@@ -1,0 +1,486 @@
+"""The ``loceval`` command line: evaluate, inspect, demo.
+
+A :class:`~loceval.errors.LocevalError` prints its message and exits 1 (bad input, no
+traceback); anything else is a bug: the traceback is printed and the exit code is 2.
+Libraries for reports and CAD files are imported only when ``--out`` asks for them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+import traceback
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn
+
+from loceval import __version__
+from loceval.alignment import AlignMethod, AlignWindow
+from loceval.association import AssociationMethod
+from loceval.errors import InputError, LocevalError
+from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate, parse_offset
+from loceval.geometry import SimilarityTransform
+from loceval.metrics import DEFAULT_THRESHOLDS_M, ErrorSeries, ErrorStats, RPEUnit
+from loceval.readers import SourceSpec, TrajectoryFormat, parse_source, read_trajectory
+from loceval.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from exporters.options import ExportOptions
+
+__all__ = ["main"]
+
+EXIT_INPUT = 1
+EXIT_BUG = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that exits 1 on a usage error: a bad option is bad input, not a bug."""
+
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of every subcommand."""
+    parser = _Parser(prog="loceval", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"loceval {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    ev = sub.add_parser(
+        "evaluate",
+        help="evaluate estimates against a reference",
+        description=(
+            "Evaluate one or more estimated trajectories against a reference. A source is "
+            "[FORMAT:]PATH[@SELECTOR]: tum:gt.txt, kitti:poses.txt@times=times.txt, "
+            "motive:take.csv@RigidBody, run.mcap@/amcl_pose, run.bag@tf:map:base_link."
+        ),
+    )
+    ev.add_argument("reference", help="the ground truth source")
+    ev.add_argument("estimates", nargs="+", metavar="estimate", help="estimate sources")
+    ev.add_argument(
+        "--name", action="append", default=[], help="estimate name, once per estimate in order"
+    )
+    ev.add_argument("--reference-name", default=None, help="name of the reference")
+    ev.add_argument(
+        "--format",
+        choices=[f.value for f in TrajectoryFormat],
+        default=None,
+        help="format of sources without a FORMAT: prefix (default: sniffed from content)",
+    )
+    ev.add_argument(
+        "--stamp",
+        choices=["header", "receive"],
+        default="header",
+        help="bags: stamps from the message header (default) or the bag's receive time",
+    )
+    ev.add_argument(
+        "--associate",
+        choices=[m.value for m in AssociationMethod],
+        default=AssociationMethod.INTERPOLATE.value,
+    )
+    ev.add_argument("--max-dt", type=float, default=0.01, metavar="S", help="nearest: max dt")
+    ev.add_argument(
+        "--max-gap", type=float, default=0.1, metavar="S", help="longest reference gap bridged"
+    )
+    ev.add_argument(
+        "--time-offset", type=float, default=0.0, metavar="S", help="added to estimate stamps"
+    )
+    ev.add_argument(
+        "--align", choices=[m.value for m in AlignMethod], default=AlignMethod.SE3.value
+    )
+    ev.add_argument(
+        "--align-first", default=None, metavar="N|Ns", help="align on the first N poses or seconds"
+    )
+    ev.add_argument(
+        "--calibrate-at",
+        type=float,
+        default=None,
+        metavar="S",
+        help="--align calibrate: seconds after the first matched pose",
+    )
+    ev.add_argument(
+        "--offset",
+        default=None,
+        metavar='"x y z qx qy qz qw"',
+        help="rigid body -> sensor offset applied to the reference",
+    )
+    ev.add_argument(
+        "--device",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="URDF (or a bag with /tf_static) giving the device offset",
+    )
+    ev.add_argument("--device-from", default=None, metavar="LINK", help="the rigid body's link")
+    ev.add_argument("--device-to", default=None, metavar="LINK", help="the sensor's link")
+    ev.add_argument("--rpe-delta", type=float, default=1.0, metavar="D")
+    ev.add_argument("--rpe-unit", choices=[u.value for u in RPEUnit], default=RPEUnit.FRAMES.value)
+    ev.add_argument("--rpe-all-pairs", action="store_true", help="every pose starts an RPE pair")
+    ev.add_argument(
+        "--thresholds",
+        default=",".join(f"{t:g}" for t in DEFAULT_THRESHOLDS_M),
+        metavar="M,M,...",
+        help="distances for the share-within figures",
+    )
+    ev.add_argument("--tolerance", default=None, metavar="M@PCT", help="verdict, e.g. 0.10@95")
+    ev.add_argument("--worst", type=int, default=10, metavar="N", help="greatest errors listed")
+    ev.add_argument("--json", action="store_true", help="print the result as JSON")
+    ev.add_argument("--out", type=Path, default=None, metavar="DIR", help="write artifacts here")
+    ev.add_argument(
+        "--formats",
+        default=None,
+        metavar="NAME,...",
+        help="artifacts to write with --out (default: all)",
+    )
+    ev.add_argument("--units", choices=["mm", "cm", "m"], default="mm", help="CAD units")
+    ev.add_argument(
+        "--site", default=None, metavar='"tx ty tz yaw_deg"', help="evaluation -> model frame"
+    )
+    ev.add_argument("--site-matrix", type=Path, default=None, metavar="FILE", help="4x4 matrix")
+    ev.add_argument(
+        "--simplify", type=float, default=0.001, metavar="M", help="CAD polyline tolerance"
+    )
+    ev.add_argument("--building", type=Path, default=None, metavar="FILE", help="mesh for glTF")
+    ev.set_defaults(handler=_cmd_evaluate)
+
+    ins = sub.add_parser("inspect", help="list what a recording holds")
+    ins.add_argument("path", help="a bag, bag directory, zip, MCAP or trajectory file")
+    ins.add_argument("--json", action="store_true", help="print the inspection as JSON")
+    ins.set_defaults(handler=_cmd_inspect)
+
+    demo = sub.add_parser(
+        "demo", help="write a synthetic recording and evaluate it (no data needed)"
+    )
+    demo.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR")
+    demo.set_defaults(handler=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit code."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.handler(args))
+    except LocevalError as err:
+        print(f"loceval: error: {err}", file=sys.stderr)  # noqa: T201
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        return 130
+    except Exception:  # noqa: BLE001  (the documented bug path: traceback, exit 2)
+        traceback.print_exc()
+        print(  # noqa: T201
+            "loceval: internal error; this is a bug, please report it with the traceback above.",
+            file=sys.stderr,
+        )
+        return EXIT_BUG
+
+
+# --- evaluate -------------------------------------------------------------------------
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    config = config_from_args(args)
+    default_format = TrajectoryFormat(args.format) if args.format else None
+    if args.name and len(args.name) != len(args.estimates):
+        msg = (
+            f"Give --name once per estimate: {len(args.estimates)} estimates but "
+            f"{len(args.name)} names."
+        )
+        raise InputError(msg)
+    ref_spec = parse_source(args.reference, default_format=default_format)
+    est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
+    reference = read_trajectory(
+        ref_spec, name=args.reference_name or _default_name(ref_spec), stamp=args.stamp
+    )
+    names = args.name or _unique_names([_default_name(s) for s in est_specs])
+    estimates = [
+        read_trajectory(spec, name=name, stamp=args.stamp)
+        for spec, name in zip(est_specs, names, strict=True)
+    ]
+    inputs = [_provenance(role, spec) for role, spec in [("reference", ref_spec)]] + [
+        _provenance("estimate", spec) for spec in est_specs
+    ]
+    export = _export_options(args) if args.out is not None else None
+    result = evaluate(reference, estimates, config, inputs=inputs)
+    if export is not None:
+        _write_outputs(result, args, export)
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
+    else:
+        print(format_tables(result))  # noqa: T201
+        if args.out is not None:
+            print(f"\nArtifacts written to {args.out}")  # noqa: T201
+    return 0
+
+
+def config_from_args(args: argparse.Namespace) -> EvaluationConfig:
+    """Build the evaluation options from parsed CLI arguments.
+
+    Raises:
+        InputError: an option's value cannot be used.
+    """
+    try:
+        thresholds = tuple(float(t) for t in args.thresholds.split(",") if t.strip())
+    except ValueError:
+        msg = (
+            f"--thresholds takes metres separated by commas like 0.05,0.1, got {args.thresholds!r}."
+        )
+        raise InputError(msg) from None
+    offset = _device_offset(args)
+    return EvaluationConfig(
+        association=AssociationMethod(args.associate),
+        max_dt_s=args.max_dt,
+        max_gap_s=args.max_gap,
+        time_offset_s=args.time_offset,
+        align=AlignMethod(args.align),
+        align_first=AlignWindow.parse(args.align_first),
+        calibrate_at_s=args.calibrate_at,
+        reference_offset=offset,
+        rpe_delta=args.rpe_delta,
+        rpe_unit=RPEUnit(args.rpe_unit),
+        rpe_all_pairs=args.rpe_all_pairs,
+        thresholds_m=thresholds,
+        tolerance=Tolerance.parse(args.tolerance) if args.tolerance else None,
+        worst_count=args.worst,
+    )
+
+
+def _device_offset(args: argparse.Namespace) -> SimilarityTransform | None:
+    if args.device is None:
+        if args.device_from or args.device_to:
+            msg = "--device-from and --device-to need --device FILE (a URDF or a bag)."
+            raise InputError(msg)
+        return parse_offset(args.offset) if args.offset else None
+    if args.offset:
+        msg = "Give the device offset either with --offset or with --device, not both."
+        raise InputError(msg)
+    if not (args.device_from and args.device_to):
+        msg = (
+            "--device needs --device-from LINK (the rigid body) and --device-to LINK "
+            "(the sensor), e.g. --device-from rigid_body --device-to camera_link."
+        )
+        raise InputError(msg)
+    if args.device.suffix.lower() in {".urdf", ".xml"}:
+        from loceval.urdf import read_urdf_offset  # noqa: PLC0415
+
+        return read_urdf_offset(args.device, from_link=args.device_from, to_link=args.device_to)
+    from loceval.readers.rosbag import read_bag_static_transform  # noqa: PLC0415
+
+    return read_bag_static_transform(args.device, args.device_from, args.device_to)
+
+
+def _export_options(args: argparse.Namespace) -> ExportOptions:
+    """Check the artifact options before the evaluation runs, so bad ones fail fast."""
+    from exporters import ExportOptions  # noqa: PLC0415
+    from exporters.placement import (  # noqa: PLC0415
+        check_options,
+        parse_site,
+        parse_units,
+        read_site_matrix,
+    )
+
+    if args.site and args.site_matrix:
+        msg = "Give the site transform either with --site or with --site-matrix, not both."
+        raise InputError(msg)
+    site = SimilarityTransform.identity()
+    if args.site:
+        site = parse_site(args.site)
+    elif args.site_matrix:
+        site = read_site_matrix(args.site_matrix)
+    options = ExportOptions(
+        units=parse_units(args.units),
+        site=site,
+        simplify_m=args.simplify,
+        building=args.building,
+        evaluation_id=args.out.name,
+    )
+    check_options(options)
+    return options
+
+
+def _write_outputs(
+    result: EvaluationResult, args: argparse.Namespace, options: ExportOptions
+) -> None:
+    from exporters import write_artifacts  # noqa: PLC0415
+
+    title = f"{result.reference.name} vs {', '.join(e.name for e in result.estimates)}"
+    names = None
+    if args.formats:
+        names = [n.strip() for n in args.formats.split(",") if n.strip()]
+        if "result.json" not in names:
+            names.insert(0, "result.json")
+    write_artifacts(result, args.out, replace(options, title=title), names=names)
+
+
+def _default_name(spec: SourceSpec) -> str:
+    if spec.selector and spec.format in {TrajectoryFormat.BAG, TrajectoryFormat.MOTIVE, None}:
+        return spec.selector
+    return spec.path.stem
+
+
+def _unique_names(names: list[str]) -> list[str]:
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(name if seen[name] == 1 else f"{name} ({seen[name]})")
+    return out
+
+
+def _provenance(role: str, spec: SourceSpec) -> dict[str, object]:
+    path = spec.path
+    info: dict[str, object] = {
+        "role": role,
+        "path": str(path),
+        "file": path.name,
+        "format": spec.format.value if spec.format else None,
+        "selector": spec.selector,
+    }
+    if path.is_file():
+        digest = hashlib.sha256()
+        with path.open("rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(chunk)
+        info["sha256"] = digest.hexdigest()
+        info["bytes"] = path.stat().st_size
+    return info
+
+
+# --- tables ---------------------------------------------------------------------------
+
+
+_ROWS = (("RMSE", "rmse"), ("MEAN", "mean"), ("MEDIAN", "median"), ("STD", "std"),
+         ("MIN", "min"), ("MAX", "max"))  # fmt: skip
+
+
+def format_tables(result: EvaluationResult) -> str:
+    """Return the framework paper's Tables 1-2 layout: one column per estimate."""
+    ref = result.reference
+    head = f"Reference {ref.name!r}: {len(ref)} poses, {ref.duration_s:.1f} s, "
+    lines = [head + f"{ref.length_m:.1f} m ({ref.source})"]
+    for e in result.estimates:
+        scale = e.alignment.transform
+        lines.append(
+            f"  {e.name}: {len(e.association)} of {len(e.estimate)} poses matched, "
+            f"aligned {e.alignment.method.value}"
+            + ("" if scale.is_rigid else f" (scale {scale.scale:.4f})")
+        )
+    for title, stats, unit in _sections(result):
+        lines += ["", title, _row("error metric", [e.name for e in result.estimates])]
+        for label, key in _ROWS:
+            cells = ["-" if s is None else f"{getattr(s, key):.3f} {unit}" for s in stats]
+            lines.append(_row(label, cells))
+    lines += ["", "Share of poses within (ATE)"]
+    for t in result.config.thresholds_m:
+        shares = [f"{e.within[t] * 100:.1f} %" for e in result.estimates]
+        lines.append(_row(f"<= {t:g} m", shares))
+    drifts = [_stats(e.drift) for e in result.estimates]
+    if any(d is not None for d in drifts):
+        cells = ["-" if d is None else f"{d.mean:.2f} %" for d in drifts]
+        lines.append(_row("drift (mean)", cells))
+    lines += [f"\n{e.name}: {e.verdict.summary}" for e in result.estimates if e.verdict]
+    warnings = [("reference", w) for w in result.reference_warnings] + [
+        (e.name, w) for e in result.estimates for w in e.warnings
+    ]
+    if warnings:
+        lines += ["", "Warnings", *(f"  {who}: {w}" for who, w in warnings)]
+    return "\n".join(lines)
+
+
+def _sections(result: EvaluationResult) -> list[tuple[str, list[ErrorStats | None], str]]:
+    est = result.estimates
+    cfg = result.config
+    sections: list[tuple[str, list[ErrorStats | None], str]] = [
+        ("Absolute Trajectory Error (ATE)", [e.ate_translation.stats for e in est], "m")
+    ]
+    if any(e.ate_rotation is not None for e in est):
+        sections.append(("ATE rotation", [_stats(e.ate_rotation) for e in est], "deg"))
+    rpe_title = f"Relative Pose Error (RPE, delta {cfg.rpe_delta:g} {cfg.rpe_unit.value})"
+    sections.append((rpe_title, [e.rpe_translation.stats for e in est], "m"))
+    if any(e.rpe_rotation is not None for e in est):
+        sections.append(("RPE rotation", [_stats(e.rpe_rotation) for e in est], "deg"))
+    return sections
+
+
+def _stats(series: ErrorSeries | None) -> ErrorStats | None:
+    return None if series is None else series.stats
+
+
+def _row(label: str, cells: Sequence[str]) -> str:
+    return f"{label:<14}" + "".join(f"{c:>16}" for c in cells)
+
+
+# --- inspect --------------------------------------------------------------------------
+
+
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    spec = parse_source(args.path)
+    from loceval.readers import sniff_format  # noqa: PLC0415
+
+    fmt = sniff_format(spec.path)
+    if fmt is TrajectoryFormat.BAG:
+        from loceval.inspection import format_inspection, inspect_recording  # noqa: PLC0415
+
+        inspection = inspect_recording(spec.path)
+        if args.json:
+            print(json.dumps(inspection.to_dict(), indent=2))  # noqa: T201
+        else:
+            print(format_inspection(inspection))  # noqa: T201
+        return 0
+    trajectory = read_trajectory(spec)
+    summary = _trajectory_summary(trajectory, fmt)
+    if args.json:
+        print(json.dumps(summary, indent=2))  # noqa: T201
+    else:
+        for key, value in summary.items():
+            print(f"{key:>14}: {value}")  # noqa: T201
+    return 0
+
+
+def _trajectory_summary(trajectory: Trajectory, fmt: TrajectoryFormat) -> dict[str, object]:
+    return {
+        "format": fmt.value,
+        "source": trajectory.source,
+        "poses": len(trajectory),
+        "start_s": int(trajectory.stamps_ns[0]) / 1e9,
+        "end_s": int(trajectory.stamps_ns[-1]) / 1e9,
+        "duration_s": trajectory.duration_s,
+        "length_m": trajectory.length_m,
+        "rate_hz": trajectory.rate_hz,
+        "orientation": trajectory.has_orientation,
+        "warnings": list(trajectory.warnings),
+    }
+
+
+# --- demo -----------------------------------------------------------------------------
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from service.demo import write_demo_recording  # noqa: PLC0415
+
+    inputs = write_demo_recording(args.out / "inputs")
+    argv = [
+        "evaluate",
+        str(inputs["reference"]),
+        str(inputs["RTAB-Map"]),
+        str(inputs["ISAAC"]),
+        "--name",
+        "RTAB-Map",
+        "--name",
+        "ISAAC",
+        "--reference-name",
+        "OptiTrack",
+        "--tolerance",
+        "0.10@95",
+        "--out",
+        str(args.out / "report"),
+    ]
+    return main(argv)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

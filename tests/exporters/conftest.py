@@ -1,0 +1,58 @@
+"""Fixtures for exporter tests: a synthetic evaluation with two estimates."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
+from loceval.trajectory import Trajectory
+
+
+def walk(rng: np.random.Generator, *, n: int = 6000, rate_hz: float = 100.0) -> Trajectory:
+    """A 60 s walk through two rooms: a rounded rectangle with a detour, z at 1.2-1.4 m."""
+    t = np.arange(n) / rate_hz
+    s = t / t[-1] * 2 * np.pi
+    x = 4.0 * np.cos(s) + 1.5 * np.cos(3 * s)
+    y = 3.0 * np.sin(s)
+    z = 1.3 + 0.1 * np.sin(5 * s)
+    positions = np.stack([x, y, z], axis=1)
+    yaw = np.unwrap(np.arctan2(np.gradient(y), np.gradient(x)))
+    quat = Rotation.from_euler("zyx", np.stack([yaw, 0.02 * np.sin(s), 0 * s], 1)).as_quat()
+    stamps = (1_700_000_000 * 10**9 + np.rint(t * 1e9)).astype(np.int64)
+    del rng
+    return Trajectory(stamps, positions, quat, name="OptiTrack", source="gt.tum", frame_id="map")
+
+
+def noisy(
+    rng: np.random.Generator,
+    truth: Trajectory,
+    *,
+    every: int,
+    sigma: float,
+    drift: float,
+    name: str,
+) -> Trajectory:
+    """An estimate at every n-th pose with noise, slow drift and a rigid frame change."""
+    sel = truth.select(np.arange(0, len(truth), every))
+    k = np.arange(len(sel))
+    pos = sel.positions_xyz + rng.normal(0, sigma, (len(sel), 3)) + drift * k[:, None] / len(sel)
+    frame = Rotation.from_euler("z", 30, degrees=True)
+    quat = (frame * Rotation.from_quat(sel.quat_xyzw)).as_quat()
+    return Trajectory(
+        sel.stamps_ns,
+        frame.apply(pos) + np.array([2.0, -1.0, 0.0]),
+        quat,
+        name=name,
+        source=f"{name}.tum",
+    )
+
+
+@pytest.fixture
+def two_estimates(rng: np.random.Generator) -> EvaluationResult:
+    """Return an evaluation of RTAB-Map-like and Isaac-like estimates against a walk."""
+    truth = walk(rng)
+    a = noisy(rng, truth, every=3, sigma=0.02, drift=0.25, name="RTAB-Map")
+    b = noisy(rng, truth, every=4, sigma=0.05, drift=0.05, name="ISAAC")
+    return evaluate(truth, [a, b], EvaluationConfig(tolerance=Tolerance(0.10, 0.95)))

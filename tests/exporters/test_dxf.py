@@ -1,0 +1,248 @@
+"""DXF export: read back with ezdxf, audit, and render with LibreCAD."""
+
+from __future__ import annotations
+
+import io
+import itertools
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exporters.errors import ExportError, ExportOptionsError
+from exporters.options import ExportOptions, Units
+from exporters.placement import ate_bins, parse_site, polyline_distances
+from loceval.evaluation import EvaluationResult, evaluate
+from tests.conftest import require_tool
+
+ezdxf = pytest.importorskip("ezdxf")
+from exporters import dxf  # noqa: E402  (after the importorskip of its library)
+
+SITE = "2000.25 -1500.5 12.3 30"
+NAMES = ["OptiTrack", "RTAB-Map", "ISAAC"]
+
+
+def read(data: bytes) -> ezdxf.document.Drawing:
+    """Parse DXF bytes with ezdxf."""
+    return ezdxf.read(io.StringIO(data.decode("utf-8")))
+
+
+def expected_paths(result: EvaluationResult, options: ExportOptions) -> list[np.ndarray]:
+    """Reference then aligned estimates after the site transform and unit scale."""
+    trajectories = [result.reference, *(e.aligned for e in result.estimates)]
+    return [
+        options.site.apply_positions(t.positions_xyz) * options.units.per_metre
+        for t in trajectories
+    ]
+
+
+@pytest.fixture
+def options() -> ExportOptions:
+    """Return placement options with a site offset and rotation, in millimetres."""
+    return ExportOptions(site=parse_site(SITE), evaluation_id="ev-42", title="Lab run")
+
+
+@pytest.fixture
+def drawing(two_estimates: EvaluationResult, options: ExportOptions) -> ezdxf.document.Drawing:
+    """Return the exported DXF of the two-estimate evaluation, read back."""
+    return read(dxf.export_dxf(two_estimates, options))
+
+
+def test_one_3d_polyline_per_trajectory_round_trip(
+    drawing: ezdxf.document.Drawing, two_estimates: EvaluationResult, options: ExportOptions
+):
+    """Each trajectory is one 3D POLYLINE on its layer, within 1 mm of the mapped poses."""
+    msp = drawing.modelspace()
+    assert len(msp.query("LWPOLYLINE")) == 0
+    for name, expected in zip(NAMES, expected_paths(two_estimates, options), strict=True):
+        polylines = msp.query(f'POLYLINE[layer=="{name}"]')
+        assert len(polylines) == 1
+        polyline = polylines[0]
+        assert polyline.is_3d_polyline
+        vertices = np.array([v.dxf.location.xyz for v in polyline.vertices])
+        assert len(vertices) <= len(expected)
+        np.testing.assert_allclose(vertices[[0, -1]], expected[[0, -1]], atol=1e-6)
+        assert polyline_distances(expected, vertices).max() <= 1.0 + 1e-6  # mm
+        assert np.ptp(vertices[:, 2]) > 100.0  # z kept: the walk rises and falls 0.2 m
+        xdata = dict(t.split("=", 1) for _, t in polyline.get_xdata(dxf.APPID))
+        assert xdata["name"] == name
+        assert float(xdata["max_deviation_m"]) <= 0.001
+
+
+def test_layers_colours(drawing: ezdxf.document.Drawing):
+    """Layers are named after the trajectories with palette ACI and true colours."""
+    expected = {
+        "OptiTrack": (4, (0, 255, 255)),
+        "RTAB-Map": (6, (255, 0, 255)),
+        "ISAAC": (None, (0, 200, 0)),
+    }
+    for name, (aci, rgb) in expected.items():
+        layer = drawing.layers.get(name)
+        assert tuple(layer.rgb) == rgb
+        assert layer.is_on()
+        if aci is not None:
+            assert layer.color == aci
+        assert 1 <= layer.color <= 255
+        if name != "OptiTrack":  # the reference has no gap, hence no markers
+            assert tuple(drawing.layers.get(f"{name} markers").rgb) == rgb
+
+
+def test_header_units_and_metadata(drawing: ezdxf.document.Drawing):
+    """$INSUNITS is millimetres, $MEASUREMENT metric, and custom properties carry metadata."""
+    assert drawing.dxfversion == "AC1027"  # R2013
+    assert drawing.header["$INSUNITS"] == 4
+    assert drawing.header["$MEASUREMENT"] == 1
+    props = dict(drawing.header.custom_vars)
+    assert props["loceval.evaluation_id"] == "ev-42"
+    assert props["loceval.units"] == "mm"
+    assert props["loceval.evaluation_frame"] == "map"
+    assert float(props["loceval.max_deviation_m"]) <= 0.001
+    assert float(props["loceval.simplify_tolerance_m"]) == 0.001
+    base = json.loads(props["loceval.base_point"])
+    assert np.abs(np.array(base) - [2000000.0, -1500000.0, 12000.0]).max() < 10_000.0
+    assert base == [round(v / 1000) * 1000.0 for v in base]  # whole metres
+    np.testing.assert_allclose(
+        json.loads(props["loceval.site_matrix_m"]), parse_site(SITE).as_matrix(), atol=1e-12
+    )
+
+
+@pytest.mark.parametrize(("units", "insunits"), [(Units.MM, 4), (Units.CM, 5), (Units.M, 6)])
+def test_units(two_estimates: EvaluationResult, units: Units, insunits: int):
+    """Each output unit sets $INSUNITS and scales the vertices."""
+    options = ExportOptions(units=units)
+    doc = read(dxf.export_dxf(two_estimates, options))
+    assert doc.header["$INSUNITS"] == insunits
+    polyline = doc.modelspace().query('POLYLINE[layer=="OptiTrack"]')[0]
+    first = np.array(polyline.vertices[0].dxf.location.xyz)
+    expected = two_estimates.reference.positions_xyz[0] * units.per_metre
+    np.testing.assert_allclose(first, expected, rtol=1e-12)
+
+
+def test_audit_clean(tmp_path: Path, two_estimates: EvaluationResult, options: ExportOptions):
+    """The drawing passes ezdxf's auditor and the `ezdxf audit` command without errors."""
+    data = dxf.export_dxf(two_estimates, options)
+    auditor = read(data).audit()
+    assert not auditor.has_errors, [e.message for e in auditor.errors]
+    assert not auditor.has_fixes, [f.message for f in auditor.fixes]
+    path = tmp_path / "paths.dxf"
+    path.write_bytes(data)
+    run = subprocess.run(
+        [sys.executable, "-m", "ezdxf", "audit", str(path)],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=120,
+    )
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "No errors found." in run.stdout
+
+
+def test_ate_layer(drawing: ezdxf.document.Drawing, two_estimates: EvaluationResult):
+    """The optional ATE layer (off) covers the estimate with bin colours and has a legend."""
+    bins = ate_bins(two_estimates.config.thresholds_m)
+    bin_colours = {b.color_rgb for b in bins}
+    for est in two_estimates.estimates:
+        layer = drawing.layers.get(f"{est.name} ATE")
+        assert not layer.is_on()
+        pieces = drawing.modelspace().query(f'POLYLINE[layer=="{est.name} ATE"]')
+        assert len(pieces) > 1
+        assert all(p.is_3d_polyline for p in pieces)
+        assert {ezdxf.colors.int2rgb(p.dxf.true_color) for p in pieces} <= bin_colours
+        vertices = np.concatenate(
+            [np.array([v.dxf.location.xyz for v in p.vertices]) for p in pieces]
+        )
+        assert len(vertices) >= 2
+        texts = [t.dxf.text for t in drawing.modelspace().query(f'TEXT[layer=="{est.name} ATE"]')]
+        assert texts[0] == f"{est.name}: ATE translation"
+        assert texts[1:] == [b.label for b in bins]
+
+
+def test_ate_pieces_follow_the_estimate(two_estimates: EvaluationResult):
+    """Joined, the ATE pieces trace the estimate within the tolerance, bin by bin."""
+    options = ExportOptions(units=Units.M)
+    doc = read(dxf.export_dxf(two_estimates, options))
+    est = two_estimates.estimates[0]
+    pieces = doc.modelspace().query(f'POLYLINE[layer=="{est.name} ATE"]')
+    vertices = [np.array([v.dxf.location.xyz for v in p.vertices]) for p in pieces]
+    expected = est.aligned.positions_xyz
+    np.testing.assert_allclose(vertices[0][0], expected[0], atol=1e-9)
+    np.testing.assert_allclose(vertices[-1][-1], expected[-1], atol=1e-9)
+    for a, b in itertools.pairwise(vertices):
+        np.testing.assert_allclose(a[-1], b[0], atol=1e-9)  # pieces join
+    joined = np.concatenate(vertices)
+    assert polyline_distances(expected, joined).max() <= 0.001 + 1e-9
+
+
+def test_markers_at_worst_errors_and_gaps(two_estimates: EvaluationResult):
+    """POINT and label at the greatest errors and at a tracking loss of the reference."""
+    ref = two_estimates.reference
+    times = ref.times_s()
+    gapped = evaluate(
+        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
+        [e.estimate for e in two_estimates.estimates],
+        two_estimates.config,
+    )
+    doc = read(dxf.export_dxf(gapped, ExportOptions(units=Units.M)))
+    msp = doc.modelspace()
+    ref_labels = [t.dxf.text for t in msp.query('TEXT[layer=="OptiTrack markers"]')]
+    assert any("OptiTrack: no pose for 3.0 s" in label for label in ref_labels)
+    gap_point = np.array(msp.query('POINT[layer=="OptiTrack markers"]')[0].dxf.location.xyz)
+    np.testing.assert_allclose(gap_point, ref.positions_xyz[times < 20.0][-1], atol=1e-9)
+    for est in gapped.estimates:
+        labels = [t.dxf.text for t in msp.query(f'TEXT[layer=="{est.name} markers"]')]
+        assert any(
+            label.startswith(f"{est.name} #1: ATE {est.worst[0].error:.3f} m") for label in labels
+        )
+        points = msp.query(f'POINT[layer=="{est.name} markers"]')
+        lines = msp.query(f'LINE[layer=="{est.name} markers"]')
+        assert len(points) == len(labels) >= len(lines) >= 1
+        worst_here = est.aligned.positions_xyz[est.worst[0].index]
+        np.testing.assert_allclose(lines[0].dxf.start.xyz, worst_here, atol=1e-9)
+        np.testing.assert_allclose(lines[0].dxf.end.xyz, est.worst[0].position_xyz, atol=1e-9)
+
+
+def test_bad_options(two_estimates: EvaluationResult):
+    """A negative tolerance is an options error, before anything is drawn."""
+    with pytest.raises(ExportOptionsError, match="--simplify"):
+        dxf.export_dxf(two_estimates, ExportOptions(simplify_m=-1.0))
+
+
+def test_ezdxf_errors_become_export_errors(
+    two_estimates: EvaluationResult, monkeypatch: pytest.MonkeyPatch
+):
+    """An ezdxf failure surfaces as ExportError, not as an ezdxf exception."""
+
+    def refuse(*_args: object, **_kwargs: object) -> None:
+        msg = "invalid table name"
+        raise ezdxf.DXFValueError(msg)
+
+    monkeypatch.setattr(dxf, "new_drawing", refuse)
+    with pytest.raises(ExportError, match="ezdxf could not write the DXF drawing"):
+        dxf.export_dxf(two_estimates, ExportOptions())
+
+
+def test_librecad_renders(tmp_path: Path, two_estimates: EvaluationResult, options: ExportOptions):
+    """`librecad dxf2pdf` (headless) turns the drawing into a one-page PDF with content."""
+    librecad = require_tool("librecad")
+    pypdf = pytest.importorskip("pypdf")
+    path = tmp_path / "paths.dxf"
+    path.write_bytes(dxf.export_dxf(two_estimates, options))
+    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "XDG_RUNTIME_DIR": str(tmp_path)}
+    run = subprocess.run(
+        [librecad, "dxf2pdf", "-a", "-p", "420x297", "-t", str(tmp_path / "out"), str(path)],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=300,
+        env=env,
+    )
+    pdf = tmp_path / "out" / "paths.pdf"
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert pdf.is_file(), run.stdout + run.stderr
+    reader = pypdf.PdfReader(pdf)
+    assert len(reader.pages) == 1
+    assert len(reader.pages[0].get_contents().get_data()) > 10_000  # the paths were drawn

@@ -1,0 +1,144 @@
+"""The 3DM-compatible JSON the Grasshopper script reads: decode every curve with rhino3dm."""
+
+from __future__ import annotations
+
+import ast
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exporters.options import ExportOptions, Units
+from exporters.placement import parse_site, polyline_distances
+from loceval.evaluation import EvaluationResult
+
+rhino3dm = pytest.importorskip("rhino3dm")
+from exporters import rhino  # noqa: E402  (after the importorskip of its library)
+
+SCRIPT = Path(__file__).resolve().parents[2] / "exporters" / "grasshopper" / "loceval_paths.py"
+SITE = "512340.25 5403210.5 112.3 37.5"
+
+
+def expected_paths(result: EvaluationResult, options: ExportOptions) -> list[np.ndarray]:
+    """Reference then aligned estimates after the site transform and unit scale."""
+    trajectories = [result.reference, *(e.aligned for e in result.estimates)]
+    return [
+        options.site.apply_positions(t.positions_xyz) * options.units.per_metre
+        for t in trajectories
+    ]
+
+
+def decode(entry: dict) -> np.ndarray:
+    """Decode a path's curve with CommonObject.Decode and return its vertices."""
+    curve = rhino3dm.CommonObject.Decode(entry["curve"])
+    assert isinstance(curve, rhino3dm.PolylineCurve)
+    points = [curve.Point(k) for k in range(curve.PointCount)]
+    return np.array([[p.X, p.Y, p.Z] for p in points])
+
+
+@pytest.fixture
+def options() -> ExportOptions:
+    """Return options with a large site offset, in millimetres."""
+    return ExportOptions(site=parse_site(SITE), evaluation_id="ev-42", title="Lab run")
+
+
+@pytest.fixture
+def document(two_estimates: EvaluationResult, options: ExportOptions) -> dict:
+    """Return the exported JSON document, parsed."""
+    return json.loads(rhino.export_3dm_json(two_estimates, options))
+
+
+def test_document_metadata(document: dict):
+    """The document names its format, units, evaluation, frame and deviation."""
+    assert document["format"] == "loceval.paths.3dm.json"
+    assert document["format_version"] == 1
+    assert document["units"] == "mm"
+    assert document["rhino_unit_system"] == "Millimeters"
+    base = np.array(document["base_point"])
+    assert np.abs(base - [512340000.0, 5403210000.0, 112000.0]).max() < 10_000.0
+    meta = document["metadata"]
+    assert meta["evaluation_id"] == "ev-42"
+    assert meta["title"] == "Lab run"
+    assert meta["frame"]["evaluation_frame"] == "map"
+    assert meta["simplify_tolerance_m"] == 0.001
+    assert 0.0 < meta["max_deviation_m"] <= 0.001
+
+
+def test_paths_names_colours_layers(document: dict):
+    """Per path: name, palette colour, layer path and the encoded curve's fields."""
+    paths = document["paths"]
+    assert [p["name"] for p in paths] == ["OptiTrack", "RTAB-Map", "ISAAC"]
+    assert [p["color"] for p in paths] == [[0, 255, 255], [255, 0, 255], [0, 200, 0]]
+    assert [p["layer"] for p in paths] == [
+        "loceval::ev-42::OptiTrack",
+        "loceval::ev-42::RTAB-Map",
+        "loceval::ev-42::ISAAC",
+    ]
+    for path in paths:
+        assert set(path["curve"]) == {"version", "archive3dm", "opennurbs", "data"}
+        assert path["curve"]["archive3dm"] <= 70  # decodable by Rhino 7
+
+
+def test_every_curve_decodes_to_the_trajectory(
+    document: dict, two_estimates: EvaluationResult, options: ExportOptions
+):
+    """CommonObject.Decode gives vertices within 1 mm of the mapped poses, all kept counted."""
+    for entry, expected in zip(
+        document["paths"], expected_paths(two_estimates, options), strict=True
+    ):
+        vertices = decode(entry)
+        assert len(vertices) == entry["vertices"]
+        assert entry["poses"] == len(expected)
+        np.testing.assert_allclose(vertices[[0, -1]], expected[[0, -1]], rtol=0, atol=1e-6)
+        assert polyline_distances(expected, vertices).max() <= 1.0 + 1e-6  # mm
+        assert entry["max_deviation_m"] <= 0.001
+
+
+def test_same_curves_as_the_3dm(
+    document: dict, two_estimates: EvaluationResult, options: ExportOptions
+):
+    """The JSON curves are exactly the .3dm curves."""
+    model = rhino3dm.File3dm.FromByteArray(rhino.export_3dm(two_estimates, options))
+    curves = {
+        o.Attributes.Name: o.Geometry
+        for o in model.Objects
+        if o.Geometry.ObjectType == rhino3dm.ObjectType.Curve
+    }
+    for entry in document["paths"]:
+        curve = curves[entry["name"]]
+        points = [curve.Point(k) for k in range(curve.PointCount)]
+        np.testing.assert_array_equal(decode(entry), [[p.X, p.Y, p.Z] for p in points])
+
+
+def test_units_scale(two_estimates: EvaluationResult):
+    """Metre output is the millimetre output divided by 1000."""
+    mm = json.loads(rhino.export_3dm_json(two_estimates, ExportOptions(units=Units.MM)))
+    m = json.loads(rhino.export_3dm_json(two_estimates, ExportOptions(units=Units.M)))
+    assert (mm["units"], m["units"]) == ("mm", "m")
+    for a, b in zip(mm["paths"], m["paths"], strict=True):
+        np.testing.assert_allclose(decode(a), 1000.0 * decode(b), rtol=1e-12)
+
+
+def test_script_reads_only_fields_the_document_has(document: dict):
+    """Every key the Grasshopper script looks up exists in the document it reads."""
+    tree = ast.parse(SCRIPT.read_text(encoding="utf-8"))
+    keys = {
+        node.slice.value
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Subscript)
+        and isinstance(node.slice, ast.Constant)
+        and isinstance(node.slice.value, str)
+    }
+    available = set(document) | set(document["metadata"]) | set(document["paths"][0])
+    assert keys
+    assert keys <= available, keys - available
+    assert document["units"] in {"mm", "cm", "m"}  # the script's UNIT_SYSTEMS
+
+
+def test_script_is_short_and_compiles():
+    """The script is valid Python 3 and short enough to review by eye."""
+    source = SCRIPT.read_text(encoding="utf-8")
+    compile(source, str(SCRIPT), "exec")
+    assert len(source.splitlines()) <= 90
+    assert "CommonObject.FromJSON" in source

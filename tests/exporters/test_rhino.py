@@ -1,0 +1,183 @@
+"""Rhino .3dm export: read back with rhino3dm's File3dm.Read and FromByteArray."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from exporters.errors import ExportError, ExportOptionsError
+from exporters.options import ExportOptions, Units
+from exporters.placement import ate_bins, parse_site, place_evaluation, polyline_distances
+from loceval.evaluation import EvaluationResult
+
+rhino3dm = pytest.importorskip("rhino3dm")
+from exporters import rhino  # noqa: E402  (after the importorskip of its library)
+
+SITE = "512340.25 5403210.5 112.3 37.5"
+NAMES = ["OptiTrack", "RTAB-Map", "ISAAC"]
+COLOURS = [(0, 255, 255), (255, 0, 255), (0, 200, 0)]
+
+
+def expected_paths(result: EvaluationResult, options: ExportOptions) -> list[np.ndarray]:
+    """Reference then aligned estimates after the site transform and unit scale."""
+    trajectories = [result.reference, *(e.aligned for e in result.estimates)]
+    return [
+        options.site.apply_positions(t.positions_xyz) * options.units.per_metre
+        for t in trajectories
+    ]
+
+
+def curve_vertices(curve: object) -> np.ndarray:
+    """Return a PolylineCurve's vertices as an (N, 3) array."""
+    points = [curve.Point(k) for k in range(curve.PointCount)]
+    return np.array([[p.X, p.Y, p.Z] for p in points])
+
+
+@pytest.fixture
+def options() -> ExportOptions:
+    """Return options with a national-grid-sized site offset, in millimetres."""
+    return ExportOptions(site=parse_site(SITE), evaluation_id="ev-42", title="Lab run")
+
+
+@pytest.fixture
+def model_file(tmp_path: Path, two_estimates: EvaluationResult, options: ExportOptions) -> Path:
+    """Write the exported .3dm to a file and return its path."""
+    path = tmp_path / "paths.3dm"
+    path.write_bytes(rhino.export_3dm(two_estimates, options))
+    return path
+
+
+def objects_by_layer(model: object) -> dict[str, list[object]]:
+    """Group a model's objects by their layer's full path."""
+    layers = {layer.Index: layer.FullPath for layer in model.Layers}
+    out: dict[str, list[object]] = {}
+    for obj in model.Objects:
+        out.setdefault(layers[obj.Attributes.LayerIndex], []).append(obj)
+    return out
+
+
+def test_written_as_rhino_7(model_file: Path):
+    """The file is a version 7 archive, which Rhino 7 and 8 open."""
+    assert rhino3dm.File3dm.ReadArchiveVersion(str(model_file)) == 70
+
+
+def test_curves_round_trip(
+    model_file: Path, two_estimates: EvaluationResult, options: ExportOptions
+):
+    """Each trajectory is one named PolylineCurve within 1 mm of the mapped poses."""
+    model = rhino3dm.File3dm.Read(str(model_file))
+    by_layer = objects_by_layer(model)
+    for name, expected in zip(NAMES, expected_paths(two_estimates, options), strict=True):
+        (obj,) = by_layer[f"loceval::ev-42::{name}"]
+        curve = obj.Geometry
+        assert isinstance(curve, rhino3dm.PolylineCurve)
+        assert obj.Attributes.Name == name
+        vertices = curve_vertices(curve)
+        np.testing.assert_allclose(vertices[[0, -1]], expected[[0, -1]], rtol=0, atol=1e-6)
+        assert polyline_distances(expected, vertices).max() <= 1.0 + 1e-6  # mm
+
+
+def test_layers_nested_with_colours(model_file: Path):
+    """Layers nest as loceval::<evaluation>::<trajectory> with the palette colours."""
+    model = rhino3dm.File3dm.Read(str(model_file))
+    layers = {layer.FullPath: layer for layer in model.Layers}
+    assert {"loceval", "loceval::ev-42"} <= set(layers)
+    for name, rgb in zip(NAMES, COLOURS, strict=True):
+        layer = layers[f"loceval::ev-42::{name}"]
+        assert layer.Name == name
+        assert tuple(layer.Color)[:3] == rgb
+        assert layer.Visible
+
+
+def test_user_strings(model_file: Path, two_estimates: EvaluationResult):
+    """Curves carry source and ATE statistics as attribute user text."""
+    model = rhino3dm.File3dm.Read(str(model_file))
+    by_layer = objects_by_layer(model)
+    (ref,) = by_layer["loceval::ev-42::OptiTrack"]
+    assert ref.Attributes.GetUserString("loceval.source") == "gt.tum"
+    assert ref.Attributes.GetUserString("loceval.kind") == "reference"
+    assert ref.Attributes.GetUserString("loceval.poses") == "6000"
+    for est in two_estimates.estimates:
+        (obj,) = by_layer[f"loceval::ev-42::{est.name}"]
+        stats = est.ate_translation.stats
+        assert obj.Attributes.GetUserString("loceval.source") == est.estimate.source
+        assert float(obj.Attributes.GetUserString("loceval.ate_rmse_m")) == stats.rmse
+        assert float(obj.Attributes.GetUserString("loceval.ate_max_m")) == stats.max
+        assert float(obj.Attributes.GetUserString("loceval.max_deviation_m")) <= 0.001
+        assert obj.Geometry.GetUserString("loceval.name") == est.name
+
+
+def test_units_base_point_and_document_text(
+    model_file: Path, two_estimates: EvaluationResult, options: ExportOptions
+):
+    """Model units, EarthAnchorPoint base point and document user text are set."""
+    model = rhino3dm.File3dm.Read(str(model_file))
+    assert model.Settings.ModelUnitSystem == rhino3dm.UnitSystem.Millimeters
+    base = model.Settings.EarthAnchorPoint.ModelBasePoint
+    expected = place_evaluation(two_estimates, options).base_point
+    np.testing.assert_array_equal([base.X, base.Y, base.Z], expected)
+    assert np.abs(expected - [512340000.0, 5403210000.0, 112000.0]).max() < 10_000.0
+    assert model.Strings["loceval.evaluation_id"] == "ev-42"
+    assert model.Strings["loceval.units"] == "mm"
+    assert float(model.Strings["loceval.max_deviation_m"]) <= 0.001
+
+
+@pytest.mark.parametrize(
+    ("units", "system"),
+    [(Units.MM, "Millimeters"), (Units.CM, "Centimeters"), (Units.M, "Meters")],
+)
+def test_model_units(two_estimates: EvaluationResult, units: Units, system: str):
+    """Each output unit sets the model unit system and scales the vertices."""
+    model = rhino3dm.File3dm.FromByteArray(
+        rhino.export_3dm(two_estimates, ExportOptions(units=units))
+    )
+    assert model.Settings.ModelUnitSystem == getattr(rhino3dm.UnitSystem, system)
+    (ref,) = objects_by_layer(model)["loceval::local::OptiTrack"]
+    first = curve_vertices(ref.Geometry)[0]
+    expected = two_estimates.reference.positions_xyz[0] * units.per_metre
+    np.testing.assert_allclose(first, expected, rtol=1e-12)
+
+
+def test_error_coloured_point_cloud(model_file: Path, two_estimates: EvaluationResult):
+    """Each estimate has a point cloud on a hidden ATE sub-layer, coloured by ATE bin."""
+    model = rhino3dm.File3dm.Read(str(model_file))
+    layers = {layer.FullPath: layer for layer in model.Layers}
+    by_layer = objects_by_layer(model)
+    bins = ate_bins(two_estimates.config.thresholds_m)
+    edges = np.array([b.high_m for b in bins[:-1]])
+    for est in two_estimates.estimates:
+        path = f"loceval::ev-42::{est.name}"
+        assert not layers[f"{path}::ATE"].Visible
+        (cloud_obj,) = by_layer[f"{path}::ATE"]
+        cloud = cloud_obj.Geometry
+        (curve_obj,) = by_layer[path]
+        assert isinstance(cloud, rhino3dm.PointCloud)
+        assert cloud.Count == curve_obj.Geometry.PointCount
+        assert cloud.ContainsColors
+        colours = [tuple(c)[:3] for c in cloud.GetColors()]
+        assert set(colours) <= {b.color_rgb for b in bins}
+        # the first vertex is the first pose: its colour is the bin of its error
+        first_bin = int(np.searchsorted(edges, est.ate_translation.values[0], side="left"))
+        assert colours[0] == bins[first_bin].color_rgb
+
+
+def test_bad_options(two_estimates: EvaluationResult):
+    """Unknown units are an options error."""
+    with pytest.raises(ExportOptionsError, match="--units must be one of"):
+        rhino.export_3dm(two_estimates, ExportOptions(units="ft"))  # type: ignore[arg-type]
+
+
+def test_write_failure_becomes_export_error(
+    two_estimates: EvaluationResult, monkeypatch: pytest.MonkeyPatch
+):
+    """A model rhino3dm refuses to write surfaces as ExportError."""
+
+    class Unwritable:
+        def Write(self, _path: str, _version: int) -> bool:  # noqa: N802  (rhino3dm's name)
+            return False
+
+    monkeypatch.setattr(rhino, "_model", lambda _placement: Unwritable())
+    with pytest.raises(ExportError, match=r"rhino3dm could not write the \.3dm model"):
+        rhino.export_3dm(two_estimates, ExportOptions())

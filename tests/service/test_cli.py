@@ -1,0 +1,153 @@
+"""The command line: contract, table layout, exit codes, artifacts."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from service.cli import main
+from service.demo import write_demo_recording
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Write the synthetic demo recording once."""
+    return write_demo_recording(tmp_path_factory.mktemp("demo"))
+
+
+def _run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_json_contract(demo: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """--json prints one document with both estimates, named in order."""
+    code, out, _ = _run(
+        capsys, "evaluate", str(demo["reference"]), str(demo["RTAB-Map"]), str(demo["ISAAC"]),
+        "--name", "RTAB-Map", "--name", "ISAAC", "--json", "--tolerance", "0.10@95",
+    )  # fmt: skip
+    assert code == 0
+    doc = json.loads(out)
+    assert [e["name"] for e in doc["estimates"]] == ["RTAB-Map", "ISAAC"]
+    assert doc["reference"]["poses"] == 6000
+    isaac = doc["estimates"][1]
+    assert isaac["dropped"]["outside"] == 0
+    assert isaac["verdict"]["required_share"] == pytest.approx(0.95)
+    assert doc["inputs"][0]["sha256"]
+    assert doc["options"]["association"] == "interpolate"
+
+
+def test_table_layout(demo: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """Without --json the framework paper's tables come out, one column per estimate."""
+    code, out, _ = _run(
+        capsys, "evaluate", str(demo["reference"]), str(demo["RTAB-Map"]), str(demo["ISAAC"]),
+        "--name", "RTAB-Map", "--name", "ISAAC",
+    )  # fmt: skip
+    assert code == 0
+    assert "Absolute Trajectory Error (ATE)" in out
+    assert "Relative Pose Error (RPE, delta 1 frames)" in out
+    header = next(line for line in out.splitlines() if line.startswith("error metric"))
+    assert header.split()[-2:] == ["RTAB-Map", "ISAAC"]
+    for label in ("RMSE", "MEAN", "MEDIAN", "STD", "MIN", "MAX"):
+        assert any(line.startswith(label) for line in out.splitlines())
+
+
+def test_options_reach_the_result(
+    demo: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Association, alignment, RPE and threshold options are applied and recorded."""
+    code, out, _ = _run(
+        capsys, "evaluate", str(demo["reference"]), str(demo["RTAB-Map"]), "--json",
+        "--associate", "nearest", "--max-dt", "0.005", "--align", "sim3", "--align-first", "10s",
+        "--rpe-delta", "0.5", "--rpe-unit", "m", "--thresholds", "0.2,0.4", "--time-offset", "0",
+    )  # fmt: skip
+    assert code == 0
+    est = json.loads(out)["estimates"][0]
+    assert est["alignment"]["method"] == "sim3"
+    assert est["alignment"]["window"] == "10s"
+    assert est["rpe"]["unit"] == "m"
+    assert set(est["within"]) == {"0.2", "0.4"}
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["evaluate", "missing.txt", "also-missing.txt"], "missing.txt"),
+        (["evaluate", "REF", "EST", "--tolerance", "ten@cm"], "--tolerance"),
+        (["evaluate", "REF", "EST", "--align-first", "-1"], "--align-first"),
+        (["evaluate", "REF", "EST", "--thresholds", "a,b"], "--thresholds"),
+        (["evaluate", "REF", "EST", "--offset", "1 2"], "--offset"),
+        (["evaluate", "REF", "EST", "--name", "a", "--name", "b"], "once per estimate"),
+        (["evaluate", "REF", "EST", "--device-from", "a"], "--device"),
+        (["evaluate", "REF", "EST", "--max-gap", "0"], "--max-gap"),
+        (["evaluate", "REF", "EST", "--rpe-delta", "100000"], "--rpe-delta"),
+        (["evaluate", "REF", "EST", "--time-offset", "1000"], "time offset"),
+        (["evaluate", "REF", "EST", "--align", "calibrate", "--calibrate-at", "1e6"], "calibrate"),
+    ],
+)
+def test_bad_input_exits_1_without_traceback(
+    demo: dict[str, Path], capsys: pytest.CaptureFixture[str], argv: list[str], match: str
+) -> None:
+    """Every bad input prints a message naming the problem and exits 1, no traceback."""
+    argv = [
+        str(demo["reference"]) if a == "REF" else str(demo["ISAAC"]) if a == "EST" else a
+        for a in argv
+    ]
+    code, _, err = _run(capsys, *argv)
+    assert code == 1
+    assert match in err
+    assert "Traceback" not in err
+
+
+def test_invalid_choice_exits_1(capsys: pytest.CaptureFixture[str]) -> None:
+    """A value outside an option's choices is a usage error with exit code 1."""
+    with pytest.raises(SystemExit) as exc:
+        main(["evaluate", "a", "b", "--align", "wobble"])
+    assert exc.value.code == 1
+    assert "invalid choice: 'wobble'" in capsys.readouterr().err
+
+
+def test_usage_errors_exit_1() -> None:
+    """An unknown option is bad input: exit code 1, not argparse's 2."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "service.cli", "evaluate", "--bogus"],
+        capture_output=True, text=True, check=False,
+        env={**os.environ, "PYTHONPATH": str(Path(__file__).parents[2])},
+    )  # fmt: skip
+    assert proc.returncode == 1
+    assert "Traceback" not in proc.stderr
+
+
+def test_out_writes_result_json_atomically(
+    demo: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """--out with --formats result.json writes the same document as --json."""
+    out_dir = tmp_path / "run"
+    code, _, _ = _run(
+        capsys, "evaluate", str(demo["reference"]), str(demo["ISAAC"]), "--out", str(out_dir),
+        "--formats", "result.json",
+    )  # fmt: skip
+    assert code == 0
+    doc = json.loads((out_dir / "result.json").read_text())
+    assert doc["evaluation_id"] == "run"
+    assert doc["estimates"][0]["matched"] > 1000
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".run.partial")]
+
+
+def test_unknown_artifact_is_an_input_error(
+    demo: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """--formats with an unknown name lists the known ones and writes nothing."""
+    code, _, err = _run(
+        capsys, "evaluate", str(demo["reference"]), str(demo["ISAAC"]),
+        "--out", str(tmp_path / "x"), "--formats", "paths.step",
+    )  # fmt: skip
+    assert code == 1
+    assert "report.pdf" in err
+    assert not (tmp_path / "x").exists()
