@@ -459,10 +459,16 @@ def _association_notes(matched: Association, total: int) -> list[str]:
             "reference's time range and were not evaluated."
         )
     if matched.dropped_gap:
-        notes.append(
+        note = (
             f"{matched.dropped_gap} of {total} estimate poses fall in reference gaps longer "
             f"than {matched.max_gap_ns / _NS_PER_S:g} s (tracking loss) and were not evaluated."
         )
+        if matched.dropped_gap > total // 2:
+            note += (
+                " Most poses were dropped: if the reference is sparse by design (AMCL, "
+                "surveyed points), use --associate nearest --max-dt S or a larger --max-gap."
+            )
+        notes.append(note)
     if matched.dropped_unmatched:
         notes.append(
             f"{matched.dropped_unmatched} of {total} estimate poses have no reference pose "

@@ -15,6 +15,8 @@ from loceval.errors import InputError
 
 __all__ = [
     "SimilarityTransform",
+    "compose_quat",
+    "conjugate_quat",
     "relative_angle_deg",
     "slerp_pairs",
 ]
@@ -129,9 +131,8 @@ class SimilarityTransform:
 
     def apply_orientations(self, quat_xyzw: FloatArray) -> FloatArray:
         """Rotate (N, 4) orientations by R (the scale does not act on rotations)."""
-        rotated = Rotation.from_matrix(self.rotation) * Rotation.from_quat(quat_xyzw)
-        out: FloatArray = rotated.as_quat(canonical=False)
-        return out
+        q_rot = Rotation.from_matrix(self.rotation).as_quat()
+        return compose_quat(np.broadcast_to(q_rot, quat_xyzw.shape), quat_xyzw)
 
     def to_dict(self) -> dict[str, object]:
         """Return ``{"rotation": 3x3 list, "translation": [x, y, z], "scale": s}``."""
@@ -142,8 +143,45 @@ class SimilarityTransform:
         }
 
 
+def compose_quat(a_xyzw: FloatArray, b_xyzw: FloatArray) -> FloatArray:
+    """Compose matching rows of two rotation arrays: ``a ∘ b`` (apply ``b`` first).
+
+    The Hamilton product, vectorized. scipy's ``Rotation.__mul__`` does the same, but
+    scipy 1.17 spends about 1 µs per rotation in it (measured: 52 ms for 50,000 pairs
+    against 1.4 ms here), which was a sixth of the CLI's time budget; everything else
+    about rotations (conversions, rotation vectors, angles, applying) stays with scipy.
+
+    Args:
+        a_xyzw: (N, 4) unit quaternions x y z w.
+        b_xyzw: (N, 4) unit quaternions x y z w.
+
+    Returns:
+        (N, 4) unit quaternions x y z w of the composed rotations.
+    """
+    x1, y1, z1, w1 = np.moveaxis(np.asarray(a_xyzw, dtype=np.float64), -1, 0)
+    x2, y2, z2, w2 = np.moveaxis(np.asarray(b_xyzw, dtype=np.float64), -1, 0)
+    out: FloatArray = np.stack(
+        [
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        ],
+        axis=-1,
+    )
+    return out
+
+
+def conjugate_quat(quat_xyzw: FloatArray) -> FloatArray:
+    """Return the inverse rotations of (N, 4) unit quaternions (the conjugates)."""
+    out: FloatArray = np.asarray(quat_xyzw, dtype=np.float64) * np.array([-1.0, -1.0, -1.0, 1.0])
+    return out
+
+
 def slerp_pairs(q0_xyzw: FloatArray, q1_xyzw: FloatArray, weights: FloatArray) -> FloatArray:
     """Spherical linear interpolation between matching rows of two quaternion arrays.
+
+    ``q0 ∘ exp(w · log(q0^-1 ∘ q1))``, with scipy's rotation vectors for log and exp.
 
     Args:
         q0_xyzw: (N, 4) start orientations.
@@ -153,10 +191,9 @@ def slerp_pairs(q0_xyzw: FloatArray, q1_xyzw: FloatArray, weights: FloatArray) -
     Returns:
         (N, 4) interpolated unit quaternions x y z w, along the shorter arc.
     """
-    r0 = Rotation.from_quat(q0_xyzw)
-    delta = (r0.inv() * Rotation.from_quat(q1_xyzw)).as_rotvec()
-    out: FloatArray = (r0 * Rotation.from_rotvec(delta * weights[:, None])).as_quat()
-    return out
+    delta = Rotation.from_quat(compose_quat(conjugate_quat(q0_xyzw), q1_xyzw)).as_rotvec()
+    step = Rotation.from_rotvec(delta * weights[:, None]).as_quat()
+    return compose_quat(q0_xyzw, step)
 
 
 def relative_angle_deg(q_a_xyzw: FloatArray, q_b_xyzw: FloatArray) -> FloatArray:
@@ -169,6 +206,6 @@ def relative_angle_deg(q_a_xyzw: FloatArray, q_b_xyzw: FloatArray) -> FloatArray
     Returns:
         (N,) angles in [0, 180] degrees.
     """
-    delta = Rotation.from_quat(q_a_xyzw).inv() * Rotation.from_quat(q_b_xyzw)
+    delta = Rotation.from_quat(compose_quat(conjugate_quat(q_a_xyzw), q_b_xyzw))
     out: FloatArray = np.degrees(delta.magnitude())
     return out

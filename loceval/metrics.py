@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from loceval._typing import FloatArray, IntArray, StampsNs
 from loceval.errors import MetricError
-from loceval.geometry import relative_angle_deg
+from loceval.geometry import compose_quat, conjugate_quat, relative_angle_deg
 from loceval.trajectory import Trajectory
 
 __all__ = [
@@ -294,8 +294,8 @@ def compute_rpe(
     dq_t = rq[i].apply(q_pos[j] - q_pos[i], inverse=True)
     dp_t = rp[i].apply(p_pos[j] - p_pos[i], inverse=True)
     err_t = np.linalg.norm(dp_t - dq_t, axis=1)
-    w = rq * rp.inv()
-    err_r = np.degrees((w[i] * w[j].inv()).magnitude())
+    w = compose_quat(reference.quat_xyzw, conjugate_quat(aligned.quat_xyzw))
+    err_r = relative_angle_deg(w[j], w[i])
     return ErrorSeries(err_t, stamps, "m"), ErrorSeries(err_r, stamps, "deg")
 
 

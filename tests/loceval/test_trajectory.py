@@ -7,7 +7,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from loceval.errors import InputError, TrajectoryError
-from loceval.geometry import SimilarityTransform, relative_angle_deg, slerp_pairs
+from loceval.geometry import (
+    SimilarityTransform,
+    compose_quat,
+    conjugate_quat,
+    relative_angle_deg,
+    slerp_pairs,
+)
 from loceval.trajectory import Trajectory
 
 
@@ -117,3 +123,13 @@ def test_slerp_pairs_halfway() -> None:
     q1 = Rotation.from_euler("z", [90], degrees=True).as_quat()
     mid = slerp_pairs(q0, q1, np.array([0.5]))
     assert Rotation.from_quat(mid).as_euler("xyz", degrees=True)[0, 2] == pytest.approx(45.0)
+
+
+def test_compose_quat_matches_scipy() -> None:
+    """The vectorized Hamilton product equals scipy's composition, with conjugate as inverse."""
+    a = Rotation.random(100, random_state=3)
+    b = Rotation.random(100, random_state=4)
+    ours = compose_quat(a.as_quat(), b.as_quat())
+    np.testing.assert_allclose(np.abs((ours * (a * b).as_quat()).sum(1)), 1.0, atol=1e-12)
+    identity = compose_quat(a.as_quat(), conjugate_quat(a.as_quat()))
+    np.testing.assert_allclose(np.abs(identity[:, 3]), 1.0, atol=1e-12)
