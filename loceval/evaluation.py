@@ -99,7 +99,10 @@ class Tolerance:
 
 @dataclass(frozen=True, slots=True)
 class FailingSpan:
-    """A stretch of consecutive matched poses whose error exceeds the tolerance."""
+    """A stretch of consecutive matched poses whose error exceeds the tolerance.
+
+    Times are seconds since the reference's first pose.
+    """
 
     start_s: float
     end_s: float
@@ -432,7 +435,8 @@ def _evaluate_one(
         ref, aligned, delta=config.rpe_delta, unit=config.rpe_unit, pairs=(i, j)
     )
     drift = compute_drift(ref, aligned)
-    verdict = None if config.tolerance is None else _verdict(ate_t, ref, config.tolerance)
+    t0_ns = int(reference.stamps_ns[0])  # every time in the result counts from here
+    verdict = None if config.tolerance is None else _verdict(ate_t, ref, config.tolerance, t0_ns)
     return EstimateResult(
         estimate=estimate,
         association=matched,
@@ -445,7 +449,7 @@ def _evaluate_one(
         rpe_index=np.stack([i, j], axis=1),
         drift=drift,
         within=share_within(ate_t, config.thresholds_m),
-        worst=greatest_errors(ate_t, ref, count=config.worst_count),
+        worst=greatest_errors(ate_t, ref, count=config.worst_count, t0_ns=t0_ns),
         verdict=verdict,
         warnings=tuple(notes),
     )
@@ -477,7 +481,7 @@ def _association_notes(matched: Association, total: int) -> list[str]:
     return notes
 
 
-def _verdict(ate: ErrorSeries, reference: Trajectory, tolerance: Tolerance) -> Verdict:
+def _verdict(ate: ErrorSeries, reference: Trajectory, tolerance: Tolerance, t0_ns: int) -> Verdict:
     share = share_within(ate, [tolerance.distance_m])[tolerance.distance_m]
     over: BoolArray = ate.values > tolerance.distance_m
     spans = []
@@ -485,14 +489,13 @@ def _verdict(ate: ErrorSeries, reference: Trajectory, tolerance: Tolerance) -> V
         edges = np.diff(np.concatenate(([0], over.astype(np.int8), [0])))
         starts = np.flatnonzero(edges == 1)
         ends = np.flatnonzero(edges == -1)  # exclusive
-        t0 = int(reference.stamps_ns[0])
         for a, b in zip(starts, ends, strict=True):  # one iteration per failing stretch
             k = a + int(np.argmax(ate.values[a:b]))
             pos = reference.positions_xyz[k]
             spans.append(
                 FailingSpan(
-                    start_s=(int(ate.stamps_ns[a]) - t0) / _NS_PER_S,
-                    end_s=(int(ate.stamps_ns[b - 1]) - t0) / _NS_PER_S,
+                    start_s=(int(ate.stamps_ns[a]) - t0_ns) / _NS_PER_S,
+                    end_s=(int(ate.stamps_ns[b - 1]) - t0_ns) / _NS_PER_S,
                     poses=int(b - a),
                     max_error_m=float(ate.values[k]),
                     max_error_position_xyz=(float(pos[0]), float(pos[1]), float(pos[2])),

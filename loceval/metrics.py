@@ -148,7 +148,7 @@ class WorstPose:
 
     Attributes:
         stamp_ns: stamp of the pose.
-        t_s: seconds since the first matched pose.
+        t_s: seconds since the reference's first pose.
         error: the error (metres).
         position_xyz: the reference position there, metres.
         index: index in the matched series.
@@ -374,15 +374,23 @@ def share_within(errors: ErrorSeries, thresholds: Sequence[float]) -> dict[float
 
 
 def greatest_errors(
-    errors: ErrorSeries, reference: Trajectory, *, count: int = 10
+    errors: ErrorSeries, reference: Trajectory, *, count: int = 10, t0_ns: int | None = None
 ) -> tuple[WorstPose, ...]:
-    """The ``count`` greatest errors, largest first, with time and reference position."""
+    """The ``count`` greatest errors, largest first, with time and reference position.
+
+    Args:
+        errors: per matched pose.
+        reference: the matched reference poses (positions for each error).
+        count: how many.
+        t0_ns: the stamp ``t_s`` counts from; the first matched pose by default (the
+            evaluation passes the whole reference's first pose, one clock for everything).
+    """
     k = min(count, len(errors))
     if k == 0:
         return ()
     idx = np.argpartition(-errors.values, k - 1)[:k]
     idx = idx[np.argsort(-errors.values[idx], kind="stable")]
-    t0 = int(reference.stamps_ns[0])
+    t0 = int(reference.stamps_ns[0]) if t0_ns is None else int(t0_ns)
     return tuple(
         WorstPose(
             stamp_ns=int(errors.stamps_ns[i]),

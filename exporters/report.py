@@ -1,0 +1,750 @@
+"""The evaluation report: self-contained HTML (Jinja2) and the same report as PDF (WeasyPrint).
+
+One set of templates (``templates/report.html.j2`` with ``templates/_partials/``) renders
+both: the HTML carries a screen and a print stylesheet, and WeasyPrint lays the same HTML
+out on A4 pages. Plots are embedded as ``data:`` URIs, so the report is one file that needs
+no network and no other file: SVG in the HTML, 200 dpi PNG in the PDF (WeasyPrint draws
+matplotlib's SVG slowly; the picture is the same).
+
+The templates hold loops, conditions and filters only; every number is computed and
+formatted here, in a view model (:class:`ReportView`), so tests can compare the report
+against the result's statistics.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from exporters.errors import ExportError, ExportUnavailableError
+from exporters.options import ExportOptions
+from exporters.plots import (
+    DEFAULT_MAX_POINTS,
+    MAX_SPAN_MARKERS,
+    REFERENCE_COLOUR,
+    ImageFormat,
+    Plot,
+    describe_rpe_step,
+    estimate_colour,
+    render_plots,
+)
+from loceval.evaluation import EstimateResult, EvaluationResult
+from loceval.metrics import ErrorSeries, ErrorStats
+
+__all__ = [
+    "BEST_MARK",
+    "DEFAULT_TEMPLATES_DIR",
+    "ReportView",
+    "build_report_view",
+    "html_to_pdf",
+    "render_report",
+    "render_report_html",
+    "render_report_pdf",
+    "render_view_html",
+]
+
+DEFAULT_TEMPLATES_DIR: Final[Path] = Path(__file__).resolve().parents[1] / "templates"
+"""The repository's ``templates/`` folder, used when the options name none."""
+TEMPLATE_NAME: Final = "report.html.j2"
+BEST_MARK: Final = "★"
+"""Marks the lowest value of a statistics row (with bold, so it survives grey print)."""
+
+_NS_PER_S = 1_000_000_000
+_STAT_ROWS: Final = (
+    ("RMSE", "rmse"),
+    ("MEAN", "mean"),
+    ("MEDIAN", "median"),
+    ("STD", "std"),
+    ("MIN", "min"),
+    ("MAX", "max"),
+)
+"""The framework paper's Tables 1-2 rows (it omits the median; the issue asks for it)."""
+
+
+# --- view model -------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Cell:
+    """One value of a statistics table, formatted with its unit, and whether it is best."""
+
+    text: str
+    best: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class StatsRow:
+    """A row of a statistics table: ``RMSE``, ``MEAN``, ... with one cell per estimate."""
+
+    label: str
+    cells: tuple[Cell, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class StatsTable:
+    """The framework paper's table layout: metrics down, estimates across."""
+
+    number: int
+    title: str
+    note: str
+    columns: tuple[str, ...]
+    groups: tuple[tuple[str, tuple[StatsRow, ...]], ...]
+    marks_best: bool
+
+
+@dataclass(frozen=True, slots=True)
+class SpanView:
+    """A stretch of the path beyond the tolerance, as the verdict lists it."""
+
+    number: int
+    start_s: str
+    end_s: str
+    duration_s: str
+    poses: int
+    max_error_m: str
+    where: str
+
+
+@dataclass(frozen=True, slots=True)
+class VerdictView:
+    """One estimate's verdict in words."""
+
+    name: str
+    colour: str
+    status: str  # "pass", "fail" or "none"
+    badge: str
+    headline: str
+    details: tuple[str, ...]
+    spans: tuple[SpanView, ...]
+    spans_total: int
+    map_figure: int | None
+    shares: str
+    glance: str
+
+
+@dataclass(frozen=True, slots=True)
+class WorstRow:
+    """One of the greatest errors."""
+
+    rank: int
+    t_s: str
+    stamp_ns: int
+    x: str
+    y: str
+    z: str
+    error_m: str
+
+
+@dataclass(frozen=True, slots=True)
+class WorstTable:
+    """The greatest errors of one estimate."""
+
+    name: str
+    rows: tuple[WorstRow, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class FigureView:
+    """A numbered figure."""
+
+    number: int
+    key: str
+    title: str
+    caption: str
+    src: str
+
+
+@dataclass(frozen=True, slots=True)
+class ReportView:
+    """Everything the templates show, formatted (the templates compute nothing).
+
+    Attributes:
+        title: the report title.
+        evaluation_id: the evaluation's id.
+        created_at: when the evaluation ran (ISO 8601, UTC).
+        loceval_version: the library version that computed it.
+        summary: one sentence: what was evaluated against what.
+        tolerance: the tolerance in words, or None.
+        verdicts: one per estimate.
+        shares: threshold rows of "share of poses within" (label, one value per estimate).
+        estimate_names: the column heads.
+        inputs: the input files (role, file, format, selector, sha256, size).
+        trajectories: reference and estimates (name, role, source, poses, ...).
+        options: the evaluation options as (label, value).
+        alignments: the transform found: (label, one value per estimate) rows.
+        tables: Tables 1 and 2.
+        figures: the plots.
+        worst: the greatest errors per estimate.
+        warnings: (source, message) pairs.
+    """
+
+    title: str
+    evaluation_id: str
+    created_at: str
+    loceval_version: str
+    summary: str
+    tolerance: str | None
+    verdicts: tuple[VerdictView, ...]
+    shares: tuple[tuple[str, tuple[str, ...]], ...]
+    estimate_names: tuple[str, ...]
+    estimate_colours: tuple[str, ...]
+    reference_colour: str
+    inputs: tuple[Mapping[str, str], ...]
+    trajectories: tuple[Mapping[str, str], ...]
+    options: tuple[tuple[str, str], ...]
+    alignments: tuple[tuple[str, tuple[str, ...]], ...]
+    tables: tuple[StatsTable, ...]
+    figures: tuple[FigureView, ...]
+    worst: tuple[WorstTable, ...]
+    warnings: tuple[tuple[str, str], ...]
+    best_mark: str = BEST_MARK
+
+
+def _fmt(value: float, decimals: int = 3) -> str:
+    return f"{value:.{decimals}f}"
+
+
+def _name(e: EstimateResult, k: int) -> str:
+    return e.name or f"estimate {k + 1}"
+
+
+def _stats_rows(
+    series: Sequence[ErrorSeries | None], unit: str, *, mark: bool
+) -> tuple[StatsRow, ...]:
+    stats: list[ErrorStats | None] = [None if s is None else s.stats for s in series]
+    rows = []
+    for label, attr in _STAT_ROWS:
+        printed = [None if st is None else _fmt(float(getattr(st, attr))) for st in stats]
+        # Best is decided on the printed values, so equal-looking numbers are marked alike.
+        numbers = [float(t) for t in printed if t is not None]
+        best = min(numbers) if numbers else None
+        cells = tuple(
+            Cell("—") if text is None else Cell(f"{text}{unit}", best=mark and float(text) == best)
+            for text in printed
+        )
+        rows.append(StatsRow(label=label, cells=cells))
+    return tuple(rows)
+
+
+def _stats_table(
+    result: EvaluationResult,
+    *,
+    number: int,
+    title: str,
+    note: str,
+    translation: Sequence[ErrorSeries],
+    rotation: Sequence[ErrorSeries | None],
+) -> StatsTable:
+    mark = len(result.estimates) > 1
+    columns = tuple(
+        f"{_name(e, k)} (n = {len(t):,})"
+        for k, (e, t) in enumerate(zip(result.estimates, translation, strict=True))
+    )
+    groups: list[tuple[str, tuple[StatsRow, ...]]] = [
+        ("translation", _stats_rows(translation, " m", mark=mark))
+    ]
+    if any(r is not None for r in rotation):
+        groups.append(("rotation", _stats_rows(rotation, "°", mark=mark)))
+    return StatsTable(
+        number=number,
+        title=title,
+        note=note,
+        columns=columns,
+        groups=tuple(groups),
+        marks_best=mark,
+    )
+
+
+def _xyz(position: Iterable[float]) -> str:
+    return ", ".join(f"{v:.2f}" for v in position)
+
+
+def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> VerdictView:
+    e = result.estimates[k]
+    name = _name(e, k)
+    colour = estimate_colour(k)
+    ate = e.ate_translation
+    shares = " · ".join(f"{share * 100:.1f} % within {t:g} m" for t, share in e.within.items())
+    worst = e.worst[0] if e.worst else None
+    worst_text = (
+        ""
+        if worst is None
+        else (
+            f"The largest error is {worst.error:.2f} m, "
+            f"{worst.t_s:.1f} s into the recording "
+            f"at x, y, z = {_xyz(worst.position_xyz)} m."
+        )
+    )
+    verdict = e.verdict
+    if verdict is None:
+        return VerdictView(
+            name=name,
+            colour=colour,
+            status="none",
+            badge="NO VERDICT",
+            headline=(
+                f"{name}: typical error (RMSE) {ate.stats.rmse:.3f} m over "
+                f"{len(ate):,} poses; no tolerance to judge it against."
+            ),
+            details=(worst_text,) if worst_text else (),
+            spans=(),
+            spans_total=0,
+            map_figure=None,
+            shares=shares,
+            glance=f"typical error (RMSE) {ate.stats.rmse:.3f} m; {shares}",
+        )
+    tol = verdict.tolerance
+    share_pct = verdict.share_within * 100
+    if verdict.passed:
+        headline = (
+            f"{name} meets the tolerance: {share_pct:.1f} % of its poses are within "
+            f"{tol.distance_m:g} m of the ground truth ({tol.share * 100:g} % required)."
+        )
+    else:
+        headline = (
+            f"{name} does not meet the tolerance: only {share_pct:.1f} % of its poses are "
+            f"within {tol.distance_m:g} m of the ground truth ({tol.share * 100:g} % required)."
+        )
+    details: list[str] = []
+    spans = verdict.failing_spans
+    if spans:
+        over = sum(s.poses for s in spans)
+        where = (
+            f" The worst are listed below and numbered on its map (Figure {map_figure})."
+            if map_figure is not None
+            else " The worst are listed below."
+        )
+        details.append(
+            f"Its error exceeds {tol.distance_m:g} m in {len(spans):,} "
+            f"stretch{'es' if len(spans) != 1 else ''} of the path, {over:,} of "
+            f"{len(ate):,} poses ({100.0 * over / max(len(ate), 1):.1f} %).{where}"
+        )
+    else:
+        details.append(f"Its error never exceeds {tol.distance_m:g} m.")
+    if worst_text:
+        details.append(worst_text)
+    shown = spans[:MAX_SPAN_MARKERS]
+    span_views = tuple(
+        SpanView(
+            number=n,
+            start_s=f"{s.start_s:.2f}",
+            end_s=f"{s.end_s:.2f}",
+            duration_s=f"{s.end_s - s.start_s:.2f}",
+            poses=s.poses,
+            max_error_m=_fmt(s.max_error_m),
+            where=_xyz(s.max_error_position_xyz),
+        )
+        for n, s in enumerate(shown, start=1)
+    )
+    return VerdictView(
+        name=name,
+        colour=colour,
+        status="pass" if verdict.passed else "fail",
+        badge="PASS" if verdict.passed else "FAIL",
+        headline=headline,
+        details=tuple(details),
+        spans=span_views,
+        spans_total=len(spans),
+        map_figure=map_figure,
+        shares=shares,
+        glance=(
+            f"{share_pct:.1f} % of poses within {tol.distance_m:g} m "
+            f"({tol.share * 100:g} % required)"
+        ),
+    )
+
+
+def _size(value: object) -> str:
+    """A byte count for people: ``123.5 kB``, ``987.7 MB``."""
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        return ""
+    units = ("B", "kB", "MB", "GB", "TB")
+    k = 0 if value < 1000 else min(int(math.log10(value)) // 3, len(units) - 1)
+    return f"{value:,} B" if k == 0 else f"{value / 1000**k:,.1f} {units[k]}"
+
+
+def _text(value: object) -> str:
+    return "" if value is None else str(value)
+
+
+def _inputs(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
+    rows = []
+    for info in result.inputs:
+        path = _text(info.get("path"))
+        rows.append(
+            {
+                "role": _text(info.get("role")),
+                "file": _text(info.get("file")) or (Path(path).name if path else ""),
+                "path": path,
+                "format": _text(info.get("format")),
+                "selector": _text(info.get("selector")),
+                "sha256": _text(info.get("sha256")),
+                "size": _size(info.get("bytes")),
+            }
+        )
+    return tuple(rows)
+
+
+def _trajectories(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
+    ref = result.reference
+    rows: list[Mapping[str, str]] = [
+        {
+            "role": "reference",
+            "name": ref.name or "reference",
+            "colour": REFERENCE_COLOUR,
+            "source": ref.source,
+            "poses": f"{len(ref):,}",
+            "matched": "",
+            "duration": f"{ref.duration_s:.1f} s",
+            "length": f"{ref.length_m:.1f} m",
+            "rate": f"{ref.rate_hz:.1f} Hz",
+            "orientation": "yes" if ref.has_orientation else "no",
+        }
+    ]
+    for k, e in enumerate(result.estimates):
+        est = e.estimate
+        rows.append(
+            {
+                "role": "estimate",
+                "name": _name(e, k),
+                "colour": estimate_colour(k),
+                "source": est.source,
+                "poses": f"{len(est):,}",
+                "matched": f"{len(e.association):,}",
+                "duration": f"{est.duration_s:.1f} s",
+                "length": f"{est.length_m:.1f} m",
+                "rate": f"{est.rate_hz:.1f} Hz",
+                "orientation": "yes" if est.has_orientation else "no",
+            }
+        )
+    return tuple(rows)
+
+
+def _options(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
+    cfg = result.config
+    association = (
+        f"interpolate the reference at the estimate's stamps (gaps over {cfg.max_gap_s:g} s "
+        "are tracking loss and not bridged)"
+        if cfg.association.value == "interpolate"
+        else (
+            f"nearest reference pose within {cfg.max_dt_s:g} s (gaps over "
+            f"{cfg.max_gap_s:g} s are tracking loss)"
+        )
+    )
+    rows = [
+        ("Association", association),
+        ("Time offset", f"{cfg.time_offset_s:+g} s added to the estimates' stamps"),
+        ("Alignment", f"{cfg.align.value} (estimated on {cfg.align_first} poses)"),
+        (
+            "RPE step",
+            describe_rpe_step(result.config)
+            + (", every pose starts a pair" if cfg.rpe_all_pairs else ", consecutive steps"),
+        ),
+        ("Thresholds", ", ".join(f"{t:g} m" for t in cfg.thresholds_m)),
+        ("Tolerance", "none given" if cfg.tolerance is None else str(cfg.tolerance)),
+    ]
+    if cfg.align.value == "calibrate":
+        at = "the first matched pose" if cfg.calibrate_at_s is None else f"{cfg.calibrate_at_s:g} s"
+        rows.insert(3, ("Calibration pose", at))
+    if cfg.reference_offset is not None:
+        t = cfg.reference_offset.translation
+        rows.append(("Device offset", f"{_xyz(t)} m (rigid body → sensor)"))
+    return tuple(rows)
+
+
+def _alignment_rows(result: EvaluationResult) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """The transform found per estimate, rows down and estimates across (as Tables 1-2)."""
+    labels = (
+        "method",
+        "poses used",
+        "translation [m]",
+        "rotation (yaw, pitch, roll)",
+        "scale",
+        "matrix [sR | t]",
+    )
+    columns: list[tuple[str, ...]] = []
+    for e in result.estimates:
+        a = e.alignment
+        tf = a.transform
+        yaw, pitch, roll = Rotation.from_matrix(tf.rotation).as_euler("ZYX", degrees=True)
+        matrix = np.hstack([tf.scale * tf.rotation, tf.translation[:, None]])
+        columns.append(
+            (
+                a.method.value,
+                f"{a.poses_used:,} (window: {a.window})",
+                _xyz(tf.translation),
+                f"{yaw:.2f}°, {pitch:.2f}°, {roll:.2f}°",
+                f"{tf.scale:.6f}",
+                "\n".join(" ".join(f"{v:+.4f}" for v in row) for row in matrix),
+            )
+        )
+    return tuple((label, tuple(col[r] for col in columns)) for r, label in enumerate(labels))
+
+
+def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
+    tables = []
+    for k, e in enumerate(result.estimates):
+        rows = tuple(
+            WorstRow(
+                rank=r,
+                t_s=f"{w.t_s:.3f}",
+                stamp_ns=w.stamp_ns,
+                x=f"{w.position_xyz[0]:.3f}",
+                y=f"{w.position_xyz[1]:.3f}",
+                z=f"{w.position_xyz[2]:.3f}",
+                error_m=_fmt(w.error),
+            )
+            for r, w in enumerate(e.worst, start=1)
+        )
+        tables.append(WorstTable(name=_name(e, k), rows=rows))
+    return tuple(tables)
+
+
+def _warnings(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
+    ref_name = result.reference.name or "reference"
+    out = [(f"{ref_name} (reference)", w) for w in result.reference_warnings]
+    for k, e in enumerate(result.estimates):
+        out.extend((_name(e, k), w) for w in e.warnings)
+    return tuple(out)
+
+
+def _summary(result: EvaluationResult) -> str:
+    ref = result.reference
+    names = [_name(e, k) for k, e in enumerate(result.estimates)]
+    listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+    return (
+        f"{listed} against {ref.name or 'the reference'} (ground truth): "
+        f"{len(ref):,} reference poses, {ref.duration_s:.1f} s, {ref.length_m:.1f} m of path."
+    )
+
+
+def build_report_view(
+    result: EvaluationResult,
+    options: ExportOptions,
+    *,
+    plots: Sequence[Plot] | None = None,
+    image_format: ImageFormat = "svg",
+    max_points: int = DEFAULT_MAX_POINTS,
+) -> ReportView:
+    """Compute and format everything the report shows.
+
+    Args:
+        result: the evaluation.
+        options: the title and evaluation id.
+        plots: already rendered plots, holding ``image_format`` (default: render them here).
+        image_format: how the figures are embedded: ``svg`` for the HTML, ``png`` for the
+            PDF.
+        max_points: most vertices drawn per plotted line (drawing only).
+
+    Returns:
+        The view model the templates render.
+    """
+    rendered = (
+        tuple(plots)
+        if plots is not None
+        else render_plots(result, max_points=max_points, formats=(image_format,))
+    )
+    figures = tuple(
+        FigureView(
+            number=n,
+            key=p.key,
+            title=p.title,
+            caption=p.caption,
+            src=p.data_uri(image_format),
+        )
+        for n, p in enumerate(rendered, start=1)
+    )
+    figure_of = {f.key: f.number for f in figures}
+    estimates = result.estimates
+    cfg = result.config
+    tables = (
+        _stats_table(
+            result,
+            number=1,
+            title="Absolute Trajectory Error (ATE)",
+            note="Distance between each aligned estimate pose and the ground truth at the same "
+            "time.",
+            translation=[e.ate_translation for e in estimates],
+            rotation=[e.ate_rotation for e in estimates],
+        ),
+        _stats_table(
+            result,
+            number=2,
+            title="Relative Pose Error (RPE)",
+            note=f"Error of the motion over each step of {describe_rpe_step(cfg)} "
+            "(drift per step).",
+            translation=[e.rpe_translation for e in estimates],
+            rotation=[e.rpe_rotation for e in estimates],
+        ),
+    )
+    shares = tuple(
+        (
+            f"≤ {t:g} m",
+            tuple(f"{100.0 * e.within.get(t, float('nan')):.1f} %" for e in estimates),
+        )
+        for t in cfg.thresholds_m
+    )
+    return ReportView(
+        title=options.title,
+        evaluation_id=options.evaluation_id,
+        created_at=result.created_at,
+        loceval_version=result.loceval_version,
+        summary=_summary(result),
+        tolerance=None if cfg.tolerance is None else str(cfg.tolerance),
+        verdicts=tuple(
+            _verdict_view(result, k, figure_of.get(f"ate_path_{k}")) for k in range(len(estimates))
+        ),
+        shares=shares,
+        estimate_names=tuple(_name(e, k) for k, e in enumerate(estimates)),
+        estimate_colours=tuple(estimate_colour(k) for k in range(len(estimates))),
+        reference_colour=REFERENCE_COLOUR,
+        inputs=_inputs(result),
+        trajectories=_trajectories(result),
+        options=_options(result),
+        alignments=_alignment_rows(result),
+        tables=tables,
+        figures=figures,
+        worst=_worst(result),
+        warnings=_warnings(result),
+    )
+
+
+# --- rendering --------------------------------------------------------------------------
+
+
+def _templates_dir(options: ExportOptions, templates_dir: Path | None) -> Path:
+    folder = templates_dir or options.templates_dir or DEFAULT_TEMPLATES_DIR
+    if not (folder / TEMPLATE_NAME).is_file():
+        msg = (
+            f"No report template {TEMPLATE_NAME!r} in {str(folder)!r}; point templates_dir "
+            "at the repository's templates/ folder."
+        )
+        raise ExportError(msg)
+    return folder
+
+
+def render_view_html(view: ReportView, *, templates_dir: Path) -> bytes:
+    """Render a view model to the report's HTML (UTF-8).
+
+    Raises:
+        ExportUnavailableError: Jinja2 is not installed.
+        ExportError: the templates are missing or broken.
+    """
+    try:
+        import jinja2  # noqa: PLC0415  (optional dependency: loceval[report])
+    except ImportError as err:
+        msg = "report.html needs jinja2; install loceval[report]."
+        raise ExportUnavailableError(msg) from err
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(templates_dir),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+    )
+    try:
+        html = env.get_template(TEMPLATE_NAME).render(report=view)
+    except jinja2.TemplateError as err:
+        msg = f"The report template in {str(templates_dir)!r} failed: {err}."
+        raise ExportError(msg) from err
+    return html.encode("utf-8")
+
+
+def html_to_pdf(html: bytes) -> bytes:
+    """Lay the report's HTML out on A4 pages with WeasyPrint.
+
+    Only ``data:`` URLs are fetched; anything else (a network or file URL slipped into a
+    template) stops the render, so a report never touches the network.
+
+    Raises:
+        ExportUnavailableError: WeasyPrint (or its system libraries) is not installed.
+        ExportError: the layout failed or the HTML referred to a non-``data:`` resource.
+    """
+    try:
+        import weasyprint  # noqa: PLC0415  (optional dependency: loceval[report])
+        from weasyprint.urls import FatalURLFetchingError  # noqa: PLC0415
+    except (ImportError, OSError) as err:  # OSError: pango/cairo libraries missing
+        msg = (
+            "report.pdf needs WeasyPrint and its system libraries (pango); install "
+            f"loceval[report] and libpango-1.0-0 ({err})."
+        )
+        raise ExportUnavailableError(msg) from err
+    fetcher = weasyprint.URLFetcher(allowed_protocols=("data",), fail_on_errors=True)
+    try:
+        document = weasyprint.HTML(string=html.decode("utf-8"), url_fetcher=fetcher)
+        pdf = document.write_pdf()
+    except FatalURLFetchingError as err:
+        msg = f"The report refers to a resource that is not embedded: {err}."
+        raise ExportError(msg) from err
+    return bytes(pdf)
+
+
+def render_report(
+    result: EvaluationResult,
+    *,
+    options: ExportOptions | None = None,
+    templates_dir: Path | None = None,
+    max_points: int = DEFAULT_MAX_POINTS,
+) -> tuple[bytes, bytes]:
+    """Render the report as HTML and PDF, building the plots once for both.
+
+    The HTML embeds the plots as SVG; the PDF is the same templates laid out by WeasyPrint
+    with the plots as 200 dpi PNG (WeasyPrint draws matplotlib's SVG slowly: seconds per
+    report, where PNG costs almost nothing).
+
+    Args:
+        result: the evaluation.
+        options: title and evaluation id (defaults otherwise).
+        templates_dir: the template folder; default ``options.templates_dir``, else the
+            repository's ``templates/``.
+        max_points: most vertices drawn per plotted line (drawing only).
+
+    Returns:
+        ``(html, pdf)`` as bytes.
+
+    Raises:
+        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
+        ExportError: the templates are missing or the layout failed.
+    """
+    options = options or ExportOptions()
+    folder = _templates_dir(options, templates_dir)
+    plots = render_plots(result, max_points=max_points, formats=("svg", "png"))
+    html = render_view_html(
+        build_report_view(result, options, plots=plots, image_format="svg"), templates_dir=folder
+    )
+    printable = render_view_html(
+        build_report_view(result, options, plots=plots, image_format="png"), templates_dir=folder
+    )
+    return html, html_to_pdf(printable)
+
+
+def render_report_html(result: EvaluationResult, options: ExportOptions) -> bytes:
+    """Render ``report.html``: one self-contained file (the ARTIFACTS exporter).
+
+    Raises:
+        ExportUnavailableError: Jinja2 or matplotlib is missing.
+        ExportError: the templates are missing or broken.
+    """
+    folder = _templates_dir(options, None)
+    return render_view_html(build_report_view(result, options), templates_dir=folder)
+
+
+def render_report_pdf(result: EvaluationResult, options: ExportOptions) -> bytes:
+    """Render ``report.pdf``: the same report on A4 pages (the ARTIFACTS exporter).
+
+    Plots are embedded as PNG (see :func:`render_report`).
+
+    Raises:
+        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
+        ExportError: the templates are missing or the layout failed.
+    """
+    folder = _templates_dir(options, None)
+    view = build_report_view(result, options, image_format="png")
+    return html_to_pdf(render_view_html(view, templates_dir=folder))
