@@ -22,6 +22,7 @@ from loceval.evaluation import EvaluationResult
 
 __all__ = [
     "ARTIFACTS",
+    "CAD_ARTIFACTS",
     "ArtifactSpec",
     "ExportOptions",
     "Units",
@@ -87,9 +88,27 @@ ARTIFACTS: Final[Mapping[str, ArtifactSpec]] = {
 """Every artifact, by file name, in the order they are written."""
 
 
-def export_result_json(result: EvaluationResult, options: ExportOptions) -> bytes:
-    """Return the ``--json`` document, with the evaluation id, as UTF-8 bytes."""
+CAD_ARTIFACTS: Final = frozenset({"paths.dxf", "paths.3dm", "paths.3dm.json", "paths.glb"})
+"""The artifacts that place the paths on the building model."""
+
+
+def export_result_json(
+    result: EvaluationResult,
+    options: ExportOptions,
+    *,
+    cad: Mapping[str, object] | None = None,
+) -> bytes:
+    """Return the ``--json`` document, with the evaluation id, as UTF-8 bytes.
+
+    Args:
+        result: the evaluation.
+        options: the export options (for the evaluation id).
+        cad: the placement of the CAD files written beside it (units, site, base point,
+            simplification tolerance and the largest deviation it introduced), if any.
+    """
     document = {"evaluation_id": options.evaluation_id, **result.to_dict()}
+    if cad is not None:
+        document["cad"] = dict(cad)
     return (json.dumps(document, indent=2, allow_nan=False) + "\n").encode()
 
 
@@ -143,7 +162,13 @@ def write_artifacts(
     staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
     try:
         for name in wanted:
-            data = render_artifact(name, result, options)
+            if name == "result.json" and CAD_ARTIFACTS.intersection(wanted):
+                from exporters.placement import place_evaluation  # noqa: PLC0415
+
+                cad = place_evaluation(result, options).metadata()
+                data = export_result_json(result, options, cad=cad)
+            else:
+                data = render_artifact(name, result, options)
             (staging / name).write_bytes(data)
         out_dir.mkdir(exist_ok=True)
         written = []

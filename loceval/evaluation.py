@@ -414,6 +414,15 @@ def _evaluate_one(
         offset_ns=round(config.time_offset_s * _NS_PER_S),
     )
     notes.extend(_association_notes(matched, len(estimate)))
+    own_gaps = estimate.gaps(round(config.max_gap_s * _NS_PER_S))
+    if own_gaps:
+        start, end = max(own_gaps, key=lambda gap: gap[1] - gap[0])
+        t0_ns = int(reference.stamps_ns[0])
+        notes.append(
+            f"The estimate itself has {len(own_gaps)} gaps longer than {config.max_gap_s:g} s "
+            f"(its own tracking loss; the longest, {(end - start) / _NS_PER_S:.2f} s, starts "
+            f"{(start - t0_ns) / _NS_PER_S:.2f} s after the reference's first pose)."
+        )
     alignment = align(
         matched.reference,
         matched.estimate,

@@ -399,7 +399,10 @@ def _sections(result: EvaluationResult) -> list[tuple[str, list[ErrorStats | Non
     ]
     if any(e.ate_rotation is not None for e in est):
         sections.append(("ATE rotation", [_stats(e.ate_rotation) for e in est], "deg"))
-    rpe_title = f"Relative Pose Error (RPE, delta {cfg.rpe_delta:g} {cfg.rpe_unit.value})"
+    unit = cfg.rpe_unit.value
+    if cfg.rpe_unit is RPEUnit.FRAMES and cfg.rpe_delta == 1:
+        unit = "frame"
+    rpe_title = f"Relative Pose Error (RPE, delta {cfg.rpe_delta:g} {unit})"
     sections.append((rpe_title, [e.rpe_translation.stats for e in est], "m"))
     if any(e.rpe_rotation is not None for e in est):
         sections.append(("RPE rotation", [_stats(e.rpe_rotation) for e in est], "deg"))

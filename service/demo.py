@@ -49,12 +49,17 @@ def write_demo_recording(folder: Path) -> dict[str, Path]:
             idx = idx[(t[idx] < lost[0]) | (t[idx] > lost[1])]
         k = np.linspace(0.0, 1.0, idx.size)[:, None]
         noisy = positions[idx] + rng.normal(0.0, sigma, (idx.size, 3)) + drift * k
+        # Heading noise of about a degree and a slowly growing heading drift.
+        wobble = Rotation.from_rotvec(
+            rng.normal(0.0, np.radians(sigma * 10), (idx.size, 3))
+            + np.array([0.0, 0.0, np.radians(3.0)]) * drift * k
+        )
         paths[name] = folder / f"{name.lower().replace('-', '_')}.tum"
         _write_tum(
             paths[name],
             stamps[idx],
             frame.apply(noisy) + np.array([2.0, -1.0, 0.0]),
-            (frame * body[idx]).as_quat(),
+            (frame * body[idx] * wobble).as_quat(),
         )
     return paths
 

@@ -143,3 +143,12 @@ def test_position_only_estimate(rng: np.random.Generator) -> None:
     assert est.rpe_rotation is None
     assert result.to_dict()["estimates"][0]["ate"]["rotation_deg"] is None  # type: ignore[index]
     assert any("no orientations" in w for w in est.warnings)
+
+
+def test_estimate_tracking_loss_is_reported(rng: np.random.Generator) -> None:
+    """A gap in the estimate's own stamps (the system lost tracking) becomes a warning."""
+    truth = smooth_trajectory(rng, n=600)
+    keep = np.ones(600, dtype=bool)
+    keep[200:260] = False  # 0.6 s without estimate poses
+    result = evaluate(truth, [truth.select(keep)])
+    assert any("its own tracking loss" in w for w in result.estimates[0].warnings)

@@ -51,7 +51,7 @@ def test_table_layout(demo: dict[str, Path], capsys: pytest.CaptureFixture[str])
     )  # fmt: skip
     assert code == 0
     assert "Absolute Trajectory Error (ATE)" in out
-    assert "Relative Pose Error (RPE, delta 1 frames)" in out
+    assert "Relative Pose Error (RPE, delta 1 frame)" in out
     header = next(line for line in out.splitlines() if line.startswith("error metric"))
     assert header.split()[-2:] == ["RTAB-Map", "ISAAC"]
     for label in ("RMSE", "MEAN", "MEDIAN", "STD", "MIN", "MAX"):
@@ -151,3 +151,50 @@ def test_unknown_artifact_is_an_input_error(
     assert code == 1
     assert "report.pdf" in err
     assert not (tmp_path / "x").exists()
+
+
+def test_out_writes_every_artifact(
+    demo: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """--out writes the report, tables and CAD files; result.json records the placement."""
+    out_dir = tmp_path / "all"
+    code, _, err = _run(
+        capsys, "evaluate", str(demo["reference"]), str(demo["ISAAC"]), "--out", str(out_dir),
+        "--units", "m", "--site", "100 200 0 90", "--simplify", "0.005", "--tolerance", "0.1@90",
+    )  # fmt: skip
+    assert code == 0, err
+    names = {p.name for p in out_dir.iterdir()}
+    assert names == {
+        "result.json", "errors.csv", "report.html", "report.pdf", "paths.dxf", "paths.3dm",
+        "paths.3dm.json", "paths.glb",
+    }  # fmt: skip
+    doc = json.loads((out_dir / "result.json").read_text())
+    assert doc["cad"]["units"] == "m"
+    assert 0 < doc["cad"]["max_deviation_m"] <= 0.005
+    assert (out_dir / "report.pdf").read_bytes().startswith(b"%PDF")
+
+
+@pytest.mark.parametrize(
+    ("option", "match"),
+    [
+        (("--site", "1 2"), "--site"),
+        (("--simplify", "-1"), "simplif"),
+        (("--building", "missing.obj"), "missing.obj"),
+    ],
+)
+def test_bad_export_options_fail_before_evaluating(
+    demo: dict[str, Path],
+    capsys: pytest.CaptureFixture[str],
+    tmp_path: Path,
+    option: tuple[str, str],
+    match: str,
+) -> None:
+    """Bad placement options exit 1 with the option named, and nothing is written."""
+    out_dir = tmp_path / "bad"
+    code, _, err = _run(
+        capsys, "evaluate", str(demo["reference"]), str(demo["ISAAC"]), "--out", str(out_dir),
+        *option,
+    )  # fmt: skip
+    assert code == 1
+    assert match in err
+    assert not out_dir.exists()
