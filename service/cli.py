@@ -191,6 +191,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             f"{len(args.name)} names."
         )
         raise InputError(msg)
+    export = _export_options(args) if args.out is not None else None
     ref_spec = parse_source(args.reference, default_format=default_format)
     est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
     reference = read_trajectory(
@@ -201,10 +202,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         read_trajectory(spec, name=name, stamp=args.stamp)
         for spec, name in zip(est_specs, names, strict=True)
     ]
-    inputs = [_provenance(role, spec) for role, spec in [("reference", ref_spec)]] + [
-        _provenance("estimate", spec) for spec in est_specs
-    ]
-    export = _export_options(args) if args.out is not None else None
+    inputs = [_provenance("reference", ref_spec), *(_provenance("estimate", s) for s in est_specs)]
     result = evaluate(reference, estimates, config, inputs=inputs)
     if export is not None:
         _write_outputs(result, args, export)

@@ -11,6 +11,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from loceval._typing import FloatArray
+
 __all__ = ["write_demo_recording"]
 
 _SEED = 20240601
@@ -64,6 +66,6 @@ def write_demo_recording(folder: Path) -> dict[str, Path]:
     return paths
 
 
-def _write_tum(path: Path, stamps: np.ndarray, xyz: np.ndarray, quat: np.ndarray) -> None:  # type: ignore[type-arg]
+def _write_tum(path: Path, stamps: FloatArray, xyz: FloatArray, quat: FloatArray) -> None:
     table = np.column_stack([stamps, xyz, quat])
-    np.savetxt(path, table, fmt=["%.6f"] + ["%.6f"] * 7, header="timestamp tx ty tz qx qy qz qw")
+    np.savetxt(path, table, fmt="%.6f", header="timestamp tx ty tz qx qy qz qw")
