@@ -11,14 +11,17 @@ import importlib
 import json
 import shutil
 import tempfile
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final, cast
+from typing import TYPE_CHECKING, Final, Protocol, cast
 
 from exporters.errors import ExportError, ExportOptionsError, ExportUnavailableError
 from exporters.options import ExportOptions, Units
 from loceval.evaluation import EvaluationResult
+
+if TYPE_CHECKING:
+    from exporters.placement import Placement
 
 __all__ = [
     "ARTIFACTS",
@@ -31,7 +34,15 @@ __all__ = [
     "write_artifacts",
 ]
 
-Exporter = Callable[[EvaluationResult, ExportOptions], bytes]
+
+class Exporter(Protocol):
+    """``(result, options) -> bytes``; CAD exporters also take a precomputed ``placement``."""
+
+    def __call__(
+        self, result: EvaluationResult, options: ExportOptions, /, **kwargs: Placement
+    ) -> bytes:
+        """Render the artifact."""
+        ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -161,12 +172,17 @@ def write_artifacts(
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
     try:
-        for name in wanted:
-            if name == "result.json" and CAD_ARTIFACTS.intersection(wanted):
-                from exporters.placement import place_evaluation  # noqa: PLC0415
+        placement = None
+        if CAD_ARTIFACTS.intersection(wanted):
+            # Placing (site transform, units, simplification) is shared by every CAD file.
+            from exporters.placement import place_evaluation  # noqa: PLC0415
 
-                cad = place_evaluation(result, options).metadata()
-                data = export_result_json(result, options, cad=cad)
+            placement = place_evaluation(result, options)
+        for name in wanted:
+            if placement is not None and name == "result.json":
+                data = export_result_json(result, options, cad=placement.metadata())
+            elif placement is not None and name in CAD_ARTIFACTS:
+                data = ARTIFACTS[name].load()(result, options, placement=placement)
             else:
                 data = render_artifact(name, result, options)
             (staging / name).write_bytes(data)

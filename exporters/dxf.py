@@ -52,12 +52,15 @@ _PDMODE_CIRCLE_CROSS: Final = 35  # a point drawn as a circle with an X, visible
 _INFO_LAYER: Final = "loceval"
 
 
-def export_dxf(result: EvaluationResult, options: ExportOptions) -> bytes:
+def export_dxf(
+    result: EvaluationResult, options: ExportOptions, *, placement: Placement | None = None
+) -> bytes:
     """Write the evaluation's trajectories as a DXF R2013 drawing.
 
     Args:
         result: the evaluation.
         options: units, site transform, simplification, ids.
+        placement: the placed paths, when the caller computed them for several formats.
 
     Returns:
         The DXF file (UTF-8 text) as bytes.
@@ -66,7 +69,7 @@ def export_dxf(result: EvaluationResult, options: ExportOptions) -> bytes:
         ExportOptionsError: unusable placement options.
         ExportError: ezdxf refused the drawing.
     """
-    placement = place_evaluation(result, options)
+    placement = placement or place_evaluation(result, options)
     try:
         doc = _drawing(placement)
         stream = io.StringIO()

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import place_evaluation
+from exporters.placement import Placement, place_evaluation
 from loceval._typing import FloatArray
 from loceval.evaluation import EvaluationResult
 
@@ -56,12 +56,15 @@ def node_matrix(base_point_m: FloatArray) -> list[float]:
     return [float(v) for v in m.T.reshape(-1)]  # glTF stores matrices column by column
 
 
-def export_glb(result: EvaluationResult, options: ExportOptions) -> bytes:
+def export_glb(
+    result: EvaluationResult, options: ExportOptions, *, placement: Placement | None = None
+) -> bytes:
     """Write the evaluation's trajectories (and the building, if given) as a GLB.
 
     Args:
         result: the evaluation.
         options: site transform, simplification, ids, and the optional building mesh.
+        placement: the placed paths, when the caller computed them for several formats.
 
     Returns:
         The GLB file.
@@ -71,7 +74,7 @@ def export_glb(result: EvaluationResult, options: ExportOptions) -> bytes:
             missing, unreadable or of an unsupported format.
         ExportError: pygltflib could not serialize the scene.
     """
-    placement = place_evaluation(result, options)
+    placement = placement or place_evaluation(result, options)
     scene = _SceneBuilder(node_matrix(placement.base_point_m))
     per_metre = placement.units.per_metre
     for path in placement.paths:

@@ -63,12 +63,15 @@ def layer_path(placement: Placement, path: PlacedPath) -> str:
     return f"{ROOT_LAYER}::{layer_name(placement.evaluation_id)}::{path.layer}"
 
 
-def export_3dm(result: EvaluationResult, options: ExportOptions) -> bytes:
+def export_3dm(
+    result: EvaluationResult, options: ExportOptions, *, placement: Placement | None = None
+) -> bytes:
     """Write the evaluation's trajectories as a Rhino 7 .3dm model.
 
     Args:
         result: the evaluation.
         options: units, site transform, simplification, ids.
+        placement: the placed paths, when the caller computed them for several formats.
 
     Returns:
         The .3dm file.
@@ -77,7 +80,7 @@ def export_3dm(result: EvaluationResult, options: ExportOptions) -> bytes:
         ExportOptionsError: unusable placement options.
         ExportError: rhino3dm could not build or write the model.
     """
-    placement = place_evaluation(result, options)
+    placement = placement or place_evaluation(result, options)
     try:
         model = _model(placement)
         with tempfile.TemporaryDirectory(prefix="loceval-3dm-") as tmp:
@@ -91,7 +94,9 @@ def export_3dm(result: EvaluationResult, options: ExportOptions) -> bytes:
         raise ExportError(msg) from err
 
 
-def export_3dm_json(result: EvaluationResult, options: ExportOptions) -> bytes:
+def export_3dm_json(
+    result: EvaluationResult, options: ExportOptions, *, placement: Placement | None = None
+) -> bytes:
     """Write the 3DM-compatible JSON document that the Grasshopper script reads.
 
     Layout: ``{"format", "format_version", "units", "rhino_unit_system", "base_point",
@@ -102,6 +107,7 @@ def export_3dm_json(result: EvaluationResult, options: ExportOptions) -> bytes:
     Args:
         result: the evaluation.
         options: units, site transform, simplification, ids.
+        placement: the placed paths, when the caller computed them for several formats.
 
     Returns:
         The JSON document as UTF-8 bytes.
@@ -110,7 +116,7 @@ def export_3dm_json(result: EvaluationResult, options: ExportOptions) -> bytes:
         ExportOptionsError: unusable placement options.
         ExportError: rhino3dm could not encode a curve.
     """
-    placement = place_evaluation(result, options)
+    placement = placement or place_evaluation(result, options)
     paths = []
     try:
         for path in placement.paths:
