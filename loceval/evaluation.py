@@ -529,6 +529,9 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig) -> dict[str, obj
         "name": e.estimate.name,
         "source": e.estimate.source,
         "poses": len(e.estimate),
+        "duration_s": e.estimate.duration_s,
+        "length_m": e.estimate.length_m,
+        "rate_hz": e.estimate.rate_hz,
         "matched": len(matched),
         "dropped": {
             "outside": matched.dropped_outside,

@@ -42,8 +42,9 @@ def test_json_document_has_the_contract_keys(rng: np.random.Generator) -> None:
     assert {"name", "source", "poses", "duration_s", "length_m"} <= doc["reference"].keys()
     for est in doc["estimates"]:
         assert {
-            "name", "source", "poses", "matched", "time_offset_s", "alignment", "ate", "rpe",
-            "within", "worst", "drift_pct", "warnings",
+            "name", "source", "poses", "duration_s", "length_m", "rate_hz", "matched",
+            "time_offset_s", "alignment", "ate", "rpe", "within", "worst", "drift_pct",
+            "warnings",
         } <= est.keys()  # fmt: skip
         assert {"method", "rotation", "translation", "scale"} <= est["alignment"].keys()
         assert set(est["ate"]["translation_m"]) == STATS_KEYS
