@@ -478,7 +478,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         "--tolerance",
         "0.10@95",
         "--out",
-        str(args.out / "report"),
+        str(args.out / "evaluation"),
     ]
     return main(argv)
 
