@@ -169,31 +169,59 @@ def write_artifacts(
             msg = f"No artifact named {name!r}; choose from {', '.join(ARTIFACTS)}."
             raise ExportOptionsError(msg)
     out_dir = out_dir.resolve()
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+    staging = _staging_folder(out_dir)
     try:
-        placement = None
-        if CAD_ARTIFACTS.intersection(wanted):
-            # Placing (site transform, units, simplification) is shared by every CAD file.
-            from exporters.placement import place_evaluation  # noqa: PLC0415
-
-            placement = place_evaluation(result, options)
-        for name in wanted:
-            if placement is not None and name == "result.json":
-                data = export_result_json(result, options, cad=placement.metadata())
-            elif placement is not None and name in CAD_ARTIFACTS:
-                data = ARTIFACTS[name].load()(result, options, placement=placement)
-            else:
-                data = render_artifact(name, result, options)
-            (staging / name).write_bytes(data)
+        _render_into(staging, result, options, wanted)
         out_dir.mkdir(exist_ok=True)
         written = []
         for name in wanted:
             (staging / name).replace(out_dir / name)
             written.append(out_dir / name)
+    except OSError as err:
+        msg = (
+            f"Cannot write the artifacts into {str(out_dir)!r} ({err.strerror}); check the "
+            "free space and permissions, or name another folder."
+        )
+        raise ExportError(msg) from err
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return written
+
+
+def _staging_folder(out_dir: Path) -> Path:
+    """Create the hidden folder beside ``out_dir`` that artifacts are rendered into."""
+    if out_dir.exists() and not out_dir.is_dir():
+        msg = f"--out {str(out_dir)!r} is a file, not a folder; name a folder for the artifacts."
+        raise ExportOptionsError(msg)
+    try:
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+        return Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+    except OSError as err:
+        msg = (
+            f"Cannot create the artifact folder {str(out_dir)!r} ({err.strerror}); name a "
+            "folder you can write to."
+        )
+        raise ExportError(msg) from err
+
+
+def _render_into(
+    staging: Path, result: EvaluationResult, options: ExportOptions, wanted: list[str]
+) -> None:
+    """Render every wanted artifact into ``staging``, placing the CAD paths only once."""
+    placement = None
+    if CAD_ARTIFACTS.intersection(wanted):
+        # Placing (site transform, units, simplification) is shared by every CAD file.
+        from exporters.placement import place_evaluation  # noqa: PLC0415
+
+        placement = place_evaluation(result, options)
+    for name in wanted:
+        if placement is not None and name == "result.json":
+            data = export_result_json(result, options, cad=placement.metadata())
+        elif placement is not None and name in CAD_ARTIFACTS:
+            data = ARTIFACTS[name].load()(result, options, placement=placement)
+        else:
+            data = render_artifact(name, result, options)
+        (staging / name).write_bytes(data)
 
 
 __all__ += ["ExportError", "ExportOptionsError", "ExportUnavailableError"]

@@ -36,6 +36,7 @@ from loceval.metrics import (
 from loceval.trajectory import Trajectory
 
 __all__ = [
+    "MAX_SPAN_S",
     "EstimateResult",
     "EvaluationConfig",
     "EvaluationResult",
@@ -47,6 +48,9 @@ __all__ = [
 ]
 
 _NS_PER_S = 1_000_000_000
+
+MAX_SPAN_S = 1e9
+"""Longest time span (about 32 years) an option may name; longer ones are typos."""
 
 ProgressCallback = Callable[[str, float], None]
 """Called with a stage name and the fraction of the evaluation done (0..1)."""
@@ -189,10 +193,19 @@ class EvaluationConfig:
 
     def __post_init__(self) -> None:
         """Check the values a user can get wrong."""
-        for name in ("max_dt_s", "max_gap_s", "time_offset_s"):
-            value = getattr(self, name)
-            if not np.isfinite(value):
-                msg = f"{name} must be a finite number of seconds, got {value!r}."
+        spans = {"--max-dt": self.max_dt_s, "--max-gap": self.max_gap_s}
+        spans["--time-offset"] = self.time_offset_s
+        if self.calibrate_at_s is not None:
+            spans["--calibrate-at"] = self.calibrate_at_s
+        if self.rpe_unit is RPEUnit.SECONDS:
+            spans["--rpe-delta"] = self.rpe_delta
+        for name, value in spans.items():
+            # Stamps are int64 ns (±292 years): a span beyond MAX_SPAN_S is a typo, not data.
+            if not (np.isfinite(value) and abs(value) <= MAX_SPAN_S):
+                msg = (
+                    f"{name} must be a finite number of seconds within ±{MAX_SPAN_S:g}, "
+                    f"got {value!r}."
+                )
                 raise InputError(msg)
         if self.max_dt_s < 0 or self.max_gap_s <= 0:
             msg = (

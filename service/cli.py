@@ -129,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--tolerance", default=None, metavar="M@PCT", help="verdict, e.g. 0.10@95")
     ev.add_argument("--worst", type=int, default=10, metavar="N", help="greatest errors listed")
     ev.add_argument("--json", action="store_true", help="print the result as JSON")
-    ev.add_argument("--out", type=Path, default=None, metavar="DIR", help="write artifacts here")
+    ev.add_argument("--out", type=_folder, default=None, metavar="DIR", help="write artifacts here")
     ev.add_argument(
         "--formats",
         default=None,
@@ -158,6 +158,14 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR")
     demo.set_defaults(handler=_cmd_demo)
     return parser
+
+
+def _folder(text: str) -> Path:
+    """Return the --out folder; an empty name is a usage error."""
+    if not text.strip():
+        msg = "needs a folder name, e.g. --out results/run1"
+        raise argparse.ArgumentTypeError(msg)
+    return Path(text)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -294,7 +302,7 @@ def _export_options(args: argparse.Namespace) -> ExportOptions:
         site=site,
         simplify_m=args.simplify,
         building=args.building,
-        evaluation_id=args.out.name,
+        evaluation_id=args.out.resolve().name,
     )
     check_options(options)
     return options

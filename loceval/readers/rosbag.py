@@ -143,6 +143,7 @@ _FOREIGN_ERRORS: Final = (
     KeyError,
     IndexError,
     AssertionError,
+    TypeError,  # rosbags' MCAP reader calls ord() on an empty read of a truncated file
 )
 
 

@@ -89,6 +89,12 @@ def test_options_reach_the_result(
         (["evaluate", "REF", "EST", "--rpe-delta", "100000"], "--rpe-delta"),
         (["evaluate", "REF", "EST", "--time-offset", "1000"], "time offset"),
         (["evaluate", "REF", "EST", "--align", "calibrate", "--calibrate-at", "1e6"], "calibrate"),
+        (["evaluate", "REF", "EST", "--time-offset", "1e12"], "--time-offset"),
+        (["evaluate", "REF", "EST", "--rpe-delta", "1e12", "--rpe-unit", "s"], "--rpe-delta"),
+        (["evaluate", "REF", "EST", "--calibrate-at", "1e12"], "--calibrate-at"),
+        (["evaluate", "REF", "EST", "--align-first", "1e12s"], "--align-first"),
+        (["evaluate", "REF", "EST", "--out", "/dev/null"], "not a folder"),
+        (["evaluate", "REF", "EST", "--out", "/proc/loceval/out"], "Cannot create"),
     ],
 )
 def test_bad_input_exits_1_without_traceback(

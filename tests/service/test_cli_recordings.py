@@ -143,3 +143,16 @@ def test_urdf_device_offset_gives_the_true_answer(
     assert main([*common, "--device", str(urdf), "--device-from", "rigid_body",
                  "--device-to", "lens"]) == 1  # fmt: skip
     assert "lens" in capsys.readouterr().err
+
+
+def test_a_bag_with_only_its_magic_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """An MCAP file cut right after its magic bytes: exit 1, 'truncated', no traceback."""
+    bag = tmp_path / "cut.mcap"
+    bag.write_bytes(b"\x89MCAP0\r\n")
+    for argv in (["inspect", str(bag)], ["evaluate", f"{bag}@/a", f"{bag}@/b"]):
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert "truncated" in err
+        assert "Traceback" not in err
