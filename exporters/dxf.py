@@ -118,8 +118,9 @@ def _drawing(placement: Placement) -> Drawing:
     center = (lo[:2] + hi[:2]) / 2.0
     height = max(float(hi[1] - lo[1]), float(hi[0] - lo[0]) * 0.6, per_metre) * 1.3
     doc.set_modelspace_vport(height, center=(float(center[0]), float(center[1])))
-    doc.header["$EXTMIN"] = tuple(float(v) for v in lo)
-    doc.header["$EXTMAX"] = tuple(float(v) for v in hi)
+    # ezdxf copies the model space's extents into $EXTMIN/$EXTMAX when it saves.
+    msp.dxf.extmin = tuple(float(v) for v in lo)
+    msp.dxf.extmax = tuple(float(v) for v in hi)
     return doc
 
 

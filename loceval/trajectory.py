@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -15,6 +16,10 @@ __all__ = ["MIN_POSES", "Trajectory"]
 
 MIN_POSES = 3
 """Fewest poses a trajectory may have: alignment and RPE need at least three."""
+MAX_COORDINATE_M = 1e9
+"""Largest position magnitude accepted: beyond any site (ECEF is 6.4e6 m); not metres."""
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]+")
 
 _NS_PER_S = 1_000_000_000
 
@@ -68,6 +73,12 @@ class Trajectory:
         if not np.isfinite(positions).all():
             msg = f"Trajectory {self.name!r}: positions contain NaN or inf."
             raise TrajectoryError(msg)
+        if n and float(np.abs(positions).max()) > MAX_COORDINATE_M:
+            msg = (
+                f"Trajectory {self.name!r}: a position is beyond ±{MAX_COORDINATE_M:g} m, "
+                "which is no site's coordinate; check the units and the columns."
+            )
+            raise TrajectoryError(msg)
         if n > 1 and not (np.diff(stamps) > 0).all():
             msg = f"Trajectory {self.name!r}: stamps must be strictly increasing."
             raise TrajectoryError(msg)
@@ -93,6 +104,8 @@ class Trajectory:
             quat.flags.writeable = False
             object.__setattr__(self, "quat_xyzw", quat)
         object.__setattr__(self, "warnings", tuple(self.warnings))
+        # Names travel into CSV cells, DXF text and file metadata: one line, no controls.
+        object.__setattr__(self, "name", " ".join(_CONTROL.sub(" ", self.name).split()))
 
     def __len__(self) -> int:
         """Return the number of poses."""

@@ -6,7 +6,7 @@ import numpy as np
 
 from loceval._typing import FloatArray, IntArray, StampsNs
 from loceval.errors import ReaderError
-from loceval.trajectory import MIN_POSES, Trajectory
+from loceval.trajectory import MAX_COORDINATE_M, MIN_POSES, Trajectory
 
 __all__ = ["QUAT_NORM_TOLERANCE", "build_trajectory", "seconds_to_ns"]
 
@@ -61,6 +61,15 @@ def build_trajectory(
     lines = np.arange(1, n + 1) if line_numbers is None else line_numbers
     notes = list(warnings)
     _reject_nonfinite(positions_xyz, lines, where=where, what="position")
+    huge = np.flatnonzero(np.abs(positions_xyz).max(axis=1) > MAX_COORDINATE_M)
+    if huge.size:
+        i = int(huge[0])
+        msg = (
+            f"{where}, line {int(lines[i])}: a position is beyond ±{MAX_COORDINATE_M:g} m "
+            f"({huge.size} such rows), which is no site's coordinate; check the units and "
+            "the column order."
+        )
+        raise ReaderError(msg)
     if quat_xyzw is not None:
         _reject_nonfinite(quat_xyzw, lines, where=where, what="quaternion")
         norms = np.linalg.norm(quat_xyzw, axis=1)

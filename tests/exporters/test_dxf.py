@@ -246,3 +246,16 @@ def test_librecad_renders(tmp_path: Path, two_estimates: EvaluationResult, optio
     reader = pypdf.PdfReader(pdf)
     assert len(reader.pages) == 1
     assert len(reader.pages[0].get_contents().get_data()) > 10_000  # the paths were drawn
+
+
+def test_extents_cover_the_paths(drawing: ezdxf.document.Drawing):
+    """$EXTMIN/$EXTMAX hold the drawing's real extents, not ezdxf's ±1e20 placeholders."""
+    lo = np.array(drawing.header["$EXTMIN"])
+    hi = np.array(drawing.header["$EXTMAX"])
+    assert np.all(np.abs(lo) < 1e9)
+    assert np.all(np.abs(hi) < 1e9)
+    assert np.all(hi > lo)
+    for polyline in drawing.modelspace().query("POLYLINE"):
+        points = np.array([v.dxf.location for v in polyline.vertices])
+        assert np.all(points >= lo - 1e-6)
+        assert np.all(points <= hi + 1e-6)

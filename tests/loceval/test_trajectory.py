@@ -133,3 +133,17 @@ def test_compose_quat_matches_scipy() -> None:
     np.testing.assert_allclose(np.abs((ours * (a * b).as_quat()).sum(1)), 1.0, atol=1e-12)
     identity = compose_quat(a.as_quat(), conjugate_quat(a.as_quat()))
     np.testing.assert_allclose(np.abs(identity[:, 3]), 1.0, atol=1e-12)
+
+
+def test_names_are_one_line() -> None:
+    """Control characters in a name (CR, LF, tab, NUL) become single spaces."""
+    traj = Trajectory(np.arange(3, dtype=np.int64), np.zeros((3, 3)), name=" RTAB\r\nMap\t\x00v2 ")
+    assert traj.name == "RTAB Map v2"
+
+
+def test_positions_beyond_any_site_are_rejected() -> None:
+    """A coordinate beyond 1e9 m is not metres: refused before it overflows the statistics."""
+    positions = np.zeros((3, 3))
+    positions[1, 0] = 1e160
+    with pytest.raises(TrajectoryError, match="beyond"):
+        Trajectory(np.arange(3, dtype=np.int64), positions)

@@ -433,3 +433,11 @@ class TestPublicData:
         assert read.warnings == ()
         last = (public_data / "KITTI_00_gt_times.txt").read_text().split()[-1]
         assert abs(int(read.stamps_ns[-1]) - float(last) * 1e9) < 1e3
+
+
+def test_tum_positions_beyond_any_site_name_the_line(tmp_path: Path) -> None:
+    """A TUM line with a 1e160 m coordinate is refused with its line number."""
+    path = tmp_path / "huge.txt"
+    path.write_text("0 0 0 0 0 0 0 1\n1 1e160 0 0 0 0 0 1\n2 0 0 0 0 0 0 1\n")
+    with pytest.raises(ReaderError, match="line 2: a position is beyond"):
+        read_tum(path)
