@@ -123,16 +123,21 @@ def find_bag(directory: Path, *, what: str) -> list[Path]:
     """
     files = sorted(p for p in directory.rglob("*") if p.is_file())
     metadata = [p.parent for p in files if p.name == "metadata.yaml"]
-    if len(metadata) == 1:
-        return metadata
-    single = [p for p in files if p.suffix in {".mcap", ".db3"}]
-    if not metadata and len(single) == 1:
-        return single
+    # Storage files inside a bag directory belong to it; only loose ones are bags of their own.
+    single = [
+        p
+        for p in files
+        if p.suffix in {".mcap", ".db3"} and not any(p.is_relative_to(m) for m in metadata)
+    ]
     ros1 = [p for p in files if p.suffix == ".bag"]
+    if len(metadata) == 1 and not single and not ros1:
+        return metadata
+    if not metadata and len(single) == 1 and not ros1:
+        return single
     if not metadata and not single and ros1:
         return ros1
     contents = _listing([str(p.relative_to(directory)) for p in files]) or "nothing"
-    if len(metadata) > 1 or len(single) > 1:
+    if metadata or single:
         msg = (
             f"Zip file {what!r} holds several bags ({contents}); zip one bag directory or "
             "one bag file per upload."

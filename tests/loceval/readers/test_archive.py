@@ -141,6 +141,28 @@ def test_several_bags_refused(tmp_path):
         pass
 
 
+@pytest.mark.parametrize(
+    "members",
+    [
+        {"one/run.bag": b"b", "two/run.mcap": b"m"},
+        {"dir/metadata.yaml": b"x", "dir/run_0.db3": b"d", "loose.mcap": b"m"},
+        {"dir/metadata.yaml": b"x", "other.bag": b"b"},
+    ],
+)
+def test_bags_of_different_kinds_refused(tmp_path, members):
+    """A ROS 1 bag beside an MCAP, or a loose file beside a bag folder, is ambiguous."""
+    archive = make_zip(tmp_path / "mixed.zip", members)
+    with pytest.raises(ReaderError, match="several bags"), extracted_bag(archive):
+        pass
+
+
+def test_storage_files_inside_the_bag_folder_belong_to_it(tmp_path):
+    """The .db3 files of a bag folder do not count as bags of their own."""
+    archive = make_zip(tmp_path / "dir.zip", {"rec/metadata.yaml": b"x", "rec/rec_0.db3": b"d"})
+    with extracted_bag(archive) as paths:
+        assert [p.name for p in paths] == ["rec"]
+
+
 def test_split_ros1_bags(tmp_path):
     """Several .bag files are one split ROS 1 recording, sorted by name."""
     archive = make_zip(tmp_path / "r1.zip", {"run_1.bag": b"b", "run_0.bag": b"a"})
