@@ -471,7 +471,11 @@ def _trajectory_summary(trajectory: Trajectory, fmt: TrajectoryFormat) -> dict[s
 def _cmd_demo(args: argparse.Namespace) -> int:
     from service.demo import write_demo_recording  # noqa: PLC0415
 
-    inputs = write_demo_recording(args.out / "inputs")
+    try:
+        inputs = write_demo_recording(args.out / "inputs")
+    except OSError as err:
+        msg = f"Cannot write the demo into {str(args.out)!r} ({err.strerror}); name a folder."
+        raise InputError(msg) from err
     argv = [
         "evaluate",
         str(inputs["reference"]),

@@ -15,7 +15,13 @@ from typing import Final
 from loceval.errors import InputError, ReaderError
 from loceval.readers.csv import CSV_KEYS, read_csv
 from loceval.readers.motive import read_motive
-from loceval.readers.sniff import SourceSpec, TrajectoryFormat, parse_source, sniff_format
+from loceval.readers.sniff import (
+    SourceSpec,
+    TrajectoryFormat,
+    parse_source,
+    refuse_special_file,
+    sniff_format,
+)
 from loceval.readers.text import read_euroc, read_kitti, read_tum
 from loceval.trajectory import Trajectory
 
@@ -81,6 +87,7 @@ def read_trajectory(
     spec = (
         parse_source(source, default_format=default_format) if isinstance(source, str) else source
     )
+    refuse_special_file(spec.path)
     fmt = spec.format or default_format or sniff_format(spec.path)
     label = str(SourceSpec(fmt, spec.path, spec.selector, spec.options))
     _check_options(spec, fmt, label=label)

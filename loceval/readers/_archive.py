@@ -32,6 +32,8 @@ DEFAULT_MAX_TOTAL_BYTES = 20 * 1024**3
 """Largest total size of the extracted files: 20 GiB."""
 DEFAULT_MAX_RATIO = 200.0
 """Largest uncompressed/compressed size ratio of a member (deflate bombs reach ~1000)."""
+MAX_MEMBERS = 10_000
+"""A bag folder holds a metadata.yaml and its split files; far more members is no bag."""
 _RATIO_MIN_BYTES = 1024**2
 """Members smaller than this are not ratio-checked (tiny files compress arbitrarily well)."""
 _COPY_BLOCK = 1024**2
@@ -72,6 +74,12 @@ def extract_zip(
         raise ReaderError(msg) from err
     with archive:
         members = archive.infolist()
+        if len(members) > MAX_MEMBERS:
+            msg = (
+                f"Zip file {str(zip_path)!r} holds {len(members):,} members, more than the "
+                f"{MAX_MEMBERS:,} a bag needs; zip only the bag folder."
+            )
+            raise ReaderError(msg)
         for info in members:
             _check_member(info, root, zip_path, max_ratio=max_ratio)
         declared = sum(info.file_size for info in members)

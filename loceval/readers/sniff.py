@@ -24,6 +24,7 @@ that file, and ``data@2024/run.txt@/odom`` splits at the last ``@`` whose left s
 
 from __future__ import annotations
 
+import stat
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -33,7 +34,14 @@ from typing import Final
 
 from loceval.errors import ReaderError
 
-__all__ = ["SourceSpec", "TrajectoryFormat", "missing_file_error", "parse_source", "sniff_format"]
+__all__ = [
+    "SourceSpec",
+    "TrajectoryFormat",
+    "missing_file_error",
+    "parse_source",
+    "refuse_special_file",
+    "sniff_format",
+]
 
 _HEAD_BYTES: Final = 64 * 1024
 _BAG_MAGICS: Final = (
@@ -182,6 +190,26 @@ def missing_file_error(path: Path) -> ReaderError:
     return ReaderError(f"No such file: {str(path)!r}; check the path.")
 
 
+def refuse_special_file(path: Path) -> None:
+    """Refuse pipes, sockets and devices with a ReaderError.
+
+    Readers open a file more than once (sniffing, then reading), which a pipe cannot serve,
+    and reading a pipe that has no writer never ends. A missing path passes: the reader
+    reports it with the path.
+    """
+    try:
+        mode = Path(path).stat().st_mode
+    except OSError:
+        return
+    if stat.S_ISDIR(mode) or stat.S_ISREG(mode):
+        return
+    msg = (
+        f"{str(path)!r} is a pipe or device, not a file; save the data to a file first "
+        "(e.g. cmd > run.txt) and name that file."
+    )
+    raise ReaderError(msg)
+
+
 def sniff_format(path: Path) -> TrajectoryFormat:
     """Tell a file's trajectory format from its content (never from its name).
 
@@ -202,6 +230,7 @@ def sniff_format(path: Path) -> TrajectoryFormat:
         ReaderError: the path does not exist, is empty, or its content matches no format.
     """
     path = Path(path)
+    refuse_special_file(path)
     if path.name == "metadata.yaml":
         return TrajectoryFormat.BAG  # the metadata of a ROS 2 bag names the bag
     if path.is_dir():

@@ -204,3 +204,20 @@ def test_bad_export_options_fail_before_evaluating(
     assert code == 1
     assert match in err
     assert not out_dir.exists()
+
+
+def test_pipes_are_refused(
+    demo: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+):
+    """A named pipe is refused at once (reading it twice would give wrong results or hang)."""
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    for argv in (["inspect", str(fifo)], ["evaluate", str(demo["reference"]), str(fifo)]):
+        assert main(argv) == 1
+        assert "pipe or device" in capsys.readouterr().err
+
+
+def test_demo_into_an_unwritable_place_exits_1(capsys: pytest.CaptureFixture[str]) -> None:
+    """loceval demo --out /dev/null is bad input, not a bug."""
+    assert main(["demo", "--out", "/dev/null"]) == 1
+    assert "Cannot write the demo" in capsys.readouterr().err

@@ -197,3 +197,13 @@ def test_zip_contains_bag(bag_zip, tmp_path):
     assert not zip_contains_bag(make_zip(tmp_path / "d.zip", {"a.txt": b"x"}))
     (tmp_path / "junk.zip").write_bytes(b"junk")
     assert not zip_contains_bag(tmp_path / "junk.zip")
+
+
+def test_too_many_members_refused(tmp_path):
+    """A zip of more members than any bag folder holds is refused before extracting."""
+    archive = tmp_path / "many.zip"
+    with zipfile.ZipFile(archive, "w") as zf:
+        for i in range(10_001):
+            zf.writestr(f"f{i}", b"")
+    with pytest.raises(ReaderError, match="10,001 members"), extracted_bag(archive):
+        pass
