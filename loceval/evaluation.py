@@ -207,9 +207,9 @@ class EvaluationConfig:
                     f"got {value!r}."
                 )
                 raise InputError(msg)
-        if self.max_dt_s < 0 or self.max_gap_s <= 0:
+        if self.max_dt_s < 0 or self.max_gap_s < 1e-9:
             msg = (
-                f"--max-dt must not be negative and --max-gap must be positive, got "
+                f"--max-dt must not be negative and --max-gap at least 1 ns, got "
                 f"{self.max_dt_s!r} and {self.max_gap_s!r}."
             )
             raise InputError(msg)
@@ -217,7 +217,7 @@ class EvaluationConfig:
             msg = f"--thresholds must be positive metres, got {self.thresholds_m!r}."
             raise InputError(msg)
         if self.worst_count < 0:
-            msg = f"worst_count must not be negative, got {self.worst_count!r}."
+            msg = f"--worst must not be negative, got {self.worst_count!r}."
             raise InputError(msg)
 
     def to_dict(self) -> dict[str, object]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import re
 import sys
 import traceback
 from collections.abc import Sequence
@@ -40,6 +41,11 @@ class _Parser(argparse.ArgumentParser):
     """argparse that exits 1 on a usage error: a bad option is bad input, not a bug."""
 
     def error(self, message: str) -> NoReturn:
+        missing = re.fullmatch(r"argument (--[\w-]+).*: expected one argument", message)
+        if missing:
+            # argparse takes "-1e6" or "-0.1,0.2" for an option unless glued to its flag.
+            flag = missing.group(1)
+            message += f"; for a value that starts with '-' write {flag}=VALUE"
         self.print_usage(sys.stderr)
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
 

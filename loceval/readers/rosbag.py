@@ -568,9 +568,10 @@ def _converted(label: str) -> Iterator[None]:
         msg = f"Bag {label!r} is incomplete ({err}); copy the whole bag folder or file."
         raise ReaderError(msg) from err
     except _FOREIGN_ERRORS as err:
+        detail = " ".join(str(err).split())  # parsers' reports span lines (YAML carets)
         msg = (
             f"Bag {label!r} cannot be read; it looks truncated, damaged or of an unknown "
-            f"format ({type(err).__name__}: {err}); re-copy the file, or reindex it "
+            f"format ({type(err).__name__}: {detail}); re-copy the file, or reindex it "
             "('rosbag reindex' / 'ros2 bag reindex')."
         )
         raise ReaderError(msg) from err
@@ -832,6 +833,13 @@ def _finish(
     warnings: tuple[str, ...] = (),
 ) -> Trajectory:
     notes = list(warnings)
+    if stamps.size >= MIN_POSES and np.unique(stamps).size < MIN_POSES:
+        msg = (
+            f"{where}: {stamps.size} messages but only {np.unique(stamps).size} distinct "
+            "header stamps (the publisher does not fill header.stamp); evaluate with "
+            "--stamp receive to use the bag's receive times."
+        )
+        raise ReaderError(msg)
     frame_id = min(frame_ids) if frame_ids else ""
     if len(frame_ids) > 1:
         notes.append(f"{where}: poses in several frames ({', '.join(sorted(frame_ids))}).")

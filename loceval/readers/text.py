@@ -187,6 +187,10 @@ def parse_table(
     )
 
 
+_SECONDS_LIKE_NS = 1e11
+"""Fractional EuRoC stamps below this (100 s after 1970) are seconds, not nanoseconds."""
+
+
 def stamps_from_values(
     values: FloatArray, *, ns_per_unit: float, lines: IntArray, where: str, unit: str
 ) -> StampsNs:
@@ -209,10 +213,14 @@ def stamps_from_values(
     bad = np.flatnonzero(~(np.abs(values) < limit))
     if bad.size:
         i = int(bad[0])
-        msg = (
-            f"{where}, line {int(lines[i])}: stamp {float(values[i])!r} {unit} is not a "
-            "usable time; fix that line or name the time unit."
-        )
+        value = float(values[i])
+        hint = "fix that line or name the time unit"
+        if unit == "s" and np.isfinite(value) and abs(value) > 1e15:
+            hint = (
+                "it looks like nanoseconds, but this format counts seconds: divide the "
+                "stamps by 1e9, or use a CSV with a header and @time_unit=ns"
+            )
+        msg = f"{where}, line {int(lines[i])}: stamp {value!r} {unit} is not a usable time; {hint}."
         raise ReaderError(msg)
     if ns_per_unit == _NS_PER_S:
         return seconds_to_ns(values)
@@ -324,6 +332,19 @@ def read_euroc(path: Path, *, name: str = "") -> Trajectory:
     if table.first_int is not None:
         stamps = table.first_int
     else:
+        first_stamps = table.values[:, 0]
+        if (
+            len(table)
+            and float(np.abs(first_stamps).max()) < _SECONDS_LIKE_NS
+            and bool((first_stamps != np.round(first_stamps)).any())
+        ):
+            msg = (
+                f"{where}, line {int(table.lines[0])}: EuRoC stamps are integer nanoseconds, "
+                f"but {float(table.values[0, 0])!r} looks like seconds; multiply the first "
+                "column by 1e9, or read the file as tum:FILE after swapping to x y z qx qy "
+                "qz qw order."
+            )
+            raise ReaderError(msg)
         stamps = stamps_from_values(
             table.values[:, 0] if len(table) else np.zeros(0),
             ns_per_unit=1.0,
