@@ -51,8 +51,9 @@ _MAX_LISTED_FRAMES = 60
 class TfLink:
     """One ``parent -> child`` link of a tf tree, over time.
 
-    On construction the samples are sorted by stamp (stable), samples with a repeated stamp
-    are dropped (the first one is kept) and the quaternions are normalized.
+    On construction samples with NaN, inf or a zero quaternion are dropped (and counted),
+    the rest are sorted by stamp (stable), samples with a repeated stamp are dropped (the
+    first one is kept) and the quaternions are normalized.
 
     Attributes:
         parent: parent frame id (no leading slash).
@@ -64,6 +65,7 @@ class TfLink:
         is_static: the link was published on ``/tf_static``; its last sample holds at
             every time.
         message_count: samples received, including dropped duplicates.
+        invalid_count: samples dropped for NaN, inf or a zero quaternion.
     """
 
     parent: str
@@ -73,6 +75,7 @@ class TfLink:
     quat_xyzw: FloatArray
     is_static: bool = False
     message_count: int = field(default=-1)
+    invalid_count: int = field(default=0, init=False)
 
     def __post_init__(self) -> None:
         """Copy, sort, de-duplicate and check the samples."""
@@ -88,13 +91,23 @@ class TfLink:
             )
             raise ReaderError(msg)
         norms = np.linalg.norm(quats, axis=1)
-        finite = np.isfinite(translations).all() and np.isfinite(quats).all()
-        if not finite or (norms < 1e-9).any():
+        valid = np.isfinite(translations).all(axis=1) & np.isfinite(quats).all(axis=1)
+        valid &= norms >= 1e-9
+        invalid = int(m - valid.sum())
+        if invalid == m:
             msg = (
-                f"tf link {self.parent!r} -> {self.child!r} holds NaN, inf or zero "
-                "quaternions; fix the publisher or pick another chain."
+                f"tf link {self.parent!r} -> {self.child!r} holds only NaN, inf or zero-"
+                "quaternion samples; fix the publisher or pick a chain without this link."
             )
             raise ReaderError(msg)
+        if invalid:
+            # A glitching publisher loses those samples, not the whole recording's tf.
+            stamps, translations, quats, norms = (
+                stamps[valid],
+                translations[valid],
+                quats[valid],
+                norms[valid],
+            )
         quats = quats / norms[:, None]
         if m > 1 and not (np.diff(stamps) > 0).all():
             order = np.argsort(stamps, kind="stable")
@@ -107,6 +120,7 @@ class TfLink:
         object.__setattr__(self, "translations_xyz", translations)
         object.__setattr__(self, "quat_xyzw", quats)
         object.__setattr__(self, "message_count", max(int(self.message_count), m))
+        object.__setattr__(self, "invalid_count", invalid)
 
     def __len__(self) -> int:
         """Return the number of distinct samples."""

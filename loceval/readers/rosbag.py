@@ -936,6 +936,12 @@ def _read_tf_trajectory(
         )
         raise ReaderError(msg)
     notes = [f"{where}: tf chain {describe_chain(steps)}."]
+    notes.extend(
+        f"{where}: {s.link.invalid_count} samples of tf link {s.link.name} held NaN, inf or "
+        "a zero quaternion and were dropped."
+        for s in steps
+        if s.link.invalid_count
+    )
     if chain.dropped:
         notes.append(
             f"{where}: {chain.dropped} of {total} poses dropped where a link of the chain "

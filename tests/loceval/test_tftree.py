@@ -99,10 +99,20 @@ class TestTfLink:
         with pytest.raises(ReaderError, match="'a' -> 'b'"):
             TfLink("a", "b", np.array([1, 2]), np.zeros((2, 3)), np.zeros((3, 4)))
 
-    def test_rejects_zero_quaternions(self):
-        """A zero quaternion cannot be normalized and is rejected."""
-        with pytest.raises(ReaderError, match="zero quaternions"):
+    def test_rejects_a_link_without_any_valid_sample(self):
+        """A link whose every quaternion is zero cannot be used: a ReaderError naming it."""
+        with pytest.raises(ReaderError, match="'a' -> 'b' holds only NaN, inf or zero"):
             TfLink("a", "b", np.array([1]), np.zeros((1, 3)), np.zeros((1, 4)))
+
+    def test_drops_and_counts_invalid_samples(self):
+        """NaN translations and zero quaternions drop those samples only, and are counted."""
+        translations = np.zeros((4, 3))
+        translations[1, 0] = np.nan
+        quats = np.tile([0, 0, 0, 1.0], (4, 1))
+        quats[2] = 0.0
+        link = TfLink("a", "b", np.array([1, 2, 3, 4]), translations, quats)
+        np.testing.assert_array_equal(link.stamps_ns, [1, 4])
+        assert link.invalid_count == 2
 
     def test_rate_and_default_gap(self):
         """Rate comes from the median interval; the default gap is max(0.1 s, 3 intervals)."""

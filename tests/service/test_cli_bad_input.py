@@ -118,6 +118,24 @@ def test_zero_header_stamps_message_suggests_stamp_receive(tmp_path: Path, fmt: 
     assert "--stamp receive" in line, line
 
 
+@pytest.mark.parametrize("fmt", bf.FORMATS)
+def test_broken_unrelated_tf_link_does_not_block_other_chains(tmp_path: Path, fmt: str) -> None:
+    """One NaN on an unrelated link (odom -> wheel) drops that sample, not every tf chain."""
+    ref = _poses()
+    bad = ref.positions.copy()
+    bad[5] = np.nan
+    records = bf.pose_records("/gt", bf.POSE, ref)
+    records += bf.tf_records(bf.link_transforms("map", "base_link", ref))
+    records += bf.tf_records(
+        bf.link_transforms("odom", "wheel", bf.Poses(ref.stamps_ns, bad, ref.quats))
+    )
+    bag = bf.write_bag(bf.bag_path(tmp_path, fmt), records, fmt=fmt)
+    proc = _cli("evaluate", f"{bag}@/gt", f"{bag}@tf:map:base_link")
+    assert proc.returncode == 0, proc.stderr
+    proc = _cli("inspect", bag)
+    assert proc.returncode == 0, proc.stderr
+
+
 def test_damaged_bag_metadata_message_is_one_line(tmp_path: Path) -> None:
     """A malformed metadata.yaml gives a one-line message, not the YAML parser's report."""
     folder = tmp_path / "bag"
