@@ -131,11 +131,16 @@ def render_artifact(name: str, result: EvaluationResult, options: ExportOptions)
         ExportUnavailableError: its libraries are not installed.
         ExportError: the exporter failed.
     """
+    return _artifact(name).load()(result, options)
+
+
+def _artifact(name: str) -> ArtifactSpec:
+    """Return the artifact called ``name``, or raise ExportOptionsError listing them all."""
     spec = ARTIFACTS.get(name)
     if spec is None:
         msg = f"No artifact named {name!r}; choose from {', '.join(ARTIFACTS)}."
         raise ExportOptionsError(msg)
-    return spec.load()(result, options)
+    return spec
 
 
 def write_artifacts(
@@ -165,9 +170,7 @@ def write_artifacts(
     """
     wanted = list(ARTIFACTS) if names is None else list(dict.fromkeys(names))
     for name in wanted:
-        if name not in ARTIFACTS:
-            msg = f"No artifact named {name!r}; choose from {', '.join(ARTIFACTS)}."
-            raise ExportOptionsError(msg)
+        _artifact(name)  # every name is checked before anything is rendered
     out_dir = out_dir.resolve()
     staging = _staging_folder(out_dir)
     try:

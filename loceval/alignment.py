@@ -25,7 +25,7 @@ import numpy as np
 from loceval._typing import FloatArray, StampsNs
 from loceval.errors import AlignmentError
 from loceval.geometry import SimilarityTransform
-from loceval.trajectory import Trajectory
+from loceval.trajectory import MAX_SPAN_S, Trajectory
 
 __all__ = [
     "AlignMethod",
@@ -39,8 +39,6 @@ __all__ = [
 ]
 
 _NS_PER_S = 1_000_000_000
-_MAX_WINDOW_S = 1e9
-"""Longest --align-first window in seconds (stamps are int64 ns); longer ones are typos."""
 _RANK_TOLERANCE = 1e-9
 """Relative size below which a singular value of the cross-covariance counts as zero."""
 
@@ -79,7 +77,7 @@ class AlignWindow:
         try:
             if raw.endswith("s"):
                 seconds = float(raw[:-1])
-                if not np.isfinite(seconds) or not 0 < seconds <= _MAX_WINDOW_S:
+                if not np.isfinite(seconds) or not 0 < seconds <= MAX_SPAN_S:
                     raise ValueError(raw)  # noqa: TRY301  (one message for every bad value)
                 return cls(seconds=seconds)
             poses = int(raw)

@@ -33,10 +33,9 @@ from loceval.metrics import (
     rpe_pairs,
     share_within,
 )
-from loceval.trajectory import Trajectory
+from loceval.trajectory import MAX_SPAN_S, Trajectory
 
 __all__ = [
-    "MAX_SPAN_S",
     "EstimateResult",
     "EvaluationConfig",
     "EvaluationResult",
@@ -48,9 +47,6 @@ __all__ = [
 ]
 
 _NS_PER_S = 1_000_000_000
-
-MAX_SPAN_S = 1e9
-"""Longest time span (about 32 years) an option may name; longer ones are typos."""
 
 ProgressCallback = Callable[[str, float], None]
 """Called with a stage name and the fraction of the evaluation done (0..1)."""
@@ -200,7 +196,6 @@ class EvaluationConfig:
         if self.rpe_unit is RPEUnit.SECONDS:
             spans["--rpe-delta"] = self.rpe_delta
         for name, value in spans.items():
-            # Stamps are int64 ns (±292 years): a span beyond MAX_SPAN_S is a typo, not data.
             if not (np.isfinite(value) and abs(value) <= MAX_SPAN_S):
                 msg = (
                     f"{name} must be a finite number of seconds within ±{MAX_SPAN_S:g}, "

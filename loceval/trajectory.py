@@ -12,12 +12,15 @@ from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import TrajectoryError
 from loceval.geometry import SimilarityTransform
 
-__all__ = ["MIN_POSES", "Trajectory"]
+__all__ = ["MAX_COORDINATE_M", "MAX_SPAN_S", "MIN_POSES", "Trajectory"]
 
 MIN_POSES = 3
 """Fewest poses a trajectory may have: alignment and RPE need at least three."""
 MAX_COORDINATE_M = 1e9
 """Largest position magnitude accepted: beyond any site (ECEF is 6.4e6 m); not metres."""
+MAX_SPAN_S = 1e9
+"""Longest time span (about 32 years) an option may name: stamps are int64 ns (±292 years),
+so a longer span overflows them and can only be a typo."""
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]+")
 
