@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Final, Protocol, cast
 
 from exporters.errors import ExportError, ExportOptionsError, ExportUnavailableError
 from exporters.options import ExportOptions, Units
-from loceval.evaluation import EvaluationResult
+from loceval.evaluation import EvaluationResult, ProgressCallback
 
 if TYPE_CHECKING:
     from exporters.placement import Placement
@@ -149,6 +149,7 @@ def write_artifacts(
     options: ExportOptions,
     *,
     names: Iterable[str] | None = None,
+    progress: ProgressCallback | None = None,
 ) -> list[Path]:
     """Write artifacts into ``out_dir``, all or nothing.
 
@@ -160,6 +161,7 @@ def write_artifacts(
         out_dir: the destination folder (created if missing).
         options: placement and report options.
         names: the artifacts to write (default: all of :data:`ARTIFACTS`).
+        progress: called with (stage, fraction done) before each artifact.
 
     Returns:
         The paths written.
@@ -174,7 +176,7 @@ def write_artifacts(
     out_dir = out_dir.resolve()
     staging = _staging_folder(out_dir)
     try:
-        _render_into(staging, result, options, wanted)
+        _render_into(staging, result, options, wanted, progress or _no_progress)
         out_dir.mkdir(exist_ok=True)
         written = []
         for name in wanted:
@@ -207,8 +209,16 @@ def _staging_folder(out_dir: Path) -> Path:
         raise ExportError(msg) from err
 
 
+def _no_progress(_stage: str, _fraction: float) -> None:
+    """Ignore progress."""
+
+
 def _render_into(
-    staging: Path, result: EvaluationResult, options: ExportOptions, wanted: list[str]
+    staging: Path,
+    result: EvaluationResult,
+    options: ExportOptions,
+    wanted: list[str],
+    progress: ProgressCallback,
 ) -> None:
     """Render every wanted artifact into ``staging``, placing the CAD paths only once."""
     placement = None
@@ -217,7 +227,8 @@ def _render_into(
         from exporters.placement import place_evaluation  # noqa: PLC0415
 
         placement = place_evaluation(result, options)
-    for name in wanted:
+    for k, name in enumerate(wanted):
+        progress(f"writing {name}", k / len(wanted))
         if placement is not None and name == "result.json":
             data = export_result_json(result, options, cad=placement.metadata())
         elif placement is not None and name in CAD_ARTIFACTS:

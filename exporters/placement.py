@@ -54,6 +54,7 @@ __all__ = [
     "polyline_distances",
     "read_site_matrix",
     "simplify_rdp",
+    "site_from_values",
 ]
 
 RGB: TypeAlias = tuple[int, int, int]
@@ -147,10 +148,22 @@ def read_site_matrix(path: Path) -> SimilarityTransform:
     except (OSError, UnicodeDecodeError) as err:
         msg = f"Cannot read the site matrix file {str(path)!r} ({err}); check the path."
         raise ExportOptionsError(msg) from err
-    values = _matrix_numbers(text)
+    return site_from_values(_matrix_numbers(text), where=f"the site matrix file {str(path)!r}")
+
+
+def site_from_values(values: Sequence[float] | None, *, where: str) -> SimilarityTransform:
+    """Return the site transform of 16 row-major numbers (see :func:`read_site_matrix`).
+
+    Args:
+        values: the numbers, or None when they could not be read.
+        where: names the matrix in messages (``"the site matrix file 'site.txt'"``).
+
+    Raises:
+        ExportOptionsError: not 16 finite numbers, or not a similarity transform.
+    """
     if values is None or len(values) != 16 or not all(math.isfinite(v) for v in values):
         msg = (
-            f"The site matrix file {str(path)!r} must hold 16 numbers (a 4x4 row-major "
+            f"{where[0].upper()}{where[1:]} must hold 16 numbers (a 4x4 row-major "
             "matrix, or JSON [[...], [...], [...], [...]]); check its contents."
         )
         raise ExportOptionsError(msg)
@@ -159,19 +172,19 @@ def read_site_matrix(path: Path) -> SimilarityTransform:
         matrix[:, 3], [0.0, 0.0, 0.0, 1.0]
     ):
         msg = (
-            f"The site matrix in {str(path)!r} looks column-major (glTF/three.js order); "
+            f"The matrix of {where} looks column-major (glTF/three.js order); "
             "write it row by row with the translation in the last column."
         )
         raise ExportOptionsError(msg)
     det = float(np.linalg.det(matrix[:3, :3]))
     if abs(det) < 1e-12:
-        msg = f"The site matrix in {str(path)!r} is singular (det={det:.3g}); check its values."
+        msg = f"The matrix of {where} is singular (det={det:.3g}); check its values."
         raise ExportOptionsError(msg)
     try:
         return SimilarityTransform.from_matrix(matrix)
     except InputError as err:
         msg = (
-            f"The site matrix in {str(path)!r} is not a rotation with uniform scale and a "
+            f"The matrix of {where} is not a rotation with uniform scale and a "
             f"translation ({err}); check its values."
         )
         raise ExportOptionsError(msg) from err

@@ -8,28 +8,42 @@ Libraries for reports and CAD files are imported only when ``--out`` asks for th
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import re
 import sys
 import traceback
 from collections.abc import Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 from loceval import __version__
-from loceval.alignment import AlignMethod, AlignWindow
+from loceval.alignment import AlignMethod
 from loceval.association import AssociationMethod
 from loceval.errors import InputError, LocevalError
-from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate, parse_offset
+from loceval.evaluation import EvaluationConfig, EvaluationResult
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import DEFAULT_THRESHOLDS_M, ErrorSeries, ErrorStats, RPEUnit
-from loceval.readers import SourceSpec, TrajectoryFormat, parse_source, read_trajectory
+from loceval.readers import TrajectoryFormat, parse_source, read_trajectory
 from loceval.trajectory import Trajectory
+from service.pipeline import (
+    Job,
+    JobSource,
+    build_config,
+    build_export_options,
+    default_name,
+    device_offset,
+    file_provenance,
+    offset_or_none,
+    run_job,
+    unique_names,
+)
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from exporters.options import ExportOptions
+    from service.jobs import Runtime
+    from service.settings import Settings
 
 __all__ = ["main"]
 
@@ -50,7 +64,7 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:  # noqa: PLR0915  (one flat list of flags)
     """Return the argument parser of every subcommand."""
     parser = _Parser(prog="loceval", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"loceval {__version__}")
@@ -163,6 +177,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     demo.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR")
     demo.set_defaults(handler=_cmd_demo)
+
+    serve = sub.add_parser(
+        "serve",
+        help="start the HTTP service with its queue consumer (settings: LOCEVAL_* variables)",
+    )
+    serve.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    serve.add_argument("--port", type=int, default=8000, help="port to listen on")
+    serve.add_argument(
+        "--no-consumer",
+        action="store_true",
+        help="do not run jobs in this process (run `loceval worker` processes instead)",
+    )
+    serve.set_defaults(handler=_cmd_serve)
+
+    worker = sub.add_parser("worker", help="run queue consumers only (scale-out)")
+    worker.set_defaults(handler=_cmd_worker)
+
+    keys = sub.add_parser("keys", help="create or revoke API keys")
+    keys_sub = keys.add_subparsers(dest="keys_command", required=True, parser_class=_Parser)
+    create = keys_sub.add_parser("create", help="create a key and print it (shown only once)")
+    create.add_argument("--project", required=True, help="the project (created if new)")
+    create.set_defaults(handler=_cmd_keys_create)
+    revoke = keys_sub.add_parser("revoke", help="revoke a key")
+    revoke.add_argument("key", help="the key, or its first 12 characters")
+    revoke.set_defaults(handler=_cmd_keys_revoke)
     return parser
 
 
@@ -208,18 +247,23 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     export = _export_options(args) if args.out is not None else None
     ref_spec = parse_source(args.reference, default_format=default_format)
     est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
-    reference = read_trajectory(
-        ref_spec, name=args.reference_name or _default_name(ref_spec), stamp=args.stamp
+    names = args.name or unique_names([default_name(s) for s in est_specs])
+    job = Job(
+        reference=JobSource(
+            ref_spec,
+            args.reference_name or default_name(ref_spec),
+            file_provenance("reference", ref_spec),
+        ),
+        estimates=[
+            JobSource(spec, name, file_provenance("estimate", spec))
+            for spec, name in zip(est_specs, names, strict=True)
+        ],
+        config=config,
+        stamp=args.stamp,
+        export=export,
+        formats=_formats(args.formats),
     )
-    names = args.name or _unique_names([_default_name(s) for s in est_specs])
-    estimates = [
-        read_trajectory(spec, name=name, stamp=args.stamp)
-        for spec, name in zip(est_specs, names, strict=True)
-    ]
-    inputs = [_provenance("reference", ref_spec), *(_provenance("estimate", s) for s in est_specs)]
-    result = evaluate(reference, estimates, config, inputs=inputs)
-    if export is not None:
-        _write_outputs(result, args, export)
+    result = run_job(job, args.out)
     if args.json:
         print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
     else:
@@ -236,28 +280,27 @@ def config_from_args(args: argparse.Namespace) -> EvaluationConfig:
         InputError: an option's value cannot be used.
     """
     try:
-        thresholds = tuple(float(t) for t in args.thresholds.split(",") if t.strip())
+        thresholds = [float(t) for t in args.thresholds.split(",") if t.strip()]
     except ValueError:
         msg = (
             f"--thresholds takes metres separated by commas like 0.05,0.1, got {args.thresholds!r}."
         )
         raise InputError(msg) from None
-    offset = _device_offset(args)
-    return EvaluationConfig(
-        association=AssociationMethod(args.associate),
+    return build_config(
+        association=args.associate,
         max_dt_s=args.max_dt,
         max_gap_s=args.max_gap,
         time_offset_s=args.time_offset,
-        align=AlignMethod(args.align),
-        align_first=AlignWindow.parse(args.align_first),
+        align=args.align,
+        align_first=args.align_first,
         calibrate_at_s=args.calibrate_at,
-        reference_offset=offset,
+        reference_offset=_device_offset(args),
         rpe_delta=args.rpe_delta,
-        rpe_unit=RPEUnit(args.rpe_unit),
+        rpe_unit=args.rpe_unit,
         rpe_all_pairs=args.rpe_all_pairs,
         thresholds_m=thresholds,
-        tolerance=Tolerance.parse(args.tolerance) if args.tolerance else None,
-        worst_count=args.worst,
+        tolerance=args.tolerance,
+        worst=args.worst,
     )
 
 
@@ -266,7 +309,7 @@ def _device_offset(args: argparse.Namespace) -> SimilarityTransform | None:
         if args.device_from or args.device_to:
             msg = "--device-from and --device-to need --device FILE (a URDF or a bag)."
             raise InputError(msg)
-        return parse_offset(args.offset) if args.offset else None
+        return offset_or_none(args.offset)
     if args.offset:
         msg = "Give the device offset either with --offset or with --device, not both."
         raise InputError(msg)
@@ -276,90 +319,28 @@ def _device_offset(args: argparse.Namespace) -> SimilarityTransform | None:
             "(the sensor), e.g. --device-from rigid_body --device-to camera_link."
         )
         raise InputError(msg)
-    if args.device.suffix.lower() in {".urdf", ".xml"}:
-        from loceval.urdf import read_urdf_offset  # noqa: PLC0415
-
-        return read_urdf_offset(args.device, from_link=args.device_from, to_link=args.device_to)
-    from loceval.readers.rosbag import read_bag_static_transform  # noqa: PLC0415
-
-    return read_bag_static_transform(args.device, args.device_from, args.device_to)
+    return device_offset(args.device, from_link=args.device_from, to_link=args.device_to)
 
 
 def _export_options(args: argparse.Namespace) -> ExportOptions:
     """Check the artifact options before the evaluation runs, so bad ones fail fast."""
-    from exporters import ExportOptions  # noqa: PLC0415
-    from exporters.placement import (  # noqa: PLC0415
-        check_options,
-        parse_site,
-        parse_units,
-        read_site_matrix,
-    )
-
     if args.site and args.site_matrix:
         msg = "Give the site transform either with --site or with --site-matrix, not both."
         raise InputError(msg)
-    site = SimilarityTransform.identity()
-    if args.site:
-        site = parse_site(args.site)
-    elif args.site_matrix:
-        site = read_site_matrix(args.site_matrix)
-    options = ExportOptions(
-        units=parse_units(args.units),
-        site=site,
+    return build_export_options(
+        units=args.units,
+        site=args.site,
+        site_matrix=args.site_matrix,
         simplify_m=args.simplify,
         building=args.building,
         evaluation_id=args.out.resolve().name,
     )
-    check_options(options)
-    return options
 
 
-def _write_outputs(
-    result: EvaluationResult, args: argparse.Namespace, options: ExportOptions
-) -> None:
-    from exporters import write_artifacts  # noqa: PLC0415
-
-    title = f"{result.reference.name} vs {', '.join(e.name for e in result.estimates)}"
-    names = None
-    if args.formats:
-        names = [n.strip() for n in args.formats.split(",") if n.strip()]
-        if "result.json" not in names:
-            names.insert(0, "result.json")
-    write_artifacts(result, args.out, replace(options, title=title), names=names)
-
-
-def _default_name(spec: SourceSpec) -> str:
-    if spec.selector and spec.format in {TrajectoryFormat.BAG, TrajectoryFormat.MOTIVE, None}:
-        return spec.selector
-    return spec.path.stem
-
-
-def _unique_names(names: list[str]) -> list[str]:
-    seen: dict[str, int] = {}
-    out = []
-    for name in names:
-        seen[name] = seen.get(name, 0) + 1
-        out.append(name if seen[name] == 1 else f"{name} ({seen[name]})")
-    return out
-
-
-def _provenance(role: str, spec: SourceSpec) -> dict[str, object]:
-    path = spec.path
-    info: dict[str, object] = {
-        "role": role,
-        "path": str(path),
-        "file": path.name,
-        "format": spec.format.value if spec.format else None,
-        "selector": spec.selector,
-    }
-    if path.is_file():
-        digest = hashlib.sha256()
-        with path.open("rb") as fh:
-            for chunk in iter(lambda: fh.read(1 << 20), b""):
-                digest.update(chunk)
-        info["sha256"] = digest.hexdigest()
-        info["bytes"] = path.stat().st_size
-    return info
+def _formats(text: str | None) -> list[str] | None:
+    if not text:
+        return None
+    return [n.strip() for n in text.split(",") if n.strip()]
 
 
 # --- tables ---------------------------------------------------------------------------
@@ -499,6 +480,117 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         str(args.out / "evaluation"),
     ]
     return main(argv)
+
+
+# --- service ----------------------------------------------------------------------------
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    import uvicorn  # noqa: PLC0415
+
+    from service.auth import bootstrap  # noqa: PLC0415
+    from service.jobs import create_runtime  # noqa: PLC0415
+    from service.main import create_app  # noqa: PLC0415
+    from service.settings import get_settings  # noqa: PLC0415
+
+    settings = _settings(get_settings)
+    runtime = _open_runtime(create_runtime, settings)
+    with runtime.sessions() as session:
+        key = bootstrap(session)
+    if key is not None:
+        print(f"API key for project 'default' (shown once): {key}", flush=True)  # noqa: T201
+    app = create_app(settings, runtime=runtime, consumer=not args.no_consumer)
+    print(  # noqa: T201
+        f"loceval {__version__}: http://{args.host}:{args.port}/ (data in "
+        f"{settings.data_dir.resolve()}, queue {settings.queue_url})",
+        flush=True,
+    )
+    uvicorn.run(app, host=args.host, port=args.port, log_level="info", access_log=False)
+    return 0
+
+
+def _cmd_worker(_args: argparse.Namespace) -> int:
+    import signal  # noqa: PLC0415
+    import threading  # noqa: PLC0415
+
+    from service.jobs import create_runtime, recover  # noqa: PLC0415
+    from service.settings import get_settings  # noqa: PLC0415
+
+    settings = _settings(get_settings)
+    runtime = _open_runtime(create_runtime, settings)
+    if settings.queue_url == "immediate":
+        msg = "LOCEVAL_QUEUE_URL=immediate runs jobs inside requests; a worker needs a queue."
+        raise InputError(msg)
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    consumer = runtime.start_consumer()
+    recover(runtime)
+    print(  # noqa: T201
+        f"loceval worker: {settings.workers} threads on queue {settings.queue_url}", flush=True
+    )
+    stop.wait()
+    consumer.stop(graceful=True)
+    runtime.close()
+    return 0
+
+
+def _cmd_keys_create(args: argparse.Namespace) -> int:
+    from service.auth import create_key  # noqa: PLC0415
+    from service.jobs import create_runtime  # noqa: PLC0415
+    from service.settings import get_settings  # noqa: PLC0415
+
+    runtime = _open_runtime(create_runtime, _settings(get_settings))
+    with runtime.sessions() as session:
+        print(create_key(session, args.project))  # noqa: T201
+    runtime.close()
+    return 0
+
+
+def _cmd_keys_revoke(args: argparse.Namespace) -> int:
+    from service.auth import revoke_key  # noqa: PLC0415
+    from service.jobs import create_runtime  # noqa: PLC0415
+    from service.settings import get_settings  # noqa: PLC0415
+
+    runtime = _open_runtime(create_runtime, _settings(get_settings))
+    with runtime.sessions() as session:
+        revoke_key(session, args.key)
+    runtime.close()
+    print("Key revoked.")  # noqa: T201
+    return 0
+
+
+def _settings(get: Callable[[], Settings]) -> Settings:
+    from pydantic import ValidationError  # noqa: PLC0415
+
+    try:
+        return get()
+    except ValidationError as err:
+        problems = "; ".join(
+            f"LOCEVAL_{'_'.join(str(p) for p in e['loc']).upper()}: {e['msg']}"
+            for e in err.errors()
+        )
+        msg = f"Bad service settings: {problems}."
+        raise InputError(msg) from None
+
+
+def _open_runtime(create: Callable[[Settings], Runtime], settings: Settings) -> Runtime:
+    from sqlalchemy.exc import SQLAlchemyError  # noqa: PLC0415
+
+    try:
+        return create(settings)
+    except SQLAlchemyError as err:
+        msg = (
+            f"Cannot open the database {settings.resolved_database_url!r} "
+            f"({type(err).__name__}: {str(err).splitlines()[0]}); check LOCEVAL_DATABASE_URL."
+        )
+        raise InputError(msg) from err
+    except OSError as err:
+        msg = (
+            f"Cannot use the data directory {str(settings.data_dir)!r} ({err.strerror}); "
+            "check LOCEVAL_DATA_DIR."
+        )
+        raise InputError(msg) from err
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -44,7 +44,7 @@ from loceval.readers.sniff import SourceSpec, TrajectoryFormat
 from loceval.readers.text import load_text, parse_table, stamps_from_values
 from loceval.trajectory import Trajectory
 
-__all__ = ["MOTIVE_FRAME_ID", "Y_UP_TO_Z_UP", "read_motive"]
+__all__ = ["MOTIVE_FRAME_ID", "Y_UP_TO_Z_UP", "list_rigid_bodies", "read_motive"]
 
 MOTIVE_FRAME_ID: Final = "motive_world"
 """The ``frame_id`` of trajectories read from Motive exports."""
@@ -83,6 +83,16 @@ class _Layout:
     quantities: list[str]  # Rotation / Position / ... per column
     axes: list[str]  # the Frame row: Frame, Time (Seconds), X, Y, ...
     frame_line: int  # 0-based index of the Frame row
+
+
+def list_rigid_bodies(path: Path) -> list[str]:
+    """Return the names of the rigid bodies in a Motive export, in column order.
+
+    Raises:
+        ReaderError: the file is missing or not a Motive export.
+    """
+    path = Path(path)
+    return _rigid_bodies(_read_layout(load_text(path), where=str(path)))
 
 
 def read_motive(

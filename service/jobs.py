@@ -1,0 +1,472 @@
+"""Evaluation jobs on huey's queue: the runtime, the task, and recovery after crashes.
+
+Job state lives in the database, not in the queue or in process memory: the queue carries
+only evaluation ids. A worker claims a job with a conditional update (``queued -> running``),
+so a job enqueued twice runs once; while it runs it beats a heartbeat. A job whose heartbeat
+stops (the worker crashed or the service restarted) is found by :func:`recover`, on start and
+once a minute, and is queued again (the work is idempotent: artifacts are rebuilt from the
+inputs) or, after ``job_attempts`` starts, marked failed with the reason.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import logging
+import os
+import shutil
+import socket
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+from huey import Huey, MemoryHuey, RedisHuey, SqliteHuey, crontab
+from huey.consumer import Consumer
+from sqlalchemy import Engine, or_, select, update
+from sqlalchemy.orm import Session, sessionmaker
+
+from loceval.errors import InputError, LocevalError
+from loceval.readers import SourceSpec, TrajectoryFormat
+from service.db import (
+    Dataset,
+    Evaluation,
+    EvaluationStatus,
+    create_db_engine,
+    make_session_factory,
+    migrate,
+    utcnow,
+)
+from service.errors import internal_problem, problem, problem_for
+from service.pipeline import (
+    Job,
+    JobSource,
+    build_config,
+    build_export_options,
+    device_offset,
+    file_provenance,
+    offset_or_none,
+    run_job,
+)
+from service.settings import Settings
+from service.storage import BlobStore
+
+__all__ = ["Runtime", "create_runtime", "evaluation_summary", "execute_evaluation", "recover"]
+
+logger = logging.getLogger(__name__)
+
+_TASK_NAME: Final = "run_evaluation"
+_PROGRESS_INTERVAL_S: Final = 0.5
+
+
+@dataclass
+class Runtime:
+    """What a service or worker process shares: settings, database, blobs and the queue."""
+
+    settings: Settings
+    engine: Engine
+    sessions: sessionmaker[Session]
+    store: BlobStore
+    huey: Huey
+    worker_id: str
+    enqueue_task: Callable[[str], object]
+
+    def enqueue(self, evaluation_id: str) -> None:
+        """Queue an evaluation (in immediate mode: run it now)."""
+        self.enqueue_task(evaluation_id)
+
+    def start_consumer(self, *, periodic: bool = True) -> Consumer:
+        """Start queue consumer threads in this process (no signal handlers of its own)."""
+        consumer = _EmbeddedConsumer(
+            self.huey,
+            workers=self.settings.workers,
+            worker_type="thread",
+            periodic=periodic,
+            max_delay=2.0,
+            check_worker_health=True,
+        )
+        consumer.start()
+        return consumer
+
+    def close(self) -> None:
+        """Release the database connections."""
+        self.engine.dispose()
+
+
+class _EmbeddedConsumer(Consumer):  # type: ignore[misc]
+    """huey's consumer without its signal handlers: uvicorn owns the signals in ``serve``."""
+
+    def _set_signal_handlers(self) -> None:
+        """Leave the process's signal handlers alone."""
+
+
+def _create_huey(settings: Settings) -> Huey:
+    if settings.queue_url == "immediate":
+        return MemoryHuey("loceval", immediate=True, results=False)
+    if settings.queue_url.startswith(("redis://", "rediss://")):
+        return RedisHuey("loceval", url=settings.queue_url, results=False)
+    queue_db = (settings.data_dir / "queue.db").resolve()
+    return SqliteHuey("loceval", filename=str(queue_db), results=False, timeout=30)
+
+
+def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runtime:
+    """Open the database (migrated to the newest schema), the blob store and the queue."""
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    engine = create_db_engine(settings.resolved_database_url)
+    if apply_migrations:
+        migrate(engine)
+    huey = _create_huey(settings)
+    runtime_box: list[Runtime] = []
+
+    @huey.task(name=_TASK_NAME)  # type: ignore[untyped-decorator]
+    def run_evaluation(evaluation_id: str) -> None:
+        execute_evaluation(runtime_box[0], evaluation_id)
+
+    @huey.periodic_task(crontab(minute="*"), name="recover_evaluations")  # type: ignore[untyped-decorator]
+    def recover_evaluations() -> None:
+        recover(runtime_box[0])
+
+    runtime = Runtime(
+        settings=settings,
+        engine=engine,
+        sessions=make_session_factory(engine),
+        store=BlobStore(settings.data_dir),
+        huey=huey,
+        worker_id=f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}",
+        enqueue_task=run_evaluation,
+    )
+    runtime_box.append(runtime)
+    return runtime
+
+
+# --- the task --------------------------------------------------------------------------
+
+
+def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
+    """Run one evaluation job to succeeded or failed; a no-op if someone else claimed it."""
+    if not _claim(runtime, evaluation_id):
+        return
+    heartbeat = _Heartbeat(runtime, evaluation_id)
+    heartbeat.start()
+    staging: Path | None = None
+    try:
+        with runtime.sessions() as session:
+            evaluation = session.get_one(Evaluation, evaluation_id)
+            job = _job_for(session, runtime, evaluation)
+        runtime.store.clear_evaluation(evaluation_id)
+        staging = runtime.store.staging_dir(evaluation_id)
+        progress = _ProgressWriter(runtime, evaluation_id)
+        run_job(job, staging, progress)
+        artifacts = _publish(runtime, evaluation_id, staging)
+        staging = None
+        document = json.loads(
+            (runtime.store.artifacts_dir(evaluation_id) / "result.json").read_text()
+        )
+        _finish(
+            runtime,
+            evaluation_id,
+            status=EvaluationStatus.SUCCEEDED,
+            result=document,
+            summary=evaluation_summary(document),
+            artifacts=artifacts,
+        )
+    except LocevalError as err:
+        _finish(runtime, evaluation_id, status=EvaluationStatus.FAILED, error=problem_for(err))
+    except Exception:
+        error_id = uuid.uuid4().hex[:12]
+        logger.exception("Evaluation %s failed with a bug (error_id=%s)", evaluation_id, error_id)
+        _finish(
+            runtime, evaluation_id, status=EvaluationStatus.FAILED, error=internal_problem(error_id)
+        )
+    finally:
+        heartbeat.stop()
+        if staging is not None:
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _claim(runtime: Runtime, evaluation_id: str) -> bool:
+    now = utcnow()
+    with runtime.sessions() as session:
+        claimed = session.execute(
+            update(Evaluation)
+            .where(Evaluation.id == evaluation_id, Evaluation.status == EvaluationStatus.QUEUED)
+            .values(
+                status=EvaluationStatus.RUNNING,
+                attempts=Evaluation.attempts + 1,
+                worker=runtime.worker_id,
+                heartbeat_at=now,
+                started_at=now,
+                stage="starting",
+                fraction=0.0,
+            )
+        )
+        session.commit()
+        return bool(claimed.rowcount)  # type: ignore[attr-defined]
+
+
+def _finish(runtime: Runtime, evaluation_id: str, *, status: str, **values: Any) -> None:  # noqa: ANN401
+    stage = "done" if status == EvaluationStatus.SUCCEEDED else "failed"
+    with runtime.sessions() as session:
+        session.execute(
+            update(Evaluation)
+            .where(Evaluation.id == evaluation_id, Evaluation.worker == runtime.worker_id)
+            .values(
+                status=status,
+                stage=stage,
+                fraction=1.0 if status == EvaluationStatus.SUCCEEDED else Evaluation.fraction,
+                finished_at=utcnow(),
+                heartbeat_at=None,
+                **values,
+            )
+        )
+        session.commit()
+
+
+def _publish(runtime: Runtime, evaluation_id: str, staging: Path) -> list[dict[str, Any]]:
+    from exporters import ARTIFACTS  # noqa: PLC0415
+
+    final = runtime.store.publish_artifacts(evaluation_id, staging)
+    return [
+        {
+            "name": name,
+            "media_type": spec.media_type,
+            "size_bytes": (final / name).stat().st_size,
+        }
+        for name, spec in ARTIFACTS.items()
+        if (final / name).is_file()
+    ]
+
+
+def evaluation_summary(document: dict[str, Any]) -> list[dict[str, Any]]:
+    """Return the headline figures per estimate from a result document."""
+    rows = []
+    for estimate in document.get("estimates", []):
+        verdict = estimate.get("verdict")
+        rows.append(
+            {
+                "name": estimate.get("name"),
+                "ate_rmse_m": (estimate.get("ate") or {}).get("translation_m", {}).get("rmse"),
+                "rpe_rmse_m": (estimate.get("rpe") or {}).get("translation_m", {}).get("rmse"),
+                "matched": estimate.get("matched"),
+                "verdict": None if not verdict else ("pass" if verdict.get("passed") else "fail"),
+            }
+        )
+    return rows
+
+
+class _ProgressWriter:
+    """Store progress, at most twice a second (and whenever the stage changes)."""
+
+    def __init__(self, runtime: Runtime, evaluation_id: str) -> None:
+        self.runtime = runtime
+        self.evaluation_id = evaluation_id
+        self._last = 0.0
+        self._stage = ""
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        now = time.monotonic()
+        if stage == self._stage and now - self._last < _PROGRESS_INTERVAL_S:
+            return
+        self._last, self._stage = now, stage
+        with self.runtime.sessions() as session:
+            session.execute(
+                update(Evaluation)
+                .where(Evaluation.id == self.evaluation_id)
+                .values(stage=stage[:200], fraction=min(max(fraction, 0.0), 1.0))
+            )
+            session.commit()
+
+
+class _Heartbeat:
+    """A thread that stamps ``heartbeat_at`` while the job runs."""
+
+    def __init__(self, runtime: Runtime, evaluation_id: str) -> None:
+        self.runtime = runtime
+        self.evaluation_id = evaluation_id
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"heartbeat-{evaluation_id[:8]}")
+        self._thread.daemon = True
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        interval = max(self.runtime.settings.job_lease_s / 4, 0.2)
+        while not self._stop.wait(interval):
+            try:
+                with self.runtime.sessions() as session:
+                    session.execute(
+                        update(Evaluation)
+                        .where(
+                            Evaluation.id == self.evaluation_id,
+                            Evaluation.status == EvaluationStatus.RUNNING,
+                        )
+                        .values(heartbeat_at=utcnow())
+                    )
+                    session.commit()
+            except Exception:  # a lost beat is retried; the job itself goes on
+                logger.warning("Heartbeat of %s failed", self.evaluation_id, exc_info=True)
+
+
+# --- building the job ------------------------------------------------------------------
+
+
+def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
+    request = evaluation.request
+    options: dict[str, Any] = request.get("options", {})
+    reference = _source(session, runtime, evaluation.project_id, request["reference"], "reference")
+    estimates = [
+        _source(session, runtime, evaluation.project_id, e, "estimate")
+        for e in request["estimates"]
+    ]
+    offset = offset_or_none(options.get("offset"))
+    device = options.get("device")
+    if device:
+        dataset = _dataset(session, evaluation.project_id, device["dataset_id"])
+        offset = device_offset(
+            runtime.store.path(dataset.storage_path),
+            from_link=device["from_link"],
+            to_link=device["to_link"],
+            offset=options.get("offset"),
+        )
+    config = build_config(
+        association=options.get("association", "interpolate"),
+        max_dt_s=options.get("max_dt_s", 0.01),
+        max_gap_s=options.get("max_gap_s", 0.1),
+        time_offset_s=options.get("time_offset_s", 0.0),
+        align=options.get("align", "se3"),
+        align_first=options.get("align_first"),
+        calibrate_at_s=options.get("calibrate_at_s"),
+        reference_offset=offset,
+        rpe_delta=options.get("rpe_delta", 1.0),
+        rpe_unit=options.get("rpe_unit", "frames"),
+        rpe_all_pairs=options.get("rpe_all_pairs", False),
+        thresholds_m=options.get("thresholds_m"),
+        tolerance=options.get("tolerance"),
+        worst=options.get("worst", 10),
+    )
+    export = build_export_options(
+        units=options.get("units", "mm"),
+        site=options.get("site"),
+        site_matrix=_flat(options.get("site_matrix")),
+        simplify_m=options.get("simplify_m", 0.001),
+        evaluation_id=evaluation.id,
+    )
+    return Job(
+        reference=reference,
+        estimates=estimates,
+        config=config,
+        stamp=options.get("stamp", "header"),
+        export=export,
+        formats=options.get("formats"),
+    )
+
+
+def _flat(matrix: list[list[float]] | None) -> list[float] | None:
+    return None if matrix is None else [float(v) for row in matrix for v in row]
+
+
+def _dataset(session: Session, project_id: str, dataset_id: str) -> Dataset:
+    dataset = session.get(Dataset, dataset_id)
+    if dataset is None or dataset.project_id != project_id:
+        msg = (
+            f"Dataset {dataset_id!r} was deleted after the evaluation was queued; upload it again."
+        )
+        raise InputError(msg)
+    return dataset
+
+
+def _source(
+    session: Session, runtime: Runtime, project_id: str, ref: dict[str, Any], role: str
+) -> JobSource:
+    dataset = _dataset(session, project_id, ref["dataset_id"])
+    fmt = dataset.inspection.get("format")
+    if fmt not in {f.value for f in TrajectoryFormat}:
+        msg = f"Dataset {dataset.name!r} is a {dataset.kind} file, not a trajectory recording."
+        raise InputError(msg)
+    spec = SourceSpec(
+        TrajectoryFormat(fmt), runtime.store.path(dataset.storage_path), ref.get("selector")
+    )
+    provenance = file_provenance(role, spec, sha256=dataset.sha256)
+    provenance.update(path=dataset.filename, dataset_id=dataset.id)
+    name = ref.get("name") or ref.get("selector") or Path(dataset.filename).stem
+    return JobSource(spec, str(name), provenance)
+
+
+# --- recovery --------------------------------------------------------------------------
+
+
+def recover(runtime: Runtime, *, now: dt.datetime | None = None) -> list[str]:
+    """Re-queue or fail jobs whose worker stopped; return the ids that were re-queued.
+
+    A running job whose heartbeat is older than the lease was abandoned: it is queued again
+    unless it has been started ``job_attempts`` times, then it fails with the reason. A
+    queued job that the queue no longer holds (a Redis without persistence restarted) is
+    enqueued again; the claim makes a duplicate harmless.
+    """
+    now = now or utcnow()
+    cutoff = now - dt.timedelta(seconds=runtime.settings.job_lease_s)
+    limit = runtime.settings.job_attempts
+    requeued: list[str] = []
+    with runtime.sessions() as session:
+        stale = session.scalars(
+            select(Evaluation).where(
+                Evaluation.status == EvaluationStatus.RUNNING,
+                or_(Evaluation.heartbeat_at.is_(None), Evaluation.heartbeat_at < cutoff),
+            )
+        ).all()
+        for evaluation in stale:
+            if evaluation.attempts >= limit:
+                detail = (
+                    f"The evaluation was interrupted {evaluation.attempts} times (its worker "
+                    "stopped: a crash, a restart or running out of memory) and is not retried "
+                    "again; check the server log, and give the server more memory for very "
+                    "large recordings."
+                )
+                values: dict[str, Any] = {
+                    "status": EvaluationStatus.FAILED,
+                    "stage": "failed",
+                    "finished_at": now,
+                    "error": problem(500, "evaluation.interrupted", "JobInterrupted", detail),
+                }
+            else:
+                values = {
+                    "status": EvaluationStatus.QUEUED,
+                    "stage": f"queued again after an interruption (attempt {evaluation.attempts})",
+                    "fraction": 0.0,
+                }
+            done = session.execute(
+                update(Evaluation)
+                .where(
+                    Evaluation.id == evaluation.id,
+                    Evaluation.status == EvaluationStatus.RUNNING,
+                    Evaluation.heartbeat_at == evaluation.heartbeat_at,
+                )
+                .values(**values)
+            )
+            if done.rowcount and values["status"] == EvaluationStatus.QUEUED:  # type: ignore[attr-defined]
+                requeued.append(evaluation.id)
+        session.commit()
+        queued = set(
+            session.scalars(
+                select(Evaluation.id).where(
+                    Evaluation.status == EvaluationStatus.QUEUED,
+                    Evaluation.created_at < now - dt.timedelta(seconds=60),
+                )
+            ).all()
+        )
+    if queued and not runtime.huey.immediate:
+        pending = {str(t.args[0]) for t in runtime.huey.pending() if t.args}
+        lost = queued - pending - set(requeued)
+        requeued += sorted(lost)
+    for evaluation_id in requeued:
+        logger.warning("Evaluation %s queued again after an interruption", evaluation_id)
+        runtime.enqueue(evaluation_id)
+    return requeued

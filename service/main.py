@@ -1,0 +1,90 @@
+"""The FastAPI application: ``create_app(settings)``.
+
+``loceval serve`` builds it with the queue consumer running in the same process; tests build
+it with ``queue_url="immediate"`` (jobs run inside the request) or against a real server.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import APIRouter, FastAPI
+
+from loceval import __version__
+from service.api import datasets, evaluations, health
+from service.errors import install_error_handlers
+from service.jobs import Runtime, create_runtime, recover
+from service.settings import Settings, get_settings
+
+__all__ = ["create_app"]
+
+logger = logging.getLogger(__name__)
+
+_DESCRIPTION = """
+How well does this localization system work in *our* building? Upload recordings (ROS 1/2
+bags, MCAP, zipped bag folders, TUM, EuRoC, KITTI, OptiTrack Motive CSV, generic CSV),
+evaluate an estimate against the ground truth as a background job, and download the
+report (HTML, PDF), the errors (CSV) and the paths for CAD (DXF, Rhino 3dm, 3DM JSON, glTF).
+
+Every `/api/v1` request needs `Authorization: Bearer KEY`; every error is an
+`application/problem+json` document whose `detail` says what to do.
+"""
+
+
+def create_app(
+    settings: Settings | None = None,
+    *,
+    runtime: Runtime | None = None,
+    consumer: bool = False,
+) -> FastAPI:
+    """Return the application.
+
+    Args:
+        settings: the settings (default: from the environment).
+        runtime: an open runtime to use (default: one is opened from the settings, with
+            the migrations applied).
+        consumer: run the queue consumer threads inside this process (``loceval serve``).
+    """
+    settings = settings or get_settings()
+    runtime = runtime or create_runtime(settings)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        swept = runtime.store.sweep()
+        if swept:
+            logger.warning("Removed %d uploads left half-received by a crash", swept)
+        running = runtime.start_consumer() if consumer else None
+        if running is not None:
+            requeued = recover(runtime)
+            if requeued:
+                logger.warning("Queued %d interrupted evaluations again", len(requeued))
+        app.state.runtime = runtime
+        try:
+            yield
+        finally:
+            if running is not None:
+                running.stop(graceful=True)
+
+    app = FastAPI(
+        title="loceval",
+        version=__version__,
+        description=_DESCRIPTION,
+        lifespan=lifespan,
+    )
+    app.state.runtime = runtime
+    app.state.settings = settings
+    install_error_handlers(app)
+    api = APIRouter(prefix="/api/v1")
+    api.include_router(datasets.router)
+    api.include_router(evaluations.router)
+    app.include_router(api)
+    app.include_router(health.router)
+    try:
+        from service import web  # noqa: PLC0415
+    except ImportError:  # pragma: no cover  (the page is optional for API-only deployments)
+        logger.warning("The web page is not available (service.web missing)")
+    else:
+        app.include_router(web.router)
+    return app

@@ -1,0 +1,69 @@
+"""Service settings, read from ``LOCEVAL_*`` environment variables.
+
+The defaults run everything in one process with nothing installed: SQLite for metadata, a
+local folder for uploads and artifacts, and huey's SQLite queue. Scale-out changes settings,
+not code: ``LOCEVAL_DATABASE_URL=postgresql+psycopg://...``, ``LOCEVAL_QUEUE_URL=redis://...``
+and a shared ``LOCEVAL_DATA_DIR``.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+__all__ = ["Settings", "get_settings"]
+
+_REPO = Path(__file__).resolve().parent.parent
+_GIB = 1 << 30
+
+
+class Settings(BaseSettings):
+    """Everything the service reads from its environment.
+
+    Attributes:
+        data_dir: uploads, artifacts, the SQLite database and the SQLite queue live here.
+        database_url: SQLAlchemy URL of the metadata database (default: SQLite in data_dir).
+        queue_url: ``sqlite`` (huey's SQLite storage in data_dir), ``redis://host:port/db``,
+            or ``immediate`` (jobs run inside the request; for tests and debugging only).
+        max_upload_bytes: largest accepted upload; bigger ones get 413.
+        workers: queue consumer threads in ``serve`` and ``worker``.
+        job_attempts: how often an interrupted job is started before it is marked failed.
+        job_lease_s: a running job whose heartbeat is older than this is taken as abandoned.
+        templates_dir: Jinja2 templates of the reports and the web page.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
+
+    data_dir: Path = Path("var")
+    database_url: str = ""
+    queue_url: str = "sqlite"
+    max_upload_bytes: Annotated[int, Field(gt=0)] = 4 * _GIB
+    workers: Annotated[int, Field(ge=1, le=64)] = 2
+    job_attempts: Annotated[int, Field(ge=1, le=20)] = 3
+    job_lease_s: Annotated[float, Field(gt=0)] = 60.0
+    templates_dir: Path = _REPO / "templates"
+
+    @field_validator("queue_url")
+    @classmethod
+    def _known_queue(cls, value: str) -> str:
+        if value in {"sqlite", "immediate"} or value.startswith(("redis://", "rediss://")):
+            return value
+        msg = f"LOCEVAL_QUEUE_URL must be sqlite, immediate or redis://HOST:PORT/DB, not {value!r}"
+        raise ValueError(msg)
+
+    @property
+    def resolved_database_url(self) -> str:
+        """The database URL, defaulting to SQLite inside the data directory."""
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'loceval.db').resolve()}"
+
+
+@lru_cache
+def get_settings() -> Settings:
+    """Return the settings of this process (read once)."""
+    return Settings()

@@ -1,0 +1,98 @@
+"""The browser page: one HTML page, its script and its stylesheet, served by the API itself.
+
+No build step and nothing from the internet: the page is a Jinja2 template and two static
+files in ``templates/web/``. The page talks to ``/api/v1`` with the key the user pastes,
+so these routes need no key themselves and carry nothing secret.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Final
+
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import HTMLResponse, Response
+from jinja2 import Environment, FileSystemLoader
+
+from loceval import __version__
+
+__all__ = ["router"]
+
+router = APIRouter(include_in_schema=False)
+
+_WEB_DIR: Final = "web"
+_PAGE: Final = f"{_WEB_DIR}/index.html.j2"
+_HEADERS: Final = {
+    "Cache-Control": "no-cache",
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+}
+_ASSETS: Final = {
+    "app.js": "text/javascript; charset=utf-8",
+    "app.css": "text/css; charset=utf-8",
+}
+
+
+@lru_cache(maxsize=8)
+def _environment(templates_dir: Path) -> Environment:
+    """Return the Jinja2 environment of a templates folder (one per folder, reused)."""
+    return Environment(loader=FileSystemLoader(templates_dir), autoescape=True)
+
+
+def _templates_dir(request: Request) -> Path:
+    """Return the templates folder of the running app's settings."""
+    return Path(request.app.state.settings.templates_dir)
+
+
+@router.get("/", response_class=HTMLResponse, include_in_schema=False)
+def index(request: Request) -> HTMLResponse:
+    """Return the browser page.
+
+    Args:
+        request: The incoming request; its app's settings name the templates folder.
+
+    Returns:
+        The rendered page, never cached without a check.
+    """
+    template = _environment(_templates_dir(request)).get_template(_PAGE)
+    html = template.render(version=__version__)
+    return HTMLResponse(
+        html, headers={**_HEADERS, "X-Frame-Options": "DENY"}, media_type="text/html"
+    )
+
+
+def _asset(request: Request, name: str) -> Response:
+    """Return one static file of the page with its media type."""
+    path = _templates_dir(request) / _WEB_DIR / name
+    try:
+        content = path.read_bytes()
+    except FileNotFoundError as err:  # a deployment without the templates folder
+        raise HTTPException(status_code=404, detail=f"{name} is not installed") from err
+    return Response(content, media_type=_ASSETS[name], headers=_HEADERS)
+
+
+@router.get("/web/app.js", include_in_schema=False)
+def app_js(request: Request) -> Response:
+    """Return the page's script.
+
+    Args:
+        request: The incoming request; its app's settings name the templates folder.
+
+    Returns:
+        The script as ``text/javascript``.
+    """
+    return _asset(request, "app.js")
+
+
+@router.get("/web/app.css", include_in_schema=False)
+def app_css(request: Request) -> Response:
+    """Return the page's stylesheet.
+
+    Args:
+        request: The incoming request; its app's settings name the templates folder.
+
+    Returns:
+        The stylesheet as ``text/css``.
+    """
+    return _asset(request, "app.css")
