@@ -7,8 +7,6 @@ identical uploads racing each other end as one dataset (the unique SHA-256 per p
 
 from __future__ import annotations
 
-import re
-from pathlib import Path
 from typing import Final
 
 from sqlalchemy import select
@@ -21,7 +19,7 @@ from service.recordings import inspect_upload
 from service.storage import safe_filename
 from service.uploads import ReceivedFile
 
-__all__ = ["parse_tags", "scrub_paths", "store_upload"]
+__all__ = ["parse_tags", "store_upload"]
 
 _BAG_SUFFIXES: Final = {
     b"#ROSBAG": ".bag",
@@ -30,9 +28,6 @@ _BAG_SUFFIXES: Final = {
     b"PK\x03\x04": ".zip",
 }
 _MAX_TAGS: Final = 20
-_ID_FOLDER: Final = re.compile(
-    r"(?:[\w./-]*/)?(?:datasets|evaluations)/[0-9a-f-]{36}/(?:\.?[\w-]+/)?"
-)
 
 
 def parse_tags(text: str | None) -> list[str]:
@@ -46,12 +41,6 @@ def parse_tags(text: str | None) -> list[str]:
         msg = f"Give at most {_MAX_TAGS} tags of up to 50 characters, separated by commas."
         raise InputError(msg)
     return tags
-
-
-def scrub_paths(text: str, root: Path) -> str:
-    """Remove the server's folders from a message, keeping the file names."""
-    text = text.replace(str(root) + "/", "")
-    return _ID_FOLDER.sub("", text)
 
 
 def _filename(received: ReceivedFile) -> str:
@@ -96,7 +85,7 @@ def store_upload(
         inspection = inspect_upload(runtime.store.path(relative), filename)
     except LocevalError as err:
         runtime.store.remove_dataset(dataset_id)
-        raise type(err)(scrub_paths(str(err), runtime.store.root)) from err
+        raise type(err)(runtime.store.scrub(str(err))) from err
     except BaseException:
         runtime.store.remove_dataset(dataset_id)
         raise

@@ -174,7 +174,9 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
             artifacts=artifacts,
         )
     except LocevalError as err:
-        _finish(runtime, evaluation_id, status=EvaluationStatus.FAILED, error=problem_for(err))
+        body = problem_for(err)
+        body["detail"] = runtime.store.scrub(body["detail"])
+        _finish(runtime, evaluation_id, status=EvaluationStatus.FAILED, error=body)
     except Exception:
         error_id = uuid.uuid4().hex[:12]
         logger.exception("Evaluation %s failed with a bug (error_id=%s)", evaluation_id, error_id)

@@ -24,6 +24,9 @@ from typing import Final
 __all__ = ["BlobStore", "safe_filename"]
 
 _UNSAFE: Final = re.compile(r"[^\w.\-+]+")
+_ID_FOLDER: Final = re.compile(
+    r"(?:datasets|evaluations)/[0-9a-f-]{36}/(?:\.staging-[0-9a-f]+/|artifacts/)?"
+)
 
 
 def safe_filename(name: str, *, default: str = "upload") -> str:
@@ -48,6 +51,10 @@ class BlobStore:
         self.evaluations = self.root / "evaluations"
         for folder in (self.incoming, self.datasets, self.evaluations):
             folder.mkdir(parents=True, exist_ok=True)
+
+    def scrub(self, message: str) -> str:
+        """Remove the server's folders from a message for a client, keeping file names."""
+        return _ID_FOLDER.sub("", message.replace(f"{self.root}/", ""))
 
     def path(self, relative: str) -> Path:
         """Return the absolute path of a stored blob."""

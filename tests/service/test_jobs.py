@@ -1,0 +1,228 @@
+"""Evaluation jobs: claiming, failing with problems, recovery after crashes, migrations."""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+from pathlib import Path
+
+import pytest
+from alembic.autogenerate import compare_metadata
+from alembic.migration import MigrationContext
+from sqlalchemy import inspect, select
+
+from loceval.errors import AssociationError
+from service import jobs
+from service.db import Base, Dataset, Evaluation, Project, utcnow
+from service.jobs import Runtime, create_runtime, execute_evaluation, recover
+from service.settings import Settings
+from tests.factories import make_trajectory, write_tum
+
+
+@pytest.fixture
+def runtime(tmp_path: Path):
+    """A runtime on SQLite with huey's SQLite queue and no consumer: jobs wait in the queue."""
+    rt = create_runtime(Settings(data_dir=tmp_path / "data", job_lease_s=30, job_attempts=3))
+    yield rt
+    rt.close()
+
+
+def _dataset(rt: Runtime, project_id: str, path: Path) -> str:
+    """Store a TUM file as a dataset row (as an upload would) and return its id."""
+    folder = rt.store.datasets / path.stem
+    folder.mkdir(parents=True)
+    target = folder / path.name
+    target.write_bytes(path.read_bytes())
+    with rt.sessions() as session:
+        dataset = Dataset(
+            project_id=project_id,
+            name=path.name,
+            filename=path.name,
+            kind="tum",
+            size_bytes=target.stat().st_size,
+            sha256=path.stem.ljust(64, "0"),
+            tags=[],
+            inspection={"kind": "tum", "format": "tum", "sources": []},
+            storage_path=str(target.relative_to(rt.store.root)),
+        )
+        session.add(dataset)
+        session.commit()
+        return dataset.id
+
+
+@pytest.fixture
+def evaluation_id(runtime: Runtime, tmp_path: Path, rng) -> str:
+    """A queued evaluation of a synthetic estimate against its ground truth."""
+    truth = make_trajectory(rng, 200)
+    gt = write_tum(tmp_path / "gt.txt", truth)
+    est = write_tum(tmp_path / "est.txt", truth)
+    with runtime.sessions() as session:
+        project = Project(name="site")
+        session.add(project)
+        session.commit()
+    ref_id = _dataset(runtime, project.id, gt)
+    est_id = _dataset(runtime, project.id, est)
+    with runtime.sessions() as session:
+        evaluation = Evaluation(
+            project_id=project.id,
+            request={
+                "reference": {"dataset_id": ref_id, "selector": None, "name": "truth"},
+                "estimates": [{"dataset_id": est_id, "selector": None, "name": "copy"}],
+                "options": {"formats": ["errors.csv"]},
+            },
+            dataset_ids=[ref_id, est_id],
+        )
+        session.add(evaluation)
+        session.commit()
+        return evaluation.id
+
+
+def _row(rt: Runtime, evaluation_id: str) -> Evaluation:
+    with rt.sessions() as session:
+        return session.get_one(Evaluation, evaluation_id)
+
+
+def test_migrations_match_the_models(runtime: Runtime):
+    """The Alembic migrations create exactly the tables and columns the models declare."""
+    with runtime.engine.connect() as connection:
+        diff = compare_metadata(MigrationContext.configure(connection), Base.metadata)
+    assert diff == []
+    assert {"projects", "api_keys", "datasets", "evaluations", "alembic_version"} <= set(
+        inspect(runtime.engine).get_table_names()
+    )
+
+
+def test_migrations_are_idempotent(tmp_path: Path):
+    """Opening the same database twice applies nothing new and keeps the data."""
+    settings = Settings(data_dir=tmp_path)
+    first = create_runtime(settings)
+    with first.sessions() as session:
+        session.add(Project(name="kept"))
+        session.commit()
+    first.close()
+    second = create_runtime(settings)
+    with second.sessions() as session:
+        assert session.scalar(select(Project.name)) == "kept"
+    second.close()
+
+
+def test_job_succeeds_and_publishes_artifacts(runtime: Runtime, evaluation_id: str):
+    """A job runs to succeeded with the result document, summary and only its formats."""
+    execute_evaluation(runtime, evaluation_id)
+    row = _row(runtime, evaluation_id)
+    assert row.status == "succeeded"
+    assert (row.stage, row.fraction, row.attempts) == ("done", 1.0, 1)
+    assert row.result is not None
+    assert row.result["estimates"][0]["name"] == "copy"
+    assert row.summary is not None
+    assert row.summary[0]["ate_rmse_m"] == pytest.approx(0.0, abs=1e-9)
+    assert [a["name"] for a in row.artifacts or []] == ["result.json", "errors.csv"]
+    folder = runtime.store.evaluations / evaluation_id
+    assert sorted(p.name for p in folder.iterdir()) == ["artifacts"]  # no staging left
+    assert row.result["inputs"][0]["path"] == "gt.txt"  # no server path in the result
+
+
+def test_a_claimed_job_does_not_run_twice(runtime: Runtime, evaluation_id: str, monkeypatch):
+    """A job enqueued twice (recovery races a slow worker) runs once: the claim is atomic."""
+    execute_evaluation(runtime, evaluation_id)
+    calls = []
+    monkeypatch.setattr(jobs, "run_job", lambda *a, **_k: calls.append(a))
+    execute_evaluation(runtime, evaluation_id)
+    assert calls == []
+    assert _row(runtime, evaluation_id).attempts == 1
+
+
+def test_bad_input_fails_the_job_with_the_core_message(
+    runtime: Runtime, evaluation_id: str, monkeypatch
+):
+    """A LocevalError becomes a failed job with a problem document and no half artifacts."""
+
+    def fail(*_args, **_kwargs):
+        msg = f"No overlap in {runtime.store.root}/datasets/{evaluation_id}/est.txt; check."
+        raise AssociationError(msg)
+
+    monkeypatch.setattr(jobs, "run_job", fail)
+    execute_evaluation(runtime, evaluation_id)
+    row = _row(runtime, evaluation_id)
+    assert row.status == "failed"
+    assert row.error is not None
+    assert row.error["type"] == "association.no_matches"
+    assert row.error["status"] == 422
+    assert row.error["detail"] == "No overlap in est.txt; check."
+    assert not runtime.store.artifacts_dir(evaluation_id).exists()
+
+
+def test_a_bug_fails_the_job_with_an_error_id(
+    runtime: Runtime, evaluation_id: str, monkeypatch, caplog
+):
+    """Any other exception is logged with its traceback; the job shows only an error id."""
+
+    def crash(*_args, **_kwargs):
+        msg = "boom"
+        raise RuntimeError(msg)
+
+    monkeypatch.setattr(jobs, "run_job", crash)
+    with caplog.at_level(logging.ERROR, logger="service.jobs"):
+        execute_evaluation(runtime, evaluation_id)
+    row = _row(runtime, evaluation_id)
+    assert row.status == "failed"
+    assert row.error is not None
+    assert row.error["type"] == "internal"
+    assert row.error["error_id"] in row.error["detail"]
+    assert "boom" not in row.error["detail"]
+    assert row.error["error_id"] in caplog.text
+    assert "RuntimeError: boom" in caplog.text
+
+
+def _abandon(rt: Runtime, evaluation_id: str, *, attempts: int, beat_age_s: float) -> None:
+    """Make the row look like a worker died while running it."""
+    with rt.sessions() as session:
+        row = session.get_one(Evaluation, evaluation_id)
+        row.status = "running"
+        row.attempts = attempts
+        row.worker = "dead-host:1:abc"
+        row.heartbeat_at = utcnow() - dt.timedelta(seconds=beat_age_s)
+        session.commit()
+
+
+def test_recover_requeues_an_abandoned_job(runtime: Runtime, evaluation_id: str):
+    """A running job whose heartbeat stopped is queued again, and then runs to the end."""
+    _abandon(runtime, evaluation_id, attempts=1, beat_age_s=120)
+    assert recover(runtime) == [evaluation_id]
+    row = _row(runtime, evaluation_id)
+    assert row.status == "queued"
+    assert "interruption" in row.stage
+    assert [t.args for t in runtime.huey.pending()] == [(evaluation_id,)]
+    execute_evaluation(runtime, evaluation_id)
+    row = _row(runtime, evaluation_id)
+    assert (row.status, row.attempts) == ("succeeded", 2)
+
+
+def test_recover_leaves_live_jobs_alone(runtime: Runtime, evaluation_id: str):
+    """A running job with a fresh heartbeat belongs to a live worker and is not touched."""
+    _abandon(runtime, evaluation_id, attempts=1, beat_age_s=5)
+    assert recover(runtime) == []
+    assert _row(runtime, evaluation_id).status == "running"
+
+
+def test_recover_fails_a_job_after_the_attempt_limit(runtime: Runtime, evaluation_id: str):
+    """A job interrupted job_attempts times fails with the reason instead of looping."""
+    _abandon(runtime, evaluation_id, attempts=3, beat_age_s=120)
+    assert recover(runtime) == []
+    row = _row(runtime, evaluation_id)
+    assert row.status == "failed"
+    assert row.error is not None
+    assert row.error["type"] == "evaluation.interrupted"
+    assert "interrupted 3 times" in row.error["detail"]
+    assert runtime.huey.pending_count() == 0
+
+
+def test_recover_requeues_a_job_the_queue_lost(runtime: Runtime, evaluation_id: str):
+    """A queued job missing from the queue (a Redis restart) is enqueued again, once."""
+    with runtime.sessions() as session:
+        row = session.get_one(Evaluation, evaluation_id)
+        row.created_at = utcnow() - dt.timedelta(minutes=5)
+        session.commit()
+    assert recover(runtime) == [evaluation_id]
+    assert recover(runtime) == []  # now it is in the queue
+    assert runtime.huey.pending_count() == 1
