@@ -1,0 +1,65 @@
+# syntax=docker/dockerfile:1
+# The loceval service in one container: the API, the web page and the in-process queue consumer.
+#
+#   docker build -t loceval .
+#   docker run -p 8000:8000 -v loceval-data:/data loceval
+#
+# On the first start with an empty /data the log shows the API key of project "default" once
+# (`docker logs`); more keys: `docker exec CONTAINER .venv/bin/loceval keys create --project NAME`.
+# Settings are LOCEVAL_* environment variables (see service/settings.py), e.g.
+# LOCEVAL_DATABASE_URL=postgresql+psycopg://... and LOCEVAL_QUEUE_URL=redis://... to scale out
+# with more containers running `.venv/bin/loceval worker` on the same volume.
+FROM python:3.11-slim
+
+# No .pyc files in the image, log lines reach `docker logs` at once, no pip nagging.
+ENV PYTHONDONTWRITEBYTECODE=1 \
+    PYTHONUNBUFFERED=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1
+
+# System libraries WeasyPrint loads at runtime (PDF reports: Pango, HarfBuzz font subsetting,
+# a font to render with) and make for `make setup`. Only what is named, then drop apt's lists.
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends \
+        libpango-1.0-0 \
+        libpangoft2-1.0-0 \
+        libharfbuzz-subset0 \
+        fonts-dejavu-core \
+        make \
+    && rm -rf /var/lib/apt/lists/*
+
+# The unprivileged user the service runs as, with a home for matplotlib's and fontconfig's
+# caches. /data (uploads, artifacts, SQLite database and queue) belongs to it; it must exist
+# with this owner before the VOLUME line, or a fresh named volume would be owned by root.
+RUN groupadd --system --gid 10001 loceval \
+    && useradd --system --uid 10001 --gid loceval --create-home --home-dir /home/loceval \
+        --shell /usr/sbin/nologin loceval \
+    && mkdir /data \
+    && chown loceval:loceval /data
+
+WORKDIR /app
+
+# The project (.dockerignore keeps out .venv, .git, outputs and caches). It stays owned by
+# root: the service can read its code and templates but not change them.
+COPY . .
+
+# Install exactly as the README does: `make setup` creates .venv and runs
+# `pip install -e ".[all]"` (runtime dependencies, service included; no dev tools), so the
+# path tested outside the container is the container's path. pip's download cache lives in a
+# BuildKit cache mount: it speeds up rebuilds and never lands in the image.
+RUN --mount=type=cache,target=/root/.cache/pip make setup
+
+# Where the service keeps its state; mount a volume here to keep it across containers.
+ENV LOCEVAL_DATA_DIR=/data
+VOLUME /data
+
+EXPOSE 8000
+
+# Liveness through the standard library (the slim image has no curl): /healthz answers 200
+# {"status": "ok"}; urlopen raises on errors and refusals, and any exception exits non-zero.
+HEALTHCHECK --interval=30s --timeout=5s --start-period=30s --retries=3 \
+    CMD ["/app/.venv/bin/python", "-c", "import urllib.request; urllib.request.urlopen('http://127.0.0.1:8000/healthz', timeout=4)"]
+
+USER loceval
+
+# Listen on all interfaces inside the container; publish the port with -p.
+CMD [".venv/bin/loceval", "serve", "--host", "0.0.0.0", "--port", "8000"]
