@@ -530,7 +530,7 @@ def _cmd_worker(_args: argparse.Namespace) -> int:
         f"loceval worker: {settings.workers} threads on queue {settings.queue_url}", flush=True
     )
     stop.wait()
-    consumer.stop(graceful=True)
+    runtime.stop_consumer(consumer)
     runtime.close()
     return 0
 

@@ -54,7 +54,14 @@ from service.pipeline import (
 from service.settings import Settings
 from service.storage import BlobStore
 
-__all__ = ["Runtime", "create_runtime", "evaluation_summary", "execute_evaluation", "recover"]
+__all__ = [
+    "Runtime",
+    "create_runtime",
+    "evaluation_summary",
+    "execute_evaluation",
+    "recover",
+    "release",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -87,9 +94,17 @@ class Runtime:
             periodic=periodic,
             max_delay=2.0,
             check_worker_health=True,
+            shutdown_timeout=10.0,
         )
         consumer.start()
         return consumer
+
+    def stop_consumer(self, consumer: Consumer) -> None:
+        """Stop the consumer (running jobs get 10 s) and queue again what did not finish."""
+        consumer.stop(graceful=True)
+        released = release(self)
+        if released:
+            logger.warning("Queued %d unfinished evaluations again for the next start", released)
 
     def close(self) -> None:
         """Release the database connections."""
@@ -472,3 +487,34 @@ def recover(runtime: Runtime, *, now: dt.datetime | None = None) -> list[str]:
         logger.warning("Evaluation %s queued again after an interruption", evaluation_id)
         runtime.enqueue(evaluation_id)
     return requeued
+
+
+def release(runtime: Runtime) -> int:
+    """Queue again the jobs this process was running when it stopped; return how many.
+
+    Their threads are abandoned (daemon threads end with the process); whatever they still
+    write is ignored, because a finished job is recorded only by the worker that holds it.
+    """
+    with runtime.sessions() as session:
+        ids = session.scalars(
+            select(Evaluation.id).where(
+                Evaluation.status == EvaluationStatus.RUNNING,
+                Evaluation.worker == runtime.worker_id,
+            )
+        ).all()
+        for evaluation_id in ids:
+            session.execute(
+                update(Evaluation)
+                .where(Evaluation.id == evaluation_id, Evaluation.worker == runtime.worker_id)
+                .values(
+                    status=EvaluationStatus.QUEUED,
+                    worker=None,
+                    heartbeat_at=None,
+                    stage="queued again: the service stopped while it ran",
+                    fraction=0.0,
+                )
+            )
+        session.commit()
+    for evaluation_id in ids:
+        runtime.enqueue(evaluation_id)
+    return len(ids)

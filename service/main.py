@@ -65,7 +65,7 @@ def create_app(
             yield
         finally:
             if running is not None:
-                running.stop(graceful=True)
+                runtime.stop_consumer(running)
 
     app = FastAPI(
         title="loceval",

@@ -226,3 +226,22 @@ def test_recover_requeues_a_job_the_queue_lost(runtime: Runtime, evaluation_id: 
     assert recover(runtime) == [evaluation_id]
     assert recover(runtime) == []  # now it is in the queue
     assert runtime.huey.pending_count() == 1
+
+
+def test_release_requeues_the_jobs_of_a_stopping_worker(runtime: Runtime, evaluation_id: str):
+    """Jobs still running when the service stops are queued again at once, not left running."""
+    with runtime.sessions() as session:
+        row = session.get_one(Evaluation, evaluation_id)
+        row.status, row.worker, row.attempts = "running", runtime.worker_id, 1
+        session.commit()
+    assert jobs.release(runtime) == 1
+    row = _row(runtime, evaluation_id)
+    assert (row.status, row.worker) == ("queued", None)
+    assert [t.args for t in runtime.huey.pending()] == [(evaluation_id,)]
+
+
+def test_release_leaves_other_workers_jobs(runtime: Runtime, evaluation_id: str):
+    """Only this process's jobs are released; another worker's run on."""
+    _abandon(runtime, evaluation_id, attempts=1, beat_age_s=0)
+    assert jobs.release(runtime) == 0
+    assert _row(runtime, evaluation_id).status == "running"
