@@ -225,15 +225,16 @@ def _claim(runtime: Runtime, evaluation_id: str) -> bool:
 
 
 def _finish(runtime: Runtime, evaluation_id: str, *, status: str, **values: Any) -> None:  # noqa: ANN401
-    stage = "done" if status == EvaluationStatus.SUCCEEDED else "failed"
+    succeeded = status == EvaluationStatus.SUCCEEDED
     with runtime.sessions() as session:
         session.execute(
             update(Evaluation)
             .where(Evaluation.id == evaluation_id, Evaluation.worker == runtime.worker_id)
             .values(
                 status=status,
-                stage=stage,
-                fraction=1.0 if status == EvaluationStatus.SUCCEEDED else Evaluation.fraction,
+                # A failed job keeps the stage it failed in ("reading est", "writing report.pdf").
+                stage="done" if succeeded else Evaluation.stage,
+                fraction=1.0 if succeeded else Evaluation.fraction,
                 finished_at=utcnow(),
                 heartbeat_at=None,
                 **values,
@@ -414,7 +415,7 @@ def _source(
     provenance = file_provenance(role, spec, sha256=dataset.sha256)
     provenance.update(path=dataset.filename, dataset_id=dataset.id)
     name = ref.get("name") or ref.get("selector") or Path(dataset.filename).stem
-    return JobSource(spec, str(name), provenance)
+    return JobSource(spec, str(name), provenance, display_path=dataset.filename)
 
 
 # --- recovery --------------------------------------------------------------------------

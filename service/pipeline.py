@@ -28,6 +28,7 @@ from loceval.evaluation import (
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import RPEUnit
 from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
+from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from exporters.options import ExportOptions
@@ -57,11 +58,26 @@ class JobSource:
         spec: the parsed source.
         name: the trajectory's name in the result.
         provenance: the input record of the result (file, checksum, selector, dataset id).
+        display_path: shown instead of the file's path in the result and the reports (the
+            service shows the uploaded file name, not its folders on the server).
     """
 
     spec: SourceSpec
     name: str
     provenance: Mapping[str, object] = field(default_factory=dict)
+    display_path: str | None = None
+
+    def read(self, *, stamp: str) -> Trajectory:
+        """Read the trajectory, naming the file by ``display_path`` when given."""
+        trajectory = read_trajectory(self.spec, name=self.name, stamp=stamp)
+        if self.display_path is None:
+            return trajectory
+        path, shown = str(self.spec.path), self.display_path
+        return replace(
+            trajectory,
+            source=trajectory.source.replace(path, shown),
+            warnings=tuple(w.replace(path, shown) for w in trajectory.warnings),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,7 +122,7 @@ def run_job(
     trajectories = []
     for k, source in enumerate(sources):
         report(f"reading {source.name}", _READ * k / len(sources))
-        trajectories.append(read_trajectory(source.spec, name=source.name, stamp=job.stamp))
+        trajectories.append(source.read(stamp=job.stamp))
 
     def evaluating(stage: str, fraction: float) -> None:
         report(stage, _READ + (_EVALUATE - _READ) * fraction)

@@ -134,6 +134,10 @@ class _Receiver:
         self._name = params[b"name"].decode("utf-8", "replace")
         filename = params.get(b"filename")
         self._filename = None if filename is None else filename.decode("utf-8", "replace")
+        if self._filename and self._name not in self.file_fields:
+            fields = " or ".join(repr(f) for f in sorted(self.file_fields))
+            msg = f"The form field {self._name!r} holds a file; send files only in {fields}."
+            raise UploadError(msg)
         if self._filename is not None and self._name in self.file_fields:
             if len(self.form.files) >= self.max_files:
                 msg = f"Too many files in one request (at most {self.max_files}); send fewer."
@@ -200,8 +204,9 @@ class _Receiver:
 
 
 def _too_large(max_bytes: int) -> str:
+    limit = f"{max_bytes / 1e6:,.0f} MB" if max_bytes >= 10**6 else f"{max_bytes:,} bytes"
     return (
-        f"The upload is larger than the limit of {max_bytes / 1e6:,.0f} MB; split the "
+        f"The upload is larger than the limit of {limit}; split the "
         "recording, or raise LOCEVAL_MAX_UPLOAD_BYTES on the server."
     )
 

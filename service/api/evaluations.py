@@ -25,7 +25,6 @@ from service.schemas import (
     EvaluationOptions,
     EvaluationPublic,
     EvaluationsPublic,
-    SourceRef,
 )
 from service.uploads import ReceivedForm, receive_multipart
 
@@ -211,18 +210,23 @@ def _evaluate_form(runtime: Runtime, project_id: str, form: ReceivedForm) -> Eva
     reference, _ = store_upload(runtime, project_id, references[0])
     stored = [store_upload(runtime, project_id, f)[0] for f in estimates]
     refs = [
-        SourceRef(
-            dataset_id=(stored[k].id if stored else reference.id),
-            selector=(selectors[k] or None) if selectors else None,
-            name=(names[k] or None) if names else None,
-        )
+        {
+            "dataset_id": (stored[k].id if stored else reference.id),
+            "selector": (selectors[k] or None) if selectors else None,
+            "name": (names[k] or None) if names else None,
+        }
         for k in range(count)
     ]
-    try:
-        body = EvaluationCreate(
-            reference=SourceRef(dataset_id=reference.id, selector=form.value("reference_selector")),
-            estimates=refs,
-            options=options,
+    try:  # one validation, so every error names its place (estimates.0.selector)
+        body = EvaluationCreate.model_validate(
+            {
+                "reference": {
+                    "dataset_id": reference.id,
+                    "selector": form.value("reference_selector"),
+                },
+                "estimates": refs,
+                "options": options,
+            }
         )
     except ValidationError as err:
         raise RequestValidationError(err.errors()) from None

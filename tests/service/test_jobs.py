@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import json
 import logging
 from pathlib import Path
 
@@ -120,6 +121,10 @@ def test_job_succeeds_and_publishes_artifacts(runtime: Runtime, evaluation_id: s
     folder = runtime.store.evaluations / evaluation_id
     assert sorted(p.name for p in folder.iterdir()) == ["artifacts"]  # no staging left
     assert row.result["inputs"][0]["path"] == "gt.txt"  # no server path in the result
+    assert str(runtime.store.root) not in json.dumps(row.result)
+    assert row.result["reference"]["source"] == "tum:gt.txt"
+    report = (runtime.store.artifacts_dir(evaluation_id) / "errors.csv").read_text()
+    assert str(runtime.store.root) not in report
 
 
 def test_a_claimed_job_does_not_run_twice(runtime: Runtime, evaluation_id: str, monkeypatch):
@@ -149,6 +154,7 @@ def test_bad_input_fails_the_job_with_the_core_message(
     assert row.error["type"] == "association.no_matches"
     assert row.error["status"] == 422
     assert row.error["detail"] == "No overlap in est.txt; check."
+    assert row.stage == "starting"  # the stage it failed in is kept
     assert not runtime.store.artifacts_dir(evaluation_id).exists()
 
 
