@@ -17,6 +17,7 @@ from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import Match
 
 from exporters.errors import ExportUnavailableError
 from loceval.errors import (
@@ -47,6 +48,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 PROBLEM_JSON: Final = "application/problem+json"
+_METHODS: Final = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
 
 
 class NotFoundError(LocevalError):
@@ -176,14 +178,37 @@ async def _handle_validation_error(_request: Request, exc: Exception) -> JSONRes
     return _response(body)
 
 
-async def _handle_http_error(_request: Request, exc: Exception) -> JSONResponse:
+def _allowed_methods(request: Request) -> str:
+    """Return every method the request's path answers to (Starlette names one route's only)."""
+    routes = request.app.router.routes
+    allowed = [
+        method
+        for method in _METHODS
+        if any(r.matches({**request.scope, "method": method})[0] is Match.FULL for r in routes)
+    ]
+    return ", ".join(allowed)
+
+
+async def _handle_http_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, StarletteHTTPException)  # noqa: S101
+    if exc.status_code == 400 and isinstance(exc.__cause__, UnicodeDecodeError):
+        # FastAPI's 400 for a JSON body that is not UTF-8: the same 422 as any undecodable JSON.
+        msg = "JSON decode error (the body is not UTF-8)"
+        errors = [{"loc": ["body"], "msg": msg, "type": "json_invalid"}]
+        detail = f"The request is not valid: body: {msg}."
+        return _response(
+            problem(422, "request.invalid", "RequestValidationError", detail, errors=errors)
+        )
     titles = {404: "NotFound", 405: "MethodNotAllowed", 401: "Unauthorized"}
     detail = str(exc.detail)
     if exc.status_code == 404 and detail == "Not Found":
         detail = "No such endpoint; the API is described at /docs."
+    headers = dict(exc.headers or {})
+    if exc.status_code == 405 and (allowed := _allowed_methods(request)):
+        headers["Allow"] = allowed
+        detail = f"This endpoint answers to {allowed} only."
     body = problem(exc.status_code, "http", titles.get(exc.status_code, "HTTPError"), detail)
-    return _response(body, exc.headers)
+    return _response(body, headers)
 
 
 async def _handle_bug(_request: Request, exc: Exception) -> JSONResponse:

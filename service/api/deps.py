@@ -30,6 +30,7 @@ RuntimeDep = Annotated[Runtime, Depends(get_runtime)]
 
 
 def current_project(
+    request: Request,
     runtime: RuntimeDep,
     credentials: Annotated[HTTPAuthorizationCredentials | None, Security(_bearer)],
 ) -> str:
@@ -38,6 +39,9 @@ def current_project(
     Raises:
         AuthenticationError: no Bearer key, or one that is unknown or revoked.
     """
+    known = getattr(request.state, "project_id", None)
+    if isinstance(known, str):
+        return known  # checked by ApiKeyMiddleware before the body was read
     if credentials is None:
         msg = (
             "This endpoint needs an API key: send the header 'Authorization: Bearer KEY' "

@@ -207,29 +207,29 @@ def _evaluate_form(runtime: Runtime, project_id: str, form: ReceivedForm) -> Eva
     if names and len(names) != count:
         msg = f"Send one estimate_name per estimate ({count}), or none."
         raise UploadError(msg)
-    reference, _ = store_upload(runtime, project_id, references[0])
-    stored = [store_upload(runtime, project_id, f)[0] for f in estimates]
-    refs = [
+    reference_ref: dict[str, str | None] = {
+        "dataset_id": "pending",
+        "selector": form.value("reference_selector"),
+    }
+    estimate_refs: list[dict[str, str | None]] = [
         {
-            "dataset_id": (stored[k].id if stored else reference.id),
+            "dataset_id": "pending",
             "selector": (selectors[k] or None) if selectors else None,
             "name": (names[k] or None) if names else None,
         }
         for k in range(count)
     ]
-    try:  # one validation, so every error names its place (estimates.0.selector)
-        body = EvaluationCreate.model_validate(
-            {
-                "reference": {
-                    "dataset_id": reference.id,
-                    "selector": form.value("reference_selector"),
-                },
-                "estimates": refs,
-                "options": options,
-            }
-        )
+    draft = {"reference": reference_ref, "estimates": estimate_refs, "options": options}
+    try:  # checked before any file is stored; every error names its place (estimates.0.name)
+        EvaluationCreate.model_validate(draft)
     except ValidationError as err:
         raise RequestValidationError(err.errors()) from None
+    reference, _ = store_upload(runtime, project_id, references[0])
+    stored = [store_upload(runtime, project_id, f)[0] for f in estimates]
+    reference_ref["dataset_id"] = reference.id
+    for k, estimate in enumerate(estimate_refs):
+        estimate["dataset_id"] = stored[k].id if stored else reference.id
+    body = EvaluationCreate.model_validate(draft)
     return create_evaluation(runtime, project_id, body)
 
 

@@ -1,0 +1,324 @@
+"""Schema fuzzing: schemathesis against the app's own OpenAPI document, with and without a key.
+
+The schema is read at import (``@schema.parametrize()`` needs it then) from an app built on a
+placeholder runtime, which serves the same document; a test checks it equals the served one.
+Requests go to the real app of the ``api`` fixture through a small ASGI proxy, because the
+fixture's data folder exists only at run time (``schemathesis.pytest.from_fixture`` would
+avoid the proxy, but it reads pytest's private ``Node._nodeid``, gone in pytest 9).
+
+Multipart bodies are generated from the declared request bodies; the file parts are then
+replaced, per example, by one of a few real recordings (valid TUM/CSV/MCAP, a truncated MCAP,
+random bytes) or kept as generated, so uploads reach the readers rather than stopping at
+"unrecognised file".
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Awaitable, Callable, Iterator, MutableMapping
+from typing import Any
+
+import numpy as np
+import pytest
+import schemathesis
+from hypothesis import HealthCheck, Phase, settings
+from hypothesis import strategies as st
+from schemathesis.checks import not_a_server_error
+from schemathesis.specs.openapi.checks import (
+    allow_header_conformance,
+    content_type_conformance,
+    ignored_auth,
+    missing_required_header,
+    negative_data_rejection,
+    positive_data_acceptance,
+    response_headers_conformance,
+    response_schema_conformance,
+    status_code_conformance,
+    unsupported_method,
+)
+
+from tests import bagfactory
+from tests.factories import make_trajectory, perturb, write_csv, write_tum
+from tests.service._api_fixtures import (
+    PROBLEM_JSON,
+    PROBLEM_KEYS,
+    Api,
+    bearer,
+    offline_app,
+    open_api,
+)
+
+_Scope = MutableMapping[str, Any]
+_Receive = Callable[[], Awaitable[MutableMapping[str, Any]]]
+_Send = Callable[[MutableMapping[str, Any]], Awaitable[None]]
+
+SPEC: dict[str, Any] = offline_app().openapi()
+
+MULTIPART = frozenset({"/api/v1/datasets", "/api/v1/evaluate"})
+LISTS = frozenset({"/api/v1/datasets", "/api/v1/evaluations"})
+FILE_FIELDS = {"file", "reference", "estimate"}
+RECORDINGS = ("tum", "csv", "generated", "mcap", "mcap-truncated", "random")
+
+CHECKS = [
+    not_a_server_error,
+    status_code_conformance,
+    content_type_conformance,
+    response_headers_conformance,
+    response_schema_conformance,
+    negative_data_rejection,
+    positive_data_acceptance,
+    missing_required_header,
+    unsupported_method,
+    allow_header_conformance,
+    ignored_auth,
+]
+"""Every built-in check of single responses; the stateful ones need links the API lacks."""
+
+EXAMPLES = 20
+
+
+class _Proxy:
+    """An ASGI app that forwards requests to the app of the running test.
+
+    Lifespan events are answered here: the real app's lifespan is run by its TestClient.
+    """
+
+    app: Callable[[_Scope, _Receive, _Send], Awaitable[None]] | None = None
+
+    async def __call__(self, scope: _Scope, receive: _Receive, send: _Send) -> None:
+        if scope["type"] == "lifespan":
+            while (await receive())["type"] != "lifespan.shutdown":
+                await send({"type": "lifespan.startup.complete"})
+            await send({"type": "lifespan.shutdown.complete"})
+            return
+        assert self.app is not None, "the api fixture is not active"
+        await self.app(scope, receive, send)
+
+
+PROXY = _Proxy()
+schema = schemathesis.openapi.from_dict(SPEC)
+schema.app = PROXY
+# Unknown query parameters are ignored (FastAPI's behaviour, and harmless), not refused.
+schema.config.generation.update(allow_extra_parameters=False)
+api_schema = schema.include(path_regex="^/api/v1/")
+
+
+@pytest.fixture(scope="module")
+def api(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Api]:
+    """One app for the module's examples; the proxy points at it while the module runs."""
+    with open_api(tmp_path_factory.mktemp("schemathesis")) as api:
+        PROXY.app = api.app
+        try:
+            yield api
+        finally:
+            PROXY.app = None
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory: pytest.TempPathFactory) -> dict[str, bytes]:
+    """Real files to put into the generated multipart bodies (seeded like the rng fixture)."""
+    rng = np.random.default_rng(20240601)
+    folder = tmp_path_factory.mktemp("recordings")
+    truth = make_trajectory(rng, 60)
+    poses = bagfactory.random_poses(rng, 40, dt_ns=20_000_000)
+    bag = bagfactory.write_bag(
+        folder / "run",
+        bagfactory.pose_records("/pose", bagfactory.POSE, poses),
+        fmt="mcap",
+    )
+    mcap = next(bag.glob("*.mcap")).read_bytes()
+    return {
+        "tum": write_tum(folder / "truth.txt", truth).read_bytes(),
+        "csv": write_csv(folder / "est.csv", perturb(truth, rng)).read_bytes(),
+        "mcap": mcap,
+        "mcap-truncated": mcap[: len(mcap) // 2],
+        "random": rng.bytes(2000),
+    }
+
+
+def _with_recordings(case: Any, picks: list[str], recordings: dict[str, bytes]) -> None:
+    """Put the picked recordings into a generated multipart body.
+
+    The file parts take the picks in order ("generated" keeps schemathesis' bytes). In a
+    one-shot /evaluate body the remaining picks become the estimate files (replacing
+    generated selectors), and options that are not a JSON object become cheap ones
+    (result.json only), so that some examples run a whole evaluation in the request
+    without rendering a PDF each time; the plain with-key test fuzzes those fields.
+    """
+    if case.operation.path not in MULTIPART or not isinstance(case.body, dict):
+        return
+    chosen = iter(picks)
+
+    def pick(value: object) -> object:
+        name = next(chosen, "generated")
+        return value if name == "generated" else recordings[name]
+
+    for field in sorted(FILE_FIELDS & case.body.keys()):
+        value = case.body[field]
+        case.body[field] = [pick(v) for v in value] if isinstance(value, list) else pick(value)
+    rest = [recordings[name] for name in chosen if name != "generated"]
+    if case.operation.path == "/api/v1/evaluate" and rest:
+        case.body["estimate"] = rest
+        case.body.pop("estimate_selector", None)
+        if not _is_json_object(case.body.get("options")):
+            case.body["options"] = json.dumps({"formats": ["result.json"]})
+
+
+def _is_json_object(text: object) -> bool:
+    try:
+        return isinstance(text, str) and isinstance(json.loads(text), dict)
+    except json.JSONDecodeError:
+        return False
+
+
+def problem_json(_ctx: object, response: Any, case: Any) -> None:
+    """Every error response is an RFC 9457 problem whose status is the HTTP status."""
+    if response.status_code < 400:
+        return
+    content_type = response.headers.get("content-type", [""])[0].split(";")[0]
+    assert content_type == PROBLEM_JSON, (case.operation.label, response.status_code, content_type)
+    body = json.loads(response.content)
+    assert isinstance(body, dict), body
+    assert body.keys() >= PROBLEM_KEYS, body
+    assert body["status"] == response.status_code, body
+    assert isinstance(body["detail"], str), body
+    assert body["detail"], body
+    assert "Traceback" not in response.text
+
+
+def test_schema_is_the_served_one(api: Api) -> None:
+    """The document fuzzed here is the one /openapi.json serves, with every route in it."""
+    served = api.client.get("/openapi.json").json()
+    assert served == SPEC
+    assert len(list(schema.get_all_operations())) == sum(len(ops) for ops in SPEC["paths"].values())
+
+
+@api_schema.parametrize()
+@settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    suppress_health_check=list(HealthCheck),
+    derandomize=True,
+)
+def test_api_with_key(case: Any, api: Api) -> None:
+    """With a valid key: no 500, responses as documented, every error a problem document."""
+    _call_with_key(case, api)
+
+
+@schema.include(path_regex="^/api/v1/(datasets|evaluate)$", method="POST").parametrize()
+@schema.given(picks=st.lists(st.sampled_from(RECORDINGS), min_size=2, max_size=4))
+@settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    suppress_health_check=list(HealthCheck),
+    derandomize=True,
+    phases=[Phase.generate],  # the schema's examples cannot fill `picks`
+)
+def test_uploads_of_recordings(
+    case: Any,
+    picks: list[str],
+    api: Api,
+    recordings: dict[str, bytes],
+) -> None:
+    """Uploads of real, damaged and random files: no 500, every error a problem document."""
+    _with_recordings(case, picks, recordings)
+    _call_with_key(case, api)
+
+
+@pytest.mark.parametrize(
+    ("path", "body", "status"),
+    [
+        ("/api/v1/datasets", {"file": "tum", "name": "run 1", "tags": "a, b"}, 201),
+        ("/api/v1/datasets", {"file": "mcap"}, 201),
+        ("/api/v1/datasets", {"file": "mcap-truncated"}, 422),
+        ("/api/v1/evaluate", {"reference": "tum", "estimate": ["csv", "tum"]}, 202),
+        ("/api/v1/evaluate", {"reference": "mcap", "estimate_selector": ["/pose"]}, 422),
+    ],
+)
+def test_upload_cases(
+    path: str, body: dict[str, Any], status: int, api: Api, recordings: dict[str, bytes]
+) -> None:
+    """Hand-made multipart cases: the success bodies conform to the schema too."""
+    files = {"file", "reference", "estimate"}
+    payload: dict[str, Any] = {
+        k: ([recordings[n] for n in v] if isinstance(v, list) else recordings[v])
+        if k in files
+        else v
+        for k, v in body.items()
+    }
+    if path == "/api/v1/evaluate":
+        payload["options"] = json.dumps({"formats": ["result.json"]})
+    case = schema[path]["POST"].Case(body=payload, media_type="multipart/form-data")
+    response = case.call_and_validate(
+        headers=bearer(api.key),
+        checks=CHECKS,
+        excluded_checks=[positive_data_acceptance],
+        additional_checks=[problem_json],
+    )
+    expected = {201, 200} if status == 201 else {status}  # 200: uploaded by an earlier test
+    assert response.status_code in expected
+    if status == 202:
+        assert response.json()["status"] == "succeeded"
+
+
+def _call_with_key(case: Any, api: Api) -> None:
+    excluded = []
+    if case.method not in {"GET", "DELETE"}:
+        # Schema-valid is not enough to be accepted: an upload's bytes must be a recording
+        # (else 422), /evaluate must name an estimate (else 400), and option strings have a
+        # grammar (tolerance "0.10@95", site "x y z yaw", a cron line; formats are artifact
+        # names, which the schema leaves as any string) that the schema does not spell out.
+        # The checks below still hold for these requests.
+        excluded.append(positive_data_acceptance)
+    if case.method == "GET" and case.operation.path in LISTS:
+        # A repeated query parameter (?tag=a&tag=b) counts once, with its last value (FastAPI's
+        # rule); schemathesis sends repeats as schema-violating. Bad values are refused (422),
+        # which test_api_bad_input checks parameter by parameter.
+        excluded.append(negative_data_rejection)
+    if case.operation.path in MULTIPART:
+        # Every multipart field is text on the wire, so a "wrong type" for a text field (null,
+        # 12, true) arrives as the valid string "null", "12", "true" and is rightly taken.
+        excluded.append(negative_data_rejection)
+    case.call_and_validate(
+        headers=bearer(api.key),
+        checks=CHECKS,
+        excluded_checks=excluded,
+        additional_checks=[problem_json],
+    )
+
+
+@api_schema.parametrize()
+@settings(
+    max_examples=EXAMPLES,
+    deadline=None,
+    suppress_health_check=list(HealthCheck),
+    derandomize=True,
+)
+def test_api_without_key(case: Any, api: Api) -> None:
+    """Without a key (or with a generated one) nothing is reached: 401 or a routing error."""
+    headers = {k: v for k, v in (case.headers or {}).items() if k.lower() != "authorization"}
+    if case.headers and any(k.lower() == "authorization" for k in case.headers):
+        headers["Authorization"] = "Bearer lcv_" + "0" * 43  # a well-formed key nobody holds
+    case.headers = headers
+    before = api.stored()
+    response = case.call()
+    problem_json(None, response, case)
+    body = response.json()
+    if response.status_code != 401:
+        # The path did not lead to an endpoint, so there was nothing to authenticate.
+        assert response.status_code in {404, 405}, body
+        assert body["type"] == "http", body
+    else:
+        assert response.headers["www-authenticate"] == ["Bearer"]
+    assert api.stored() == before
+
+
+@schema.include(path_regex="^/(healthz|readyz)$").parametrize()
+@settings(max_examples=5, deadline=None, suppress_health_check=list(HealthCheck))
+def test_probes(case: Any, api: Api) -> None:
+    """The probes need no key and answer 200."""
+    assert api.app is not None
+    response = case.call_and_validate(checks=CHECKS, additional_checks=[problem_json])
+    if case.method == "GET":
+        assert response.status_code == 200
+        assert response.json()["status"] in {"ok", "ready"}
