@@ -14,22 +14,23 @@ import sys
 import traceback
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from loceval import __version__
 from loceval.alignment import AlignMethod
 from loceval.association import AssociationMethod
 from loceval.errors import InputError, LocevalError
-from loceval.evaluation import EvaluationConfig, EvaluationResult
+from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import DEFAULT_THRESHOLDS_M, ErrorSeries, ErrorStats, RPEUnit
-from loceval.readers import TrajectoryFormat, parse_source, read_trajectory
+from loceval.readers import SourceSpec, TrajectoryFormat, parse_source, read_trajectory
 from loceval.trajectory import Trajectory
 from service.pipeline import (
     Job,
     JobSource,
     build_config,
     build_export_options,
+    config_from_options,
     default_name,
     device_offset,
     file_provenance,
@@ -177,6 +178,29 @@ def build_parser() -> argparse.ArgumentParser:  # noqa: PLR0915  (one flat list 
     )
     demo.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR")
     demo.set_defaults(handler=_cmd_demo)
+
+    report = sub.add_parser(
+        "report",
+        help="one summary report over many recordings (as a schedule run makes it)",
+        description=(
+            "Evaluate each recording with the same template and write one summary report "
+            "(summary.html, summary.pdf): a row per recording, a trend per system, the "
+            "systems side by side, and the repeatability of the reference paths."
+        ),
+    )
+    report.add_argument(
+        "--datasets", nargs="+", required=True, type=Path, metavar="FILE", help="recordings"
+    )
+    report.add_argument(
+        "--template",
+        required=True,
+        type=Path,
+        metavar="FILE",
+        help='JSON: {"reference": {"selector": ...}, "estimates": [...], "options": {...}}',
+    )
+    report.add_argument("--out", required=True, type=_folder, metavar="DIR")
+    report.add_argument("--title", default="Summary report", help="the report's title")
+    report.set_defaults(handler=_cmd_report)
 
     serve = sub.add_parser(
         "serve",
@@ -482,6 +506,109 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return main(argv)
 
 
+# --- report -----------------------------------------------------------------------------
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    import datetime as dt  # noqa: PLC0415
+
+    from exporters.summary import SummaryInput, SummaryRun, render_summary  # noqa: PLC0415
+
+    template = _read_template(args.template)
+    options = template["options"]
+    config = config_from_options(options, reference_offset=offset_or_none(options.get("offset")))
+    runs = []
+    for path in args.datasets:
+        recorded = (
+            dt.datetime.fromtimestamp(path.stat().st_mtime, dt.UTC)
+            if path.exists()
+            else (dt.datetime.now(dt.UTC))
+        )
+        job = _template_job(path, template, config)
+        try:
+            result = run_job(job, None)
+        except LocevalError as err:
+            runs.append(SummaryRun(path.name, recorded, "failed", error=str(err)))
+            continue
+        runs.append(
+            SummaryRun.from_result(
+                result.to_dict(),
+                dataset=path.name,
+                recorded_at=recorded,
+                reference_xyz=result.reference.positions_xyz,
+            )
+        )
+    tolerance = options.get("tolerance")
+    summary = SummaryInput(
+        title=args.title,
+        generated_at=dt.datetime.now(dt.UTC),
+        selection=f"the {len(args.datasets)} recordings named on the command line",
+        runs=runs,
+        tolerance=str(Tolerance.parse(tolerance)) if tolerance else None,
+    )
+    from service.settings import Settings  # noqa: PLC0415
+
+    html, pdf = render_summary(summary, templates_dir=Settings().templates_dir)
+    _write_all(args.out, {"summary.html": html, "summary.pdf": pdf})
+    for run in runs:
+        figures = ", ".join(
+            f"{name} ATE {fig.ate_rmse_m:.3f} m" if fig.ate_rmse_m is not None else name
+            for name, fig in run.systems.items()
+        )
+        print(f"{run.dataset}: {run.status}" + (f" ({run.error})" if run.error else f", {figures}"))  # noqa: T201
+    print(f"\nSummary written to {args.out}")  # noqa: T201
+    return 0
+
+
+def _read_template(path: Path) -> dict[str, Any]:
+    from pydantic import ValidationError  # noqa: PLC0415
+
+    from service.schemas import EvaluationTemplate  # noqa: PLC0415
+
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        msg = f"Cannot read the template {str(path)!r} ({err}); check the path."
+        raise InputError(msg) from err
+    try:
+        template = EvaluationTemplate.model_validate_json(text)
+    except ValidationError as err:
+        where = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc']) or 'template'}: {e['msg']}"
+            for e in err.errors()[:5]
+        )
+        msg = f"The template {str(path)!r} is not valid: {where}."
+        raise InputError(msg) from None
+    return template.model_dump(mode="json")
+
+
+def _template_job(path: Path, template: dict[str, Any], config: EvaluationConfig) -> Job:
+    def source(entry: dict[str, Any], role: str) -> JobSource:
+        spec = SourceSpec(None, path, entry.get("selector"))
+        name = entry.get("name") or default_name(spec)
+        return JobSource(spec, name, file_provenance(role, spec))
+
+    return Job(
+        reference=source(template["reference"], "reference"),
+        estimates=[source(e, "estimate") for e in template["estimates"]],
+        config=config,
+        stamp=template["options"].get("stamp", "header"),
+    )
+
+
+def _write_all(out: Path, files: dict[str, bytes]) -> None:
+    """Write the files into ``out`` through temporary names: each appears whole or not at all."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for name, data in files.items():
+            partial = out / f".{name}.partial"
+            partial.write_bytes(data)
+            partial.replace(out / name)
+    except OSError as err:
+        msg = f"Cannot write into {str(out)!r} ({err.strerror}); name a folder you can write to."
+        raise InputError(msg) from err
+
+
 # --- service ----------------------------------------------------------------------------
 
 
@@ -514,6 +641,7 @@ def _cmd_worker(_args: argparse.Namespace) -> int:
     import threading  # noqa: PLC0415
 
     from service.jobs import create_runtime, recover  # noqa: PLC0415
+    from service.schedules import tick  # noqa: PLC0415
     from service.settings import get_settings  # noqa: PLC0415
 
     settings = _settings(get_settings)
@@ -526,6 +654,7 @@ def _cmd_worker(_args: argparse.Namespace) -> int:
         signal.signal(signum, lambda *_: stop.set())
     consumer = runtime.start_consumer()
     recover(runtime)
+    tick(runtime)
     print(  # noqa: T201
         f"loceval worker: {settings.workers} threads on queue {settings.queue_url}", flush=True
     )

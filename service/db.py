@@ -16,6 +16,7 @@ from alembic.config import Config
 from sqlalchemy import (
     JSON,
     BigInteger,
+    Boolean,
     DateTime,
     Dialect,
     Engine,
@@ -39,6 +40,8 @@ __all__ = [
     "Evaluation",
     "EvaluationStatus",
     "Project",
+    "Schedule",
+    "ScheduleRun",
     "create_db_engine",
     "make_session_factory",
     "migrate",
@@ -170,6 +173,58 @@ class Evaluation(Base):
     summary: Mapped[list[Any] | None] = mapped_column(default=None)
     error: Mapped[dict[str, Any] | None] = mapped_column(default=None)
     artifacts: Mapped[list[Any] | None] = mapped_column(default=None)
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    worker: Mapped[str | None] = mapped_column(String(200), default=None)
+    heartbeat_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+    created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+    finished_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+
+
+class Schedule(Base):
+    """A recurring summary report over the project's recordings."""
+
+    __tablename__ = "schedules"
+    __table_args__ = (Index("ix_schedules_due", "paused", "next_fire_at"),)
+
+    id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
+    project_id: Mapped[str] = mapped_column(ForeignKey("projects.id", ondelete="CASCADE"))
+    name: Mapped[str] = mapped_column(String(200))
+    cron: Mapped[str] = mapped_column(String(200))
+    timezone: Mapped[str] = mapped_column(String(64))
+    paused: Mapped[bool] = mapped_column(Boolean, default=False)
+    selection: Mapped[dict[str, Any]] = mapped_column()
+    template: Mapped[dict[str, Any]] = mapped_column()
+    produce: Mapped[dict[str, Any]] = mapped_column()
+    webhook_url: Mapped[str | None] = mapped_column(Text, default=None)
+    next_fire_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+    last_fired_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+    created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+
+
+class ScheduleRun(Base):
+    """One firing of a schedule: its evaluations, the summary report and the webhook."""
+
+    __tablename__ = "schedule_runs"
+    __table_args__ = (
+        UniqueConstraint("schedule_id", "due_at", name="uq_schedule_runs_due"),
+        Index("ix_schedule_runs_schedule_created", "schedule_id", "created_at"),
+    )
+
+    id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
+    schedule_id: Mapped[str] = mapped_column(ForeignKey("schedules.id", ondelete="CASCADE"))
+    project_id: Mapped[str] = mapped_column(ForeignKey("projects.id", ondelete="CASCADE"))
+    trigger: Mapped[str] = mapped_column(String(16))
+    due_at: Mapped[dt.datetime] = mapped_column()
+    status: Mapped[str] = mapped_column(String(16), default=EvaluationStatus.QUEUED)
+    stage: Mapped[str] = mapped_column(String(200), default="queued")
+    fraction: Mapped[float] = mapped_column(Float, default=0.0)
+    note: Mapped[str | None] = mapped_column(Text, default=None)
+    rows: Mapped[list[Any] | None] = mapped_column(default=None)
+    error: Mapped[dict[str, Any] | None] = mapped_column(default=None)
+    artifacts: Mapped[list[Any] | None] = mapped_column(default=None)
+    webhook: Mapped[dict[str, Any] | None] = mapped_column(default=None)
     attempts: Mapped[int] = mapped_column(Integer, default=0)
     worker: Mapped[str | None] = mapped_column(String(200), default=None)
     heartbeat_at: Mapped[dt.datetime | None] = mapped_column(default=None)

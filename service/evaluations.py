@@ -15,18 +15,23 @@ from service.pipeline import build_config, build_export_options, offset_or_none
 from service.schemas import (
     ArtifactPublic,
     EvaluationCreate,
+    EvaluationOptions,
     EvaluationPublic,
     ProgressPublic,
     SourceRef,
 )
 
-__all__ = ["create_evaluation", "evaluation_public", "get_evaluation"]
+__all__ = ["check_options", "create_evaluation", "evaluation_public", "get_evaluation"]
 
 logger = logging.getLogger(__name__)
 
 
-def create_evaluation(runtime: Runtime, project_id: str, body: EvaluationCreate) -> Evaluation:
+def create_evaluation(
+    runtime: Runtime, project_id: str, body: EvaluationCreate, *, enqueue: bool = True
+) -> Evaluation:
     """Check a new evaluation, record it and queue its job.
+
+    With ``enqueue=False`` the job is only recorded (a schedule run executes it itself).
 
     Raises:
         NotFoundError: a dataset is not in the project.
@@ -52,27 +57,7 @@ def create_evaluation(runtime: Runtime, project_id: str, body: EvaluationCreate)
             ("estimate", e) for e in body.estimates
         ]:
             _check_selector(datasets[ref.dataset_id], ref, role)
-        if options.device is not None and options.offset:
-            msg = "Give the device offset either as offset or as device, not both."
-            raise InputError(msg)
-        # Bad option values fail now, with the CLI's messages, not later in the job.
-        build_config(
-            association=options.association,
-            align=options.align,
-            align_first=options.align_first,
-            reference_offset=offset_or_none(options.offset),
-            rpe_unit=options.rpe_unit,
-            thresholds_m=options.thresholds_m,
-            tolerance=options.tolerance,
-        )
-        build_export_options(
-            units=options.units,
-            site=options.site,
-            site_matrix=None
-            if options.site_matrix is None
-            else [v for row in options.site_matrix for v in row],
-            simplify_m=options.simplify_m,
-        )
+        check_options(options)
         evaluation = Evaluation(
             project_id=project_id,
             request=body.model_dump(mode="json"),
@@ -81,6 +66,8 @@ def create_evaluation(runtime: Runtime, project_id: str, body: EvaluationCreate)
         )
         session.add(evaluation)
         session.commit()
+    if not enqueue:
+        return evaluation
     try:
         runtime.enqueue(evaluation.id)
     except Exception as err:
@@ -100,6 +87,34 @@ def create_evaluation(runtime: Runtime, project_id: str, body: EvaluationCreate)
         msg = "The job queue cannot be reached; try again in a minute (see GET /readyz)."
         raise ServiceUnavailableError(msg) from err
     return get_evaluation(runtime, project_id, evaluation.id)
+
+
+def check_options(options: EvaluationOptions) -> None:
+    """Fail now, with the CLI's messages, on option values the job could not use.
+
+    Raises:
+        InputError: an option's value cannot be used.
+    """
+    if options.device is not None and options.offset:
+        msg = "Give the device offset either as offset or as device, not both."
+        raise InputError(msg)
+    build_config(
+        association=options.association,
+        align=options.align,
+        align_first=options.align_first,
+        reference_offset=offset_or_none(options.offset),
+        rpe_unit=options.rpe_unit,
+        thresholds_m=options.thresholds_m,
+        tolerance=options.tolerance,
+    )
+    build_export_options(
+        units=options.units,
+        site=options.site,
+        site_matrix=None
+        if options.site_matrix is None
+        else [v for row in options.site_matrix for v in row],
+        simplify_m=options.simplify_m,
+    )
 
 
 def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:

@@ -44,9 +44,9 @@ from service.errors import internal_problem, problem, problem_for
 from service.pipeline import (
     Job,
     JobSource,
-    build_config,
-    build_export_options,
+    config_from_options,
     device_offset,
+    export_from_options,
     file_provenance,
     offset_or_none,
     run_job,
@@ -66,6 +66,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 _TASK_NAME: Final = "run_evaluation"
+_RUN_TASK_NAME: Final = "run_schedule"
 _PROGRESS_INTERVAL_S: Final = 0.5
 
 
@@ -80,10 +81,15 @@ class Runtime:
     huey: Huey
     worker_id: str
     enqueue_task: Callable[[str], object]
+    enqueue_run_task: Callable[[str], object]
 
     def enqueue(self, evaluation_id: str) -> None:
         """Queue an evaluation (in immediate mode: run it now)."""
         self.enqueue_task(evaluation_id)
+
+    def enqueue_schedule_run(self, run_id: str) -> None:
+        """Queue a schedule run (in immediate mode: run it now)."""
+        self.enqueue_run_task(run_id)
 
     def start_consumer(self, *, periodic: bool = True) -> Consumer:
         """Start queue consumer threads in this process (no signal handlers of its own)."""
@@ -140,9 +146,18 @@ def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runt
     def run_evaluation(evaluation_id: str) -> None:
         execute_evaluation(runtime_box[0], evaluation_id)
 
-    @huey.periodic_task(crontab(minute="*"), name="recover_evaluations")  # type: ignore[untyped-decorator]
-    def recover_evaluations() -> None:
+    @huey.task(name=_RUN_TASK_NAME)  # type: ignore[untyped-decorator]
+    def run_schedule(run_id: str) -> None:
+        from service.schedules import execute_schedule_run  # noqa: PLC0415
+
+        execute_schedule_run(runtime_box[0], run_id)
+
+    @huey.periodic_task(crontab(minute="*"), name="every_minute")  # type: ignore[untyped-decorator]
+    def every_minute() -> None:
+        from service.schedules import tick  # noqa: PLC0415
+
         recover(runtime_box[0])
+        tick(runtime_box[0])
 
     runtime = Runtime(
         settings=settings,
@@ -152,6 +167,7 @@ def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runt
         huey=huey,
         worker_id=f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}",
         enqueue_task=run_evaluation,
+        enqueue_run_task=run_schedule,
     )
     runtime_box.append(runtime)
     return runtime
@@ -354,29 +370,8 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
             to_link=device["to_link"],
             offset=options.get("offset"),
         )
-    config = build_config(
-        association=options.get("association", "interpolate"),
-        max_dt_s=options.get("max_dt_s", 0.01),
-        max_gap_s=options.get("max_gap_s", 0.1),
-        time_offset_s=options.get("time_offset_s", 0.0),
-        align=options.get("align", "se3"),
-        align_first=options.get("align_first"),
-        calibrate_at_s=options.get("calibrate_at_s"),
-        reference_offset=offset,
-        rpe_delta=options.get("rpe_delta", 1.0),
-        rpe_unit=options.get("rpe_unit", "frames"),
-        rpe_all_pairs=options.get("rpe_all_pairs", False),
-        thresholds_m=options.get("thresholds_m"),
-        tolerance=options.get("tolerance"),
-        worst=options.get("worst", 10),
-    )
-    export = build_export_options(
-        units=options.get("units", "mm"),
-        site=options.get("site"),
-        site_matrix=_flat(options.get("site_matrix")),
-        simplify_m=options.get("simplify_m", 0.001),
-        evaluation_id=evaluation.id,
-    )
+    config = config_from_options(options, reference_offset=offset)
+    export = export_from_options(options, evaluation_id=evaluation.id)
     return Job(
         reference=reference,
         estimates=estimates,
@@ -385,10 +380,6 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
         export=export,
         formats=options.get("formats"),
     )
-
-
-def _flat(matrix: list[list[float]] | None) -> list[float] | None:
-    return None if matrix is None else [float(v) for row in matrix for v in row]
 
 
 def _dataset(session: Session, project_id: str, dataset_id: str) -> Dataset:
@@ -487,7 +478,50 @@ def recover(runtime: Runtime, *, now: dt.datetime | None = None) -> list[str]:
     for evaluation_id in requeued:
         logger.warning("Evaluation %s queued again after an interruption", evaluation_id)
         runtime.enqueue(evaluation_id)
+    _recover_runs(runtime, cutoff, now)
     return requeued
+
+
+def _recover_runs(runtime: Runtime, cutoff: dt.datetime, now: dt.datetime) -> None:
+    """Queue again (or fail after the attempt limit) schedule runs whose worker stopped."""
+    from service.db import ScheduleRun  # noqa: PLC0415
+
+    requeued = []
+    with runtime.sessions() as session:
+        stale = session.scalars(
+            select(ScheduleRun).where(
+                ScheduleRun.status == EvaluationStatus.RUNNING,
+                or_(ScheduleRun.heartbeat_at.is_(None), ScheduleRun.heartbeat_at < cutoff),
+            )
+        ).all()
+        for run in stale:
+            failed = run.attempts >= runtime.settings.job_attempts
+            detail = (
+                f"The run was interrupted {run.attempts} times (its worker stopped) and is "
+                "not retried again; check the server log."
+            )
+            done = session.execute(
+                update(ScheduleRun)
+                .where(
+                    ScheduleRun.id == run.id,
+                    ScheduleRun.status == EvaluationStatus.RUNNING,
+                    ScheduleRun.heartbeat_at == run.heartbeat_at,
+                )
+                .values(
+                    status=EvaluationStatus.FAILED if failed else EvaluationStatus.QUEUED,
+                    stage="failed" if failed else "queued again after an interruption",
+                    finished_at=now if failed else None,
+                    error=problem(500, "run.interrupted", "RunInterrupted", detail)
+                    if failed
+                    else None,
+                )
+            )
+            if done.rowcount and not failed:  # type: ignore[attr-defined]
+                requeued.append(run.id)
+        session.commit()
+    for run_id in requeued:
+        logger.warning("Schedule run %s queued again after an interruption", run_id)
+        runtime.enqueue_schedule_run(run_id)
 
 
 def release(runtime: Runtime) -> int:

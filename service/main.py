@@ -13,9 +13,11 @@ from contextlib import asynccontextmanager
 from fastapi import APIRouter, FastAPI
 
 from loceval import __version__
-from service.api import datasets, evaluations, health
+from service.api import datasets, evaluations, health, schedules
+from service.api.middleware import ApiKeyMiddleware
 from service.errors import install_error_handlers
 from service.jobs import Runtime, create_runtime, recover
+from service.schedules import tick
 from service.settings import Settings, get_settings
 
 __all__ = ["create_app"]
@@ -60,6 +62,9 @@ def create_app(
             requeued = recover(runtime)
             if requeued:
                 logger.warning("Queued %d interrupted evaluations again", len(requeued))
+            fired = tick(runtime)  # a fire missed while the service was down runs now, once
+            if fired:
+                logger.warning("Started %d schedule runs that were due", len(fired))
         app.state.runtime = runtime
         try:
             yield
@@ -76,9 +81,11 @@ def create_app(
     app.state.runtime = runtime
     app.state.settings = settings
     install_error_handlers(app)
+    app.add_middleware(ApiKeyMiddleware)
     api = APIRouter(prefix="/api/v1")
     api.include_router(datasets.router)
     api.include_router(evaluations.router)
+    api.include_router(schedules.router)
     app.include_router(api)
     app.include_router(health.router)
     try:

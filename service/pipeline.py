@@ -12,7 +12,7 @@ import hashlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from loceval.alignment import AlignMethod, AlignWindow
 from loceval.association import AssociationMethod
@@ -38,8 +38,10 @@ __all__ = [
     "JobSource",
     "build_config",
     "build_export_options",
+    "config_from_options",
     "default_name",
     "device_offset",
+    "export_from_options",
     "file_provenance",
     "offset_or_none",
     "run_job",
@@ -189,6 +191,48 @@ def build_config(
         thresholds_m=defaults.thresholds_m if thresholds_m is None else tuple(thresholds_m),
         tolerance=Tolerance.parse(tolerance) if tolerance else None,
         worst_count=worst,
+    )
+
+
+def config_from_options(
+    options: Mapping[str, Any], *, reference_offset: SimilarityTransform | None = None
+) -> EvaluationConfig:
+    """Return the core's options from an options document (``POST /evaluations``).
+
+    Raises:
+        InputError: a value cannot be used.
+    """
+    return build_config(
+        association=options.get("association", "interpolate"),
+        max_dt_s=options.get("max_dt_s", 0.01),
+        max_gap_s=options.get("max_gap_s", 0.1),
+        time_offset_s=options.get("time_offset_s", 0.0),
+        align=options.get("align", "se3"),
+        align_first=options.get("align_first"),
+        calibrate_at_s=options.get("calibrate_at_s"),
+        reference_offset=reference_offset,
+        rpe_delta=options.get("rpe_delta", 1.0),
+        rpe_unit=options.get("rpe_unit", "frames"),
+        rpe_all_pairs=options.get("rpe_all_pairs", False),
+        thresholds_m=options.get("thresholds_m"),
+        tolerance=options.get("tolerance"),
+        worst=options.get("worst", 10),
+    )
+
+
+def export_from_options(options: Mapping[str, Any], *, evaluation_id: str = "") -> ExportOptions:
+    """Return the artifact options from an options document.
+
+    Raises:
+        InputError: a value cannot be used.
+    """
+    matrix = options.get("site_matrix")
+    return build_export_options(
+        units=options.get("units", "mm"),
+        site=options.get("site"),
+        site_matrix=None if matrix is None else [float(v) for row in matrix for v in row],
+        simplify_m=options.get("simplify_m", 0.001),
+        evaluation_id=evaluation_id,
     )
 
 

@@ -34,6 +34,7 @@ class Settings(BaseSettings):
         job_attempts: how often an interrupted job is started before it is marked failed.
         job_lease_s: a running job whose heartbeat is older than this is taken as abandoned.
         templates_dir: Jinja2 templates of the reports and the web page.
+        public_url: the service's address as users reach it, for links in webhooks.
     """
 
     model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
@@ -46,6 +47,7 @@ class Settings(BaseSettings):
     job_attempts: Annotated[int, Field(ge=1, le=20)] = 3
     job_lease_s: Annotated[float, Field(gt=0)] = 60.0
     templates_dir: Path = _REPO / "templates"
+    public_url: str = "http://127.0.0.1:8000"
 
     @field_validator("queue_url")
     @classmethod

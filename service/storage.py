@@ -6,6 +6,7 @@ Layout (paths in the database are relative to the data directory)::
     datasets/<dataset id>/<file name>    a stored upload
     evaluations/<id>/artifacts/          the artifacts of a succeeded evaluation
     evaluations/<id>/.staging-<uuid>/    artifacts being written (renamed into place whole)
+    runs/<run id>/artifacts/             the summary report of a schedule run (same scheme)
 
 Everything becomes visible by a rename within one file system, so a reader sees a whole file
 or nothing; leftovers of a crash are swept on start.
@@ -25,7 +26,7 @@ __all__ = ["BlobStore", "safe_filename"]
 
 _UNSAFE: Final = re.compile(r"[^\w.\-+]+")
 _ID_FOLDER: Final = re.compile(
-    r"(?:datasets|evaluations)/[0-9a-f-]{36}/(?:\.staging-[0-9a-f]+/|artifacts/)?"
+    r"(?:datasets|evaluations|runs)/[0-9a-f-]{36}/(?:\.staging-[0-9a-f]+/|artifacts/)?"
 )
 
 
@@ -49,7 +50,8 @@ class BlobStore:
         self.incoming = self.root / "incoming"
         self.datasets = self.root / "datasets"
         self.evaluations = self.root / "evaluations"
-        for folder in (self.incoming, self.datasets, self.evaluations):
+        self.runs = self.root / "runs"
+        for folder in (self.incoming, self.datasets, self.evaluations, self.runs):
             folder.mkdir(parents=True, exist_ok=True)
 
     def scrub(self, message: str) -> str:
@@ -88,13 +90,25 @@ class BlobStore:
 
     def publish_artifacts(self, evaluation_id: str, staging: Path) -> Path:
         """Rename a finished staging folder into place, replacing an earlier attempt's."""
-        final = self.artifacts_dir(evaluation_id)
-        if final.exists():
-            old = final.with_name(f".old-{uuid.uuid4().hex}")
-            final.rename(old)
-            shutil.rmtree(old, ignore_errors=True)
-        staging.rename(final)
-        return final
+        return _publish(staging, self.artifacts_dir(evaluation_id))
+
+    def run_artifacts_dir(self, run_id: str) -> Path:
+        """Return the folder of a schedule run's summary report."""
+        return self.runs / run_id / "artifacts"
+
+    def run_staging_dir(self, run_id: str) -> Path:
+        """Return a fresh folder to write a schedule run's report into."""
+        folder = self.runs / run_id / f".staging-{uuid.uuid4().hex}"
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        return folder
+
+    def publish_run_artifacts(self, run_id: str, staging: Path) -> Path:
+        """Rename a run's finished staging folder into place."""
+        return _publish(staging, self.run_artifacts_dir(run_id))
+
+    def remove_run(self, run_id: str) -> None:
+        """Delete a schedule run's files."""
+        shutil.rmtree(self.runs / run_id, ignore_errors=True)
 
     def clear_evaluation(self, evaluation_id: str) -> None:
         """Remove an evaluation's staging leftovers and artifacts (before a new attempt)."""
@@ -119,3 +133,13 @@ class BlobStore:
             except FileNotFoundError:
                 continue
         return removed
+
+
+def _publish(staging: Path, final: Path) -> Path:
+    """Rename a staging folder to ``final``, replacing an earlier attempt's folder."""
+    if final.exists():
+        old = final.with_name(f".old-{uuid.uuid4().hex}")
+        final.rename(old)
+        shutil.rmtree(old, ignore_errors=True)
+    staging.rename(final)
+    return final

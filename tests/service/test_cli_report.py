@@ -1,0 +1,78 @@
+"""``loceval report``: the schedule's summary report from the shell."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from service.cli import main
+from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
+
+
+def _bag(tmp_path: Path, rng, name: str, *, noise: float, with_estimate: bool = True) -> Path:
+    truth = random_poses(rng, 100, dt_ns=50_000_000)
+    records = pose_records("/gt", POSE, truth)
+    if with_estimate:
+        moved = truth.positions + rng.normal(scale=noise, size=truth.positions.shape)
+        records += pose_records("/est", POSE, Poses(truth.stamps_ns, moved, truth.quats))
+    return write_bag(tmp_path / f"{name}.bag", records, fmt="rosbag1")
+
+
+@pytest.fixture
+def template(tmp_path: Path) -> Path:
+    """A template: /gt against /est named AMCL, nearest association, a tolerance."""
+    path = tmp_path / "template.json"
+    path.write_text(
+        json.dumps(
+            {
+                "reference": {"selector": "/gt"},
+                "estimates": [{"selector": "/est", "name": "AMCL"}],
+                "options": {"association": "nearest", "max_dt_s": 0.005, "tolerance": "0.10@95"},
+            }
+        )
+    )
+    return path
+
+
+def test_report_writes_the_summary_with_each_recordings_figures(
+    tmp_path: Path, rng, template: Path, capsys
+):
+    """Each recording is evaluated as `evaluate` would; failures are listed, not fatal."""
+    bags = [_bag(tmp_path, rng, f"run{k}", noise=0.02 * (k + 1)) for k in range(2)]
+    bags.append(_bag(tmp_path, rng, "gt-only", noise=0, with_estimate=False))
+    out = tmp_path / "weekly"
+    argv = ["report", "--datasets", *map(str, bags), "--template", str(template)]
+    assert main([*argv, "--out", str(out), "--title", "Level 2"]) == 0
+    printed = capsys.readouterr().out
+    assert sorted(p.name for p in out.iterdir()) == ["summary.html", "summary.pdf"]
+    html = (out / "summary.html").read_text()
+    assert "Level 2" in html
+    assert "gt-only.bag: failed" in printed
+    for bag in bags[:2]:
+        assert main(["evaluate", f"{bag}@/gt", f"{bag}@/est", "--associate", "nearest",
+                     "--max-dt", "0.005", "--json"]) == 0  # fmt: skip
+        ate = json.loads(capsys.readouterr().out)["estimates"][0]["ate"]["translation_m"]["rmse"]
+        assert f"{ate:.3f}" in html
+        assert f"{bag.name}: succeeded, AMCL ATE {ate:.3f} m" in printed
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        ("{not json", "is not valid"),
+        ('{"reference": {"selector": "/gt"}}', "estimates"),
+        ('{"reference": {}, "estimates": [{}], "options": {"align": "best"}}', "align"),
+    ],
+)
+def test_report_with_a_bad_template_exits_1(tmp_path: Path, capsys, content: str, match: str):
+    """A template that is not valid JSON or misses fields exits 1 and names the problem."""
+    path = tmp_path / "template.json"
+    path.write_text(content)
+    argv = ["report", "--datasets", "x.bag", "--template", str(path), "--out", str(tmp_path / "o")]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert match in err
+    assert "Traceback" not in err
+    assert not (tmp_path / "o").exists()
