@@ -143,7 +143,7 @@ def test_bad_input_fails_the_job_with_the_core_message(
     """A LocevalError becomes a failed job with a problem document and no half artifacts."""
 
     def fail(*_args, **_kwargs):
-        msg = f"No overlap in {runtime.store.root}/datasets/{evaluation_id}/est.txt; check."
+        msg = f"No overlap in {runtime.store.root}/datasets/{evaluation_id}/est.txt; --time-offset?"
         raise AssociationError(msg)
 
     monkeypatch.setattr(jobs, "run_job", fail)
@@ -153,7 +153,7 @@ def test_bad_input_fails_the_job_with_the_core_message(
     assert row.error is not None
     assert row.error["type"] == "association.no_matches"
     assert row.error["status"] == 422
-    assert row.error["detail"] == "No overlap in est.txt; check."
+    assert row.error["detail"] == "No overlap in est.txt; options.time_offset_s?"  # API names
     assert row.stage == "starting"  # the stage it failed in is kept
     assert not runtime.store.artifacts_dir(evaluation_id).exists()
 
