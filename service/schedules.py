@@ -338,7 +338,6 @@ def _evaluate_all(
 ) -> tuple[list[dict[str, Any]], list[Any]]:
     """Run the template on every picked recording; failures become rows with the reason."""
     from exporters.summary import SummaryRun  # noqa: PLC0415
-
     from service.evaluations import create_evaluation  # noqa: PLC0415
     from service.schemas import EvaluationCreate  # noqa: PLC0415
 
