@@ -18,8 +18,8 @@ What it does:
    ``loceval keys create --project bench``.
 3. Samples the RSS of the server process and all its descendants (``VmRSS`` and ``RssAnon``
    of ``/proc/<pid>/status``) every 50 ms: idle for a baseline, then during the uploads.
-4. Uploads with ``--clients`` concurrent httpx clients (one thread each, started together),
-   ``POST /api/v1/datasets`` multipart, streaming each file from disk in 64 KiB chunks: httpx
+4. Uploads with ``--clients`` concurrent httpx2 clients (one thread each, started together),
+   ``POST /api/v1/datasets`` multipart, streaming each file from disk in 64 KiB chunks: httpx2
    reads a file object passed in ``files=`` chunk by chunk and sends a Content-Length.
 5. Prints one row per upload, the RSS figures and throughput, and a last line with the RSS
    growth against the target. Stops the server (and removes its data directory unless
@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import httpx
+import httpx2 as httpx
 
 from benchmarks.bags import IMAGE_HZ, generate_bag
 
