@@ -42,10 +42,12 @@ __all__ = [
     "DEFAULT_TEMPLATES_DIR",
     "ReportView",
     "build_report_view",
+    "check_templates",
     "html_to_pdf",
     "render_report",
     "render_report_html",
     "render_report_pdf",
+    "render_template",
     "render_view_html",
 ]
 
@@ -618,28 +620,41 @@ def build_report_view(
 # --- rendering --------------------------------------------------------------------------
 
 
-def _templates_dir(options: ExportOptions, templates_dir: Path | None) -> Path:
-    folder = templates_dir or options.templates_dir or DEFAULT_TEMPLATES_DIR
-    if not (folder / TEMPLATE_NAME).is_file():
+def check_templates(folder: Path, name: str, *, label: str) -> Path:
+    """Return ``folder`` if it holds the template ``name``.
+
+    Raises:
+        ExportError: the template is missing (the message names the ``label`` template).
+    """
+    if not (folder / name).is_file():
         msg = (
-            f"No report template {TEMPLATE_NAME!r} in {str(folder)!r}; point templates_dir "
+            f"No {label} template {name!r} in {str(folder)!r}; point templates_dir "
             "at the repository's templates/ folder."
         )
         raise ExportError(msg)
     return folder
 
 
-def render_view_html(view: ReportView, *, templates_dir: Path) -> bytes:
-    """Render a view model to the report's HTML (UTF-8).
+def render_template(
+    templates_dir: Path, name: str, *, label: str, requirement: str, **context: object
+) -> bytes:
+    """Render a report template (autoescaped, strict about undefined names) to UTF-8.
+
+    Args:
+        templates_dir: the template folder.
+        name: the template's file name.
+        label: names the template in messages (``report``, ``summary``).
+        requirement: what needs Jinja2, for the message when it is missing.
+        context: the template's variables.
 
     Raises:
         ExportUnavailableError: Jinja2 is not installed.
-        ExportError: the templates are missing or broken.
+        ExportError: the template is broken.
     """
     try:
         import jinja2  # noqa: PLC0415  (optional dependency: loceval[report])
     except ImportError as err:
-        msg = "report.html needs jinja2; install loceval[report]."
+        msg = f"{requirement} needs jinja2; install loceval[report]."
         raise ExportUnavailableError(msg) from err
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(templates_dir),
@@ -650,11 +665,28 @@ def render_view_html(view: ReportView, *, templates_dir: Path) -> bytes:
         keep_trailing_newline=True,
     )
     try:
-        html = env.get_template(TEMPLATE_NAME).render(report=view)
+        html = env.get_template(name).render(**context)
     except jinja2.TemplateError as err:
-        msg = f"The report template in {str(templates_dir)!r} failed: {err}."
+        msg = f"The {label} template in {str(templates_dir)!r} failed: {err}."
         raise ExportError(msg) from err
     return html.encode("utf-8")
+
+
+def _templates_dir(options: ExportOptions, templates_dir: Path | None) -> Path:
+    folder = templates_dir or options.templates_dir or DEFAULT_TEMPLATES_DIR
+    return check_templates(folder, TEMPLATE_NAME, label="report")
+
+
+def render_view_html(view: ReportView, *, templates_dir: Path) -> bytes:
+    """Render a view model to the report's HTML (UTF-8).
+
+    Raises:
+        ExportUnavailableError: Jinja2 is not installed.
+        ExportError: the templates are missing or broken.
+    """
+    return render_template(
+        templates_dir, TEMPLATE_NAME, label="report", requirement="report.html", report=view
+    )
 
 
 def html_to_pdf(html: bytes) -> bytes:

@@ -32,7 +32,6 @@ from matplotlib.dates import AutoDateLocator, ConciseDateFormatter, date2num
 from numpy.typing import NDArray
 from scipy.spatial import KDTree
 
-from exporters.errors import ExportError, ExportUnavailableError
 from exporters.plots import (
     TOLERANCE_COLOUR,
     ImageFormat,
@@ -44,7 +43,13 @@ from exporters.plots import (
     decimate_uniform,
     estimate_colour,
 )
-from exporters.report import BEST_MARK, DEFAULT_TEMPLATES_DIR, html_to_pdf
+from exporters.report import (
+    BEST_MARK,
+    DEFAULT_TEMPLATES_DIR,
+    check_templates,
+    html_to_pdf,
+    render_template,
+)
 from loceval import __version__
 
 __all__ = [
@@ -1221,14 +1226,9 @@ def render_summary_plots(
 
 
 def _templates(templates_dir: Path | None) -> Path:
-    folder = templates_dir or DEFAULT_TEMPLATES_DIR
-    if not (folder / SUMMARY_TEMPLATE_NAME).is_file():
-        msg = (
-            f"No summary template {SUMMARY_TEMPLATE_NAME!r} in {str(folder)!r}; point "
-            "templates_dir at the repository's templates/ folder."
-        )
-        raise ExportError(msg)
-    return folder
+    return check_templates(
+        templates_dir or DEFAULT_TEMPLATES_DIR, SUMMARY_TEMPLATE_NAME, label="summary"
+    )
 
 
 def render_summary_view_html(view: SummaryView, *, templates_dir: Path) -> bytes:
@@ -1238,26 +1238,13 @@ def render_summary_view_html(view: SummaryView, *, templates_dir: Path) -> bytes
         ExportUnavailableError: Jinja2 is not installed.
         ExportError: the templates are missing or broken.
     """
-    try:
-        import jinja2  # noqa: PLC0415  (optional dependency: loceval[report])
-    except ImportError as err:
-        msg = "The summary report needs jinja2; install loceval[report]."
-        raise ExportUnavailableError(msg) from err
-    folder = _templates(templates_dir)
-    env = jinja2.Environment(
-        loader=jinja2.FileSystemLoader(folder),
-        autoescape=True,
-        undefined=jinja2.StrictUndefined,
-        trim_blocks=True,
-        lstrip_blocks=True,
-        keep_trailing_newline=True,
+    return render_template(
+        _templates(templates_dir),
+        SUMMARY_TEMPLATE_NAME,
+        label="summary",
+        requirement="The summary report",
+        summary=view,
     )
-    try:
-        html = env.get_template(SUMMARY_TEMPLATE_NAME).render(summary=view)
-    except jinja2.TemplateError as err:
-        msg = f"The summary template in {str(folder)!r} failed: {err}."
-        raise ExportError(msg) from err
-    return html.encode("utf-8")
 
 
 def render_summary_html(summary: SummaryInput, *, templates_dir: Path) -> bytes:
