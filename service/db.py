@@ -9,7 +9,7 @@ from __future__ import annotations
 import datetime as dt
 import uuid
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, TypeVar
 
 from alembic import command
 from alembic.config import Config
@@ -33,16 +33,20 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, sessionmaker
 
+from service.errors import NotFoundError
+
 __all__ = [
     "ApiKey",
     "Base",
     "Dataset",
     "Evaluation",
     "EvaluationStatus",
+    "JobState",
     "Project",
     "Schedule",
     "ScheduleRun",
     "create_db_engine",
+    "get_owned",
     "make_session_factory",
     "migrate",
     "new_id",
@@ -153,7 +157,27 @@ class EvaluationStatus:
     ACTIVE: Final = frozenset({"queued", "running"})
 
 
-class Evaluation(Base):
+class JobState:
+    """The columns of a queued job, shared by evaluations and schedule runs.
+
+    The job functions in :mod:`service.jobs` (claim, progress, heartbeat, finish, recovery)
+    work on either table through these columns.
+    """
+
+    status: Mapped[str] = mapped_column(String(16), default=EvaluationStatus.QUEUED)
+    stage: Mapped[str] = mapped_column(String(200), default="queued")
+    fraction: Mapped[float] = mapped_column(Float, default=0.0)
+    error: Mapped[dict[str, Any] | None] = mapped_column(default=None)
+    artifacts: Mapped[list[Any] | None] = mapped_column(default=None)
+    attempts: Mapped[int] = mapped_column(Integer, default=0)
+    worker: Mapped[str | None] = mapped_column(String(200), default=None)
+    heartbeat_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+    created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+    finished_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+
+
+class Evaluation(JobState, Base):
     """An evaluation job and, once it succeeded, its result and artifacts."""
 
     __tablename__ = "evaluations"
@@ -164,21 +188,10 @@ class Evaluation(Base):
 
     id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
     project_id: Mapped[str] = mapped_column(ForeignKey("projects.id", ondelete="CASCADE"))
-    status: Mapped[str] = mapped_column(String(16), default=EvaluationStatus.QUEUED)
-    stage: Mapped[str] = mapped_column(String(200), default="queued")
-    fraction: Mapped[float] = mapped_column(Float, default=0.0)
     request: Mapped[dict[str, Any]] = mapped_column()
     dataset_ids: Mapped[list[Any]] = mapped_column(default=list)
     result: Mapped[dict[str, Any] | None] = mapped_column(default=None)
     summary: Mapped[list[Any] | None] = mapped_column(default=None)
-    error: Mapped[dict[str, Any] | None] = mapped_column(default=None)
-    artifacts: Mapped[list[Any] | None] = mapped_column(default=None)
-    attempts: Mapped[int] = mapped_column(Integer, default=0)
-    worker: Mapped[str | None] = mapped_column(String(200), default=None)
-    heartbeat_at: Mapped[dt.datetime | None] = mapped_column(default=None)
-    created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
-    started_at: Mapped[dt.datetime | None] = mapped_column(default=None)
-    finished_at: Mapped[dt.datetime | None] = mapped_column(default=None)
 
 
 class Schedule(Base):
@@ -203,7 +216,7 @@ class Schedule(Base):
     updated_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
 
 
-class ScheduleRun(Base):
+class ScheduleRun(JobState, Base):
     """One firing of a schedule: its evaluations, the summary report and the webhook."""
 
     __tablename__ = "schedule_runs"
@@ -217,20 +230,30 @@ class ScheduleRun(Base):
     project_id: Mapped[str] = mapped_column(ForeignKey("projects.id", ondelete="CASCADE"))
     trigger: Mapped[str] = mapped_column(String(16))
     due_at: Mapped[dt.datetime] = mapped_column()
-    status: Mapped[str] = mapped_column(String(16), default=EvaluationStatus.QUEUED)
-    stage: Mapped[str] = mapped_column(String(200), default="queued")
-    fraction: Mapped[float] = mapped_column(Float, default=0.0)
     note: Mapped[str | None] = mapped_column(Text, default=None)
     rows: Mapped[list[Any] | None] = mapped_column(default=None)
-    error: Mapped[dict[str, Any] | None] = mapped_column(default=None)
-    artifacts: Mapped[list[Any] | None] = mapped_column(default=None)
     webhook: Mapped[dict[str, Any] | None] = mapped_column(default=None)
-    attempts: Mapped[int] = mapped_column(Integer, default=0)
-    worker: Mapped[str | None] = mapped_column(String(200), default=None)
-    heartbeat_at: Mapped[dt.datetime | None] = mapped_column(default=None)
-    created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
-    started_at: Mapped[dt.datetime | None] = mapped_column(default=None)
-    finished_at: Mapped[dt.datetime | None] = mapped_column(default=None)
+
+
+_Owned = TypeVar("_Owned", Dataset, Evaluation, Schedule)
+
+
+def get_owned(
+    sessions: sessionmaker[Session], model: type[_Owned], row_id: str, project_id: str
+) -> _Owned:
+    """Return a dataset, evaluation or schedule of the project.
+
+    Raises:
+        NotFoundError: no such row in this project (another project's ids included, so
+            their existence is not revealed).
+    """
+    with sessions() as session:
+        row = session.get(model, row_id)
+    if row is None or row.project_id != project_id:
+        plural = str(model.__tablename__)
+        msg = f"No {plural[:-1]} {row_id!r} in this project; list them with GET /{plural}."
+        raise NotFoundError(msg)
+    return row
 
 
 def create_db_engine(url: str) -> Engine:

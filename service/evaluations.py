@@ -8,7 +8,7 @@ from typing import Any
 from sqlalchemy import select
 
 from loceval.errors import InputError
-from service.db import Dataset, Evaluation, EvaluationStatus, utcnow
+from service.db import Dataset, Evaluation, EvaluationStatus, get_owned, utcnow
 from service.errors import NotFoundError, ServiceUnavailableError
 from service.jobs import Runtime
 from service.pipeline import build_config, build_export_options, offset_or_none
@@ -21,7 +21,7 @@ from service.schemas import (
     SourceRef,
 )
 
-__all__ = ["check_options", "create_evaluation", "evaluation_public", "get_evaluation"]
+__all__ = ["check_options", "create_evaluation", "evaluation_public"]
 
 logger = logging.getLogger(__name__)
 
@@ -86,7 +86,7 @@ def create_evaluation(
                 session.commit()
         msg = "The job queue cannot be reached; try again in a minute (see GET /readyz)."
         raise ServiceUnavailableError(msg) from err
-    return get_evaluation(runtime, project_id, evaluation.id)
+    return get_owned(runtime.sessions, Evaluation, evaluation.id, project_id)
 
 
 def check_options(options: EvaluationOptions) -> None:
@@ -150,20 +150,6 @@ def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:
     if ref.selector is not None:
         msg = f"{label} is a {fmt} file with one trajectory; leave its selector empty (null)."
         raise InputError(msg)
-
-
-def get_evaluation(runtime: Runtime, project_id: str, evaluation_id: str) -> Evaluation:
-    """Return an evaluation of the project.
-
-    Raises:
-        NotFoundError: no such evaluation in this project.
-    """
-    with runtime.sessions() as session:
-        evaluation = session.get(Evaluation, evaluation_id)
-    if evaluation is None or evaluation.project_id != project_id:
-        msg = f"No evaluation {evaluation_id!r} in this project; list them with GET /evaluations."
-        raise NotFoundError(msg)
-    return evaluation
 
 
 def evaluation_public(

@@ -35,6 +35,7 @@ from service.db import (
     Dataset,
     Evaluation,
     EvaluationStatus,
+    ScheduleRun,
     create_db_engine,
     make_session_factory,
     migrate,
@@ -55,10 +56,15 @@ from service.settings import Settings
 from service.storage import BlobStore
 
 __all__ = [
+    "Heartbeat",
+    "JobModel",
+    "ProgressWriter",
     "Runtime",
+    "claim",
     "create_runtime",
     "evaluation_summary",
     "execute_evaluation",
+    "finish",
     "recover",
     "release",
 ]
@@ -178,9 +184,9 @@ def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runt
 
 def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
     """Run one evaluation job to succeeded or failed; a no-op if someone else claimed it."""
-    if not _claim(runtime, evaluation_id):
+    if not claim(runtime, Evaluation, evaluation_id):
         return
-    heartbeat = _Heartbeat(runtime, evaluation_id)
+    heartbeat = Heartbeat(runtime, Evaluation, evaluation_id)
     heartbeat.start()
     staging: Path | None = None
     try:
@@ -189,15 +195,16 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
             job = _job_for(session, runtime, evaluation)
         runtime.store.clear_evaluation(evaluation_id)
         staging = runtime.store.staging_dir(evaluation_id)
-        progress = _ProgressWriter(runtime, evaluation_id)
+        progress = ProgressWriter(runtime, Evaluation, evaluation_id)
         run_job(job, staging, progress)
         artifacts = _publish(runtime, evaluation_id, staging)
         staging = None
         document = json.loads(
             (runtime.store.artifacts_dir(evaluation_id) / "result.json").read_text()
         )
-        _finish(
+        finish(
             runtime,
+            Evaluation,
             evaluation_id,
             status=EvaluationStatus.SUCCEEDED,
             result=document,
@@ -207,12 +214,16 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
     except LocevalError as err:
         body = problem_for(err)
         body["detail"] = runtime.store.scrub(body["detail"])
-        _finish(runtime, evaluation_id, status=EvaluationStatus.FAILED, error=body)
+        finish(runtime, Evaluation, evaluation_id, status=EvaluationStatus.FAILED, error=body)
     except Exception:
         error_id = uuid.uuid4().hex[:12]
         logger.exception("Evaluation %s failed with a bug (error_id=%s)", evaluation_id, error_id)
-        _finish(
-            runtime, evaluation_id, status=EvaluationStatus.FAILED, error=internal_problem(error_id)
+        finish(
+            runtime,
+            Evaluation,
+            evaluation_id,
+            status=EvaluationStatus.FAILED,
+            error=internal_problem(error_id),
         )
     finally:
         heartbeat.stop()
@@ -220,19 +231,24 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
             shutil.rmtree(staging, ignore_errors=True)
 
 
-def _claim(runtime: Runtime, evaluation_id: str) -> bool:
+JobModel = type[Evaluation] | type[ScheduleRun]
+"""A table of queued jobs (both have the :class:`~service.db.JobState` columns)."""
+
+
+def claim(runtime: Runtime, model: JobModel, job_id: str, *, stage: str = "starting") -> bool:
+    """Move a queued job to running for this worker; False if someone else has it."""
     now = utcnow()
     with runtime.sessions() as session:
         claimed = session.execute(
-            update(Evaluation)
-            .where(Evaluation.id == evaluation_id, Evaluation.status == EvaluationStatus.QUEUED)
+            update(model)
+            .where(model.id == job_id, model.status == EvaluationStatus.QUEUED)
             .values(
                 status=EvaluationStatus.RUNNING,
-                attempts=Evaluation.attempts + 1,
+                attempts=model.attempts + 1,
                 worker=runtime.worker_id,
                 heartbeat_at=now,
                 started_at=now,
-                stage="starting",
+                stage=stage,
                 fraction=0.0,
             )
         )
@@ -240,17 +256,25 @@ def _claim(runtime: Runtime, evaluation_id: str) -> bool:
         return bool(claimed.rowcount)  # type: ignore[attr-defined]
 
 
-def _finish(runtime: Runtime, evaluation_id: str, *, status: str, **values: Any) -> None:  # noqa: ANN401
+def finish(
+    runtime: Runtime,
+    model: JobModel,
+    job_id: str,
+    *,
+    status: str,
+    **values: Any,  # noqa: ANN401
+) -> None:
+    """Record a job's end, if this worker still holds it (else a recovered copy owns it)."""
     succeeded = status == EvaluationStatus.SUCCEEDED
     with runtime.sessions() as session:
         session.execute(
-            update(Evaluation)
-            .where(Evaluation.id == evaluation_id, Evaluation.worker == runtime.worker_id)
+            update(model)
+            .where(model.id == job_id, model.worker == runtime.worker_id)
             .values(
                 status=status,
                 # A failed job keeps the stage it failed in ("reading est", "writing report.pdf").
-                stage="done" if succeeded else Evaluation.stage,
-                fraction=1.0 if succeeded else Evaluation.fraction,
+                stage="done" if succeeded else model.stage,
+                fraction=1.0 if succeeded else model.fraction,
                 finished_at=utcnow(),
                 heartbeat_at=None,
                 **values,
@@ -291,62 +315,67 @@ def evaluation_summary(document: dict[str, Any]) -> list[dict[str, Any]]:
     return rows
 
 
-class _ProgressWriter:
-    """Store progress, at most twice a second (and whenever the stage changes)."""
+class ProgressWriter:
+    """Store a job's progress, at most twice a second (and whenever the stage changes)."""
 
-    def __init__(self, runtime: Runtime, evaluation_id: str) -> None:
+    def __init__(self, runtime: Runtime, model: JobModel, job_id: str) -> None:
+        """Write to the row ``job_id`` of ``model``."""
         self.runtime = runtime
-        self.evaluation_id = evaluation_id
+        self.model = model
+        self.job_id = job_id
         self._last = 0.0
         self._stage = ""
 
     def __call__(self, stage: str, fraction: float) -> None:
+        """Record the stage and the fraction done."""
         now = time.monotonic()
         if stage == self._stage and now - self._last < _PROGRESS_INTERVAL_S:
             return
         self._last, self._stage = now, stage
         with self.runtime.sessions() as session:
             session.execute(
-                update(Evaluation)
-                .where(Evaluation.id == self.evaluation_id)
+                update(self.model)
+                .where(self.model.id == self.job_id)
                 .values(stage=stage[:200], fraction=min(max(fraction, 0.0), 1.0))
             )
             session.commit()
 
 
-class _Heartbeat:
-    """A thread that stamps ``heartbeat_at`` while the job runs."""
+class Heartbeat:
+    """A thread that stamps a job's ``heartbeat_at`` while it runs."""
 
-    def __init__(self, runtime: Runtime, evaluation_id: str) -> None:
+    def __init__(self, runtime: Runtime, model: JobModel, job_id: str) -> None:
+        """Beat for the row ``job_id`` of ``model`` (start it with :meth:`start`)."""
         self.runtime = runtime
-        self.evaluation_id = evaluation_id
+        self.model = model
+        self.job_id = job_id
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"heartbeat-{evaluation_id[:8]}")
+        self._thread = threading.Thread(target=self._run, name=f"heartbeat-{job_id[:8]}")
         self._thread.daemon = True
 
     def start(self) -> None:
+        """Start beating."""
         self._thread.start()
 
     def stop(self) -> None:
+        """Stop beating (waits up to 5 s for the thread)."""
         self._stop.set()
         self._thread.join(timeout=5)
 
     def _run(self) -> None:
         interval = max(self.runtime.settings.job_lease_s / 4, 0.2)
+        model = self.model
         while not self._stop.wait(interval):
             try:
                 with self.runtime.sessions() as session:
                     session.execute(
-                        update(Evaluation)
-                        .where(
-                            Evaluation.id == self.evaluation_id,
-                            Evaluation.status == EvaluationStatus.RUNNING,
-                        )
+                        update(model)
+                        .where(model.id == self.job_id, model.status == EvaluationStatus.RUNNING)
                         .values(heartbeat_at=utcnow())
                     )
                     session.commit()
             except Exception:  # a lost beat is retried; the job itself goes on
-                logger.warning("Heartbeat of %s failed", self.evaluation_id, exc_info=True)
+                logger.warning("Heartbeat of %s failed", self.job_id, exc_info=True)
 
 
 # --- building the job ------------------------------------------------------------------
@@ -412,116 +441,110 @@ def _source(
 # --- recovery --------------------------------------------------------------------------
 
 
+_INTERRUPTED: Final[dict[JobModel, tuple[str, str, str]]] = {
+    Evaluation: (
+        "evaluation.interrupted",
+        "JobInterrupted",
+        (
+            "The evaluation was interrupted {n} times (its worker stopped: a crash, a restart "
+            "or running out of memory) and is not retried again; check the server log, and "
+            "give the server more memory for very large recordings."
+        ),
+    ),
+    ScheduleRun: (
+        "run.interrupted",
+        "RunInterrupted",
+        (
+            "The run was interrupted {n} times (its worker stopped) and is not retried again; "
+            "check the server log."
+        ),
+    ),
+}
+
+
+def _enqueue(runtime: Runtime, model: JobModel, job_id: str) -> None:
+    if model is Evaluation:
+        runtime.enqueue(job_id)
+    else:
+        runtime.enqueue_schedule_run(job_id)
+
+
 def recover(runtime: Runtime, *, now: dt.datetime | None = None) -> list[str]:
     """Re-queue or fail jobs whose worker stopped; return the ids that were re-queued.
 
-    A running job whose heartbeat is older than the lease was abandoned: it is queued again
-    unless it has been started ``job_attempts`` times, then it fails with the reason. A
-    queued job that the queue no longer holds (a Redis without persistence restarted) is
-    enqueued again; the claim makes a duplicate harmless.
+    A running job (evaluation or schedule run) whose heartbeat is older than the lease was
+    abandoned: it is queued again unless it has been started ``job_attempts`` times, then
+    it fails with the reason. A queued job that the queue no longer holds (a Redis without
+    persistence restarted) is enqueued again; the claim makes a duplicate harmless.
     """
     now = now or utcnow()
+    stale = {model: _requeue_stale(runtime, model, now) for model in _INTERRUPTED}
+    lost: dict[JobModel, list[str]] = {model: [] for model in _INTERRUPTED}
+    if not runtime.huey.immediate:
+        queued = {model: _queued_before(runtime, model, now) for model in _INTERRUPTED}
+        if any(queued.values()):
+            pending = {str(t.args[0]) for t in runtime.huey.pending() if t.args}
+            for model, ids in queued.items():
+                lost[model] = sorted(ids - pending - set(stale[model]))
+    for model in _INTERRUPTED:
+        for job_id in stale[model] + lost[model]:
+            logger.warning("%s %s queued again after an interruption", model.__name__, job_id)
+            _enqueue(runtime, model, job_id)
+    return stale[Evaluation] + lost[Evaluation]
+
+
+def _requeue_stale(runtime: Runtime, model: JobModel, now: dt.datetime) -> list[str]:
+    """Mark abandoned running jobs queued (or failed at the attempt limit); return the queued."""
     cutoff = now - dt.timedelta(seconds=runtime.settings.job_lease_s)
-    limit = runtime.settings.job_attempts
+    code, title, detail = _INTERRUPTED[model]
     requeued: list[str] = []
     with runtime.sessions() as session:
-        stale = session.scalars(
-            select(Evaluation).where(
-                Evaluation.status == EvaluationStatus.RUNNING,
-                or_(Evaluation.heartbeat_at.is_(None), Evaluation.heartbeat_at < cutoff),
+        stale = session.execute(
+            select(model.id, model.attempts, model.heartbeat_at).where(
+                model.status == EvaluationStatus.RUNNING,
+                or_(model.heartbeat_at.is_(None), model.heartbeat_at < cutoff),
             )
         ).all()
-        for evaluation in stale:
-            if evaluation.attempts >= limit:
-                detail = (
-                    f"The evaluation was interrupted {evaluation.attempts} times (its worker "
-                    "stopped: a crash, a restart or running out of memory) and is not retried "
-                    "again; check the server log, and give the server more memory for very "
-                    "large recordings."
-                )
+        for job_id, attempts, beat in stale:
+            if attempts >= runtime.settings.job_attempts:
                 values: dict[str, Any] = {
                     "status": EvaluationStatus.FAILED,
                     "stage": "failed",
                     "finished_at": now,
-                    "error": problem(500, "evaluation.interrupted", "JobInterrupted", detail),
+                    "error": problem(500, code, title, detail.format(n=attempts)),
                 }
             else:
                 values = {
                     "status": EvaluationStatus.QUEUED,
-                    "stage": f"queued again after an interruption (attempt {evaluation.attempts})",
+                    "stage": f"queued again after an interruption (attempt {attempts})",
                     "fraction": 0.0,
                 }
             done = session.execute(
-                update(Evaluation)
+                update(model)
                 .where(
-                    Evaluation.id == evaluation.id,
-                    Evaluation.status == EvaluationStatus.RUNNING,
-                    Evaluation.heartbeat_at == evaluation.heartbeat_at,
+                    model.id == job_id,
+                    model.status == EvaluationStatus.RUNNING,
+                    model.heartbeat_at == beat,
                 )
                 .values(**values)
             )
             if done.rowcount and values["status"] == EvaluationStatus.QUEUED:  # type: ignore[attr-defined]
-                requeued.append(evaluation.id)
+                requeued.append(job_id)
         session.commit()
-        queued = set(
-            session.scalars(
-                select(Evaluation.id).where(
-                    Evaluation.status == EvaluationStatus.QUEUED,
-                    Evaluation.created_at < now - dt.timedelta(seconds=60),
-                )
-            ).all()
-        )
-    if queued and not runtime.huey.immediate:
-        pending = {str(t.args[0]) for t in runtime.huey.pending() if t.args}
-        lost = queued - pending - set(requeued)
-        requeued += sorted(lost)
-    for evaluation_id in requeued:
-        logger.warning("Evaluation %s queued again after an interruption", evaluation_id)
-        runtime.enqueue(evaluation_id)
-    _recover_runs(runtime, cutoff, now)
     return requeued
 
 
-def _recover_runs(runtime: Runtime, cutoff: dt.datetime, now: dt.datetime) -> None:
-    """Queue again (or fail after the attempt limit) schedule runs whose worker stopped."""
-    from service.db import ScheduleRun  # noqa: PLC0415
-
-    requeued = []
+def _queued_before(runtime: Runtime, model: JobModel, now: dt.datetime) -> set[str]:
+    """Return the jobs queued for more than a minute (candidates for a lost queue entry)."""
     with runtime.sessions() as session:
-        stale = session.scalars(
-            select(ScheduleRun).where(
-                ScheduleRun.status == EvaluationStatus.RUNNING,
-                or_(ScheduleRun.heartbeat_at.is_(None), ScheduleRun.heartbeat_at < cutoff),
-            )
-        ).all()
-        for run in stale:
-            failed = run.attempts >= runtime.settings.job_attempts
-            detail = (
-                f"The run was interrupted {run.attempts} times (its worker stopped) and is "
-                "not retried again; check the server log."
-            )
-            done = session.execute(
-                update(ScheduleRun)
-                .where(
-                    ScheduleRun.id == run.id,
-                    ScheduleRun.status == EvaluationStatus.RUNNING,
-                    ScheduleRun.heartbeat_at == run.heartbeat_at,
+        return set(
+            session.scalars(
+                select(model.id).where(
+                    model.status == EvaluationStatus.QUEUED,
+                    model.created_at < now - dt.timedelta(seconds=60),
                 )
-                .values(
-                    status=EvaluationStatus.FAILED if failed else EvaluationStatus.QUEUED,
-                    stage="failed" if failed else "queued again after an interruption",
-                    finished_at=now if failed else None,
-                    error=problem(500, "run.interrupted", "RunInterrupted", detail)
-                    if failed
-                    else None,
-                )
-            )
-            if done.rowcount and not failed:  # type: ignore[attr-defined]
-                requeued.append(run.id)
-        session.commit()
-    for run_id in requeued:
-        logger.warning("Schedule run %s queued again after an interruption", run_id)
-        runtime.enqueue_schedule_run(run_id)
+            ).all()
+        )
 
 
 def release(runtime: Runtime) -> int:
@@ -530,17 +553,21 @@ def release(runtime: Runtime) -> int:
     Their threads are abandoned (daemon threads end with the process); whatever they still
     write is ignored, because a finished job is recorded only by the worker that holds it.
     """
-    with runtime.sessions() as session:
-        ids = session.scalars(
-            select(Evaluation.id).where(
-                Evaluation.status == EvaluationStatus.RUNNING,
-                Evaluation.worker == runtime.worker_id,
-            )
-        ).all()
-        for evaluation_id in ids:
+    released = 0
+    for model in _INTERRUPTED:
+        with runtime.sessions() as session:
+            ids = session.scalars(
+                select(model.id).where(
+                    model.status == EvaluationStatus.RUNNING, model.worker == runtime.worker_id
+                )
+            ).all()
             session.execute(
-                update(Evaluation)
-                .where(Evaluation.id == evaluation_id, Evaluation.worker == runtime.worker_id)
+                update(model)
+                .where(
+                    model.id.in_(ids),
+                    model.status == EvaluationStatus.RUNNING,
+                    model.worker == runtime.worker_id,
+                )
                 .values(
                     status=EvaluationStatus.QUEUED,
                     worker=None,
@@ -549,7 +576,8 @@ def release(runtime: Runtime) -> int:
                     fraction=0.0,
                 )
             )
-        session.commit()
-    for evaluation_id in ids:
-        runtime.enqueue(evaluation_id)
-    return len(ids)
+            session.commit()
+        for job_id in ids:
+            _enqueue(runtime, model, job_id)
+        released += len(ids)
+    return released

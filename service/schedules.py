@@ -41,7 +41,14 @@ from service.db import (
     utcnow,
 )
 from service.errors import internal_problem, problem_for
-from service.jobs import Runtime, execute_evaluation
+from service.jobs import (
+    Heartbeat,
+    ProgressWriter,
+    Runtime,
+    claim,
+    execute_evaluation,
+    finish,
+)
 
 __all__ = [
     "SUMMARY_ARTIFACTS",
@@ -249,27 +256,45 @@ def describe_selection(selection: Mapping[str, Any], *, as_of: dt.datetime) -> s
 
 def execute_schedule_run(runtime: Runtime, run_id: str) -> None:
     """Evaluate the selected recordings, render the summary and notify; never raises."""
-    if not _claim(runtime, run_id):
+    if not claim(runtime, ScheduleRun, run_id, stage="selecting recordings"):
         return
+    heartbeat = Heartbeat(runtime, ScheduleRun, run_id)
+    heartbeat.start()
     staging: Path | None = None
     try:
         run, schedule, datasets = _load(runtime, run_id)
         picked = select_datasets(datasets, schedule.selection, as_of=run.due_at)
-        rows, summary_runs = _evaluate_all(runtime, run, schedule, picked)
+        progress = ProgressWriter(runtime, ScheduleRun, run_id)
+        rows, summary_runs = _evaluate_all(runtime, run, schedule, picked, progress)
         staging = runtime.store.run_staging_dir(run_id)
-        _render(runtime, run, schedule, summary_runs, staging)
+        progress("writing the summary report", 0.85)
+        _render(run, schedule, summary_runs, staging, runtime.settings.templates_dir)
         artifacts = _publish(runtime, run_id, staging)
         staging = None
-        _finish(runtime, run_id, status=EvaluationStatus.SUCCEEDED, rows=rows, artifacts=artifacts)
+        finish(
+            runtime,
+            ScheduleRun,
+            run_id,
+            status=EvaluationStatus.SUCCEEDED,
+            rows=rows,
+            artifacts=artifacts,
+        )
     except LocevalError as err:
         body = problem_for(err)
         body["detail"] = runtime.store.scrub(body["detail"])
-        _finish(runtime, run_id, status=EvaluationStatus.FAILED, error=body)
+        finish(runtime, ScheduleRun, run_id, status=EvaluationStatus.FAILED, error=body)
     except Exception:
         error_id = new_id()[:12]
         logger.exception("Schedule run %s failed with a bug (error_id=%s)", run_id, error_id)
-        _finish(runtime, run_id, status=EvaluationStatus.FAILED, error=internal_problem(error_id))
+        finish(
+            runtime,
+            ScheduleRun,
+            run_id,
+            status=EvaluationStatus.FAILED,
+            error=internal_problem(error_id),
+        )
     finally:
+        heartbeat.stop()
         if staging is not None:
             shutil.rmtree(staging, ignore_errors=True)
     _notify(runtime, run_id)
@@ -286,55 +311,12 @@ def _load(runtime: Runtime, run_id: str) -> tuple[ScheduleRun, Schedule, Sequenc
         return run, schedule, datasets.all()
 
 
-def _claim(runtime: Runtime, run_id: str) -> bool:
-    now = utcnow()
-    with runtime.sessions() as session:
-        claimed = session.execute(
-            update(ScheduleRun)
-            .where(ScheduleRun.id == run_id, ScheduleRun.status == EvaluationStatus.QUEUED)
-            .values(
-                status=EvaluationStatus.RUNNING,
-                attempts=ScheduleRun.attempts + 1,
-                worker=runtime.worker_id,
-                heartbeat_at=now,
-                started_at=now,
-                stage="selecting recordings",
-            )
-        )
-        session.commit()
-        return bool(claimed.rowcount)  # type: ignore[attr-defined]
-
-
-def _progress(runtime: Runtime, run_id: str, stage: str, fraction: float) -> None:
-    with runtime.sessions() as session:
-        session.execute(
-            update(ScheduleRun)
-            .where(ScheduleRun.id == run_id)
-            .values(stage=stage[:200], fraction=fraction, heartbeat_at=utcnow())
-        )
-        session.commit()
-
-
-def _finish(runtime: Runtime, run_id: str, *, status: str, **values: Any) -> None:  # noqa: ANN401
-    succeeded = status == EvaluationStatus.SUCCEEDED
-    with runtime.sessions() as session:
-        session.execute(
-            update(ScheduleRun)
-            .where(ScheduleRun.id == run_id, ScheduleRun.worker == runtime.worker_id)
-            .values(
-                status=status,
-                stage="done" if succeeded else ScheduleRun.stage,
-                fraction=1.0 if succeeded else ScheduleRun.fraction,
-                finished_at=utcnow(),
-                heartbeat_at=None,
-                **values,
-            )
-        )
-        session.commit()
-
-
 def _evaluate_all(
-    runtime: Runtime, run: ScheduleRun, schedule: Schedule, picked: Sequence[Dataset]
+    runtime: Runtime,
+    run: ScheduleRun,
+    schedule: Schedule,
+    picked: Sequence[Dataset],
+    progress: ProgressWriter,
 ) -> tuple[list[dict[str, Any]], list[Any]]:
     """Run the template on every picked recording; failures become rows with the reason."""
     from exporters.summary import SummaryRun  # noqa: PLC0415
@@ -346,7 +328,7 @@ def _evaluate_all(
     rows: list[dict[str, Any]] = []
     summary_runs = []
     for k, dataset in enumerate(picked):
-        _progress(runtime, run.id, f"evaluating {dataset.name}", 0.8 * k / max(len(picked), 1))
+        progress(f"evaluating {dataset.name}", 0.8 * k / max(len(picked), 1))
         row: dict[str, Any] = {"dataset_id": dataset.id, "dataset": dataset.name}
         options = dict(template.get("options") or {})
         if not per_run:
@@ -417,15 +399,14 @@ def _reference_xyz(
 
 
 def _render(
-    runtime: Runtime,
     run: ScheduleRun,
     schedule: Schedule,
     summary_runs: Sequence[Any],
     staging: Path,
+    templates_dir: Path,
 ) -> None:
     from exporters.summary import SummaryInput, render_summary  # noqa: PLC0415
 
-    _progress(runtime, run.id, "writing the summary report", 0.85)
     tolerance = (schedule.template.get("options") or {}).get("tolerance")
     notes = [run.note] if run.note else []
     summary = SummaryInput(
@@ -438,7 +419,7 @@ def _render(
         schedule_id=schedule.id,
         run_id=run.id,
     )
-    html, pdf = render_summary(summary, templates_dir=runtime.settings.templates_dir)
+    html, pdf = render_summary(summary, templates_dir=templates_dir)
     wanted = schedule.produce.get("summary_formats") or list(SUMMARY_ARTIFACTS)
     staging.mkdir(parents=True, exist_ok=True)
     if "summary.html" in wanted:

@@ -84,9 +84,7 @@ class BlobStore:
 
     def staging_dir(self, evaluation_id: str) -> Path:
         """Return a fresh folder to write an evaluation's artifacts into."""
-        folder = self.evaluations / evaluation_id / f".staging-{uuid.uuid4().hex}"
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        return folder
+        return _new_staging(self.evaluations / evaluation_id)
 
     def publish_artifacts(self, evaluation_id: str, staging: Path) -> Path:
         """Rename a finished staging folder into place, replacing an earlier attempt's."""
@@ -98,9 +96,7 @@ class BlobStore:
 
     def run_staging_dir(self, run_id: str) -> Path:
         """Return a fresh folder to write a schedule run's report into."""
-        folder = self.runs / run_id / f".staging-{uuid.uuid4().hex}"
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        return folder
+        return _new_staging(self.runs / run_id)
 
     def publish_run_artifacts(self, run_id: str, staging: Path) -> Path:
         """Rename a run's finished staging folder into place."""
@@ -133,6 +129,12 @@ class BlobStore:
             except FileNotFoundError:
                 continue
         return removed
+
+
+def _new_staging(parent: Path) -> Path:
+    """Return a fresh staging folder's path in ``parent`` (created), the folder not yet."""
+    parent.mkdir(parents=True, exist_ok=True)
+    return parent / f".staging-{uuid.uuid4().hex}"
 
 
 def _publish(staging: Path, final: Path) -> Path:

@@ -11,9 +11,8 @@ from sqlalchemy import select
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.datasets import parse_tags, store_upload
-from service.db import Dataset, Evaluation, EvaluationStatus
-from service.errors import ConflictError, NotFoundError, UploadError
-from service.jobs import Runtime
+from service.db import Dataset, Evaluation, EvaluationStatus, get_owned
+from service.errors import ConflictError, UploadError
 from service.schemas import DatasetPublic, DatasetsPublic
 from service.uploads import receive_multipart
 
@@ -103,19 +102,10 @@ def read_datasets(
     return DatasetsPublic(items=[dataset_public(d) for d in page], count=len(rows))
 
 
-def _get_dataset(runtime: Runtime, project_id: str, dataset_id: str) -> Dataset:
-    with runtime.sessions() as session:
-        dataset = session.get(Dataset, dataset_id)
-    if dataset is None or dataset.project_id != project_id:
-        msg = f"No dataset {dataset_id!r} in this project; list them with GET /datasets."
-        raise NotFoundError(msg)
-    return dataset
-
-
 @router.get("/{dataset_id}", response_model=DatasetPublic, responses=problems(404))
 def read_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> DatasetPublic:
     """Show one dataset with its inspection."""
-    return dataset_public(_get_dataset(runtime, project_id, dataset_id))
+    return dataset_public(get_owned(runtime.sessions, Dataset, dataset_id, project_id))
 
 
 @router.delete(
@@ -126,7 +116,7 @@ def delete_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep)
 
     Finished evaluations keep their results and artifacts.
     """
-    dataset = _get_dataset(runtime, project_id, dataset_id)
+    dataset = get_owned(runtime.sessions, Dataset, dataset_id, project_id)
     with runtime.sessions() as session:
         active = session.scalars(
             select(Evaluation.dataset_ids).where(

@@ -16,9 +16,9 @@ from exporters import ARTIFACTS
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.datasets import store_upload
-from service.db import Evaluation, EvaluationStatus
+from service.db import Evaluation, EvaluationStatus, get_owned
 from service.errors import NotFoundError, NotReadyError, UploadError
-from service.evaluations import create_evaluation, evaluation_public, get_evaluation
+from service.evaluations import create_evaluation, evaluation_public
 from service.jobs import Runtime
 from service.schemas import (
     EvaluationCreate,
@@ -84,7 +84,7 @@ def read_evaluation(
     evaluation_id: str, request: Request, runtime: RuntimeDep, project_id: ProjectDep
 ) -> EvaluationPublic:
     """Status and progress; the result document once succeeded, the problem once failed."""
-    evaluation = get_evaluation(runtime, project_id, evaluation_id)
+    evaluation = get_owned(runtime.sessions, Evaluation, evaluation_id, project_id)
     return evaluation_public(evaluation, base_url=str(request.base_url), with_result=True)
 
 
@@ -103,7 +103,7 @@ def read_artifact(
     evaluation_id: str, name: str, runtime: RuntimeDep, project_id: ProjectDep
 ) -> FileResponse:
     """Download an artifact: report.html, report.pdf, errors.csv, result.json, paths.*."""
-    evaluation = get_evaluation(runtime, project_id, evaluation_id)
+    evaluation = get_owned(runtime.sessions, Evaluation, evaluation_id, project_id)
     spec = ARTIFACTS.get(name)
     if spec is None:
         msg = f"No artifact {name!r}; the artifacts are {', '.join(ARTIFACTS)}."

@@ -10,7 +10,7 @@ from sqlalchemy import select
 
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
-from service.db import Schedule, ScheduleRun, utcnow
+from service.db import Schedule, ScheduleRun, get_owned, utcnow
 from service.errors import NotFoundError, NotReadyError
 from service.evaluations import check_options
 from service.jobs import Runtime
@@ -61,17 +61,8 @@ def _run_public(run: ScheduleRun, base_url: str) -> ScheduleRunPublic:
     )
 
 
-def _get_schedule(runtime: Runtime, project_id: str, schedule_id: str) -> Schedule:
-    with runtime.sessions() as session:
-        schedule = session.get(Schedule, schedule_id)
-    if schedule is None or schedule.project_id != project_id:
-        msg = f"No schedule {schedule_id!r} in this project; list them with GET /schedules."
-        raise NotFoundError(msg)
-    return schedule
-
-
 def _get_run(runtime: Runtime, project_id: str, schedule_id: str, run_id: str) -> ScheduleRun:
-    _get_schedule(runtime, project_id, schedule_id)
+    get_owned(runtime.sessions, Schedule, schedule_id, project_id)
     with runtime.sessions() as session:
         run = session.get(ScheduleRun, run_id)
     if run is None or run.schedule_id != schedule_id:
@@ -130,7 +121,7 @@ def read_schedules(runtime: RuntimeDep, project_id: ProjectDep) -> SchedulesPubl
 @router.get("/{schedule_id}", response_model=SchedulePublic, responses=problems(404))
 def read_schedule(schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> SchedulePublic:
     """Show a schedule and when it fires next."""
-    return _schedule_public(_get_schedule(runtime, project_id, schedule_id))
+    return _schedule_public(get_owned(runtime.sessions, Schedule, schedule_id, project_id))
 
 
 @router.patch("/{schedule_id}", response_model=SchedulePublic, responses=problems(404))
@@ -142,7 +133,7 @@ def update_schedule(
     Changing the cron or the time zone, or resuming, counts the next fire from now: fires
     missed while paused are not run.
     """
-    schedule = _get_schedule(runtime, project_id, schedule_id)
+    schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
     changes = body.model_dump(exclude_unset=True, mode="json")
     cron = changes.get("cron", schedule.cron)
     timezone = changes.get("timezone", schedule.timezone)
@@ -165,7 +156,7 @@ def update_schedule(
 @router.delete("/{schedule_id}", status_code=status.HTTP_204_NO_CONTENT, responses=problems(404))
 def delete_schedule(schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Delete a schedule with its runs and their reports (the evaluations stay)."""
-    schedule = _get_schedule(runtime, project_id, schedule_id)
+    schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
     with runtime.sessions() as session:
         run_ids = session.scalars(
             select(ScheduleRun.id).where(ScheduleRun.schedule_id == schedule.id)
@@ -191,7 +182,7 @@ def run_schedule_now(
     schedule_id: str, request: Request, runtime: RuntimeDep, project_id: ProjectDep
 ) -> ScheduleRunPublic:
     """Start a run now (paused schedules too); poll ``GET .../runs/{run_id}``."""
-    schedule = _get_schedule(runtime, project_id, schedule_id)
+    schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
     run_id = trigger_run(runtime, schedule)
     return _run_public(_get_run(runtime, project_id, schedule.id, run_id), str(request.base_url))
 
@@ -205,7 +196,7 @@ def read_runs(
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
 ) -> ScheduleRunsPublic:
     """List a schedule's runs, newest first, with status and links."""
-    schedule = _get_schedule(runtime, project_id, schedule_id)
+    schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
     with runtime.sessions() as session:
         runs = session.scalars(
             select(ScheduleRun)

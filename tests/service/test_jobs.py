@@ -14,7 +14,7 @@ from sqlalchemy import inspect, select
 
 from loceval.errors import AssociationError
 from service import jobs
-from service.db import Base, Dataset, Evaluation, Project, utcnow
+from service.db import Base, Dataset, Evaluation, Project, Schedule, ScheduleRun, utcnow
 from service.jobs import Runtime, create_runtime, execute_evaluation, recover
 from service.settings import Settings
 from tests.factories import make_trajectory, write_tum
@@ -251,3 +251,58 @@ def test_release_leaves_other_workers_jobs(runtime: Runtime, evaluation_id: str)
     _abandon(runtime, evaluation_id, attempts=1, beat_age_s=0)
     assert jobs.release(runtime) == 0
     assert _row(runtime, evaluation_id).status == "running"
+
+
+def _running_run(rt: Runtime, *, worker: str, attempts: int, beat_age_s: float) -> str:
+    """A schedule run left running (the same job columns as an evaluation)."""
+    now = utcnow()
+    with rt.sessions() as session:
+        project = Project(name=f"runs-{worker}")
+        session.add(project)
+        session.flush()
+        schedule = Schedule(
+            project_id=project.id,
+            name="weekly",
+            cron="0 7 * * mon",
+            timezone="UTC",
+            selection={},
+            template={},
+            produce={},
+        )
+        session.add(schedule)
+        session.flush()
+        run = ScheduleRun(
+            schedule_id=schedule.id,
+            project_id=project.id,
+            trigger="cron",
+            due_at=now,
+            status="running",
+            worker=worker,
+            attempts=attempts,
+            heartbeat_at=now - dt.timedelta(seconds=beat_age_s),
+        )
+        session.add(run)
+        session.commit()
+        return run.id
+
+
+def test_recover_handles_schedule_runs_like_evaluations(runtime: Runtime):
+    """An abandoned schedule run is queued again, and failed at the attempt limit."""
+    again = _running_run(runtime, worker="dead:1", attempts=1, beat_age_s=120)
+    given_up = _running_run(runtime, worker="dead:2", attempts=3, beat_age_s=120)
+    recover(runtime)
+    with runtime.sessions() as session:
+        assert session.get_one(ScheduleRun, again).status == "queued"
+        failed = session.get_one(ScheduleRun, given_up)
+    assert failed.status == "failed"
+    assert failed.error is not None
+    assert failed.error["type"] == "run.interrupted"
+    assert [t.args for t in runtime.huey.pending()] == [(again,)]
+
+
+def test_release_requeues_this_workers_schedule_runs(runtime: Runtime):
+    """A stopping service queues its unfinished schedule runs again too."""
+    run_id = _running_run(runtime, worker=runtime.worker_id, attempts=1, beat_age_s=0)
+    assert jobs.release(runtime) == 1
+    with runtime.sessions() as session:
+        assert session.get_one(ScheduleRun, run_id).status == "queued"
