@@ -20,9 +20,22 @@ __all__ = [
 
 
 class LocevalError(Exception):
-    """Base for every error this project raises on purpose."""
+    """Base for every error this project raises on purpose.
+
+    Args:
+        message: one sentence that names the offending value and says what to do. It names
+            no command-line flag: an error about an option carries the option's key in
+            ``option`` and each front door names that option its own way (the CLI as
+            ``--max-dt``, the HTTP API as ``options.max_dt_s``).
+        option: the key of the evaluation option at fault (``"max_dt_s"``), if any.
+    """
 
     code: ClassVar[str] = "error"
+
+    def __init__(self, message: str = "", *, option: str | None = None) -> None:
+        """Keep the message and the option's key."""
+        super().__init__(message)
+        self.option = option
 
 
 class InputError(LocevalError):
