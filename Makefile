@@ -1,23 +1,28 @@
 # The two commands of the README: `make serve` (set up, then start the service) and `make test`
 # (set up with the dev tools, then every check and test). Both need only Python 3.11+ and the
 # package registries. The Dockerfile runs `make setup`, so the container installs what we test.
+# Installs come from the hash-pinned lock files in requirements/ (`make lock` refreshes them);
+# pyproject.toml keeps the `>=` ranges for people who install loceval as a library.
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEVSTAMP := $(VENV)/.installed-dev
 
-.PHONY: setup setup-dev serve run demo test lint typecheck pytest bench clean
+.PHONY: setup setup-dev serve run demo test lint typecheck pytest bench clean lock
 
-$(STAMP): pyproject.toml
+LOCK_PYTHON := 3.11
+PIP_LOCKED := $(BIN)/python -m pip install --quiet --require-hashes --only-binary=:all:
+
+$(STAMP): pyproject.toml requirements/runtime.lock requirements/build.lock
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "loceval needs Python 3.11 or newer; set PYTHON=python3.11")'
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[all]"
+	$(PIP_LOCKED) -r requirements/build.lock -r requirements/runtime.lock
+	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	@touch $(STAMP)
 
-$(DEVSTAMP): $(STAMP)
-	$(BIN)/python -m pip install --quiet -e ".[dev]"
+$(DEVSTAMP): $(STAMP) requirements/dev.lock
+	$(PIP_LOCKED) -r requirements/dev.lock
 	@touch $(DEVSTAMP)
 
 setup: $(STAMP)
@@ -46,6 +51,20 @@ test: lint typecheck pytest
 
 bench: setup-dev
 	$(BIN)/python -m benchmarks.core
+
+# Refresh the lock files after changing a dependency in pyproject.toml (or to take new
+# releases): uv resolves for Python $(LOCK_PYTHON) on every platform and writes the hashes of
+# every wheel; uv runs from a scratch environment, it is not a dependency.
+lock:
+	$(PYTHON) -m venv .lockenv
+	.lockenv/bin/python -m pip install --quiet uv
+	.lockenv/bin/uv pip compile pyproject.toml --extra dev --generate-hashes --universal \
+		--python-version $(LOCK_PYTHON) --no-header -o requirements/dev.lock
+	.lockenv/bin/uv pip compile pyproject.toml --extra all --generate-hashes --universal \
+		--python-version $(LOCK_PYTHON) --no-header -c requirements/dev.lock -o requirements/runtime.lock
+	.lockenv/bin/uv pip compile requirements/build.in --generate-hashes --universal \
+		--python-version $(LOCK_PYTHON) --no-header -o requirements/build.lock
+	rm -rf .lockenv
 
 clean:
 	rm -rf $(VENV) out var .mypy_cache .ruff_cache
