@@ -39,7 +39,14 @@ def test_reads_horizontal_and_vertical_sigma_with_units_and_semicolons(tmp_path)
     pts = read_control_points(
         _write(
             tmp_path,
-            "ID; X [m]; Y [m]; Z [m]; sigma_xy_m; sigma_z_m\nA;0;0;0;0.001;0.003\nB;1;0;0;0.001;0.003\nC;0;1;0;0.001;0.003\n",
+            "\n".join(
+                [
+                    "ID; X [m]; Y [m]; Z [m]; sigma_xy_m; sigma_z_m",
+                    "A;0;0;0;0.001;0.003",
+                    "B;1;0;0;0.001;0.003",
+                    "C;0;1;0;0.001;0.003",
+                ]
+            ),
         )
     )
     np.testing.assert_array_equal(pts.sigma_xyz[0], [0.001, 0.001, 0.003])
