@@ -14,6 +14,13 @@ from loceval.readers.points import (
 )
 
 
+_SURVEY_HV = """ID; X [m]; Y [m]; Z [m]; sigma_xy_m; sigma_z_m
+A;0;0;0;0.001;0.003
+B;1;0;0;0.001;0.003
+C;0;1;0;0.001;0.003
+"""
+
+
 def _write(tmp_path, text: str, name: str = "survey.csv"):
     path = tmp_path / name
     path.write_text(text, encoding="utf-8")
@@ -39,14 +46,7 @@ def test_reads_horizontal_and_vertical_sigma_with_units_and_semicolons(tmp_path)
     pts = read_control_points(
         _write(
             tmp_path,
-            "\n".join(
-                [
-                    "ID; X [m]; Y [m]; Z [m]; sigma_xy_m; sigma_z_m",
-                    "A;0;0;0;0.001;0.003",
-                    "B;1;0;0;0.001;0.003",
-                    "C;0;1;0;0.001;0.003",
-                ]
-            ),
+            _SURVEY_HV,
         )
     )
     np.testing.assert_array_equal(pts.sigma_xyz[0], [0.001, 0.001, 0.003])
