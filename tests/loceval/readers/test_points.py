@@ -13,7 +13,6 @@ from loceval.readers.points import (
     read_visits,
 )
 
-
 _SURVEY_HV = """ID; X [m]; Y [m]; Z [m]; sigma_xy_m; sigma_z_m
 A;0;0;0;0.001;0.003
 B;1;0;0;0.001;0.003
