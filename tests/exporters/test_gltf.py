@@ -13,7 +13,8 @@ import pytest
 
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import parse_site, place_evaluation, polyline_distances
+from exporters.placement import parse_site, place_evaluation
+from loceval.polyline import polyline_distances
 from loceval.evaluation import EvaluationResult
 from tests.conftest import require_tool
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from exporters.options import ExportOptions, Units
-from exporters.placement import parse_site, polyline_distances
+from exporters.placement import parse_site
+from loceval.polyline import polyline_distances
 from loceval.evaluation import EvaluationResult
 
 rhino3dm = pytest.importorskip("rhino3dm")

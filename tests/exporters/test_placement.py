@@ -23,12 +23,11 @@ from exporters.placement import (
     parse_site,
     parse_units,
     place_evaluation,
-    polyline_distances,
     read_site_matrix,
-    simplify_rdp,
 )
 from loceval.evaluation import EvaluationResult, evaluate
 from loceval.geometry import SimilarityTransform
+from loceval.polyline import polyline_distances, simplify_rdp
 
 SITE = "512340.25 5403210.5 112.3 37.5"
 
