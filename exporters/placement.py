@@ -31,7 +31,7 @@ from scipy.spatial.transform import Rotation
 from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval import __version__
-from loceval._typing import FloatArray, IntArray, StampsNs
+from loceval._typing import FloatArray, StampsNs
 from loceval.errors import InputError
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.geometry import SimilarityTransform

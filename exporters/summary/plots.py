@@ -14,7 +14,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.dates import AutoDateLocator, ConciseDateFormatter, date2num
 
-from exporters.plots import (
+from exporters.plots.figure import (
     TOLERANCE_COLOUR,
     ImageFormat,
     Plot,
