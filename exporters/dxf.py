@@ -39,10 +39,10 @@ from exporters.placement import (
     Placement,
     ate_bins,
     place_evaluation,
-    simplify_rdp,
 )
 from loceval._typing import FloatArray
 from loceval.evaluation import EstimateResult, EvaluationResult
+from loceval.polyline import simplify_rdp
 
 __all__ = ["export_dxf"]
 

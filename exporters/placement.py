@@ -31,10 +31,11 @@ from scipy.spatial.transform import Rotation
 from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval import __version__
-from loceval._typing import FloatArray, IntArray, StampsNs
+from loceval._typing import FloatArray, StampsNs
 from loceval.errors import InputError
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.geometry import SimilarityTransform
+from loceval.polyline import simplify_rdp
 
 __all__ = [
     "BUILDING_SUFFIXES",
@@ -51,9 +52,7 @@ __all__ = [
     "parse_site",
     "parse_units",
     "place_evaluation",
-    "polyline_distances",
     "read_site_matrix",
-    "simplify_rdp",
     "site_from_values",
 ]
 
@@ -80,7 +79,6 @@ _NS_PER_S: Final = 1_000_000_000
 _WORST_SEPARATION_S: Final = 2.0  # greatest errors closer in time than this share a marker
 _INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f]+')
 _BIN_COLORS: Final[tuple[RGB, ...]] = ((0, 170, 0), (230, 200, 0), (255, 120, 0), (220, 0, 0))
-_CHUNK: Final = 4_000_000  # point-segment pairs per vectorized block (about 100 MB)
 
 
 class PathKind(StrEnum):
@@ -235,110 +233,6 @@ def check_options(options: ExportOptions) -> None:
         if not building.is_file():
             msg = f"--building {str(building)!r} does not exist; check the path."
             raise ExportOptionsError(msg)
-
-
-# --- simplification ------------------------------------------------------------------------
-
-
-def simplify_rdp(points_xyz: FloatArray, tolerance: float) -> tuple[IntArray, float]:
-    """Ramer-Douglas-Peucker simplification of a 3D polyline.
-
-    Iterative and vectorized: every pending segment of one refinement level is measured in
-    a single numpy pass (a work list instead of recursion, so no recursion limit and no
-    Python loop over points). Distances are to the segment, not the infinite line, so
-    closed loops (first point == last point) simplify correctly.
-
-    The returned deviation is the largest distance from a dropped vertex to the simplified
-    segment that replaces it. Because the distance to a segment is convex, this is also the
-    largest distance from any point of the original polyline to the simplified one.
-
-    Args:
-        points_xyz: (N, 3) vertices.
-        tolerance: largest allowed deviation, in the points' units; 0 keeps every vertex.
-
-    Returns:
-        The (M,) increasing indices of the kept vertices (first and last always kept), and
-        the largest deviation introduced (0.0 when nothing was dropped).
-    """
-    points = np.asarray(points_xyz, dtype=np.float64)
-    n = points.shape[0]
-    if n <= 2 or tolerance <= 0.0:
-        return np.arange(n, dtype=np.intp), 0.0
-    keep = np.zeros(n, dtype=bool)
-    keep[[0, n - 1]] = True
-    starts = np.array([0], dtype=np.intp)
-    ends = np.array([n - 1], dtype=np.intp)
-    deviation = 0.0
-    while starts.size:
-        counts = ends - starts - 1
-        nonempty = counts > 0
-        starts, ends, counts = starts[nonempty], ends[nonempty], counts[nonempty]
-        if not starts.size:
-            break
-        first = np.cumsum(counts) - counts  # where each segment's interior starts
-        segment = np.repeat(np.arange(starts.size), counts)
-        inner = starts[segment] + 1 + (np.arange(int(counts.sum())) - first[segment])
-        dist = _segment_distances(points[inner], points[starts][segment], points[ends][segment])
-        peak = np.maximum.reduceat(dist, first)
-        at_peak = np.flatnonzero(dist == peak[segment])
-        # on ties (zigzags, quantized data) split nearest the middle: the work list then
-        # halves each level instead of peeling off one vertex per level
-        off_centre = np.abs(2 * inner[at_peak] - (starts + ends)[segment[at_peak]])
-        at_peak = at_peak[np.lexsort((off_centre, segment[at_peak]))]
-        argmax = at_peak[np.unique(segment[at_peak], return_index=True)[1]]
-        split = peak > tolerance
-        if (~split).any():
-            deviation = max(deviation, float(peak[~split].max()))
-        cut = inner[argmax[split]]
-        keep[cut] = True
-        starts = np.concatenate([starts[split], cut])
-        ends = np.concatenate([cut, ends[split]])
-    return np.flatnonzero(keep), deviation
-
-
-def _segment_distances(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
-    """Distances of (K, 3) points to the (K, 3) segments ``a``-``b`` row by row."""
-    ab = b - a
-    length2 = np.einsum("ij,ij->i", ab, ab)
-    along = np.einsum("ij,ij->i", p - a, ab)
-    t = np.divide(along, length2, out=np.zeros_like(along), where=length2 > 0.0)
-    diff = p - a - np.clip(t, 0.0, 1.0)[:, None] * ab
-    out: FloatArray = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-    return out
-
-
-def polyline_distances(points_xyz: FloatArray, vertices_xyz: FloatArray) -> FloatArray:
-    """Distance from each point to the nearest segment of a polyline (brute force, chunked).
-
-    Used to check a simplified or re-read polyline against the poses it stands for.
-
-    Args:
-        points_xyz: (N, 3) points.
-        vertices_xyz: (M, 3) polyline vertices, M >= 1.
-
-    Returns:
-        (N,) distances in the points' units.
-    """
-    points = np.asarray(points_xyz, dtype=np.float64)
-    vertices = np.asarray(vertices_xyz, dtype=np.float64)
-    a = vertices[:-1] if len(vertices) > 1 else vertices
-    b = vertices[1:] if len(vertices) > 1 else vertices
-    out = np.empty(len(points))
-    step = max(1, _CHUNK // max(1, len(a)))
-    for k in range(0, len(points), step):  # one iteration per ~4M point-segment pairs
-        p = points[k : k + step]
-        ab = b - a
-        length2 = np.einsum("ij,ij->i", ab, ab)
-        ap = p[:, None, :] - a[None, :, :]
-        t = np.divide(
-            np.einsum("kij,ij->ki", ap, ab),
-            length2,
-            out=np.zeros((len(p), len(a))),
-            where=length2 > 0.0,
-        )
-        diff = ap - np.clip(t, 0.0, 1.0)[..., None] * ab
-        out[k : k + step] = np.sqrt(np.einsum("kij,kij->ki", diff, diff).min(axis=1))
-    return out
 
 
 # --- names and colours -----------------------------------------------------------------

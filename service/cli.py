@@ -544,7 +544,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
         generated_at=dt.datetime.now(dt.UTC),
         selection=f"the {len(args.datasets)} recordings named on the command line",
         runs=runs,
-        tolerance=str(Tolerance.parse(tolerance)) if tolerance else None,
+        tolerance=Tolerance.parse(tolerance) if tolerance else None,
     )
     from service.settings import Settings  # noqa: PLC0415
 

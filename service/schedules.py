@@ -30,6 +30,7 @@ from sqlalchemy import select, update
 from sqlalchemy.exc import IntegrityError
 
 from loceval.errors import InputError, LocevalError
+from loceval.evaluation import Tolerance
 from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
 from service.db import (
     Dataset,
@@ -414,7 +415,7 @@ def _render(
         generated_at=utcnow(),
         selection=describe_selection(schedule.selection, as_of=run.due_at),
         runs=summary_runs,
-        tolerance=_tolerance_words(tolerance),
+        tolerance=Tolerance.parse(tolerance) if tolerance else None,
         notes=notes,
         schedule_id=schedule.id,
         run_id=run.id,
@@ -426,14 +427,6 @@ def _render(
         (staging / "summary.html").write_bytes(html)
     if "summary.pdf" in wanted:
         (staging / "summary.pdf").write_bytes(pdf)
-
-
-def _tolerance_words(tolerance: str | None) -> str | None:
-    if not tolerance:
-        return None
-    from loceval.evaluation import Tolerance  # noqa: PLC0415
-
-    return str(Tolerance.parse(tolerance))
 
 
 def _publish(runtime: Runtime, run_id: str, staging: Path) -> list[dict[str, Any]]:

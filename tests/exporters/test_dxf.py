@@ -15,8 +15,9 @@ import pytest
 
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import ate_bins, parse_site, polyline_distances
+from exporters.placement import ate_bins, parse_site
 from loceval.evaluation import EvaluationResult, evaluate
+from loceval.polyline import polyline_distances
 from tests.conftest import require_tool
 
 ezdxf = pytest.importorskip("ezdxf")

@@ -13,8 +13,9 @@ import pytest
 
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import parse_site, place_evaluation, polyline_distances
+from exporters.placement import parse_site, place_evaluation
 from loceval.evaluation import EvaluationResult
+from loceval.polyline import polyline_distances
 from tests.conftest import require_tool
 
 pygltflib = pytest.importorskip("pygltflib")

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from exporters.options import ExportOptions, Units
-from exporters.placement import parse_site, polyline_distances
+from exporters.placement import parse_site
 from loceval.evaluation import EvaluationResult
+from loceval.polyline import polyline_distances
 
 rhino3dm = pytest.importorskip("rhino3dm")
 from exporters import rhino  # noqa: E402  (after the importorskip of its library)

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import itertools
 import json
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -23,12 +21,11 @@ from exporters.placement import (
     parse_site,
     parse_units,
     place_evaluation,
-    polyline_distances,
     read_site_matrix,
-    simplify_rdp,
 )
 from loceval.evaluation import EvaluationResult, evaluate
 from loceval.geometry import SimilarityTransform
+from loceval.polyline import polyline_distances
 
 SITE = "512340.25 5403210.5 112.3 37.5"
 
@@ -152,69 +149,6 @@ class TestUnitsAndOptions:
         (tmp_path / "model.fbx").write_bytes(b"FBX")
         with pytest.raises(ExportOptionsError, match=match):
             check_options(ExportOptions(building=tmp_path / name))
-
-
-class TestSimplify:
-    def test_deviation_within_tolerance_and_reported_exactly(self, rng: np.random.Generator):
-        """No original vertex is farther than the tolerance, and the reported maximum is true."""
-        t = np.linspace(0, 6 * np.pi, 5000)
-        points = np.stack([np.cos(t) * t, np.sin(t) * t, 0.1 * t], 1)
-        points += rng.normal(0.0, 0.0005, points.shape)
-        kept, deviation = simplify_rdp(points, 0.002)
-        actual = polyline_distances(points, points[kept])
-        assert 10 < len(kept) < len(points)
-        assert deviation <= 0.002
-        assert actual.max() <= deviation + 1e-12
-        assert actual.max() == pytest.approx(deviation, abs=1e-12)
-
-    def test_endpoints_zero_tolerance_and_lines(self):
-        """Endpoints stay, tolerance 0 keeps all, a straight line keeps two vertices."""
-        line = np.stack([np.arange(100.0), 2 * np.arange(100.0), np.zeros(100)], 1)
-        kept, deviation = simplify_rdp(line, 1e-6)
-        np.testing.assert_array_equal(kept, [0, 99])
-        assert deviation < 1e-9
-        kept0, deviation0 = simplify_rdp(line, 0.0)
-        np.testing.assert_array_equal(kept0, np.arange(100))
-        assert deviation0 == 0.0
-
-    def test_closed_loop(self):
-        """A loop whose first and last points coincide simplifies against segments, not lines."""
-        s = np.linspace(0, 2 * np.pi, 2000)
-        loop = np.stack([np.cos(s), np.sin(s), np.zeros_like(s)], 1)
-        kept, deviation = simplify_rdp(loop, 0.001)
-        assert 20 < len(kept) < 200
-        assert polyline_distances(loop, loop[kept]).max() <= deviation + 1e-12 <= 0.001 + 1e-12
-
-    def test_large_inputs_are_fast_without_recursion(self, rng: np.random.Generator):
-        """100,000 noisy poses and a 100,000-vertex zigzag (ties everywhere) finish in seconds."""
-        n = 100_000
-        t = np.linspace(0, 60 * np.pi, n)
-        walk = np.stack([5 * np.cos(t) + 0.01 * t, 3 * np.sin(t), 1.3 + 0.1 * np.sin(5 * t)], 1)
-        noisy = walk + rng.normal(0, 0.0005, walk.shape)
-        zigzag = np.stack([np.arange(n) * 0.01, (np.arange(n) % 2) * 0.1, np.zeros(n)], 1)
-        start = time.perf_counter()
-        kept_walk, _ = simplify_rdp(walk, 0.001)
-        _, dev_noisy = simplify_rdp(noisy, 0.001)
-        kept_zigzag, _ = simplify_rdp(zigzag, 0.001)
-        elapsed = time.perf_counter() - start
-        assert len(kept_walk) < n / 10
-        assert len(kept_zigzag) == n
-        assert dev_noisy <= 0.001
-        assert elapsed < 10.0
-
-    def test_polyline_distances_brute_force(self, rng: np.random.Generator):
-        """Distances to a polyline match a per-segment computation, including a single vertex."""
-        points = rng.normal(size=(50, 3))
-        vertices = rng.normal(size=(7, 3))
-        expected = np.full(50, np.inf)
-        for a, b in itertools.pairwise(vertices):
-            t = np.clip((points - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1)
-            expected = np.minimum(
-                expected, np.linalg.norm(points - (a + t[:, None] * (b - a)), axis=1)
-            )
-        np.testing.assert_allclose(polyline_distances(points, vertices), expected, rtol=1e-12)
-        single = polyline_distances(points, vertices[:1])
-        np.testing.assert_allclose(single, np.linalg.norm(points - vertices[0], axis=1))
 
 
 class TestNamesAndColours:

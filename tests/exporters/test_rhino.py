@@ -9,8 +9,9 @@ import pytest
 
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import ate_bins, parse_site, place_evaluation, polyline_distances
+from exporters.placement import ate_bins, parse_site, place_evaluation
 from loceval.evaluation import EvaluationResult
+from loceval.polyline import polyline_distances
 
 rhino3dm = pytest.importorskip("rhino3dm")
 from exporters import rhino  # noqa: E402  (after the importorskip of its library)

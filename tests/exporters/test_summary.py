@@ -15,24 +15,22 @@ import numpy as np
 import pytest
 
 from exporters.errors import ExportError
-from exporters.placement import polyline_distances
 from exporters.report import DEFAULT_TEMPLATES_DIR
 from exporters.summary import (
-    PolylineIndex,
     SummaryInput,
     SummaryRun,
     SystemFigures,
     best_systems,
     build_summary_view,
-    path_distances,
     render_summary,
     render_summary_html,
     render_summary_pdf,
+    render_summary_plots,
     repeatability,
     system_stats,
-    tolerance_distance,
 )
 from loceval.evaluation import EvaluationConfig, Tolerance, evaluate
+from loceval.polyline import PolylineIndex, path_distances, polyline_distances
 from service.cli import main as cli_main
 from tests.exporters.conftest import noisy, walk
 from tests.factories import make_trajectory, perturb, write_tum
@@ -115,7 +113,7 @@ def _summary(runs: list[SummaryRun], **kwargs: object) -> SummaryInput:
         "generated_at": GENERATED,
         "selection": SELECTION,
         "runs": runs,
-        "tolerance": "0.10 m for 95 % of poses",
+        "tolerance": Tolerance(0.10, 0.95),
         "notes": ("The service was down at 07:00; this run started at 09:12.",),
         "schedule_id": "sch-42",
         "run_id": "run-7",
@@ -267,14 +265,14 @@ def test_dates_must_be_aware_and_are_kept_in_utc() -> None:
         SummaryRun(dataset="d", recorded_at=MONDAY, status="failed", reference_xyz=np.zeros(3))
 
 
-def test_tolerance_distance_reads_the_words() -> None:
-    """The dashed line's distance comes from the tolerance's words, as loceval prints them."""
-    assert tolerance_distance("0.10 m for 95 % of poses") == pytest.approx(0.10)
-    assert tolerance_distance(str(Tolerance(0.05, 0.99))) == pytest.approx(0.05)
-    assert tolerance_distance("10 cm for 95 %") == pytest.approx(0.10)
-    assert tolerance_distance("0.2@95") == pytest.approx(0.2)
-    assert tolerance_distance("strict") is None
-    assert tolerance_distance(None) is None
+def test_trend_draws_the_tolerance_distance_it_is_given(rng: np.random.Generator) -> None:
+    """The dashed line is the Tolerance's distance, a value (not read back from words)."""
+    runs = _week_runs(rng)
+    trend = render_summary_plots(_summary(runs, tolerance=Tolerance(0.05, 0.99)))[0]
+    assert trend.key == "trend"
+    assert "The dashed line is the tolerance distance (0.05 m)" in trend.caption
+    plain = render_summary_plots(_summary(runs, tolerance=None))[0]
+    assert "dashed line" not in plain.caption
 
 
 # --- statistics ---------------------------------------------------------------------------
@@ -500,7 +498,7 @@ def test_html_shows_header_trend_and_repeatability(
 ) -> None:
     """Header facts, the trend figure and the repeatability table with its caption are there."""
     html, _ = rendered
-    for text in (week.title, SELECTION, "0.10 m for 95 % of poses", "sch-42", "run-7",
+    for text in (week.title, SELECTION, "95 % of poses within 0.1 m", "sch-42", "run-7",
                  "2026-11-23 09:12 UTC", "The service was down at 07:00"):  # fmt: skip
         assert text in html
     assert 'data-plot="trend"' in html

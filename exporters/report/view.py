@@ -1,14 +1,8 @@
-"""The evaluation report: self-contained HTML (Jinja2) and the same report as PDF (WeasyPrint).
+"""The evaluation report's view model: every number of the report computed and formatted.
 
-One set of templates (``templates/report.html.j2`` with ``templates/_partials/``) renders
-both: the HTML carries a screen and a print stylesheet, and WeasyPrint lays the same HTML
-out on A4 pages. Plots are embedded as ``data:`` URIs, so the report is one file that needs
-no network and no other file: SVG in the HTML, 200 dpi PNG in the PDF (WeasyPrint draws
-matplotlib's SVG slowly; the picture is the same).
-
-The templates hold loops, conditions and filters only; every number is computed and
-formatted here, in a view model (:class:`ReportView`), so tests can compare the report
-against the result's statistics.
+:func:`build_report_view` turns an :class:`~loceval.evaluation.EvaluationResult` into a
+:class:`ReportView` (statistics tables, verdicts, inputs, options, alignment, the greatest
+errors, numbered figures); the templates only loop over it.
 """
 
 from __future__ import annotations
@@ -22,7 +16,6 @@ from typing import Final
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from exporters.errors import ExportError, ExportUnavailableError
 from exporters.options import ExportOptions
 from exporters.plots import (
     DEFAULT_MAX_POINTS,
@@ -37,23 +30,8 @@ from exporters.plots import (
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.metrics import ErrorSeries, ErrorStats
 
-__all__ = [
-    "BEST_MARK",
-    "DEFAULT_TEMPLATES_DIR",
-    "ReportView",
-    "build_report_view",
-    "check_templates",
-    "html_to_pdf",
-    "render_report",
-    "render_report_html",
-    "render_report_pdf",
-    "render_template",
-    "render_view_html",
-]
+__all__ = ["BEST_MARK", "ReportView", "build_report_view"]
 
-DEFAULT_TEMPLATES_DIR: Final[Path] = Path(__file__).resolve().parents[1] / "templates"
-"""The repository's ``templates/`` folder, used when the options name none."""
-TEMPLATE_NAME: Final = "report.html.j2"
 BEST_MARK: Final = "★"
 """Marks the lowest value of a statistics row (with bold, so it survives grey print)."""
 
@@ -67,9 +45,6 @@ _STAT_ROWS: Final = (
     ("MAX", "max"),
 )
 """The framework paper's Tables 1-2 rows (it omits the median; the issue asks for it)."""
-
-
-# --- view model -------------------------------------------------------------------------
 
 
 @dataclass(frozen=True, slots=True)
@@ -615,168 +590,3 @@ def build_report_view(
         worst=_worst(result),
         warnings=_warnings(result),
     )
-
-
-# --- rendering --------------------------------------------------------------------------
-
-
-def check_templates(folder: Path, name: str, *, label: str) -> Path:
-    """Return ``folder`` if it holds the template ``name``.
-
-    Raises:
-        ExportError: the template is missing (the message names the ``label`` template).
-    """
-    if not (folder / name).is_file():
-        msg = (
-            f"No {label} template {name!r} in {str(folder)!r}; point templates_dir "
-            "at the repository's templates/ folder."
-        )
-        raise ExportError(msg)
-    return folder
-
-
-def render_template(
-    templates_dir: Path, name: str, *, label: str, requirement: str, **context: object
-) -> bytes:
-    """Render a report template (autoescaped, strict about undefined names) to UTF-8.
-
-    Args:
-        templates_dir: the template folder.
-        name: the template's file name.
-        label: names the template in messages (``report``, ``summary``).
-        requirement: what needs Jinja2, for the message when it is missing.
-        context: the template's variables.
-
-    Raises:
-        ExportUnavailableError: Jinja2 is not installed.
-        ExportError: the template is broken.
-    """
-    try:
-        import jinja2  # noqa: PLC0415  (optional dependency: loceval[report])
-    except ImportError as err:
-        msg = f"{requirement} needs jinja2; install loceval[report]."
-        raise ExportUnavailableError(msg) from err
-    env = jinja2.Environment(
-        loader=jinja2.FileSystemLoader(templates_dir),
-        autoescape=True,
-        undefined=jinja2.StrictUndefined,
-        trim_blocks=True,
-        lstrip_blocks=True,
-        keep_trailing_newline=True,
-    )
-    try:
-        html = env.get_template(name).render(**context)
-    except jinja2.TemplateError as err:
-        msg = f"The {label} template in {str(templates_dir)!r} failed: {err}."
-        raise ExportError(msg) from err
-    return html.encode("utf-8")
-
-
-def _templates_dir(options: ExportOptions, templates_dir: Path | None) -> Path:
-    folder = templates_dir or options.templates_dir or DEFAULT_TEMPLATES_DIR
-    return check_templates(folder, TEMPLATE_NAME, label="report")
-
-
-def render_view_html(view: ReportView, *, templates_dir: Path) -> bytes:
-    """Render a view model to the report's HTML (UTF-8).
-
-    Raises:
-        ExportUnavailableError: Jinja2 is not installed.
-        ExportError: the templates are missing or broken.
-    """
-    return render_template(
-        templates_dir, TEMPLATE_NAME, label="report", requirement="report.html", report=view
-    )
-
-
-def html_to_pdf(html: bytes) -> bytes:
-    """Lay the report's HTML out on A4 pages with WeasyPrint.
-
-    Only ``data:`` URLs are fetched; anything else (a network or file URL slipped into a
-    template) stops the render, so a report never touches the network.
-
-    Raises:
-        ExportUnavailableError: WeasyPrint (or its system libraries) is not installed.
-        ExportError: the layout failed or the HTML referred to a non-``data:`` resource.
-    """
-    try:
-        import weasyprint  # noqa: PLC0415  (optional dependency: loceval[report])
-        from weasyprint.urls import FatalURLFetchingError  # noqa: PLC0415
-    except (ImportError, OSError) as err:  # OSError: pango/cairo libraries missing
-        msg = (
-            "report.pdf needs WeasyPrint and its system libraries (pango); install "
-            f"loceval[report] and libpango-1.0-0 ({err})."
-        )
-        raise ExportUnavailableError(msg) from err
-    fetcher = weasyprint.URLFetcher(allowed_protocols=("data",), fail_on_errors=True)
-    try:
-        document = weasyprint.HTML(string=html.decode("utf-8"), url_fetcher=fetcher)
-        pdf = document.write_pdf()
-    except FatalURLFetchingError as err:
-        msg = f"The report refers to a resource that is not embedded: {err}."
-        raise ExportError(msg) from err
-    return bytes(pdf)
-
-
-def render_report(
-    result: EvaluationResult,
-    *,
-    options: ExportOptions | None = None,
-    templates_dir: Path | None = None,
-    max_points: int = DEFAULT_MAX_POINTS,
-) -> tuple[bytes, bytes]:
-    """Render the report as HTML and PDF, building the plots once for both.
-
-    The HTML embeds the plots as SVG; the PDF is the same templates laid out by WeasyPrint
-    with the plots as 200 dpi PNG (WeasyPrint draws matplotlib's SVG slowly: seconds per
-    report, where PNG costs almost nothing).
-
-    Args:
-        result: the evaluation.
-        options: title and evaluation id (defaults otherwise).
-        templates_dir: the template folder; default ``options.templates_dir``, else the
-            repository's ``templates/``.
-        max_points: most vertices drawn per plotted line (drawing only).
-
-    Returns:
-        ``(html, pdf)`` as bytes.
-
-    Raises:
-        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
-        ExportError: the templates are missing or the layout failed.
-    """
-    options = options or ExportOptions()
-    folder = _templates_dir(options, templates_dir)
-    plots = render_plots(result, max_points=max_points, formats=("svg", "png"))
-    html = render_view_html(
-        build_report_view(result, options, plots=plots, image_format="svg"), templates_dir=folder
-    )
-    printable = render_view_html(
-        build_report_view(result, options, plots=plots, image_format="png"), templates_dir=folder
-    )
-    return html, html_to_pdf(printable)
-
-
-def render_report_html(result: EvaluationResult, options: ExportOptions) -> bytes:
-    """Render ``report.html``: one self-contained file (the ARTIFACTS exporter).
-
-    Raises:
-        ExportUnavailableError: Jinja2 or matplotlib is missing.
-        ExportError: the templates are missing or broken.
-    """
-    folder = _templates_dir(options, None)
-    return render_view_html(build_report_view(result, options), templates_dir=folder)
-
-
-def render_report_pdf(result: EvaluationResult, options: ExportOptions) -> bytes:
-    """Render ``report.pdf``: the same report on A4 pages (the ARTIFACTS exporter).
-
-    Plots are embedded as PNG (see :func:`render_report`).
-
-    Raises:
-        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
-        ExportError: the templates are missing or the layout failed.
-    """
-    folder = _templates_dir(options, None)
-    view = build_report_view(result, options, image_format="png")
-    return html_to_pdf(render_view_html(view, templates_dir=folder))

@@ -1,0 +1,71 @@
+"""Report plots: matplotlib figures rendered to self-contained SVG (HTML) and PNG (PDF).
+
+Split by concern: :mod:`~exporters.plots.figure` (colours, decimation, the figure and its
+encoding), :mod:`~exporters.plots.maps` (paths from above, error along the path, side
+views), :mod:`~exporters.plots.series` (errors over time, the CDF) and
+:mod:`~exporters.plots.render` (every plot of the report, in order).
+"""
+
+from __future__ import annotations
+
+from exporters.plots.figure import (
+    DEFAULT_MAX_POINTS,
+    ESTIMATE_COLOURS,
+    MAX_SPAN_MARKERS,
+    MIN_GAP_WIDTH_SHARE,
+    PNG_DPI,
+    RASTER_DPI,
+    RASTER_MIN_POINTS,
+    REFERENCE_COLOUR,
+    SIDE_VIEW_MIN_Z_SPAN_M,
+    TOLERANCE_COLOUR,
+    ImageFormat,
+    Plot,
+    decimate_minmax,
+    decimate_uniform,
+    estimate_colour,
+)
+from exporters.plots.maps import (
+    failing_span_markers,
+    is_3d,
+    plot_ate_path,
+    plot_overlay_xy,
+    plot_side_views,
+)
+from exporters.plots.render import render_plots
+from exporters.plots.series import (
+    describe_rpe_step,
+    envelope,
+    plot_ate_over_time,
+    plot_error_cdf,
+    plot_rpe_over_time,
+)
+
+__all__ = [
+    "DEFAULT_MAX_POINTS",
+    "ESTIMATE_COLOURS",
+    "MAX_SPAN_MARKERS",
+    "MIN_GAP_WIDTH_SHARE",
+    "PNG_DPI",
+    "RASTER_DPI",
+    "RASTER_MIN_POINTS",
+    "REFERENCE_COLOUR",
+    "SIDE_VIEW_MIN_Z_SPAN_M",
+    "TOLERANCE_COLOUR",
+    "ImageFormat",
+    "Plot",
+    "decimate_minmax",
+    "decimate_uniform",
+    "describe_rpe_step",
+    "envelope",
+    "estimate_colour",
+    "failing_span_markers",
+    "is_3d",
+    "plot_ate_over_time",
+    "plot_ate_path",
+    "plot_error_cdf",
+    "plot_overlay_xy",
+    "plot_rpe_over_time",
+    "plot_side_views",
+    "render_plots",
+]

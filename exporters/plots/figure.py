@@ -1,0 +1,264 @@
+"""The report plots' drawing kit: colours, decimation, figures and their SVG/PNG encoding.
+
+Every plot is drawn on a :class:`matplotlib.figure.Figure` built directly: no pyplot, no
+backend switch, no rcParams changes and no display, so nothing is shared between renders
+and no GUI backend is needed. Long series are decimated for *drawing only*: a line never
+carries more than ``max_points`` vertices, while every statistic in the report is
+computed from all poses by the core.
+
+Colours follow the framework paper's Fig. 5: ground truth cyan, the first estimate
+magenta (RTAB-Map there), the second green (ISAAC there), further estimates in other
+distinct colours.
+
+The underscored helpers are shared by the plot modules of this package and the summary
+report's (:mod:`exporters.summary.plots`); they are not part of the public API.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal, TypeAlias
+
+import numpy as np
+from matplotlib import colormaps
+from matplotlib.axes import Axes
+from matplotlib.colors import ListedColormap
+from matplotlib.figure import Figure
+
+from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
+from loceval.evaluation import EvaluationResult
+
+__all__ = [
+    "DEFAULT_MAX_POINTS",
+    "ESTIMATE_COLOURS",
+    "MAX_SPAN_MARKERS",
+    "MIN_GAP_WIDTH_SHARE",
+    "PNG_DPI",
+    "RASTER_DPI",
+    "RASTER_MIN_POINTS",
+    "REFERENCE_COLOUR",
+    "SIDE_VIEW_MIN_Z_SPAN_M",
+    "TOLERANCE_COLOUR",
+    "ImageFormat",
+    "Plot",
+    "decimate_minmax",
+    "decimate_uniform",
+    "estimate_colour",
+]
+
+
+DEFAULT_MAX_POINTS = 5000
+"""Most vertices drawn per line; keeps a 1,000,000-pose report small and fast."""
+SIDE_VIEW_MIN_Z_SPAN_M = 0.05
+"""The path counts as 3D (x-z and y-z views drawn) when the reference's heights span more."""
+MAX_SPAN_MARKERS = 5
+"""Failing stretches numbered on the maps (the worst first; the verdict table lists them)."""
+
+REFERENCE_COLOUR = "#00b5d8"
+"""Ground truth: cyan (the framework paper's Fig. 5), darkened a little to read on white."""
+ESTIMATE_COLOURS: tuple[str, ...] = (
+    "#d4009a",  # magenta (RTAB-Map in the paper's Fig. 5)
+    "#1f9e34",  # green (ISAAC in the paper's Fig. 5)
+    "#f58a07",  # orange
+    "#3b4cc0",  # blue
+    "#8c564b",  # brown
+    "#6b6b6b",  # grey
+    "#b8a700",  # olive
+    "#7b2cbf",  # violet
+)
+"""Distinct estimate colours in order of the estimates."""
+GAP_COLOUR = "#9e9e9e"
+TOLERANCE_COLOUR = "#c62828"
+
+MIN_GAP_WIDTH_SHARE = 0.003
+"""Tracking-loss bands are drawn at least this share of the time axis wide."""
+ENVELOPE_DIVISOR = 5
+"""A series longer than ``max_points`` is drawn as a band of ``max_points / 5`` buckets
+(about one per pixel column of the plot): each bucket's smallest and largest value."""
+RASTER_MIN_POINTS = 500
+"""An error-coloured path with more segments is embedded as a bitmap inside the SVG (axes,
+labels and the colour bar stay vector): thousands of separately coloured SVG segments
+would make the HTML large and WeasyPrint slow."""
+RASTER_DPI = 150
+"""Resolution of those bitmaps."""
+
+PNG_DPI = 200
+"""Resolution of PNG plots (the PDF's; print quality on A4)."""
+
+ImageFormat: TypeAlias = Literal["svg", "png"]
+"""How a plot is encoded: SVG for the HTML, PNG for the PDF (WeasyPrint draws SVG slowly)."""
+
+_NS_PER_S = 1_000_000_000
+_MIN_ERROR_AXIS = 0.01
+_WIDTH_IN = 7.0
+# plasma without its palest yellow, so the largest errors stay visible on white paper.
+_ERROR_CMAP = ListedColormap(
+    np.asarray(colormaps["plasma"](np.linspace(0.0, 0.88, 256)), dtype=np.float64),
+    name="plasma_print",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class Plot:
+    """One rendered figure of the report.
+
+    Attributes:
+        key: a stable identifier (``"overlay_xy"``, ``"ate_path_0"``, ...).
+        title: the figure's title in the report.
+        caption: what the figure shows, in words.
+        svg: the SVG document (UTF-8), if rendered.
+        png: the PNG image, if rendered.
+    """
+
+    key: str
+    title: str
+    caption: str
+    svg: bytes | None = None
+    png: bytes | None = None
+
+    def data_uri(self, image_format: ImageFormat = "svg") -> str:
+        """Return the image as a ``data:`` URI for an ``<img>`` (no external file).
+
+        Raises:
+            ValueError: the plot was not rendered in that format.
+        """
+        data = self.svg if image_format == "svg" else self.png
+        if data is None:
+            msg = f"Plot {self.key!r} was not rendered as {image_format}."
+            raise ValueError(msg)
+        media = "image/svg+xml" if image_format == "svg" else "image/png"
+        return f"data:{media};base64," + base64.b64encode(data).decode("ascii")
+
+
+def estimate_colour(index: int) -> str:
+    """Return the colour of the ``index``-th estimate (cycling after eight)."""
+    return ESTIMATE_COLOURS[index % len(ESTIMATE_COLOURS)]
+
+
+def decimate_uniform(n: int, max_points: int) -> IntArray:
+    """Return at most ``max_points`` evenly spaced indices into ``n`` samples.
+
+    The first and last samples are always kept.
+    """
+    if n <= max_points:
+        return np.arange(n, dtype=np.intp)
+    idx = np.unique(np.linspace(0, n - 1, max(max_points, 2)).round().astype(np.intp))
+    return idx.astype(np.intp, copy=False)
+
+
+def decimate_minmax(values: FloatArray, max_points: int) -> IntArray:
+    """Return sorted indices keeping each bucket's minimum and maximum (at most ``max_points``).
+
+    The series is split into ``max_points // 2`` equal buckets of consecutive samples; the
+    smallest and largest value of each bucket survive, so peaks (the errors that matter)
+    are never decimated away. The first and last samples are always kept.
+    """
+    n = int(values.shape[0])
+    if n <= max_points:
+        return np.arange(n, dtype=np.intp)
+    buckets = max(max_points // 2 - 1, 1)
+    size = -(-n // buckets)  # ceil
+    padded_n = buckets * size
+    padded_lo = np.full(padded_n, np.inf)
+    padded_hi = np.full(padded_n, -np.inf)
+    padded_lo[:n] = values
+    padded_hi[:n] = values
+    offsets = np.arange(buckets, dtype=np.intp) * size
+    lo = padded_lo.reshape(buckets, size).argmin(axis=1) + offsets
+    hi = padded_hi.reshape(buckets, size).argmax(axis=1) + offsets
+    keep = np.concatenate(([0, n - 1], lo, hi))
+    return np.unique(keep[keep < n]).astype(np.intp, copy=False)
+
+
+def _breaks(stamps_ns: StampsNs, kept: IntArray, max_gap_ns: int) -> BoolArray:
+    """Return, per kept sample but the last, whether a time gap lies before the next one."""
+    jump = np.diff(stamps_ns) > max_gap_ns
+    before = np.concatenate(([0], np.cumsum(jump, dtype=np.int64)))
+    out: BoolArray = np.diff(before[kept]) > 0
+    return out
+
+
+def _with_nan_breaks(
+    columns: Sequence[FloatArray], stamps_ns: StampsNs, kept: IntArray, max_gap_ns: int
+) -> list[FloatArray]:
+    """Pick ``kept`` samples of each column and insert NaN where a gap lies between two."""
+    picked = [np.asarray(c, dtype=np.float64)[kept] for c in columns]
+    if kept.size < 2:
+        return picked
+    where = np.flatnonzero(_breaks(stamps_ns, kept, max_gap_ns)) + 1
+    return [np.insert(c, where, np.nan) for c in picked]
+
+
+def _seconds(stamps_ns: StampsNs, t0_ns: int) -> FloatArray:
+    out: FloatArray = (stamps_ns - np.int64(t0_ns)).astype(np.float64) / _NS_PER_S
+    return out
+
+
+def _max_gap_ns(result: EvaluationResult) -> int:
+    return round(result.config.max_gap_s * _NS_PER_S)
+
+
+def _dense(vertices: FloatArray | IntArray) -> bool:
+    return int(vertices.shape[0]) > RASTER_MIN_POINTS
+
+
+_SVG_NUMBER = re.compile(rb"(\d\.\d\d)\d+")
+_SVG_PATH_DATA = re.compile(rb' d="[^"]*"')
+
+
+def _svg(fig: Figure) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="svg", dpi=RASTER_DPI, metadata={"Date": None, "Creator": "loceval"})
+    # Path coordinates are points (1/72 in); matplotlib writes six decimals. Two (1/7200 in)
+    # are far below what any screen or printer shows and make the SVG a third smaller.
+    return _SVG_PATH_DATA.sub(lambda m: _SVG_NUMBER.sub(rb"\1", m.group(0)), buf.getvalue())
+
+
+def _png(fig: Figure) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=PNG_DPI, metadata={"Software": "loceval"})
+    return buf.getvalue()
+
+
+def _plot(
+    fig: Figure, formats: Sequence[ImageFormat], *, key: str, title: str, caption: str
+) -> Plot:
+    """Encode a finished figure in the requested formats (drawn once per format)."""
+    svg = png = None
+    if "svg" in formats:
+        svg = _svg(fig)
+        # The constrained layout is settled by the first save; freezing it spares the
+        # second format another layout pass.
+        fig.set_layout_engine("none")
+    if "png" in formats:
+        png = _png(fig)
+    return Plot(key=key, title=title, caption=caption, svg=svg, png=png)
+
+
+def _new_figure(height_in: float) -> Figure:
+    return Figure(figsize=(_WIDTH_IN, height_in), dpi=150, layout="constrained")
+
+
+def _style(ax: Axes) -> None:
+    ax.grid(visible=True, color="#e0e0e0", linewidth=0.6)
+    ax.set_axisbelow(True)
+    for side in ("top", "right"):
+        ax.spines[side].set_visible(False)
+
+
+def _legend_above(fig: Figure, ax: Axes) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    # One row when it fits the figure's width (about 95 characters at 8 pt), else two.
+    ncols = len(labels) if sum(len(t) + 6 for t in labels) <= 95 else -(-len(labels) // 2)
+    fig.legend(
+        handles,
+        labels,
+        loc="outside upper center",
+        ncols=max(ncols, 1),
+        frameon=False,
+        fontsize=8,
+    )

@@ -1,0 +1,292 @@
+"""The report's maps: the paths from above, each estimate's error along its path, side views."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
+from matplotlib.colors import Normalize
+
+from exporters.plots.figure import (
+    _ERROR_CMAP,
+    _WIDTH_IN,
+    DEFAULT_MAX_POINTS,
+    MAX_SPAN_MARKERS,
+    REFERENCE_COLOUR,
+    SIDE_VIEW_MIN_Z_SPAN_M,
+    TOLERANCE_COLOUR,
+    ImageFormat,
+    Plot,
+    _breaks,
+    _dense,
+    _legend_above,
+    _max_gap_ns,
+    _new_figure,
+    _plot,
+    _style,
+    _with_nan_breaks,
+    decimate_minmax,
+    decimate_uniform,
+    estimate_colour,
+)
+from loceval.evaluation import EstimateResult, EvaluationResult
+
+__all__ = [
+    "failing_span_markers",
+    "is_3d",
+    "plot_ate_path",
+    "plot_overlay_xy",
+    "plot_side_views",
+]
+
+
+def _xy_figure_height(result: EvaluationResult, *, plot_width_in: float) -> float:
+    """Height for an equal-aspect x-y plot of the paths, so little paper is wasted."""
+    xy = [result.reference.positions_xyz[:, :2]]
+    xy.extend(e.aligned.positions_xyz[:, :2] for e in result.estimates)
+    lo = np.min([p.min(axis=0) for p in xy if p.size], axis=0)
+    hi = np.max([p.max(axis=0) for p in xy if p.size], axis=0)
+    dx, dy = float(hi[0] - lo[0]), float(hi[1] - lo[1])
+    ratio = 1.0 if dx <= 0 else dy / dx
+    return float(np.clip(plot_width_in * ratio, 2.6, 7.5)) + 1.2
+
+
+def is_3d(result: EvaluationResult) -> bool:
+    """Whether the side views are worth drawing: the reference's heights span > 5 cm."""
+    z = result.reference.positions_xyz[:, 2]
+    return bool(z.size) and float(np.ptp(z)) > SIDE_VIEW_MIN_Z_SPAN_M
+
+
+def failing_span_markers(estimate: EstimateResult) -> list[tuple[int, float, float]]:
+    """Return ``(number, x, y)`` of the worst failing stretches, numbered as in the verdict."""
+    if estimate.verdict is None:
+        return []
+    spans = estimate.verdict.failing_spans[:MAX_SPAN_MARKERS]
+    return [
+        (k, span.max_error_position_xyz[0], span.max_error_position_xyz[1])
+        for k, span in enumerate(spans, start=1)
+    ]
+
+
+def _draw_reference_xy(
+    ax: Axes,
+    result: EvaluationResult,
+    max_points: int,
+    axes_ij: tuple[int, int] = (0, 1),
+    *,
+    on_top: bool = False,
+) -> None:
+    ref = result.reference
+    kept = decimate_uniform(len(ref), max_points)
+    a, b = _with_nan_breaks(
+        [ref.positions_xyz[:, axes_ij[0]], ref.positions_xyz[:, axes_ij[1]]],
+        ref.stamps_ns,
+        kept,
+        _max_gap_ns(result),
+    )
+    # Under an error-coloured path the truth is a wide band; over noisy estimates it is
+    # drawn last and thinner, so it stays visible.
+    ax.plot(
+        a,
+        b,
+        color=REFERENCE_COLOUR,
+        linewidth=1.5 if on_top else 2.2,
+        zorder=4 if on_top else 2,
+        label=_reference_label(result),
+    )
+
+
+def _reference_label(result: EvaluationResult) -> str:
+    name = result.reference.name or "reference"
+    return f"{name} (ground truth)"
+
+
+def _draw_estimate(
+    ax: Axes,
+    result: EvaluationResult,
+    k: int,
+    max_points: int,
+    axes_ij: tuple[int, int] = (0, 1),
+) -> None:
+    e = result.estimates[k]
+    aligned = e.aligned
+    kept = decimate_uniform(len(aligned), max_points)
+    a, b = _with_nan_breaks(
+        [aligned.positions_xyz[:, axes_ij[0]], aligned.positions_xyz[:, axes_ij[1]]],
+        aligned.stamps_ns,
+        kept,
+        _max_gap_ns(result),
+    )
+    ax.plot(
+        a,
+        b,
+        color=estimate_colour(k),
+        linewidth=1.0,
+        alpha=0.85,
+        label=e.name or f"estimate {k + 1}",
+    )
+
+
+def _mark_start(ax: Axes, result: EvaluationResult) -> None:
+    start = result.reference.positions_xyz[0]
+    ax.plot(
+        [start[0]],
+        [start[1]],
+        marker="o",
+        markersize=7,
+        markerfacecolor="white",
+        markeredgecolor="black",
+        linestyle="none",
+        label="start",
+        zorder=5,
+    )
+
+
+def plot_overlay_xy(
+    result: EvaluationResult,
+    *,
+    max_points: int = DEFAULT_MAX_POINTS,
+    formats: Sequence[ImageFormat] = ("svg",),
+) -> Plot:
+    """Top-down (x-y) overlay of the reference and every aligned estimate."""
+    fig = _new_figure(_xy_figure_height(result, plot_width_in=_WIDTH_IN - 0.8))
+    ax = fig.add_subplot()
+    _draw_reference_xy(ax, result, max_points, on_top=True)
+    for k in range(len(result.estimates)):
+        _draw_estimate(ax, result, k, max_points)
+    _mark_start(ax, result)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    _style(ax)
+    _legend_above(fig, ax)
+    names = ", ".join(e.name or f"estimate {k + 1}" for k, e in enumerate(result.estimates))
+    return _plot(
+        fig,
+        formats,
+        key="overlay_xy",
+        title="Paths from above (x-y)",
+        caption=(
+            f"The ground truth in cyan and the aligned estimates ({names}) seen from "
+            "above; the circle marks the start."
+        ),
+    )
+
+
+def plot_ate_path(
+    result: EvaluationResult,
+    index: int,
+    *,
+    max_points: int = DEFAULT_MAX_POINTS,
+    formats: Sequence[ImageFormat] = ("svg",),
+) -> Plot:
+    """Top-down path of one estimate coloured by its ATE, with failing stretches numbered."""
+    e = result.estimates[index]
+    name = e.name or f"estimate {index + 1}"
+    ate = e.ate_translation.values
+    kept = decimate_minmax(ate, max_points)
+    xy = e.aligned.positions_xyz[kept, :2]
+    segments = np.stack([xy[:-1], xy[1:]], axis=1)
+    keep_segment = ~_breaks(e.aligned.stamps_ns, kept, _max_gap_ns(result))
+    # Each drawn segment takes the larger error of its two ends, so a peak shows.
+    seg_err = np.maximum(ate[kept][:-1], ate[kept][1:])
+    vmax = float(np.percentile(ate, 99.5)) if ate.size else 1.0
+    tolerance = e.verdict.tolerance.distance_m if e.verdict is not None else None
+    if tolerance is not None:
+        vmax = max(vmax, tolerance * 1.25)
+    vmax = max(vmax, 1e-6)
+    fig = _new_figure(_xy_figure_height(result, plot_width_in=_WIDTH_IN - 1.8))
+    ax = fig.add_subplot()
+    _draw_reference_xy(ax, result, max_points)
+    collection = LineCollection(
+        list(segments[keep_segment]),
+        cmap=_ERROR_CMAP,
+        norm=Normalize(0.0, vmax),
+        linewidths=1.8,
+        capstyle="round",
+        zorder=3,
+        rasterized=_dense(segments),
+    )
+    collection.set_array(seg_err[keep_segment])
+    ax.add_collection(collection)
+    ax.update_datalim(xy)
+    ax.autoscale_view()
+    colorbar = fig.colorbar(
+        collection, ax=ax, extend="max" if float(ate.max()) > vmax else "neither", shrink=0.85
+    )
+    colorbar.set_label("ATE [m]")
+    if tolerance is not None:
+        colorbar.ax.axhline(tolerance, color="black", linewidth=1.2)
+        colorbar.ax.text(
+            -0.15,
+            tolerance,
+            "tolerance",
+            transform=colorbar.ax.get_yaxis_transform(),
+            ha="right",
+            va="center",
+            fontsize=7,
+        )
+    for number, x, y in failing_span_markers(e):
+        ax.annotate(
+            str(number),
+            (x, y),
+            xytext=(9, 9),
+            textcoords="offset points",
+            fontsize=8,
+            fontweight="bold",
+            ha="center",
+            va="center",
+            bbox={"boxstyle": "circle,pad=0.25", "fc": "white", "ec": TOLERANCE_COLOUR},
+            arrowprops={"arrowstyle": "-", "color": TOLERANCE_COLOUR, "linewidth": 0.8},
+            zorder=6,
+        )
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    _style(ax)
+    caption = (
+        f"{name}'s aligned path coloured by its absolute trajectory error (ATE) at each "
+        "pose, over the ground truth in cyan."
+    )
+    if tolerance is not None and e.verdict is not None and e.verdict.failing_spans:
+        caption += (
+            " Numbered circles mark where the worst stretches beyond the tolerance peak "
+            "(see the verdict)."
+        )
+    return _plot(
+        fig,
+        formats,
+        key=f"ate_path_{index}",
+        title=f"{name}: error along the path",
+        caption=caption,
+    )
+
+
+def plot_side_views(
+    result: EvaluationResult,
+    *,
+    max_points: int = DEFAULT_MAX_POINTS,
+    formats: Sequence[ImageFormat] = ("svg",),
+) -> Plot:
+    """Side views (x-z and y-z) of the reference and every aligned estimate."""
+    fig = _new_figure(5.2)
+    axes = fig.subplots(2, 1)
+    for ax, (i, label) in zip(axes, ((0, "x"), (1, "y")), strict=True):
+        _draw_reference_xy(ax, result, max_points, axes_ij=(i, 2), on_top=True)
+        for k in range(len(result.estimates)):
+            _draw_estimate(ax, result, k, max_points, axes_ij=(i, 2))
+        ax.set_xlabel(f"{label} [m]")
+        ax.set_ylabel("z [m]")
+        _style(ax)
+    _legend_above(fig, axes[0])
+    return _plot(
+        fig,
+        formats,
+        key="side_views",
+        title="Side views (x-z, y-z)",
+        caption=(
+            "The paths seen from the side; the height axis is stretched to show height errors."
+        ),
+    )

@@ -1,0 +1,42 @@
+"""Every plot of the evaluation report, in report order."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from exporters.plots.figure import DEFAULT_MAX_POINTS, ImageFormat, Plot
+from exporters.plots.maps import is_3d, plot_ate_path, plot_overlay_xy, plot_side_views
+from exporters.plots.series import plot_ate_over_time, plot_error_cdf, plot_rpe_over_time
+from loceval.evaluation import EvaluationResult
+
+__all__ = ["render_plots"]
+
+
+def render_plots(
+    result: EvaluationResult,
+    *,
+    max_points: int = DEFAULT_MAX_POINTS,
+    formats: Sequence[ImageFormat] = ("svg",),
+) -> tuple[Plot, ...]:
+    """Render every plot of the report, in report order.
+
+    Args:
+        result: the evaluation.
+        max_points: most vertices drawn per line (drawing only; statistics use all poses).
+        formats: the encodings to produce from each figure (SVG for HTML, PNG for PDF).
+
+    Returns:
+        The overlay, one error-coloured path per estimate, ATE and RPE over time, the CDF
+        and, for a 3D path, the side views.
+    """
+    plots = [plot_overlay_xy(result, max_points=max_points, formats=formats)]
+    plots.extend(
+        plot_ate_path(result, k, max_points=max_points, formats=formats)
+        for k in range(len(result.estimates))
+    )
+    plots.append(plot_ate_over_time(result, max_points=max_points, formats=formats))
+    plots.append(plot_rpe_over_time(result, max_points=max_points, formats=formats))
+    plots.append(plot_error_cdf(result, max_points=max_points, formats=formats))
+    if is_3d(result):
+        plots.append(plot_side_views(result, max_points=max_points, formats=formats))
+    return tuple(plots)

@@ -1,0 +1,194 @@
+"""Rendering the evaluation report: Jinja2 to HTML, WeasyPrint to an A4 PDF.
+
+:func:`render_template`, :func:`check_templates` and :func:`html_to_pdf` are shared with
+the summary report (:mod:`exporters.summary`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Final
+
+from exporters.errors import ExportError, ExportUnavailableError
+from exporters.options import ExportOptions
+from exporters.plots import DEFAULT_MAX_POINTS, render_plots
+from exporters.report.view import ReportView, build_report_view
+from loceval.evaluation import EvaluationResult
+
+__all__ = [
+    "DEFAULT_TEMPLATES_DIR",
+    "TEMPLATE_NAME",
+    "check_templates",
+    "html_to_pdf",
+    "render_report",
+    "render_report_html",
+    "render_report_pdf",
+    "render_template",
+    "render_view_html",
+]
+
+DEFAULT_TEMPLATES_DIR: Final[Path] = Path(__file__).resolve().parents[2] / "templates"
+"""The repository's ``templates/`` folder, used when the options name none."""
+TEMPLATE_NAME: Final = "report.html.j2"
+
+
+def check_templates(folder: Path, name: str, *, label: str) -> Path:
+    """Return ``folder`` if it holds the template ``name``.
+
+    Raises:
+        ExportError: the template is missing (the message names the ``label`` template).
+    """
+    if not (folder / name).is_file():
+        msg = (
+            f"No {label} template {name!r} in {str(folder)!r}; point templates_dir "
+            "at the repository's templates/ folder."
+        )
+        raise ExportError(msg)
+    return folder
+
+
+def render_template(
+    templates_dir: Path, name: str, *, label: str, requirement: str, **context: object
+) -> bytes:
+    """Render a report template (autoescaped, strict about undefined names) to UTF-8.
+
+    Args:
+        templates_dir: the template folder.
+        name: the template's file name.
+        label: names the template in messages (``report``, ``summary``).
+        requirement: what needs Jinja2, for the message when it is missing.
+        context: the template's variables.
+
+    Raises:
+        ExportUnavailableError: Jinja2 is not installed.
+        ExportError: the template is broken.
+    """
+    try:
+        import jinja2  # noqa: PLC0415  (optional dependency: loceval[report])
+    except ImportError as err:
+        msg = f"{requirement} needs jinja2; install loceval[report]."
+        raise ExportUnavailableError(msg) from err
+    env = jinja2.Environment(
+        loader=jinja2.FileSystemLoader(templates_dir),
+        autoescape=True,
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+    )
+    try:
+        html = env.get_template(name).render(**context)
+    except jinja2.TemplateError as err:
+        msg = f"The {label} template in {str(templates_dir)!r} failed: {err}."
+        raise ExportError(msg) from err
+    return html.encode("utf-8")
+
+
+def _templates_dir(options: ExportOptions, templates_dir: Path | None) -> Path:
+    folder = templates_dir or options.templates_dir or DEFAULT_TEMPLATES_DIR
+    return check_templates(folder, TEMPLATE_NAME, label="report")
+
+
+def render_view_html(view: ReportView, *, templates_dir: Path) -> bytes:
+    """Render a view model to the report's HTML (UTF-8).
+
+    Raises:
+        ExportUnavailableError: Jinja2 is not installed.
+        ExportError: the templates are missing or broken.
+    """
+    return render_template(
+        templates_dir, TEMPLATE_NAME, label="report", requirement="report.html", report=view
+    )
+
+
+def html_to_pdf(html: bytes) -> bytes:
+    """Lay the report's HTML out on A4 pages with WeasyPrint.
+
+    Only ``data:`` URLs are fetched; anything else (a network or file URL slipped into a
+    template) stops the render, so a report never touches the network.
+
+    Raises:
+        ExportUnavailableError: WeasyPrint (or its system libraries) is not installed.
+        ExportError: the layout failed or the HTML referred to a non-``data:`` resource.
+    """
+    try:
+        import weasyprint  # noqa: PLC0415  (optional dependency: loceval[report])
+        from weasyprint.urls import FatalURLFetchingError  # noqa: PLC0415
+    except (ImportError, OSError) as err:  # OSError: pango/cairo libraries missing
+        msg = (
+            "report.pdf needs WeasyPrint and its system libraries (pango); install "
+            f"loceval[report] and libpango-1.0-0 ({err})."
+        )
+        raise ExportUnavailableError(msg) from err
+    fetcher = weasyprint.URLFetcher(allowed_protocols=("data",), fail_on_errors=True)
+    try:
+        document = weasyprint.HTML(string=html.decode("utf-8"), url_fetcher=fetcher)
+        pdf = document.write_pdf()
+    except FatalURLFetchingError as err:
+        msg = f"The report refers to a resource that is not embedded: {err}."
+        raise ExportError(msg) from err
+    return bytes(pdf)
+
+
+def render_report(
+    result: EvaluationResult,
+    *,
+    options: ExportOptions | None = None,
+    templates_dir: Path | None = None,
+    max_points: int = DEFAULT_MAX_POINTS,
+) -> tuple[bytes, bytes]:
+    """Render the report as HTML and PDF, building the plots once for both.
+
+    The HTML embeds the plots as SVG; the PDF is the same templates laid out by WeasyPrint
+    with the plots as 200 dpi PNG (WeasyPrint draws matplotlib's SVG slowly: seconds per
+    report, where PNG costs almost nothing).
+
+    Args:
+        result: the evaluation.
+        options: title and evaluation id (defaults otherwise).
+        templates_dir: the template folder; default ``options.templates_dir``, else the
+            repository's ``templates/``.
+        max_points: most vertices drawn per plotted line (drawing only).
+
+    Returns:
+        ``(html, pdf)`` as bytes.
+
+    Raises:
+        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
+        ExportError: the templates are missing or the layout failed.
+    """
+    options = options or ExportOptions()
+    folder = _templates_dir(options, templates_dir)
+    plots = render_plots(result, max_points=max_points, formats=("svg", "png"))
+    html = render_view_html(
+        build_report_view(result, options, plots=plots, image_format="svg"), templates_dir=folder
+    )
+    printable = render_view_html(
+        build_report_view(result, options, plots=plots, image_format="png"), templates_dir=folder
+    )
+    return html, html_to_pdf(printable)
+
+
+def render_report_html(result: EvaluationResult, options: ExportOptions) -> bytes:
+    """Render ``report.html``: one self-contained file (the ARTIFACTS exporter).
+
+    Raises:
+        ExportUnavailableError: Jinja2 or matplotlib is missing.
+        ExportError: the templates are missing or broken.
+    """
+    folder = _templates_dir(options, None)
+    return render_view_html(build_report_view(result, options), templates_dir=folder)
+
+
+def render_report_pdf(result: EvaluationResult, options: ExportOptions) -> bytes:
+    """Render ``report.pdf``: the same report on A4 pages (the ARTIFACTS exporter).
+
+    Plots are embedded as PNG (see :func:`render_report`).
+
+    Raises:
+        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
+        ExportError: the templates are missing or the layout failed.
+    """
+    folder = _templates_dir(options, None)
+    view = build_report_view(result, options, image_format="png")
+    return html_to_pdf(render_view_html(view, templates_dir=folder))
