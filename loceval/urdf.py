@@ -3,7 +3,8 @@
 The framework paper (sect. 3.3.2) describes the tracked device in URDF: the offset from the
 motion-capture rigid body's origin to the localization system's origin (e.g. a camera
 centre) is a chain of fixed joints. :func:`read_urdf_offset` composes that chain, walking
-up from ``from_link`` to the common ancestor and down to ``to_link``.
+up from ``from_link`` to the common ancestor and down to ``to_link``. :func:`read_urdf` is
+the one parse of a URDF file (the inspection of an uploaded device file uses it too).
 
 A joint's ``<origin xyz="x y z" rpy="r p y"/>`` is the pose of its child link in its parent
 link; ``rpy`` are fixed-axis roll, pitch, yaw, so ``R = Rz(yaw) @ Ry(pitch) @ Rx(roll)``.
@@ -23,7 +24,7 @@ from loceval._typing import FloatArray
 from loceval.errors import ReaderError
 from loceval.geometry import SimilarityTransform
 
-__all__ = ["UrdfJoint", "read_urdf_joints", "read_urdf_offset"]
+__all__ = ["UrdfJoint", "UrdfRobot", "read_urdf", "read_urdf_joints", "read_urdf_offset"]
 
 _FORBIDDEN = re.compile(r"<!\s*(DOCTYPE|ENTITY)", re.IGNORECASE)
 _XACRO_NS = "http://www.ros.org/wiki/xacro"
@@ -50,14 +51,29 @@ class UrdfJoint:
     transform: SimilarityTransform
 
 
-def read_urdf_joints(urdf: Path) -> tuple[tuple[str, ...], tuple[UrdfJoint, ...]]:
-    """Parse a URDF file into its link names and joints.
+@dataclass(frozen=True, slots=True, eq=False)
+class UrdfRobot:
+    """A parsed URDF file.
+
+    Attributes:
+        name: the ``<robot name>``, or ``""`` when it has none.
+        links: link names in file order, then links only named by joints.
+        joints: the joints in file order.
+    """
+
+    name: str
+    links: tuple[str, ...]
+    joints: tuple[UrdfJoint, ...]
+
+
+def read_urdf(urdf: Path) -> UrdfRobot:
+    """Parse a URDF file into its robot name, links and joints.
 
     Args:
         urdf: path of a ``.urdf`` file (plain XML; expand ``.xacro`` files first).
 
     Returns:
-        The link names (sorted, including links only named by joints) and the joints.
+        The robot.
 
     Raises:
         ReaderError: the file is missing, not UTF-8, holds a DOCTYPE or ENTITY
@@ -97,12 +113,32 @@ def read_urdf_joints(urdf: Path) -> tuple[tuple[str, ...], tuple[UrdfJoint, ...]
         )
         raise ReaderError(msg)
     if root.tag != "robot":
-        msg = f"URDF file {str(urdf)!r} has root element {root.tag!r}, not 'robot'; pass a URDF."
+        msg = (
+            f"URDF file {str(urdf)!r} is XML but not a URDF (root element {root.tag!r}, "
+            "expected 'robot'); pass the robot's URDF."
+        )
         raise ReaderError(msg)
     joints = tuple(_parse_joint(el, urdf) for el in root.findall("joint"))
-    links = {el.get("name", "") for el in root.findall("link")} - {""}
-    links |= {j.parent for j in joints} | {j.child for j in joints}
-    return tuple(sorted(links)), joints
+    named = [el.get("name", "") for el in root.findall("link")]
+    links = dict.fromkeys(x for x in named if x)
+    links.update(dict.fromkeys(x for j in joints for x in (j.parent, j.child)))
+    return UrdfRobot(root.get("name", ""), tuple(links), joints)
+
+
+def read_urdf_joints(urdf: Path) -> tuple[tuple[str, ...], tuple[UrdfJoint, ...]]:
+    """Parse a URDF file into its link names and joints.
+
+    Args:
+        urdf: path of a ``.urdf`` file (plain XML; expand ``.xacro`` files first).
+
+    Returns:
+        The link names (sorted, including links only named by joints) and the joints.
+
+    Raises:
+        ReaderError: the file cannot be parsed (see :func:`read_urdf`).
+    """
+    robot = read_urdf(urdf)
+    return tuple(sorted(robot.links)), robot.joints
 
 
 def read_urdf_offset(urdf: Path, *, from_link: str, to_link: str) -> SimilarityTransform:

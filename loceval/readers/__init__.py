@@ -1,9 +1,10 @@
 """Trajectory readers: TUM, EuRoC, KITTI, generic CSV, OptiTrack Motive CSV and ROS bags.
 
 :func:`read_trajectory` takes a source ``[FORMAT:]PATH[@SELECTOR]`` (syntax in
-:mod:`loceval.readers.sniff`), sniffs the format from the content when no prefix names it,
-and dispatches to the reader. Bags are read by :mod:`loceval.readers.rosbag`, imported only
-when a bag is read, so importing :mod:`loceval` does not import rosbags.
+:mod:`loceval.readers.source`), sniffs the format from the content when no prefix names it
+(:mod:`loceval.readers.sniff`), and dispatches to the reader. Bags are read by
+:mod:`loceval.readers.rosbag`, imported only when a bag is read, so importing :mod:`loceval`
+does not import rosbags.
 """
 
 from __future__ import annotations
@@ -15,13 +16,8 @@ from typing import Final
 from loceval.errors import InputError, ReaderError
 from loceval.readers.csv import CSV_KEYS, read_csv
 from loceval.readers.motive import read_motive
-from loceval.readers.sniff import (
-    SourceSpec,
-    TrajectoryFormat,
-    parse_source,
-    refuse_special_file,
-    sniff_format,
-)
+from loceval.readers.sniff import sniff_format
+from loceval.readers.source import SourceSpec, TrajectoryFormat, parse_source, refuse_special_file
 from loceval.readers.text import read_euroc, read_kitti, read_tum
 from loceval.trajectory import Trajectory
 

@@ -211,7 +211,7 @@ def _check_member(info: zipfile.ZipInfo, root: Path, zip_path: Path, *, max_rati
     if stat.S_ISLNK(mode):
         msg = (
             f"Zip file {str(zip_path)!r} holds the symbolic link {info.filename!r}, which is "
-            "refused; zip the files themselves (zip without --symlinks)."
+            "refused; zip the files themselves, not links to them."
         )
         raise ReaderError(msg)
     if info.flag_bits & 0x1:

@@ -41,7 +41,7 @@ import numpy as np
 from loceval._typing import IntArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.readers._common import build_trajectory
-from loceval.readers.sniff import SourceSpec, TrajectoryFormat
+from loceval.readers.source import SourceSpec, TrajectoryFormat
 from loceval.readers.text import load_text, parse_table, stamps_from_values
 from loceval.trajectory import Trajectory
 

@@ -40,7 +40,7 @@ import numpy as np
 from loceval.errors import ReaderError
 from loceval.geometry import SimilarityTransform
 from loceval.readers._common import build_trajectory
-from loceval.readers.sniff import SourceSpec, TrajectoryFormat
+from loceval.readers.source import SourceSpec, TrajectoryFormat
 from loceval.readers.text import load_text, parse_table, stamps_from_values
 from loceval.trajectory import Trajectory
 

@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.readers._common import build_trajectory, seconds_to_ns
-from loceval.readers.sniff import SourceSpec, TrajectoryFormat, missing_file_error
+from loceval.readers.source import SourceSpec, TrajectoryFormat, missing_file_error
 from loceval.trajectory import Trajectory
 
 __all__ = [

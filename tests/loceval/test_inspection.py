@@ -13,7 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from loceval.errors import ReaderError
-from loceval.inspection import format_inspection, inspect_recording
+from loceval.inspection import format_inspection, inspect, inspect_recording
 from loceval.readers.rosbag import read_bag_trajectory
 from tests import bagfactory as bf
 
@@ -91,6 +91,23 @@ def test_counts_and_ranges_match_reading(tmp_path, records):
         assert len(traj) == candidate.pose_count, candidate.selector
         assert candidate.first_stamp_ns == traj.stamps_ns[0]
         assert candidate.last_stamp_ns == traj.stamps_ns[-1]
+
+
+def test_inspect_sniffs_bags_and_rates(tmp_path, records):
+    """inspect() on a bag gives inspect_recording's result, with rates and orientation."""
+    bag = bf.write_bag(tmp_path / "rec", records, fmt="mcap")
+    insp = inspect(str(bag))
+    assert insp == inspect_recording(bag)
+    assert (insp.kind, insp.format) == ("rosbag2-mcap", "bag")
+    sources = {c.selector: c for c in insp.sources}
+    # /amcl_pose: 12 poses 0.5 s apart (+ < 1 ms jitter), so 11 intervals over ~5.5 s.
+    assert sources["/amcl_pose"].rate_hz == pytest.approx(2.0, rel=0.01)
+    assert sources["/amcl_pose"].orientation is True
+    # tf:odom:base_link is sampled at base_link's 30 Hz (NS // 30 apart, jittered).
+    assert sources["tf:odom:base_link"].rate_hz == pytest.approx(30.0, rel=0.05)
+    data = insp.to_dict()
+    assert data["kind"] == "rosbag2-mcap"
+    assert "poses" not in data  # a bag is no single trajectory
 
 
 @pytest.mark.parametrize("fmt", bf.FORMATS)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from loceval.errors import ReaderError
-from loceval.urdf import read_urdf_joints, read_urdf_offset
+from loceval.urdf import read_urdf, read_urdf_joints, read_urdf_offset
 
 
 def rx(a: float) -> np.ndarray:
@@ -206,6 +206,32 @@ def test_xacro_refused(tmp_path):
     )
     with pytest.raises(ReaderError, match="xacro"):
         read_urdf_joints(path)
+
+
+def test_read_urdf_keeps_file_order(device, tmp_path):
+    """read_urdf gives the robot's name, links in file order and joints in file order."""
+    robot = read_urdf(device)
+    assert robot.name == "device"
+    assert robot.links == ("base", "rigid_body", "mount", "camera", "wheel")
+    assert [j.name for j in robot.joints] == [
+        "base_to_body",
+        "base_to_mount",
+        "mount_to_camera",
+        "base_to_wheel",
+    ]
+    only_joint = write(
+        tmp_path,
+        '<robot><link name="b"/><joint name="j" type="fixed"><parent link="b"/>'
+        '<child link="a"/></joint></robot>',
+    )
+    assert read_urdf(only_joint).links == ("b", "a")  # "a" is only named by the joint
+    assert read_urdf(only_joint).name == ""
+
+
+def test_not_a_robot_says_so(tmp_path):
+    """A root element other than <robot> is XML but not a URDF."""
+    with pytest.raises(ReaderError, match=r"XML but not a URDF \(root element 'html'"):
+        read_urdf(write(tmp_path, "<html><body/></html>"))
 
 
 def test_not_a_robot(tmp_path):

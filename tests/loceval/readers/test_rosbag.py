@@ -16,7 +16,6 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from scipy.spatial.transform import Rotation
 
 from loceval.errors import InputError, ReaderError
-from loceval.readers import rosbag as rosbag_module
 from loceval.readers._mcap import read_indexed_messages
 from loceval.readers.rosbag import (
     SUPPORTED_MSGTYPES,
@@ -26,6 +25,7 @@ from loceval.readers.rosbag import (
     read_bag_tf_buffer,
     read_bag_trajectory,
 )
+from loceval.readers.rosbag import tf as rosbag_tf
 from loceval.tftree import TfBuffer, TfLink, compose_chain
 from tests import bagfactory as bf
 
@@ -255,7 +255,7 @@ class TestTf:
         )
         bag = write(tmp_path, records, fmt="sqlite3")
         fast = read_bag_tf_buffer(bag)
-        monkeypatch.setattr(rosbag_module, "_standard_tf_layout", lambda _: False)
+        monkeypatch.setattr(rosbag_tf, "_standard_tf_layout", lambda _: False)
         slow = read_bag_tf_buffer(bag)
         assert [x.name for x in fast.links] == [x.name for x in slow.links]
         for x, y in zip(fast.links, slow.links, strict=True):
@@ -274,7 +274,7 @@ class TestTf:
     def test_tf_rihs01_is_the_standard_hash(self):
         """The CDR parser's type hash is the standard tf2_msgs/msg/TFMessage hash."""
         store = get_typestore(Stores.ROS2_HUMBLE)
-        assert store.hash_rihs01("tf2_msgs/msg/TFMessage") == rosbag_module._TF_RIHS01
+        assert store.hash_rihs01("tf2_msgs/msg/TFMessage") == rosbag_tf._TF_RIHS01
 
     def test_static_transform(self, tmp_path, tf_setup):
         """read_bag_static_transform returns the /tf_static offset and its inverse."""
@@ -505,6 +505,16 @@ class TestErrors:
             r"/pose \(geometry_msgs/msg/PoseStamped\).*tf:PARENT:CHILD",
         ):
             read_bag_trajectory(bag, "/odom")
+
+    def test_zero_header_stamps_name_the_stamp_option(self, tmp_path, poses):
+        """Unfilled header stamps: the error names the stamp option by key, no CLI flag."""
+        zero = bf.Poses(np.zeros_like(poses.stamps_ns), poses.positions, poses.quats)
+        records = bf.pose_records("/pose", bf.POSE, zero)
+        bag = write(tmp_path, records, fmt="mcap")
+        with pytest.raises(ReaderError, match=r"60 messages but only 1 distinct.*receive") as err:
+            read_bag_trajectory(bag, "/pose")
+        assert err.value.option == "stamp"
+        assert "--" not in str(err.value)
 
     def test_unsupported_type_lists_supported(self, tmp_path, poses):
         """A topic of a type without a pose names the supported types."""

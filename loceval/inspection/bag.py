@@ -1,0 +1,209 @@
+"""Inspect a bag: topics, the tf tree with rates, and the trajectory sources.
+
+Reads the bag's index and metadata, its tf messages and the first and last message of each
+pose topic, never image or point-cloud payloads (:func:`loceval.readers.rosbag.read_bag_overview`),
+and lists the trajectory sources with the selector to type (``FILE@SELECTOR``): pose topics
+of a supported type, and tf chains (for every dynamic link, its parent -> child, the chain
+from its tree's root, and REP 105 pairs such as ``map -> base_link``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from loceval.errors import ReaderError
+from loceval.inspection.model import (
+    NS,
+    FrameInspection,
+    Inspection,
+    SourceInspection,
+    TopicInspection,
+)
+from loceval.readers import SourceSpec
+from loceval.readers.rosbag import PoseKind, TopicOverview, read_bag_overview
+from loceval.tftree import TfBuffer, compose_chain, describe_chain, find_chain
+
+__all__ = ["inspect_bag"]
+
+_WORLD_FRAMES = ("earth", "world", "map", "odom")
+_BODY_FRAMES = ("base_link", "base_footprint")
+
+
+def inspect_bag(spec: SourceSpec) -> Inspection:
+    """Describe a bag and list the trajectories that can be read from it.
+
+    Args:
+        spec: the bag (a ROS 1 bag, a ROS 2 bag directory, an ``.mcap`` or ``.db3`` file,
+            or a ``.zip`` of one); its selector is not used.
+
+    Returns:
+        The inspection (``kind`` is the storage format, ``format`` is ``bag``).
+
+    Raises:
+        ReaderError: the bag cannot be read.
+    """
+    overview = read_bag_overview(spec.path)
+    warnings: list[str] = []
+    topics = tuple(
+        TopicInspection(t.name, t.msgtype, t.message_count, pose_source=_is_pose_topic(t))
+        for t in overview.topics
+    )
+    sources = [
+        _topic_source(t) for t in overview.topics if _is_pose_topic(t) and t.message_count > 0
+    ]
+    frames = _frames(overview.tf, warnings)
+    sources.extend(_tf_candidates(overview.tf, warnings))
+    return Inspection(
+        path=str(spec.path),
+        kind=str(overview.storage_format),
+        format="bag",
+        sources=tuple(sources),
+        warnings=tuple(warnings),
+        storage_format=str(overview.storage_format),
+        archive=overview.archive,
+        start_ns=overview.start_ns,
+        end_ns=overview.end_ns,
+        message_count=overview.message_count,
+        topics=topics,
+        frames=frames,
+    )
+
+
+def _is_pose_topic(topic: TopicOverview) -> bool:
+    return topic.kind is not None and topic.kind is not PoseKind.TF
+
+
+def _topic_source(topic: TopicOverview) -> SourceInspection:
+    first, last = topic.first_stamp_ns, topic.last_stamp_ns
+    span_ns = 0 if first is None or last is None else last - first
+    rate_hz = (topic.pose_count - 1) * NS / span_ns if span_ns > 0 else 0.0
+    return SourceInspection(
+        topic.name,
+        "topic",
+        topic.msgtype,
+        topic.pose_count,
+        first,
+        last,
+        rate_hz=rate_hz,
+        orientation=topic.kind is not PoseKind.POINT,
+    )
+
+
+def _frames(buffer: TfBuffer, warnings: list[str]) -> tuple[FrameInspection, ...]:
+    children: dict[str, list[str]] = {}
+    for link in buffer.links:
+        children.setdefault(link.parent, []).append(link.child)
+    out: list[FrameInspection] = []
+    visited: set[str] = set()
+
+    def visit(frame: str, parent: str, depth: int) -> None:
+        if frame in visited:
+            return
+        visited.add(frame)
+        link = buffer.link(parent, frame) if parent else None
+        if link is None:
+            out.append(
+                FrameInspection(
+                    frame,
+                    "",
+                    depth,
+                    static=False,
+                    rate_hz=0.0,
+                    message_count=0,
+                    first_stamp_ns=None,
+                    last_stamp_ns=None,
+                )
+            )
+        else:
+            out.append(
+                FrameInspection(
+                    frame,
+                    parent,
+                    depth,
+                    link.is_static,
+                    link.rate_hz,
+                    link.message_count,
+                    int(link.stamps_ns[0]),
+                    int(link.stamps_ns[-1]),
+                )
+            )
+        for child in sorted(children.get(frame, [])):
+            visit(child, frame, depth + 1)
+
+    for root in buffer.roots():
+        visit(root, "", 0)
+    for frame in buffer.frames():
+        parents = buffer.parent_links(frame)
+        if len(parents) > 1:
+            names = ", ".join(sorted(x.parent for x in parents))
+            warnings.append(
+                f"tf frame {frame!r} has {len(parents)} parents ({names}); chains through it "
+                "cannot be read."
+            )
+    unvisited = [f for f in buffer.frames() if f not in visited]
+    if unvisited:
+        warnings.append(
+            f"tf frames without a root (a loop?): {', '.join(unvisited)}; chains through them "
+            "cannot be read."
+        )
+    return tuple(out)
+
+
+def _tf_candidates(buffer: TfBuffer, warnings: list[str]) -> list[SourceInspection]:
+    pairs: list[tuple[str, str]] = []
+    for link in sorted(buffer.links, key=lambda x: (x.parent, x.child)):
+        if link.is_static:
+            continue
+        pairs.append((link.parent, link.child))
+        try:
+            root = buffer.root_of(link.child)
+        except ReaderError:
+            continue
+        pairs.append((root, link.child))
+    frames = set(buffer.frames())
+    pairs.extend(
+        (world, body)
+        for world in _WORLD_FRAMES
+        for body in _BODY_FRAMES
+        if world in frames and body in frames
+    )
+    out: list[SourceInspection] = []
+    seen: set[tuple[str, str]] = set()
+    for parent, child in pairs:
+        if (parent, child) in seen or parent == child:
+            continue
+        seen.add((parent, child))
+        candidate = _tf_candidate(buffer, parent, child, warnings)
+        if candidate is not None:
+            out.append(candidate)
+    return out
+
+
+def _tf_candidate(
+    buffer: TfBuffer, parent: str, child: str, warnings: list[str]
+) -> SourceInspection | None:
+    try:
+        steps = find_chain(buffer, parent, child)
+    except ReaderError:
+        return None  # different trees, or a broken tree (reported with the frames)
+    if all(s.link.is_static for s in steps):
+        return None
+    try:
+        chain = compose_chain(buffer, parent, child)
+    except ReaderError as err:
+        warnings.append(f"tf:{parent}:{child}: {err}")
+        return None
+    stamps = chain.stamps_ns
+    empty = stamps.shape[0] == 0
+    steps_ns = np.diff(stamps)
+    median_ns = float(np.median(steps_ns)) if steps_ns.size else 0.0
+    return SourceInspection(
+        f"tf:{parent}:{child}",
+        "tf",
+        describe_chain(steps),
+        int(stamps.shape[0]),
+        None if empty else int(stamps[0]),
+        None if empty else int(stamps[-1]),
+        rate_hz=NS / median_ns if median_ns > 0 else 0.0,
+        orientation=True,
+    )

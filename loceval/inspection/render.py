@@ -1,0 +1,132 @@
+"""The terminal text of an inspection (what ``loceval inspect`` prints without ``--json``)."""
+
+from __future__ import annotations
+
+import datetime as dt
+from typing import Final
+
+from loceval.inspection.model import NS, Inspection
+
+__all__ = ["render_inspection_text"]
+
+_EPOCH_2000_NS: Final = 946_684_800 * NS
+_SUMMARY_KEYS: Final = (
+    "format",
+    "source",
+    "poses",
+    "start_s",
+    "end_s",
+    "duration_s",
+    "length_m",
+    "rate_hz",
+    "orientation",
+)
+
+
+def render_inspection_text(insp: Inspection) -> str:
+    """Render an inspection for the terminal.
+
+    Bags: the time range, topics, the tf tree with rates and the sources with their
+    selectors. Files holding one trajectory: its summary (format, poses, time range,
+    duration, length, rate, orientation). Motive takes: a source line per rigid body. URDF:
+    links and joints. Warnings last.
+    """
+    if insp.is_bag:
+        lines = _bag_lines(insp)
+    elif insp.is_urdf:
+        lines = _urdf_lines(insp)
+    else:
+        lines = _file_lines(insp)
+    if insp.warnings:
+        lines += ["", "warnings:"]
+        lines.extend(f"  {w}" for w in insp.warnings)
+    return "\n".join(lines)
+
+
+def _bag_lines(insp: Inspection) -> list[str]:
+    lines = [
+        f"{insp.path}  ({insp.storage_format}{', zipped' if insp.archive else ''})",
+        (
+            f"  {insp.message_count} messages, {insp.duration_s:.3f} s: "
+            f"{_stamp_text(insp.start_ns)} .. {_stamp_text(insp.end_ns)}"
+        ),
+        "",
+        "topics:",
+    ]
+    width = max((len(t.name) for t in insp.topics), default=0)
+    type_width = max((len(t.msgtype) for t in insp.topics), default=0)
+    lines.extend(
+        f"  {t.name:<{width}}  {t.msgtype:<{type_width}}  {t.message_count:>8}"
+        f"{'  (pose)' if t.pose_source else ''}"
+        for t in insp.topics
+    )
+    if not insp.topics:
+        lines.append("  (none)")
+    lines += ["", "tf tree:"]
+    for f in insp.frames:
+        indent = "  " * (f.depth + 1)
+        if not f.parent:
+            lines.append(f"{indent}{f.frame}")
+        elif f.static:
+            lines.append(f"{indent}{f.frame}  (static)")
+        else:
+            lines.append(
+                f"{indent}{f.frame}  ({f.rate_hz:.1f} Hz, {f.message_count} transforms, "
+                f"{_stamp_text(f.first_stamp_ns)} .. {_stamp_text(f.last_stamp_ns)})"
+            )
+    if not insp.frames:
+        lines.append("  (no tf data)")
+    lines += ["", "trajectory sources (type FILE@SELECTOR):"]
+    lines.extend(_source_lines(insp))
+    if not insp.sources:
+        lines.append("  (none: no pose topic of a supported type and no dynamic tf link)")
+    return lines
+
+
+def _file_lines(insp: Inspection) -> list[str]:
+    lines = [f"{insp.path}  ({insp.kind})"]
+    if insp.single is not None:
+        summary = insp.to_dict()
+        lines.extend(f"{key:>14}: {summary[key]}" for key in _SUMMARY_KEYS if key in summary)
+        return lines
+    lines += ["", "trajectory sources (type FILE@SELECTOR):"]
+    lines.extend(_source_lines(insp))
+    return lines
+
+
+def _source_lines(insp: Inspection) -> list[str]:
+    selectors = [s.selector or "" for s in insp.sources]
+    width = max((len(s) for s in selectors), default=0)
+    lines = []
+    for selector, s in zip(selectors, insp.sources, strict=True):
+        rate = f"{s.rate_hz:7.1f} Hz" if s.rate_hz else " " * 10
+        length = f"  {s.length_m:9.3f} m" if s.length_m is not None else ""
+        lines.append(
+            f"  {selector:<{width}}  {s.pose_count:>7} poses  {s.duration_s:9.2f} s  "
+            f"{rate}{length}  {s.description}"
+        )
+    return lines
+
+
+def _urdf_lines(insp: Inspection) -> list[str]:
+    robot = f", robot {insp.robot!r}" if insp.robot else ""
+    lines = [f"{insp.path}  (urdf{robot})", "", "links:"]
+    lines.extend(f"  {link}" for link in insp.links)
+    if not insp.links:
+        lines.append("  (none)")
+    lines += ["", "joints:"]
+    lines.extend(f"  {j.name}  ({j.joint_type}): {j.parent} -> {j.child}" for j in insp.joints)
+    if not insp.joints:
+        lines.append("  (none)")
+    lines += ["", "trajectory sources: none (a URDF describes the device, use it as offset)"]
+    return lines
+
+
+def _stamp_text(stamp_ns: int | None) -> str:
+    """Render a stamp: ISO UTC for wall-clock stamps, seconds for simulation time."""
+    if stamp_ns is None:
+        return "-"
+    if stamp_ns >= _EPOCH_2000_NS:
+        when = dt.datetime.fromtimestamp(stamp_ns / NS, tz=dt.UTC)
+        return when.isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    return f"{stamp_ns / NS:.3f} s"

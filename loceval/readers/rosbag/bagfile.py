@@ -1,0 +1,291 @@
+"""Open a bag through rosbags and read the raw messages of chosen connections.
+
+Every rosbags error, damaged-file error and missing file becomes a
+:class:`~loceval.errors.ReaderError` here (:func:`converted`).
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import struct
+import sys
+from collections.abc import Iterator, Sequence
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.interfaces import Connection
+from rosbags.rosbag1 import ReaderError as Rosbag1ReaderError
+from rosbags.rosbag2 import Reader as Rosbag2Reader
+from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
+from rosbags.serde import SerdeError
+from rosbags.typesys import Stores, TypesysError, get_typestore
+from rosbags.typesys.store import Typestore
+
+if sys.version_info >= (3, 14):
+    from compression.zstd import ZstdError
+else:  # rosbags depends on backports.zstd before Python 3.14
+    from backports.zstd import ZstdError
+
+from loceval.errors import ReaderError
+from loceval.readers._archive import extracted_bag
+from loceval.readers._mcap import read_indexed_messages
+from loceval.readers.rosbag.messages import TF_MSGTYPE, BagFormat
+
+__all__ = [
+    "Bag",
+    "converted",
+    "deserialize",
+    "is_static_topic",
+    "is_tf",
+    "listing",
+    "normalize_msgtype",
+    "open_bag",
+    "raw_messages",
+]
+
+_MAX_LISTED = 40
+
+# rosbags reports damaged files through its own errors, and through these builtins when a
+# record is cut short or garbled (struct unpacking, text decoding, sqlite, decompressors).
+_FOREIGN_ERRORS: Final = (
+    AnyReaderError,
+    Rosbag1ReaderError,
+    Rosbag2ReaderError,
+    SerdeError,
+    TypesysError,
+    sqlite3.Error,
+    ZstdError,
+    struct.error,
+    EOFError,
+    OSError,
+    ValueError,
+    RuntimeError,
+    KeyError,
+    IndexError,
+    AssertionError,
+    TypeError,  # rosbags' MCAP reader calls ord() on an empty read of a truncated file
+)
+
+
+# --- Opening bags.
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Bag:
+    """An open bag: the reader, its label and storage format, and the paths opened."""
+
+    reader: AnyReader
+    label: str
+    storage_format: BagFormat
+    archive: str
+    paths: tuple[Path, ...]
+
+
+@contextmanager
+def open_bag(path: Path | Sequence[Path]) -> Iterator[Bag]:
+    """Open a bag (file, folder, split set or zip) and yield it; close it afterwards."""
+    paths = _as_paths(path)
+    label = ",".join(p.name for p in paths)
+    for p in paths:
+        if not p.exists():
+            msg = f"Bag {str(p)!r} does not exist; check the path (a ROS 2 bag is a folder)."
+            raise ReaderError(msg)
+    with ExitStack() as stack:
+        archive = ""
+        if len(paths) == 1 and paths[0].is_file() and paths[0].suffix.lower() == ".zip":
+            paths = tuple(stack.enter_context(extracted_bag(paths[0])))
+            archive = "zip"
+        paths = tuple(_storage_path(p) for p in paths)
+        if len(paths) > 1 and any(p.suffix != ".bag" for p in paths):
+            names = ", ".join(p.name for p in paths)
+            msg = (
+                f"Only ROS 1 bags (.bag) can be read as a split set, got {names!r}; pass one "
+                "ROS 2 bag directory or the .bag files of one recording."
+            )
+            raise ReaderError(msg)
+        if paths[0].is_dir() and not (paths[0] / "metadata.yaml").is_file():
+            inside = listing(sorted(x.name for x in paths[0].iterdir())) or "nothing"
+            msg = (
+                f"Folder {str(paths[0])!r} has no metadata.yaml, so it is no ROS 2 bag; it "
+                f"holds: {inside}; pass the bag folder or a bag file."
+            )
+            raise ReaderError(msg)
+        if paths[0].is_file() and paths[0].suffix.lower() not in {".bag", ".mcap", ".db3"}:
+            msg = (
+                f"File {str(paths[0])!r} is not a bag; pass a .bag, .mcap or .db3 file, a ROS "
+                "2 bag folder or a .zip of one."
+            )
+            raise ReaderError(msg)
+        with converted(label):
+            reader = _open_reader(list(paths), stack)
+        yield Bag(reader, label, _storage_format(paths), archive, paths)
+
+
+def _open_reader(paths: list[Path], stack: ExitStack) -> AnyReader:
+    """Open an AnyReader; fall back to ROS 2 Humble's types for bags without definitions.
+
+    The fallback typestore takes a tenth of a second to build, so it is only built for the
+    bags that need it: old ROS 2 bags without embedded message definitions make the first
+    open fail, and the second open then gets it.
+    """
+    reader = AnyReader(paths)
+    try:
+        reader.open()
+    except AnyReaderError:
+        reader = AnyReader(paths, default_typestore=_default_typestore())
+        reader.open()
+    stack.callback(reader.close)
+    return reader
+
+
+def _as_paths(path: Path | Sequence[Path]) -> tuple[Path, ...]:
+    if isinstance(path, str | os.PathLike):
+        return (Path(path),)
+    paths = tuple(Path(p) for p in path)
+    if not paths:
+        msg = "No bag path given; pass a bag file, a ROS 2 bag folder or a zip of one."
+        raise ReaderError(msg)
+    return paths
+
+
+def _storage_path(path: Path) -> Path:
+    """Return what rosbags opens: a .db3 or metadata.yaml inside a bag opens the folder."""
+    if path.name == "metadata.yaml" and path.is_file():
+        return path.parent
+    if path.suffix == ".db3" and (path.parent / "metadata.yaml").is_file():
+        return path.parent
+    return path
+
+
+def _storage_format(paths: tuple[Path, ...]) -> BagFormat:
+    first = paths[0]
+    if first.suffix == ".bag":
+        return BagFormat.ROSBAG1
+    if first.suffix == ".mcap":
+        return BagFormat.ROSBAG2_MCAP
+    if first.is_dir() and any(".mcap" in x.suffixes for x in first.iterdir()):
+        return BagFormat.ROSBAG2_MCAP
+    return BagFormat.ROSBAG2_SQLITE3
+
+
+@contextmanager
+def converted(label: str) -> Iterator[None]:
+    """Turn rosbags' (and damaged files') exceptions into ReaderError."""
+    try:
+        yield
+    except ReaderError:
+        raise
+    except FileNotFoundError as err:
+        msg = f"Bag {label!r} is incomplete ({err}); copy the whole bag folder or file."
+        raise ReaderError(msg) from err
+    except _FOREIGN_ERRORS as err:
+        detail = " ".join(str(err).split())  # parsers' reports span lines (YAML carets)
+        msg = (
+            f"Bag {label!r} cannot be read; it looks truncated, damaged or of an unknown "
+            f"format ({type(err).__name__}: {detail}); re-copy the file, or reindex it "
+            "('rosbag reindex' / 'ros2 bag reindex')."
+        )
+        raise ReaderError(msg) from err
+
+
+def _default_typestore() -> Typestore:
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+def normalize_msgtype(msgtype: str) -> str:
+    """Return ``pkg/msg/Type`` for ``pkg/Type`` (ROS 1) and ``pkg/msg/Type``."""
+    parts = msgtype.split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return msgtype
+
+
+def is_tf(conn: Connection) -> bool:
+    """Whether a connection carries tf2_msgs/msg/TFMessage."""
+    return normalize_msgtype(conn.msgtype) == TF_MSGTYPE
+
+
+def is_static_topic(topic: str) -> bool:
+    """Whether a tf topic holds static links (its last name part is ``tf_static``)."""
+    return topic.rstrip("/").rsplit("/", 1)[-1] == "tf_static"
+
+
+# --- Reading messages.
+
+
+def raw_messages(
+    bag: Bag, connections: Sequence[Connection]
+) -> Iterator[tuple[Connection, int, bytes]]:
+    """Yield ``(connection, receive_ns, rawdata)`` of the connections.
+
+    ROS 2 bags yield in receive order. ROS 1 bags yield topic by topic, each in receive
+    order: rosbags reloads a chunk whenever consecutive messages lie in different chunks,
+    and merging topics recorded into separate chunks (as in bags written topic by topic)
+    made that thirty times slower.
+
+    Checks that as many messages came out as the bag's index recorded: damaged chunks can
+    otherwise vanish silently.
+    """
+    if not connections:
+        return
+    counts: dict[str, int] = dict.fromkeys((c.topic for c in connections), 0)
+    if bag.reader.is2:
+        groups = [list(connections)]
+    else:
+        groups = [[c for c in connections if c.topic == topic] for topic in counts]
+    for group in groups:
+        indexed = _indexed_mcap_messages(bag, group)
+        with converted(bag.label):
+            source = indexed if indexed is not None else bag.reader.messages(group)
+            for conn, receive_ns, raw in source:
+                counts[conn.topic] += 1
+                yield conn, receive_ns, raw
+    for topic, seen in counts.items():
+        recorded = sum(c.msgcount for c in connections if c.topic == topic)
+        if seen < recorded:
+            msg = (
+                f"Bag {bag.label!r} looks damaged: topic {topic!r} gave {seen} of the "
+                f"{recorded} messages its index records; re-copy the file or reindex it."
+            )
+            raise ReaderError(msg)
+
+
+def _indexed_mcap_messages(
+    bag: Bag, connections: Sequence[Connection]
+) -> list[tuple[Connection, int, bytes]] | None:
+    """Read MCAP messages through the file's index, or return None when it cannot serve."""
+    if bag.storage_format is not BagFormat.ROSBAG2_MCAP:
+        return None
+    files: list[Path] = []
+    for reader in bag.reader.readers:
+        if not isinstance(reader, Rosbag2Reader) or reader.compression_mode:
+            return None
+        rpath = Path(str(reader.path))
+        files.extend(sorted(rpath.glob("*.mcap")) if rpath.is_dir() else [rpath])
+    keys = [(c.topic, c.msgtype) for c in connections]
+    out: list[tuple[Connection, int, bytes]] = []
+    for file in files:
+        messages = read_indexed_messages(file, keys)
+        if messages is None:
+            return None
+        out.extend((connections[i], log_time, data) for log_time, i, data in messages)
+    if len(files) > 1:
+        out.sort(key=lambda x: x[1])
+    return out
+
+
+def deserialize(bag: Bag, raw: bytes, msgtype: str) -> object:
+    """Deserialize one message, turning rosbags errors into ReaderError."""
+    with converted(bag.label):
+        return bag.reader.deserialize(raw, msgtype)
+
+
+def listing(items: Sequence[str]) -> str:
+    """Join names with commas, cut after the first forty."""
+    if len(items) <= _MAX_LISTED:
+        return ", ".join(items)
+    return f"{', '.join(items[:_MAX_LISTED])} and {len(items) - _MAX_LISTED} more"
