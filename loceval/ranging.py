@@ -343,9 +343,7 @@ def evaluate_ranging(
             f"{max_gap_ns / _NS_PER_S:g} s (tracking loss) and were not evaluated."
         )
     if unused:
-        notes.append(
-            f"{len(unused)} of {k} anchors have no evaluated range: {', '.join(unused)}."
-        )
+        notes.append(f"{len(unused)} of {k} anchors have no evaluated range: {', '.join(unused)}.")
     return RangingResult(
         outlier_threshold_m=float(outlier_threshold_m),
         anchors=anchors,

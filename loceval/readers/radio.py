@@ -58,6 +58,7 @@ _UNIT_SPELLINGS: Final = {
     **dict.fromkeys(("us", "µs", "usec", "microsecond", "microseconds"), "us"),
     **dict.fromkeys(("ns", "nsec", "nanosecond", "nanoseconds"), "ns"),
 }
+_DECIMAL_RE: Final = re.compile(r"(?P<sign>[-+]?)(?P<whole>\d*)(?:\.(?P<frac>\d*))?")
 _NAMED_IDS: Final = 3  # unknown anchor ids quoted in the warning
 
 
@@ -260,13 +261,18 @@ def read_ranges(path: Path, anchors: Anchors) -> Ranges:
     ns_per_unit = _time_scale(headers[cols["t"]], where=where)
     total = len(rows)
     width = len(headers)
+    if not total:
+        msg = f"{where}: a header but no range rows; check that the file holds the recording."
+        raise ReaderError(msg)
     shaped: BoolArray = np.fromiter((len(r) == width for r in rows), dtype=bool, count=total)
     fill = [""] * width
-    table = [r if ok else fill for r, ok in zip(rows, shaped, strict=True)]
-    t_raw = _floats([r[cols["t"]] for r in table])
-    range_raw = _floats([r[cols["range_m"]] for r in table])
-    id_cells = np.array([r[cols["anchor_id"]].strip() for r in table], dtype=object)
-    rssi = _floats([r[cols["rssi"]] for r in table]) if "rssi" in cols else None
+    padded = (r if ok else fill for r, ok in zip(rows, shaped, strict=True))
+    columns = list(zip(*padded, strict=True))
+    t_cells = columns[cols["t"]]
+    t_raw = _floats(t_cells)
+    range_raw = _floats(columns[cols["range_m"]])
+    id_cells = np.array([c.strip() for c in columns[cols["anchor_id"]]], dtype=object)
+    rssi = _floats(columns[cols["rssi"]]) if "rssi" in cols else None
     known = {anchor_id: k for k, anchor_id in enumerate(anchors.ids)}
     index = np.fromiter((known.get(c, -1) for c in id_cells), dtype=np.intp, count=total)
     limit = float(np.iinfo(np.int64).max) / ns_per_unit
@@ -302,7 +308,7 @@ def read_ranges(path: Path, anchors: Anchors) -> Ranges:
             "check the columns t, anchor_id, range_m and that the ids match the anchors file."
         )
         raise ReaderError(msg)
-    stamps = np.rint(t_raw[keep] * ns_per_unit).astype(np.int64)
+    stamps = _exact_stamps(t_cells, t_raw, keep, int(ns_per_unit))
     order = np.argsort(stamps, kind="stable")
     return Ranges(
         anchors=anchors,
@@ -313,6 +319,33 @@ def read_ranges(path: Path, anchors: Anchors) -> Ranges:
         source=where,
         warnings=tuple(notes),
     )
+
+
+def _exact_stamps(
+    cells: Sequence[str], values: FloatArray, keep: BoolArray, ns_per_unit: int
+) -> StampsNs:
+    """Return the kept stamps in nanoseconds, exact for plain decimals such as ``1.000000005``.
+
+    Float seconds near 1.7e9 resolve only about 240 ns, so plain decimal cells are read as
+    integers (whole part, then the fraction's digits down to the nanosecond; further digits
+    are cut); other spellings (``1e9``) go through the float value.
+    """
+    out: StampsNs = np.rint(values[keep] * ns_per_unit).astype(np.int64)
+    text = np.char.strip(np.asarray(cells, dtype=str)[keep])
+    negative = np.char.startswith(text, "-")
+    parts = np.char.partition(np.char.lstrip(text, "+-"), ".")
+    whole, frac = parts[:, 0], parts[:, 2]
+    plain = (np.char.isdigit(whole) | (whole == "")) & (np.char.isdigit(frac) | (frac == ""))
+    if not plain.any():
+        return out
+    digits = len(str(ns_per_unit)) - 1  # units are powers of ten of a nanosecond
+    whole_ns = np.where(whole[plain] == "", "0", whole[plain]).astype(np.int64) * ns_per_unit
+    frac_ns = np.zeros(whole_ns.shape[0], dtype=np.int64)
+    if digits:
+        padded = np.char.ljust(frac[plain], digits, "0").astype(f"<U{digits}")
+        frac_ns = padded.astype(np.int64)
+    out[plain] = np.where(negative[plain], -1, 1) * (whole_ns + frac_ns)
+    return out
 
 
 def _floats(cells: Sequence[str]) -> FloatArray:
@@ -352,22 +385,22 @@ def _read_rows(
     delimiter = max(_DELIMITERS, key=header_text.count)
     sep = delimiter if header_text.count(delimiter) else None
     headers = [c.strip() for c in _split(header_text.lstrip("#"), sep)]
-    if _is_number(headers[0]):
+    if sum(_is_number(c) for c in headers) >= 2:  # no header has two numbers as names
         expected = "id,x,y,z" if kind == "anchors" else "t,anchor_id,range_m"
         msg = (
             f"{where}, line {header_line}: numbers but no header row; add a header such as "
             f"{expected}."
         )
         raise ReaderError(msg)
-    rows: list[list[str]] = []
-    lines: list[int] = []
     body = text[body_start:].splitlines()
-    for offset, raw in enumerate(body, start=header_line + 1):
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
-        rows.append(_split(line, sep))
-        lines.append(offset)
+    numbered = [
+        (number, raw)
+        for number, raw in enumerate(body, start=header_line + 1)
+        if raw.strip() and not raw.lstrip().startswith("#")
+    ]
+    lines = [number for number, _ in numbered]
+    raws = [raw.strip() for _, raw in numbered]
+    rows = [r.split() for r in raws] if sep is None else list(csv.reader(raws, delimiter=sep))
     return header_line, headers, rows, np.array(lines, dtype=np.intp)
 
 
@@ -422,8 +455,7 @@ def _choose(
                 found = [
                     i
                     for i, n in enumerate(normalized)
-                    if n.rpartition("_")[0] == candidate
-                    and n.rpartition("_")[2] in _UNIT_SPELLINGS
+                    if n.rpartition("_")[0] == candidate and n.rpartition("_")[2] in _UNIT_SPELLINGS
                 ]
             if found:
                 chosen[key] = found[0]

@@ -38,7 +38,10 @@ def loop_epochs(ranges, *, dims, height=TAG_HEIGHT_M, epoch_ns=EPOCH_NS):
     t0 = int(ranges.stamps_ns[0])
     windows = defaultdict(lambda: {"stamps": [], "ranges": defaultdict(list)})
     for t, a, r in zip(
-        ranges.stamps_ns.tolist(), ranges.anchor_index.tolist(), ranges.range_m.tolist(), strict=True
+        ranges.stamps_ns.tolist(),
+        ranges.anchor_index.tolist(),
+        ranges.range_m.tolist(),
+        strict=True,
     ):
         w = windows[(t - t0) // epoch_ns]
         w["stamps"].append(t - t0)
@@ -65,7 +68,11 @@ def scipy_nlls(anchors, dists):
     b = dists**2 - (anchors**2).sum(axis=1)
     x0 = np.linalg.lstsq(h, b, rcond=None)[0][: anchors.shape[1]]
     res = least_squares(
-        lambda x: np.linalg.norm(x - anchors, axis=1) - dists, x0, method="lm", xtol=1e-12, ftol=1e-12
+        lambda x: np.linalg.norm(x - anchors, axis=1) - dists,
+        x0,
+        method="lm",
+        xtol=1e-12,
+        ftol=1e-12,
     )
     return res.x
 
@@ -129,7 +136,7 @@ def test_nlls_recovers_the_walk_from_clean_synchronous_ranges(rng, dims):
     assert nlls.warnings == ()
 
 
-def test_epoch_stamps_and_mean_ranges(rng):
+def test_epoch_stamps_and_mean_ranges():
     """Epochs start at the first range; stamps are their ranges' mean; repeats are averaged."""
     anchors = Anchors(("a", "b", "c", "d"), [[0, 0, 1.2], [10, 0, 1.2], [0, 10, 1.2], [10, 10, 3]])
     stamps = T0_NS + np.array([0, 10, 20, 30, 60, 100, 120, 130, 140]) * 1_000_000
@@ -145,9 +152,7 @@ def test_epoch_stamps_and_mean_ranges(rng):
     # Window 0: stamps 0, 10, 20, 30, 60 ms -> mean 24 ms; window 1: 100..140 -> 122.5 ms.
     assert epochs.stamps_ns.tolist() == [T0_NS + 24_000_000, T0_NS + 122_500_000]
     # Anchor "a" heard twice in window 0 (5 m and 6 m): its mean, 5.5 m.
-    assert epochs.range_m[(epochs.epoch_index == 0) & (epochs.anchor_index == 0)].tolist() == [
-        5.5
-    ]
+    assert epochs.range_m[(epochs.epoch_index == 0) & (epochs.anchor_index == 0)].tolist() == [5.5]
 
 
 def test_epochs_with_too_few_anchors_are_skipped_and_counted(rng):

@@ -23,7 +23,10 @@ def loop_errors(reference, ranges, max_gap_ns=DEFAULT_MAX_GAP_NS):
     out = []  # (anchor, true, error)
     outside = gap = 0
     for t, a, r in zip(
-        ranges.stamps_ns.tolist(), ranges.anchor_index.tolist(), ranges.range_m.tolist(), strict=True
+        ranges.stamps_ns.tolist(),
+        ranges.anchor_index.tolist(),
+        ranges.range_m.tolist(),
+        strict=True,
     ):
         if t < t_ref[0] or t > t_ref[-1]:
             outside += 1
@@ -143,7 +146,9 @@ def test_distance_bins_partition_the_measurements(rng):
         assert b.n == expected["n"]
         assert b.bias_m == pytest.approx(expected["bias_m"], rel=1e-9, abs=1e-12)
         assert b.rmse_m == pytest.approx(expected["rmse_m"], rel=1e-9)
-    assert [b.start_m for b in result.distance_bins] == sorted(b.start_m for b in result.distance_bins)
+    assert [b.start_m for b in result.distance_bins] == sorted(
+        b.start_m for b in result.distance_bins
+    )
 
 
 def test_error_series_is_measured_minus_true_over_time(rng):
@@ -209,7 +214,7 @@ def test_no_time_overlap_is_a_clear_error(rng):
     """Ranges recorded in another clock (no overlap) raise an AssociationError, no traceback."""
     rec = make_ranges(rng)
     late = replace(rec.ranges, stamps_ns=rec.ranges.stamps_ns + 10_000 * 10**9)
-    with pytest.raises(AssociationError, match="None of the .* ranges .* falls within"):
+    with pytest.raises(AssociationError, match=r"None of the \d+ ranges .* falls within"):
         evaluate_ranging(make_reference(), late)
 
 
@@ -264,9 +269,7 @@ def test_json_contract(rng):
 def test_all_outliers_give_null_inlier_figures(rng):
     """With a threshold below every error the inlier figures are null, not NaN."""
     rec = make_ranges(rng, end_s=5.0, bias_m=[1.0] * 13, noise_m=[0.01] * 13)
-    result: RangingResult = evaluate_ranging(
-        make_reference(), rec.ranges, outlier_threshold_m=0.5
-    )
+    result: RangingResult = evaluate_ranging(make_reference(), rec.ranges, outlier_threshold_m=0.5)
     doc = json.loads(json.dumps(result.to_dict(), allow_nan=False))
     assert doc["overall"]["outlier_share"] == 1.0
     assert doc["anchors"][0]["inliers"] == {"bias_m": None, "std_m": None, "rmse_m": None}
