@@ -123,6 +123,18 @@ class Epochs:
     source: str = ""
     warnings: tuple[str, ...] = field(default=())
 
+    def __post_init__(self) -> None:
+        """Make read-only copies of the arrays and check that their lengths agree."""
+        m = int(np.shape(self.range_m)[0])
+        for name in ("stamps_ns", "epoch_index", "anchor_index", "anchors_xyz", "range_m"):
+            array = np.array(getattr(self, name), copy=True)
+            if name != "stamps_ns" and array.shape[0] != m:
+                msg = f"Epochs: {name} has {array.shape[0]} rows, the ranges {m}."
+                raise InputError(msg)
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
+        object.__setattr__(self, "warnings", tuple(self.warnings))
+
     def __len__(self) -> int:
         """Return the number of kept epochs."""
         return int(self.stamps_ns.shape[0])
@@ -161,18 +173,10 @@ def make_epochs(
         InputError: an option is out of range, 2D without a tag height, or no epoch has
             enough anchors.
     """
-    if dims not in (2, 3):
-        msg = f"The number of dimensions must be 2 or 3, got {dims!r}."
-        raise InputError(msg, option="dims")
-    if not (np.isfinite(epoch_s) and 1e-9 <= epoch_s <= MAX_SPAN_S):
-        msg = f"The epoch length must be a positive number of seconds, got {epoch_s!r}."
-        raise InputError(msg, option="epoch_s")
-    if dims == 2 and (tag_height_m is None or not np.isfinite(tag_height_m)):
-        msg = (
-            f"Positioning in 2D needs the tag's height in metres, got {tag_height_m!r}; "
-            "give it or take the reference's median height."
-        )
-        raise InputError(msg, option="tag_height_m")
+    _check_options(epoch_s=epoch_s, dims=dims, tag_height_m=tag_height_m)
+    if not len(ranges):
+        msg = f"No range measurements in {ranges.source!r} to position from; check the file."
+        raise InputError(msg)
     epoch_ns = max(round(epoch_s * _NS_PER_S), 1)
     k = len(ranges.anchors)
     stamps = ranges.stamps_ns
@@ -240,6 +244,21 @@ def make_epochs(
         source=ranges.source,
         warnings=tuple(notes),
     )
+
+
+def _check_options(*, epoch_s: float, dims: int, tag_height_m: float | None) -> None:
+    if dims not in (2, 3):
+        msg = f"The number of dimensions must be 2 or 3, got {dims!r}."
+        raise InputError(msg, option="dims")
+    if not (np.isfinite(epoch_s) and 1e-9 <= epoch_s <= MAX_SPAN_S):
+        msg = f"The epoch length must be a positive number of seconds, got {epoch_s!r}."
+        raise InputError(msg, option="epoch_s")
+    if dims == 2 and (tag_height_m is None or not np.isfinite(tag_height_m)):
+        msg = (
+            f"Positioning in 2D needs the tag's height in metres, got {tag_height_m!r}; "
+            "give it or take the reference's median height."
+        )
+        raise InputError(msg, option="tag_height_m")
 
 
 def solve_minmax(epochs: Epochs) -> Trajectory:

@@ -180,6 +180,14 @@ class RangingResult:
     dropped_gap: int
     warnings: tuple[str, ...] = field(default=())
 
+    def __post_init__(self) -> None:
+        """Make read-only copies of the per-measurement arrays."""
+        for name in ("anchor_index", "true_distance_m", "measured_m"):
+            array = np.array(getattr(self, name), copy=True)
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
+        object.__setattr__(self, "warnings", tuple(self.warnings))
+
     def to_dict(self) -> dict[str, object]:
         """Return the ``ranging`` object of the JSON contract."""
         return {
@@ -252,16 +260,17 @@ def evaluate_ranging(
         The per-anchor and overall figures and the per-measurement errors.
 
     Raises:
-        InputError: an option is out of range, or a tag offset is given for a
-            position-only reference.
+        InputError: an option is out of range, a tag offset is given for a position-only
+            reference, or there are no ranges.
         AssociationError: no measurement falls within the reference's coverage.
     """
-    _check_positive(outlier_threshold_m, "outlier_threshold_m", "the outlier threshold")
-    _check_positive(distance_bin_m, "distance_bin_m", "the distance bin width")
-    if max_gap_ns <= 0:
-        msg = f"The longest bridged reference gap must be positive, got {max_gap_ns!r} ns."
-        raise InputError(msg, option="max_gap_s")
+    _check_options(outlier_threshold_m, distance_bin_m, max_gap_ns)
     tag_positions(reference, tag_offset_xyz)  # check the offset before the work
+    if not len(ranges):
+        msg = f"No range measurements in {ranges.source!r} to evaluate; check the file."
+        raise InputError(msg)
+    if tag_offset_xyz is None or not np.any(tag_offset_xyz):
+        reference = reference.without_orientation()  # no SLERP needed without an offset
     # Anchors share stamps: interpolate once per distinct stamp.
     unique_ns, inverse = np.unique(ranges.stamps_ns, return_inverse=True)
     probe = Trajectory(unique_ns, np.zeros((unique_ns.shape[0], 3)), name="ranges")
@@ -427,6 +436,14 @@ def _fits(
         RangeFit(offset_m=float(offset[g]), scale=float(scale[g])) if usable[g] else None
         for g in range(n_groups)  # one per anchor
     ]
+
+
+def _check_options(outlier_threshold_m: float, distance_bin_m: float, max_gap_ns: int) -> None:
+    _check_positive(outlier_threshold_m, "outlier_threshold_m", "the outlier threshold")
+    _check_positive(distance_bin_m, "distance_bin_m", "the distance bin width")
+    if max_gap_ns <= 0:
+        msg = f"The longest bridged reference gap must be positive, got {max_gap_ns!r} ns."
+        raise InputError(msg, option="max_gap_s")
 
 
 def _check_positive(value: float, option: str, words: str) -> None:

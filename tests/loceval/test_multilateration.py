@@ -178,6 +178,14 @@ def test_no_epoch_with_enough_anchors_is_a_clear_error():
     assert info.value.option == "epoch_s"
 
 
+def test_no_ranges_is_a_clear_error():
+    """An empty set of ranges is refused with an InputError."""
+    anchors = Anchors(("a", "b", "c"), [[0, 0, 2], [5, 0, 2], [0, 5, 2]])
+    empty = Ranges(anchors, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.intp), [])
+    with pytest.raises(InputError, match="No range measurements"):
+        make_epochs(empty, tag_height_m=1.0)
+
+
 def test_short_ranges_are_clamped_and_counted():
     """A 2D range shorter than the anchor's height above the tag becomes 0 and is counted."""
     anchors = Anchors(("a", "b", "c"), [[0, 0, 3.2], [5, 0, 1.2], [0, 5, 1.2]])

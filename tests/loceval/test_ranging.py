@@ -245,6 +245,19 @@ def test_options_are_checked(rng, kwargs, option, match):
     assert "--" not in str(info.value)
 
 
+def test_no_ranges_is_a_clear_error(rng):
+    """An empty set of ranges is a clear InputError, not an IndexError."""
+    rec = make_ranges(rng, end_s=3.0)
+    empty = replace(
+        rec.ranges,
+        stamps_ns=rec.ranges.stamps_ns[:0],
+        anchor_index=rec.ranges.anchor_index[:0],
+        range_m=rec.ranges.range_m[:0],
+    )
+    with pytest.raises(InputError, match=r"No range measurements in 'ranges\.csv' to evaluate"):
+        evaluate_ranging(make_reference(), empty)
+
+
 def test_json_contract(rng):
     """to_dict() is exactly the contract's ranging object and serialises without NaN."""
     rec = make_ranges(rng, nlos_share=0.03)
