@@ -6,7 +6,10 @@ the same for any ranging system; each solver returns a position-only
 :class:`~loceval.trajectory.Trajectory` that goes through
 :func:`loceval.evaluation.evaluate` like any estimate (``align=none``: the anchors are in
 building coordinates already; ``association=interpolate``: the reference is interpolated
-at each epoch's stamp).
+at each epoch's stamp, never across its tracking loss; ``nearest`` suits only a reference
+much denser than the epochs, with ``max_dt`` at most half its interval). In 2D the
+estimate's z is the tag height, so its ATE includes the reference's height variation
+unless the evaluation measures in x-y only.
 
 **Epochs** (:func:`make_epochs`) are windows of ``epoch_s`` from the first range; an
 epoch's stamp is the mean of its ranges' stamps and an anchor heard more than once in an

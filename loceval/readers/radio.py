@@ -405,10 +405,18 @@ def _read_rows(
 
 
 def _is_comment(line: str) -> bool:
-    """A ``#`` line is a comment unless it is the header written as ``# id,x,y,z``."""
+    """A ``#`` line is a comment unless it is the header written as ``# id,x,y,z``.
+
+    A header names at least two known columns; a remark such as ``# anchor survey`` does not.
+    """
     cells = re.split(r"[,;\t\s]+", line.lstrip("#").strip())
     wanted = {n for names in (*_ANCHOR_NAMES.values(), *_RANGE_NAMES.values()) for n in names}
-    return not any(_normalize(c)[0] in wanted for c in cells)
+    known = 0
+    for cell in cells:
+        name = _normalize(cell)[0]
+        base, sep, suffix = name.rpartition("_")
+        known += name in wanted or bool(sep and suffix in _UNIT_SPELLINGS and base in wanted)
+    return known < 2
 
 
 def _split(line: str, delimiter: str | None) -> list[str]:

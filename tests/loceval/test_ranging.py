@@ -77,6 +77,18 @@ def assert_stats_close(actual: dict[str, object], expected: dict[str, object]) -
             assert actual[key] == pytest.approx(value, rel=1e-9, abs=1e-12), key
 
 
+def test_bias_and_std_over_all_measurements_without_nlos(rng):
+    """Without NLOS errors, bias and std over all measurements match the generator."""
+    rec = make_ranges(rng)
+    result = evaluate_ranging(make_reference(), rec.ranges)
+    for anchor in result.anchors:
+        k = ANCHOR_IDS.index(anchor.id)
+        n, sigma = anchor.stats.n, rec.noise_m[k]
+        # Standard errors sigma / sqrt(n) and sigma / sqrt(2 n), 4 of them, + 3 mm (corners).
+        assert anchor.stats.bias_m == pytest.approx(rec.bias_m[k], abs=4 * sigma / n**0.5 + 3e-3)
+        assert anchor.stats.std_m == pytest.approx(sigma, abs=4 * sigma / (2 * n) ** 0.5 + 3e-3)
+
+
 def test_per_anchor_bias_and_std_equal_the_generated_values(rng):
     """Inlier bias and std per anchor match the generator within 4 standard errors."""
     rec = make_ranges(rng, nlos_share=0.05)

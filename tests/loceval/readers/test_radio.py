@@ -100,7 +100,7 @@ def test_other_spellings_delimiters_and_time_units(tmp_path):
     """A '#' header, whitespace cells, column aliases and a t_ns column are understood."""
     path = tmp_path / "ranges.txt"
     path.write_text(
-        "# recorded by the tag\n# t_ns anchor distance\n1700000000000000001 A2 4.5\n",
+        "# anchor survey of the tag\n# t_ns anchor distance\n1700000000000000001 A2 4.5\n",
         encoding="utf-8",
     )
     ranges = read_ranges(path, read_anchors(_anchors(tmp_path)))
