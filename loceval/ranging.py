@@ -22,6 +22,7 @@ measurements) that a team can use to calibrate. Everything is computed with
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -38,6 +39,7 @@ from loceval.trajectory import Trajectory
 __all__ = [
     "DEFAULT_DISTANCE_BIN_M",
     "DEFAULT_OUTLIER_THRESHOLD_M",
+    "MAX_DISTANCE_BINS",
     "AnchorRanging",
     "DistanceBin",
     "RangeFit",
@@ -51,6 +53,8 @@ DEFAULT_OUTLIER_THRESHOLD_M: Final = 1.0
 """|error| beyond this is an outlier (a non-line-of-sight or multipath measurement)."""
 DEFAULT_DISTANCE_BIN_M: Final = 2.0
 """Width of the true-distance bins of the error-versus-distance table."""
+MAX_DISTANCE_BINS: Final = 1000
+"""Most true-distance bins: a table, not one row per measurement."""
 
 _NS_PER_S: Final = 1_000_000_000
 _MIN_FIT_SPREAD_M: Final = 1e-3
@@ -325,21 +329,7 @@ def evaluate_ranging(
         if per_anchor[a].n
     )
     unused = tuple(ranges.anchors.ids[a] for a in range(k) if not per_anchor[a].n)
-    bin_index = np.floor(true / distance_bin_m).astype(np.intp)
-    n_bins = int(bin_index.max()) + 1
-    bins = _group_stats(error, bin_index, n_bins, outlier_threshold_m)
-    distance_bins = tuple(
-        DistanceBin(
-            start_m=b * distance_bin_m,
-            end_m=(b + 1) * distance_bin_m,
-            n=s.n,
-            bias_m=s.bias_m,
-            std_m=s.std_m,
-            rmse_m=s.rmse_m,
-        )
-        for b, s in enumerate(bins)  # one per bin
-        if s.n
-    )
+    distance_bins = _distance_bins(true, error, distance_bin_m)
     notes = list(ranges.warnings)
     if dropped_outside:
         notes.append(
@@ -366,6 +356,33 @@ def evaluate_ranging(
         dropped_outside=dropped_outside,
         dropped_gap=dropped_gap,
         warnings=tuple(notes),
+    )
+
+
+def _distance_bins(
+    true_m: FloatArray, error: FloatArray, width_m: float
+) -> tuple[DistanceBin, ...]:
+    """Return the error statistics per non-empty true-distance bin ``[k w, (k + 1) w)``."""
+    bin_of = np.floor(true_m / width_m)
+    if float(bin_of.max()) >= MAX_DISTANCE_BINS:
+        msg = (
+            f"The distance bin width {width_m!r} m cuts distances up to "
+            f"{float(true_m.max()):.1f} m into more than {MAX_DISTANCE_BINS} bins; use a "
+            f"width of at least {float(true_m.max()) / MAX_DISTANCE_BINS:.3g} m."
+        )
+        raise InputError(msg, option="distance_bin_m")
+    used, compact = np.unique(bin_of.astype(np.intp), return_inverse=True)
+    stats = _group_stats(error, compact, used.shape[0], math.inf)
+    return tuple(
+        DistanceBin(
+            start_m=float(b) * width_m,
+            end_m=float(b + 1) * width_m,
+            n=st.n,
+            bias_m=st.bias_m,
+            std_m=st.std_m,
+            rmse_m=st.rmse_m,
+        )
+        for b, st in zip(used.tolist(), stats, strict=True)  # one per bin
     )
 
 

@@ -246,6 +246,7 @@ def test_ranges_only_in_tracking_loss_are_a_clear_error(rng):
         ({"outlier_threshold_m": math.nan}, "outlier_threshold_m", "The outlier threshold"),
         ({"distance_bin_m": -1.0}, "distance_bin_m", "The distance bin width must"),
         ({"max_gap_ns": 0}, "max_gap_s", "longest bridged reference gap"),
+        ({"distance_bin_m": 1e-6}, "distance_bin_m", "into more than 1000 bins"),
     ],
 )
 def test_options_are_checked(rng, kwargs, option, match):
