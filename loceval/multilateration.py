@@ -297,6 +297,9 @@ def solve_nlls(epochs: Epochs, *, max_iterations: int = _MAX_ITERATIONS) -> Traj
     Returns:
         A position-only trajectory named ``nlls``, one pose per epoch whose anchors are
         not all on one line (2D) or plane (3D).
+
+    Raises:
+        InputError: in every epoch the anchors lie on one line (2D) or plane (3D).
     """
     d = epochs.dims
     e = len(epochs)
@@ -308,13 +311,44 @@ def solve_nlls(epochs: Epochs, *, max_iterations: int = _MAX_ITERATIONS) -> Traj
     x, valid = _linear_start(a, r, ep, e, d)
     notes = list(epochs.warnings)
     degenerate = int((~valid).sum())
+    if degenerate == e:
+        msg = (
+            f"In all {e} epochs the anchors heard lie on one {'line' if d == 2 else 'plane'}, "
+            "so nlls cannot tell the position from its mirror image; add an anchor off that "
+            f"{'line' if d == 2 else 'plane'}."
+        )
+        raise InputError(msg)
     if degenerate:
         notes.append(
             f"{degenerate} of {e} epochs skipped by nlls: their anchors lie on one "
             f"{'line' if d == 2 else 'plane'}, which leaves the position mirrored."
         )
+    done = _levenberg_marquardt(x, a, r, ep, done=~valid, max_iterations=max_iterations)
+    unconverged = int((~done).sum())
+    if unconverged:
+        notes.append(
+            f"nlls did not converge within {max_iterations} iterations in {unconverged} of "
+            f"{e} epochs; their last iterate is used."
+        )
+    return _trajectory(epochs, valid, x[valid] + centre, Solver.NLLS, notes)
+
+
+def _levenberg_marquardt(
+    x: FloatArray,
+    a: FloatArray,
+    r: FloatArray,
+    ep: IntArray,
+    *,
+    done: BoolArray,
+    max_iterations: int,
+) -> BoolArray:
+    """Iterate every epoch not ``done`` from ``x`` (E, d), both updated in place.
+
+    Returns:
+        ``done``: the epochs that converged, or were done on entry.
+    """
+    e, d = x.shape
     damping = np.full(e, _LAMBDA_START)
-    done = ~valid
     cost = _cost(x, a, r, ep, _segment_starts(ep, e))
     eye = np.eye(d)
     active = np.zeros(0, dtype=np.intp)
@@ -352,13 +386,7 @@ def solve_nlls(epochs: Epochs, *, max_iterations: int = _MAX_ITERATIONS) -> Traj
         small = np.abs(step).max(axis=1) < _STEP_TOLERANCE_M
         flat = better & (before - trial_cost <= _COST_TOLERANCE * before)
         done[active] = small | flat | (lam >= _LAMBDA_MAX) | (cost[active] == 0.0)
-    unconverged = int((~done).sum())
-    if unconverged:
-        notes.append(
-            f"nlls did not converge within {max_iterations} iterations in {unconverged} of "
-            f"{e} epochs; their last iterate is used."
-        )
-    return _trajectory(epochs, valid, x[valid] + centre, Solver.NLLS, notes)
+    return done
 
 
 def solve_positions(

@@ -210,6 +210,14 @@ def test_collinear_anchors_are_skipped_by_nlls():
     assert len(minmax) == 2
 
 
+def test_anchors_on_one_plane_in_every_epoch_are_a_clear_error():
+    """3D positioning with all anchors at one height is refused by nlls, not returned empty."""
+    anchors = Anchors(("a", "b", "c", "d"), [[0, 0, 2.5], [5, 0, 2.5], [0, 5, 2.5], [5, 5, 2.5]])
+    ranges = Ranges(anchors, T0_NS + np.arange(4), np.arange(4), [3.0, 4.0, 4.0, 5.0])
+    with pytest.raises(InputError, match="In all 1 epochs the anchors heard lie on one plane"):
+        solve_nlls(make_epochs(ranges, dims=3))
+
+
 def test_minmax_counts_boxes_that_do_not_intersect():
     """Inconsistent ranges whose boxes do not meet are counted in the warnings."""
     anchors = Anchors(("a", "b", "c"), [[0, 0, 1], [10, 0, 1], [0, 10, 1]])
