@@ -23,6 +23,7 @@ from loceval.trajectory import Trajectory
 
 NS_PER_S = 1_000_000_000
 MAX_ITERATIONS = 30
+RESCALE_ITERATIONS = 2
 HUBER_K = 3.0
 """Residuals beyond this many robust sigmas get a linearly growing (Huber) cost."""
 
@@ -337,8 +338,8 @@ def fit_relative_motions(
     x = base[free]
     idx = np.arange(8)[free]
     step = np.where(idx == 0, 1e-5, 1e-6)
-    tol = np.where(idx == 0, 1e-8, 1e-9)
-    for _ in range(MAX_ITERATIONS):
+    tol = np.where(idx == 0, 1e-7, 1e-7)
+    for iteration in range(MAX_ITERATIONS):
         # Gauss-Newton with Huber weights (IRLS), started near the solution by the closed
         # form; each iteration costs P + 2 residual evaluations and two interpolations.
         r = weighted(x)
@@ -346,19 +347,21 @@ def fit_relative_motions(
         sw = np.sqrt(_huber_weights(r))
         dx = -np.linalg.lstsq(jac * sw[:, None], r * sw, rcond=None)[0]
         cost = _huber_cost(r)
-        for _halving in range(10):
+        for _halving in range(6):
             if _huber_cost(weighted(x + dx)) <= cost:
                 break
             dx = 0.5 * dx
         x = x + dx
-        r_rot, r_t = raw_residuals(unpack(x))
-        scales = np.array(
-            [
-                max(_robust_rms(r_rot), 1e-6),
-                max(_robust_rms(r_t), 1e-7) if fit_translation else 1.0,
-            ]
-        )
-        if (np.abs(dx) < tol).all():
+        if iteration < RESCALE_ITERATIONS:
+            # The groups' noise levels from the residuals (then held, so the cost is fixed).
+            r_rot, r_t = raw_residuals(unpack(x))
+            scales = np.array(
+                [
+                    max(_robust_rms(r_rot), 1e-6),
+                    max(_robust_rms(r_t), 1e-7) if fit_translation else 1.0,
+                ]
+            )
+        elif (np.abs(dx) < tol).all():
             break
     r = weighted(x)
     jac = _jacobian(weighted, x, step, r)
@@ -412,3 +415,39 @@ def _jacobian(
         cols.append((fun(x + dx) - f0) / step[k])
     out: FloatArray = np.stack(cols, axis=1)
     return out
+
+
+def initial_rotation(
+    sampler: PoseSampler, estimate: Trajectory, i: IntArray, j: IntArray, *, offset_ns: int
+) -> FloatArray:
+    """Closed-form device rotation from the rotation axes of the relative motions."""
+    assert estimate.quat_xyzw is not None  # noqa: S101
+    t_s = (estimate.stamps_ns - sampler.origin_ns + offset_ns).astype(np.float64) / NS_PER_S
+    idx = np.concatenate((i, j))
+    q_ref = np.zeros((estimate.quat_xyzw.shape[0], 4))
+    q_ref[idx] = sampler.quat_at(t_s[idx])
+    p_ref = np.zeros((estimate.quat_xyzw.shape[0], 3))
+    a_q, _ = relative_motions(p_ref, q_ref, i, j)
+    b_q, _ = relative_motions(estimate.positions_xyz, estimate.quat_xyzw, i, j)
+    return solve_rotation(rotvec_of(a_q), rotvec_of(b_q))
+
+
+def rotation_excitation(alpha: FloatArray) -> FloatArray:
+    """``mean(|a|² I - a a^T)`` over rotation vectors: the information on a left rotation."""
+    sq = (alpha**2).sum(axis=1)
+    out: FloatArray = np.eye(3) * sq.mean() - alpha.T @ alpha / alpha.shape[0]
+    return out
+
+
+def weak_axes(info: FloatArray, *, threshold: float) -> list[int]:
+    """Body axes that lie mostly in the span of the information's small eigenvalues.
+
+    An eigenvalue below ``threshold`` times the largest is small; an axis whose squared
+    projection on those eigenvectors exceeds one half is weak.
+    """
+    values, vectors = np.linalg.eigh(info)
+    weak = values < threshold * max(float(values[-1]), 1e-300)
+    if not weak.any():
+        return []
+    share = (vectors[:, weak] ** 2).sum(axis=1)
+    return [k for k in range(3) if share[k] > 0.5]

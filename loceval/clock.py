@@ -35,10 +35,11 @@ from loceval._calibration import (
     PoseSampler,
     fit_relative_motions,
     hac_covariance,
+    initial_rotation,
     make_pairs,
-    relative_motions,
+    rotation_excitation,
     rotvec_of,
-    solve_rotation,
+    weak_axes,
 )
 from loceval._typing import BoolArray, FloatArray
 from loceval.alignment import align_umeyama
@@ -432,27 +433,25 @@ def _refine_rotation(
     )
     _check_pairs(pairs.i.shape[0], estimate, reference)
     rotation0 = initial_rotation(sampler, estimate, pairs.i, pairs.j, offset_ns=offset_ns)
+    # The device rotation about an axis every rotation shares is not told by rotations
+    # (a ground robot's yaw): hold it, the time offset does not depend on it.
+    t_s = (estimate.stamps_ns - sampler.origin_ns + offset_ns).astype(np.float64) / NS_PER_S
+    q_i = sampler.quat_at(t_s[pairs.i])
+    q_j = sampler.quat_at(t_s[pairs.j])
+    alpha = rotvec_of(compose_quat(conjugate_quat(q_i), q_j))
+    fixed = weak_axes(rotation_excitation(alpha), threshold=1e-3)
+    if len(fixed) > 1:
+        msg = (
+            f"The tracked body of {reference.name!r} hardly rotates, so the time offset cannot "
+            "be refined from rotations; record a run that turns, or give the time offset."
+        )
+        raise InputError(msg, option="time_offset_s")
     fit = fit_relative_motions(
         sampler, estimate, pairs, offset_ns=offset_ns, rotation0=rotation0,
         translation0=np.zeros(3), scale0=1.0, fit_offset=True, fit_translation=False,
-        fit_scale=False,
+        fit_scale=False, fixed_rotation_axes=tuple(fixed),
     )
     return offset_ns / NS_PER_S + fit.offset_s, float(np.sqrt(fit.cov[0, 0]))
-
-
-def initial_rotation(
-    sampler: PoseSampler, estimate: Trajectory, i: FloatArray, j: FloatArray, *, offset_ns: int
-) -> FloatArray:
-    """Closed-form device rotation from the rotation axes of the relative motions."""
-    assert estimate.quat_xyzw is not None  # noqa: S101
-    t_s = (estimate.stamps_ns - sampler.origin_ns + offset_ns).astype(np.float64) / NS_PER_S
-    idx = np.concatenate((i, j))
-    q_ref = np.zeros((estimate.quat_xyzw.shape[0], 4))
-    q_ref[idx] = sampler.quat_at(t_s[idx])
-    p_ref = np.zeros((estimate.quat_xyzw.shape[0], 3))
-    a_q, _ = relative_motions(p_ref, q_ref, i, j)
-    b_q, _ = relative_motions(estimate.positions_xyz, estimate.quat_xyzw, i, j)
-    return solve_rotation(rotvec_of(a_q), rotvec_of(b_q))
 
 
 def _check_pairs(count: int, estimate: Trajectory, reference: Trajectory) -> None:
