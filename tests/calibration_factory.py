@@ -81,6 +81,7 @@ def make_recording(
     time_offset_s: float = -0.045,
     device: SimilarityTransform = TRUE_DEVICE,
     drift_m_per_min: float = 0.01,
+    yaw_drift_deg_per_min: float = 0.1,
     orientation_noise_deg: float = 0.3,
     position_noise_m: float = 0.001,
     tracking_losses: int = 3,
@@ -91,7 +92,7 @@ def make_recording(
 
     The orientation noise is per axis (so the noise angle's RMS is sqrt(3) times it); the
     drift is a translation growing at ``drift_m_per_min`` in a random direction plus
-    0.1 deg/min of yaw; tracking losses last 0.5 to 2 s each.
+    ``yaw_drift_deg_per_min`` of yaw; tracking losses last 0.5 to 2 s each.
     """
     seed = int(rng.integers(2**32))
     motion_rng = np.random.default_rng(seed)
@@ -114,7 +115,7 @@ def make_recording(
     direction = rng.normal(size=3)
     direction /= np.linalg.norm(direction)
     drift_t = np.outer(t_est / 60.0 * drift_m_per_min, direction)
-    drift_r = Rotation.from_euler("z", 0.1 * t_est[:, None] / 60.0, degrees=True)
+    drift_r = Rotation.from_euler("z", yaw_drift_deg_per_min * t_est[:, None] / 60.0, degrees=True)
     world = Rotation.from_euler("xyz", rng.uniform(-180, 180, 3), degrees=True)
     world_t = rng.uniform(-5, 5, 3)
     p_est = world.apply(drift_r.apply(p_sensor) + drift_t) + world_t
