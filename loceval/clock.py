@@ -32,6 +32,7 @@ from scipy.optimize import minimize_scalar
 
 from loceval._calibration import (
     NS_PER_S,
+    SIGMA_SAFETY,
     PoseSampler,
     fit_relative_motions,
     hac_covariance,
@@ -511,4 +512,7 @@ def _refine_positions(
     # Drift makes position residuals correlated over long times: count 10 s as one block.
     per_s = max(1.0, ok.shape[0] / max(estimate.duration_s, 1e-9))
     cov, _ = hac_covariance(jac, r, ok.shape[0], lag=int(np.ceil(10.0 * per_s)))
-    return offset_ns / NS_PER_S + d_hat, float(np.sqrt(cov[0, 0]))
+    # The unmodelled lever arm and drift make the residuals systematic; on 8 seeds of the
+    # synthetic position-only recordings the sandwich alone gave an error RMS of 1.3 sigma
+    # (3.2 at most), so the same safety factor as the relative-motion fit applies.
+    return offset_ns / NS_PER_S + d_hat, SIGMA_SAFETY * float(np.sqrt(cov[0, 0]))
