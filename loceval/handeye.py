@@ -97,7 +97,7 @@ class DeviceOffsetEstimate:
         unobservable: components the motion does not excite (``"x"``... ``"rz"``).
         time_offset_s: the time offset estimated jointly (added to the estimate's stamps).
         sigma_time_offset_s: its 1-sigma (None when it was held fixed).
-        scale: estimate units per metre (1 unless estimated for a monocular estimate).
+        scale: metres per estimate unit (1 unless estimated for a monocular estimate).
         pairs: relative motions used.
         rms_rotation_deg: RMS rotation residual of the fit, degrees.
         rms_translation_m: RMS translation residual of the fit, metres.
