@@ -157,7 +157,7 @@ def estimate_time_offset(
     max_gap_s: float = DEFAULT_MAX_GAP_NS / NS_PER_S,
     window_s: float = 1.0,
     with_scale: bool = False,
-    max_pairs: int = 20_000,
+    max_pairs: int = 3_000,
 ) -> TimeOffsetEstimate:
     """Estimate the offset to add to the estimate's stamps, and check a given one.
 
@@ -259,7 +259,7 @@ class _Coarse:
 
 def _grid_dt_s(reference: Trajectory, estimate: Trajectory) -> float:
     rate = min(reference.rate_hz, estimate.rate_hz)
-    dt = float(np.clip(1.0 / rate if rate > 0 else 0.05, 0.01, 0.1))
+    dt = float(np.clip(1.0 / rate if rate > 0 else 0.05, 0.04, 0.1))
     span = max(reference.duration_s, estimate.duration_s)
     return max(dt, span / 2**19)  # bounds the FFT length on day-long recordings
 

@@ -145,7 +145,7 @@ def estimate_device_offset(
     with_scale: bool = False,
     max_gap_s: float = DEFAULT_MAX_GAP_NS / NS_PER_S,
     window_s: float = 1.0,
-    max_pairs: int = 5_000,
+    max_pairs: int = 3_000,
 ) -> DeviceOffsetEstimate:
     """Estimate the tracked body -> sensor offset, jointly with the time offset.
 
