@@ -22,6 +22,8 @@ from loceval.trajectory import Trajectory
 
 NS_PER_S = 1_000_000_000
 MAX_ITERATIONS = 30
+CONVERGED = 1e-6
+"""Largest step at convergence: 1 µs, 1 µrad, 1 µm (far below any sigma)."""
 RESCALE_ITERATIONS = 2
 ANCHOR_STEP_S = 1e-4
 RELINEARISE_S = 5e-4
@@ -280,6 +282,154 @@ def make_pairs(
     return PairSet(i=i, j=j, lag=3)
 
 
+@dataclass(frozen=True, slots=True)
+class FitOptions:
+    """Which parameters :func:`fit_relative_motions` estimates (the others stay fixed)."""
+
+    fit_offset: bool
+    fit_translation: bool
+    fit_scale: bool
+    fit_drift: bool = True
+    fixed_rotation_axes: tuple[int, ...] = ()
+    fixed_translation_axes: tuple[int, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class _Anchor:
+    """The reference's motions at offset ``d_s`` and their rate of change with it."""
+
+    d_s: float
+    q: FloatArray
+    t: FloatArray
+    w: FloatArray
+    v: FloatArray
+
+
+_N_PAR = 11  # offset, rotation (3), translation (3), log scale, drift velocity (3)
+
+
+class _RelativeProblem:
+    """Residuals and Jacobian of ``A X = X B`` over the pairs (see fit_relative_motions).
+
+    Parameters (full vector of 11): ``[offset_s, phi (3), t_X (3), log s, v (3)]``, with
+    ``X_R = exp([phi]) R_0``. The reference's motions are taken first order in the offset
+    about an anchor that follows the solution: interpolating the reference anew for every
+    trial offset cost most of the time on long recordings; within RELINEARISE_S of the
+    anchor the neglected term is below 1e-4 degrees.
+    """
+
+    def __init__(
+        self,
+        sampler: PoseSampler,
+        estimate: Trajectory,
+        pairs: PairSet,
+        *,
+        offset_ns: int,
+        rotation0: FloatArray,
+        with_translation: bool,
+    ) -> None:
+        """Precompute everything that does not depend on the parameters."""
+        assert estimate.quat_xyzw is not None  # noqa: S101  (callers check)
+        est_q = estimate.quat_xyzw
+        self.sampler = sampler
+        self.n = pairs.i.shape[0]
+        self.b_q, self.b_t = relative_motions(estimate.positions_xyz, est_q, pairs.i, pairs.j)
+        self.b_inv = quat_matrices(conjugate_quat(est_q[pairs.i]))  # estimate -> sensor i
+        self.b_mat_t = quat_matrices(self.b_q).transpose(0, 2, 1)  # R_B^T
+        stamps = estimate.stamps_ns
+        self.dt_s = (stamps[pairs.j] - stamps[pairs.i]).astype(np.float64) / NS_PER_S
+        shift = offset_ns - sampler.origin_ns
+        self.t_i_s = (stamps[pairs.i] + shift).astype(np.float64) / NS_PER_S
+        self.t_j_s = (stamps[pairs.j] + shift).astype(np.float64) / NS_PER_S
+        self.r0 = Rotation.from_matrix(rotation0)
+        self.with_translation = with_translation
+        self.rows = 6 if with_translation else 3
+        self.scales = np.array([0.01, 0.005])
+        self.anchor: _Anchor | None = None
+
+    def _exact_a(self, d_s: float) -> tuple[FloatArray, FloatArray]:
+        times = np.concatenate((self.t_i_s + d_s, self.t_j_s + d_s))
+        p = self.sampler.positions_at(times)
+        q = self.sampler.quat_at(times)
+        idx = np.arange(self.n)
+        return relative_motions(p, q, idx, idx + self.n)
+
+    def set_anchor(self, d_s: float) -> _Anchor:
+        """Interpolate the reference exactly at ``d_s`` (and one small step later)."""
+        q0, t0 = self._exact_a(d_s)
+        qh, th = self._exact_a(d_s + ANCHOR_STEP_S)
+        w = rotvec_of(compose_quat(conjugate_quat(q0), qh)) / ANCHOR_STEP_S
+        self.anchor = _Anchor(d_s, q0, t0, w, (th - t0) / ANCHOR_STEP_S)
+        return self.anchor
+
+    def motions_a(self, d_s: float) -> tuple[FloatArray, FloatArray, _Anchor]:
+        """The reference's motions at offset ``d_s`` (first order about the anchor)."""
+        anchor = self.anchor
+        if anchor is None or abs(d_s - anchor.d_s) > RELINEARISE_S:
+            anchor = self.set_anchor(d_s)
+        e = d_s - anchor.d_s
+        if e == 0.0:
+            return anchor.q, anchor.t, anchor
+        return compose_quat(anchor.q, quat_of(anchor.w * e)), anchor.t + anchor.v * e, anchor
+
+    def _travel(self, full: FloatArray, mx: FloatArray) -> FloatArray:
+        """``R_X t_B'``: the estimate's travel, drift removed, in the body's frame."""
+        b_t = self.b_t - np.einsum("nij,j->ni", self.b_inv, full[8:11]) * self.dt_s[:, None]
+        out: FloatArray = b_t @ mx.T
+        return out
+
+    def residuals(self, full: FloatArray) -> FloatArray:
+        """(n, rows) scaled residuals: rotation, then translation."""
+        a_q, a_t, _ = self.motions_a(float(full[0]))
+        rot_x = Rotation.from_rotvec(full[1:4]) * self.r0
+        qx = np.broadcast_to(rot_x.as_quat(), (self.n, 4))
+        lhs = compose_quat(a_q, qx)
+        r_rot = rotvec_of(compose_quat(conjugate_quat(lhs), compose_quat(qx, self.b_q)))
+        if not self.with_translation:
+            out: FloatArray = r_rot / self.scales[0]
+            return out
+        t_x = full[4:7]
+        travel = self._travel(full, rot_x.as_matrix())
+        r_t = rotate(a_q, np.broadcast_to(t_x, (self.n, 3))) + a_t - np.exp(full[7]) * travel
+        out = np.concatenate((r_rot / self.scales[0], (r_t - t_x) / self.scales[1]), axis=1)
+        return out
+
+    def jacobian(self, full: FloatArray) -> FloatArray:
+        """(n * rows, 11) analytic Jacobian, first order in the residual (under a degree).
+
+        With ``X -> exp([phi]) X`` and ``A -> A exp([w] e)`` (the anchor's rate ``w``), the
+        rotation residual moves by ``R_B^T R_X^T (I - R_A) phi - R_X^T w e``; the
+        translation residual by ``s [R_X t_B']x phi`` and ``(R_A (w x t_X) + v) e``, and
+        linearly in ``t_X``, ``log s`` and the drift velocity (checked against central
+        differences: within 0.3 %).
+        """
+        n, rows, sc = self.n, self.rows, self.scales
+        jac = np.zeros((n, rows, _N_PAR))
+        a_q, _, anchor = self.motions_a(float(full[0]))
+        ra = quat_matrices(a_q)
+        mx = (Rotation.from_rotvec(full[1:4]) * self.r0).as_matrix()
+        jac[:, :3, 1:4] = (self.b_mat_t @ mx.T) @ (np.eye(3) - ra) / sc[0]
+        jac[:, :3, 0] = -(anchor.w @ mx) / sc[0]
+        if self.with_translation:
+            s = np.exp(full[7])
+            travel = self._travel(full, mx)
+            w_x_t = np.cross(anchor.w, full[4:7])
+            jac[:, 3:, 0] = (np.einsum("nij,nj->ni", ra, w_x_t) + anchor.v) / sc[1]
+            jac[:, 3:, 1:4] = s * _skew(travel) / sc[1]
+            jac[:, 3:, 4:7] = (ra - np.eye(3)) / sc[1]
+            jac[:, 3:, 7] = -s * travel / sc[1]
+            jac[:, 3:, 8:11] = (s / sc[1]) * self.dt_s[:, None, None] * (mx @ self.b_inv)
+        out: FloatArray = jac.reshape(n * rows, _N_PAR)
+        return out
+
+    def rescale(self, full: FloatArray) -> None:
+        """Set each group's scale to the robust RMS of its residuals at ``full``."""
+        res = self.residuals(full) * np.repeat(self.scales, 3)[: self.rows]
+        rot = max(_robust_rms(res[:, :3]), 1e-6)
+        trans = max(_robust_rms(res[:, 3:]), 1e-7) if self.with_translation else 1.0
+        self.scales = np.array([rot, trans])
+
+
 def fit_relative_motions(
     sampler: PoseSampler,
     estimate: Trajectory,
@@ -289,12 +439,7 @@ def fit_relative_motions(
     rotation0: FloatArray,
     translation0: FloatArray,
     scale0: float,
-    fit_offset: bool,
-    fit_translation: bool,
-    fit_scale: bool,
-    fit_drift: bool = True,
-    fixed_rotation_axes: tuple[int, ...] = (),
-    fixed_translation_axes: tuple[int, ...] = (),
+    options: FitOptions,
 ) -> RelativeFit:
     """Robust least squares of ``A X = X B`` over the pairs, optionally with the offset.
 
@@ -302,194 +447,90 @@ def fit_relative_motions(
     ``B`` the estimate's between ``t_i`` and ``t_j``. Residuals per pair: the rotation
     ``log((A_R X_R)^T X_R B_R)`` (radians) and, with ``fit_translation``, the translation
     ``A_R t_X + t_A - s X_R (t_B - B_Ri^T v dt) - t_X`` (metres), where ``v`` is a constant
-    drift velocity of the estimate's frame (``fit_drift``; drift would otherwise bias the
-    lever arm by a fraction of a millimetre). Each group is divided by its robust scale,
-    the loss is Huber's (IRLS Gauss-Newton), and the covariance is the HAC sandwich.
+    drift velocity of the estimate's frame (``fit_drift``). Each group is divided by its
+    robust scale, the loss is Huber's (IRLS Gauss-Newton), and the covariance is the
+    sandwich of :func:`hac_covariance` times SIGMA_SAFETY.
     """
-    assert estimate.quat_xyzw is not None  # noqa: S101  (callers check)
-    est_q = estimate.quat_xyzw
-    b_q, b_t = relative_motions(estimate.positions_xyz, est_q, pairs.i, pairs.j)
-    b_inv = quat_matrices(conjugate_quat(est_q[pairs.i]))  # (n, 3, 3) estimate -> sensor i
-    dt_s = (estimate.stamps_ns[pairs.j] - estimate.stamps_ns[pairs.i]).astype(np.float64) / NS_PER_S
-    t_i_s = (estimate.stamps_ns[pairs.i] - sampler.origin_ns + offset_ns).astype(
-        np.float64
-    ) / NS_PER_S
-    t_j_s = (estimate.stamps_ns[pairs.j] - sampler.origin_ns + offset_ns).astype(
-        np.float64
-    ) / NS_PER_S
-    n = pairs.i.shape[0]
-    anchor: dict[str, object] = {}
-
-    def exact_a(d_s: float) -> tuple[FloatArray, FloatArray]:
-        times = np.concatenate((t_i_s + d_s, t_j_s + d_s))
-        p = sampler.positions_at(times)
-        q = sampler.quat_at(times)
-        idx = np.arange(n)
-        return relative_motions(p, q, idx, idx + n)
-
-    def set_anchor(d_s: float) -> None:
-        # The reference's motions and their rate of change with the offset, at d_s.
-        q0, t0 = exact_a(d_s)
-        qh, th = exact_a(d_s + ANCHOR_STEP_S)
-        anchor.update(
-            d=d_s,
-            q=q0,
-            t=t0,
-            w=rotvec_of(compose_quat(conjugate_quat(q0), qh)) / ANCHOR_STEP_S,
-            v=(th - t0) / ANCHOR_STEP_S,
-        )
-
-    def motions_a(d_s: float) -> tuple[FloatArray, FloatArray]:
-        # First order in the offset about an anchor that follows the solution: interpolating
-        # the reference anew for every trial offset cost most of the time on long recordings.
-        # Within RELINEARISE_S of the anchor the neglected term is below 1e-4 degrees.
-        if not anchor or abs(d_s - float(anchor["d"])) > RELINEARISE_S:  # type: ignore[arg-type]
-            set_anchor(d_s)
-        e = d_s - float(anchor["d"])  # type: ignore[arg-type]
-        q0, t0 = anchor["q"], anchor["t"]
-        w, v = anchor["w"], anchor["v"]
-        assert isinstance(q0, np.ndarray) and isinstance(t0, np.ndarray)  # noqa: S101
-        assert isinstance(w, np.ndarray) and isinstance(v, np.ndarray)  # noqa: S101
-        if e == 0.0:
-            return q0, t0
-        return compose_quat(q0, quat_of(w * e)), t0 + v * e
-
-    n_par = 11  # offset, rotation (3), translation (3), log scale, drift velocity (3)
-    free = np.ones(n_par, dtype=bool)
-    free[0] = fit_offset
-    for k in fixed_rotation_axes:
-        free[1 + k] = False
-    free[4:7] = fit_translation
-    for k in fixed_translation_axes:
-        free[4 + k] = False
-    free[7] = fit_scale and fit_translation
-    free[8:11] = fit_drift and fit_translation
+    problem = _RelativeProblem(
+        sampler,
+        estimate,
+        pairs,
+        offset_ns=offset_ns,
+        rotation0=rotation0,
+        with_translation=options.fit_translation,
+    )
+    free = _free_parameters(options)
     base = np.concatenate(([0.0], np.zeros(3), translation0, [np.log(scale0)], np.zeros(3)))
-    r0 = Rotation.from_matrix(rotation0)
-    rows = 6 if fit_translation else 3
-    scales = np.array([0.01, 0.005])
 
     def unpack(x: FloatArray) -> FloatArray:
         full = base.copy()
         full[free] = x
         return full
 
-    def corrected_b_t(full: FloatArray) -> FloatArray:
-        out: FloatArray = b_t - np.einsum("nij,j->ni", b_inv, full[8:11]) * dt_s[:, None]
-        return out
-
-    def residuals(full: FloatArray) -> FloatArray:
-        """(n, rows) weighted residuals: rotation, then translation."""
-        a_q, a_t = motions_a(float(full[0]))
-        rot_x = Rotation.from_rotvec(full[1:4]) * r0
-        qx = np.broadcast_to(rot_x.as_quat(), (n, 4))
-        r_rot = rotvec_of(compose_quat(conjugate_quat(compose_quat(a_q, qx)), compose_quat(qx, b_q)))
-        if not fit_translation:
-            out: FloatArray = r_rot / scales[0]
-            return out
-        t_x = full[4:7]
-        mx = rot_x.as_matrix()
-        r_t = (
-            rotate(a_q, np.broadcast_to(t_x, (n, 3)))
-            + a_t
-            - np.exp(full[7]) * (corrected_b_t(full) @ mx.T)
-            - t_x
-        )
-        out = np.concatenate((r_rot / scales[0], r_t / scales[1]), axis=1)
-        return out
-
-    b_mat_t = quat_matrices(b_q).transpose(0, 2, 1)  # R_B^T per pair
-
-    def jacobian(full: FloatArray, f0: FloatArray) -> FloatArray:
-        """Analytic Jacobian, first order in the residual (a fraction of a degree).
-
-        With ``X -> exp([phi]) X`` and ``A -> A exp([w] e)`` (the anchor's rate ``w``), the
-        rotation residual moves by ``R_B^T R_X^T (I - R_A) phi - R_X^T w e``; the
-        translation residual by ``s [R_X t_B']x phi`` and ``(R_A (w x t_X) + v) e``, and
-        linearly in ``t_X``, ``log s`` and the drift velocity.
-        """
-        del f0
-        jac = np.zeros((n, rows, n_par))
-        a_q, _ = motions_a(float(full[0]))
-        ra = quat_matrices(a_q)
-        mx = (Rotation.from_rotvec(full[1:4]) * r0).as_matrix()
-        w = anchor["w"]
-        v = anchor["v"]
-        assert isinstance(w, np.ndarray) and isinstance(v, np.ndarray)  # noqa: S101
-        jac[:, :3, 1:4] = (b_mat_t @ mx.T) @ (np.eye(3) - ra) / scales[0]
-        jac[:, :3, 0] = -(w @ mx) / scales[0]
-        if fit_translation:
-            s = np.exp(full[7])
-            t_x = full[4:7]
-            travel = corrected_b_t(full) @ mx.T  # R_X t_B'
-            jac[:, 3:, 0] = (np.einsum("nij,nj->ni", ra, np.cross(w, t_x)) + v) / scales[1]
-            jac[:, 3:, 1:4] = s * _skew(travel) / scales[1]
-            jac[:, 3:, 4:7] = (ra - np.eye(3)) / scales[1]
-            jac[:, 3:, 7] = -s * travel / scales[1]
-            jac[:, 3:, 8:11] = (s / scales[1]) * dt_s[:, None, None] * (mx @ b_inv)
-        out: FloatArray = jac.reshape(n * rows, n_par)[:, free]
-        return out
-
     x = base[free]
-    tol = 1e-6  # 1 µs, 1 µrad, 1 µm: far below any sigma
     for iteration in range(MAX_ITERATIONS):
         # Gauss-Newton with Huber weights (IRLS), started near the solution by the closed
-        # form; an iteration costs about six residual evaluations and two interpolations.
+        # forms; an iteration costs two or three residual evaluations.
         full = unpack(x)
-        f0 = residuals(full)
-        r = f0.ravel()
-        jac = jacobian(full, f0)
-        sw = np.sqrt(_huber_weights(r))
-        jw = jac * sw[:, None]
+        r = problem.residuals(full).ravel()
+        jw = problem.jacobian(full)[:, free] * np.sqrt(_huber_weights(r))[:, None]
         normal = jw.T @ jw
-        # Normal equations (P <= 11 columns): far cheaper than an SVD of the tall matrix;
-        # the tiny ridge only guards a parameter the data hardly move.
+        # Normal equations (at most 11 columns): far cheaper than an SVD of the tall
+        # matrix; the tiny ridge only guards a parameter the data hardly move.
         normal += 1e-12 * np.trace(normal) * np.eye(normal.shape[0])
-        dx = -np.linalg.solve(normal, jw.T @ (r * sw))
+        dx = -np.linalg.solve(normal, jw.T @ (r * np.sqrt(_huber_weights(r))))
         cost = _huber_cost(r)
         for _halving in range(6):
-            if _huber_cost(residuals(unpack(x + dx))) <= cost:
+            if _huber_cost(problem.residuals(unpack(x + dx))) <= cost:
                 break
             dx = 0.5 * dx
         x = x + dx
         if iteration < RESCALE_ITERATIONS:
-            # The groups' noise levels from the residuals (then held, so the cost is fixed).
-            res = residuals(unpack(x)) * np.repeat(scales, 3)[:rows]
-            scales = np.array(
-                [
-                    max(_robust_rms(res[:, :3]), 1e-6),
-                    max(_robust_rms(res[:, 3:]), 1e-7) if fit_translation else 1.0,
-                ]
-            )
-        elif (np.abs(dx) < tol).all():
+            problem.rescale(unpack(x))  # then held, so that the cost stays one function
+        elif (np.abs(dx) < CONVERGED).all():
             break
     full = unpack(x)
-    if fit_offset:
-        set_anchor(float(full[0]))  # residuals and Jacobian exact at the solution
-    f0 = residuals(full)
+    if options.fit_offset:
+        problem.set_anchor(float(full[0]))  # residuals and Jacobian exact at the solution
+    f0 = problem.residuals(full)
     r = f0.ravel()
-    jac = jacobian(full, f0)
     inside = np.abs(r) <= HUBER_K
     psi = np.where(inside, r, HUBER_K * np.sign(r))
     cov_free, inflation = hac_covariance(
-        jac, psi, n, lag=pairs.lag, dpsi=inside.astype(np.float64)
+        problem.jacobian(full)[:, free],
+        psi,
+        problem.n,
+        lag=pairs.lag,
+        dpsi=inside.astype(np.float64),
     )
-    cov = np.full((n_par, n_par), np.nan)
+    cov = np.full((_N_PAR, _N_PAR), np.nan)
     cov[np.ix_(free, free)] = cov_free * SIGMA_SAFETY**2
-    rotation = (Rotation.from_rotvec(full[1:4]) * r0).as_matrix()
-    raw = f0 * np.repeat(scales, 3)[:rows]
+    raw = f0 * np.repeat(problem.scales, 3)[: problem.rows]
     return RelativeFit(
         offset_s=float(full[0]),
-        rotation=rotation,
+        rotation=(Rotation.from_rotvec(full[1:4]) * problem.r0).as_matrix(),
         translation_m=full[4:7].copy(),
         scale=float(np.exp(full[7])),
         drift_velocity=full[8:11].copy(),
         cov=cov,
-        pairs=n,
+        pairs=problem.n,
         rms_rotation_rad=float(np.sqrt(np.mean(raw[:, :3] ** 2))),
-        rms_translation_m=float(np.sqrt(np.mean(raw[:, 3:] ** 2))) if fit_translation else 0.0,
+        rms_translation_m=float(np.sqrt(np.mean(raw[:, 3:] ** 2)))
+        if options.fit_translation
+        else 0.0,
         correlation_inflation=inflation,
     )
+
+
+def _free_parameters(options: FitOptions) -> BoolArray:
+    free = np.ones(_N_PAR, dtype=bool)
+    free[0] = options.fit_offset
+    free[[1 + k for k in options.fixed_rotation_axes]] = False
+    free[4:7] = options.fit_translation
+    free[[4 + k for k in options.fixed_translation_axes]] = False
+    free[7] = options.fit_scale and options.fit_translation
+    free[8:11] = options.fit_drift and options.fit_translation
+    return free
 
 
 def _skew(v: FloatArray) -> FloatArray:

@@ -33,6 +33,7 @@ from scipy.optimize import minimize_scalar
 from loceval._calibration import (
     NS_PER_S,
     SIGMA_SAFETY,
+    FitOptions,
     PoseSampler,
     fit_relative_motions,
     hac_covariance,
@@ -202,13 +203,23 @@ def estimate_time_offset(
     start_s = float(coarse.candidates_s[chosen])
     if use_rotation:
         estimated_s, sigma_s = _refine_rotation(
-            reference, estimate, start_s, max_gap_ns=max_gap_ns, window_s=window_s,
-            max_pairs=max_pairs, step_s=coarse.grid_dt_s,
+            reference,
+            estimate,
+            start_s,
+            max_gap_ns=max_gap_ns,
+            window_s=window_s,
+            max_pairs=max_pairs,
+            step_s=coarse.grid_dt_s,
         )
     else:
         estimated_s, sigma_s = _refine_positions(
-            reference, estimate, start_s, max_gap_ns=max_gap_ns, with_scale=with_scale,
-            max_pairs=max_pairs, step_s=coarse.grid_dt_s,
+            reference,
+            estimate,
+            start_s,
+            max_gap_ns=max_gap_ns,
+            with_scale=with_scale,
+            max_pairs=max_pairs,
+            step_s=coarse.grid_dt_s,
         )
     candidates = coarse.candidates_s.copy()
     candidates[chosen] = estimated_s
@@ -366,7 +377,9 @@ def _coarse_search(
     peak = np.zeros(sc.shape, dtype=bool)
     peak[1:-1] = (sc[1:-1] >= sc[:-2]) & (sc[1:-1] >= sc[2:])
     peak[best_i] = True
-    near = (sc >= CANDIDATE_SHARE * best) & (best - sc <= AMBIGUITY_NOISE_SHARE * (1.0 - best) + 0.02)
+    near = (sc >= CANDIDATE_SHARE * best) & (
+        best - sc <= AMBIGUITY_NOISE_SHARE * (1.0 - best) + 0.02
+    )
     cand = np.flatnonzero(peak & near)
     cand = cand[np.argsort(-sc[cand])]
     kept: list[int] = []
@@ -429,7 +442,11 @@ def _refine_rotation(
     sampler = PoseSampler(reference, origin_ns=int(reference.stamps_ns[0]), max_gap_ns=max_gap_ns)
     offset_ns = round(start_s * NS_PER_S)
     pairs = make_pairs(
-        estimate, sampler, offset_ns=offset_ns, window_s=window_s, margin_s=2.0 * step_s,
+        estimate,
+        sampler,
+        offset_ns=offset_ns,
+        window_s=window_s,
+        margin_s=2.0 * step_s,
         max_pairs=max_pairs,
     )
     _check_pairs(pairs.i.shape[0], estimate, reference)
@@ -447,10 +464,21 @@ def _refine_rotation(
             "be refined from rotations; record a run that turns, or give the time offset."
         )
         raise InputError(msg, option="time_offset_s")
+    options = FitOptions(
+        fit_offset=True,
+        fit_translation=False,
+        fit_scale=False,
+        fixed_rotation_axes=tuple(fixed),
+    )
     fit = fit_relative_motions(
-        sampler, estimate, pairs, offset_ns=offset_ns, rotation0=rotation0,
-        translation0=np.zeros(3), scale0=1.0, fit_offset=True, fit_translation=False,
-        fit_scale=False, fixed_rotation_axes=tuple(fixed),
+        sampler,
+        estimate,
+        pairs,
+        offset_ns=offset_ns,
+        rotation0=rotation0,
+        translation0=np.zeros(3),
+        scale0=1.0,
+        options=options,
     )
     return offset_ns / NS_PER_S + fit.offset_s, float(np.sqrt(fit.cov[0, 0]))
 

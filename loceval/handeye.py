@@ -36,6 +36,7 @@ from scipy.spatial.transform import Rotation
 
 from loceval._calibration import (
     NS_PER_S,
+    FitOptions,
     PoseSampler,
     fit_relative_motions,
     initial_rotation,
@@ -183,7 +184,11 @@ def estimate_device_offset(
     sampler = PoseSampler(reference, origin_ns=int(reference.stamps_ns[0]), max_gap_ns=max_gap_ns)
     offset_ns = round(time_offset_s * NS_PER_S)
     pairs = make_pairs(
-        estimate, sampler, offset_ns=offset_ns, window_s=window_s, margin_s=0.05,
+        estimate,
+        sampler,
+        offset_ns=offset_ns,
+        window_s=window_s,
+        margin_s=0.05,
         max_pairs=max_pairs,
     )
     if pairs.i.shape[0] < _MIN_PAIRS:
@@ -219,19 +224,31 @@ def estimate_device_offset(
         # Every rotation is about one axis (a ground robot), so the rotation axes cannot
         # tell the rotation about it; the direction of travel can (the sensor's travel
         # seen from the body), when the body moves across that axis.
-        rotation0 = _rotation_from_travel(rot_a, a_t, b_t, rotation0, rot_weak[0], free=free,
-                                          with_scale=with_scale)
+        rotation0 = _rotation_from_travel(
+            rot_a, a_t, b_t, rotation0, rot_weak[0], free=free, with_scale=with_scale
+        )
         rot_weak = []
     for k in rot_weak:
         rotation0 = _drop_rotation_about(rotation0, k)
     translation0, scale0 = _initial_translation(
         rot_a, a_t, b_t, rotation0, free=free, with_scale=with_scale
     )
-    fit = fit_relative_motions(
-        sampler, estimate, pairs, offset_ns=offset_ns, rotation0=rotation0,
-        translation0=translation0, scale0=scale0, fit_offset=fit_time_offset,
-        fit_translation=True, fit_scale=with_scale, fixed_rotation_axes=tuple(rot_weak),
+    options = FitOptions(
+        fit_offset=fit_time_offset,
+        fit_translation=True,
+        fit_scale=with_scale,
+        fixed_rotation_axes=tuple(rot_weak),
         fixed_translation_axes=tuple(trans_weak),
+    )
+    fit = fit_relative_motions(
+        sampler,
+        estimate,
+        pairs,
+        offset_ns=offset_ns,
+        rotation0=rotation0,
+        translation0=translation0,
+        scale0=scale0,
+        options=options,
     )
     sd = np.sqrt(np.diag(fit.cov))
     unobservable = tuple(
@@ -317,7 +334,9 @@ def compare_device_offset(
         if within
         else f"beyond 3 sigma: check the {given_source} (frame, sign, units) or the tracking"
     )
-    skipped = f" (not compared: {', '.join(estimated.unobservable)})" if estimated.unobservable else ""
+    skipped = (
+        f" (not compared: {', '.join(estimated.unobservable)})" if estimated.unobservable else ""
+    )
     message = (
         f"The device offset estimated from the motion differs from the {given_source} by "
         f"{dist_m * 1e3:.1f} mm and {angle_deg:.2f} deg{skipped}, {verdict}."

@@ -45,7 +45,9 @@ class Recording:
     scale: float
 
 
-def _sines(rng: np.random.Generator, t: np.ndarray, *, k: int, f_lo: float, f_hi: float) -> np.ndarray:
+def _sines(
+    rng: np.random.Generator, t: np.ndarray, *, k: int, f_lo: float, f_hi: float
+) -> np.ndarray:
     """Sum of ``k`` unit-total-amplitude sines with random incommensurate frequencies."""
     freq = rng.uniform(f_lo, f_hi, k)
     amp = rng.uniform(0.5, 1.0, k)
@@ -59,15 +61,21 @@ def _body(rng: np.random.Generator, t: np.ndarray, motion: Motion) -> tuple[np.n
         xyz = np.stack([_sines(rng, t, k=4, f_lo=0.05, f_hi=0.35) for _ in range(3)], axis=1)
         xyz *= np.array([1.2, 1.0, 0.4])
         angles = np.stack([_sines(rng, t, k=3, f_lo=0.1, f_hi=0.6) for _ in range(3)], axis=1)
-        return xyz + np.array([0.0, 0.0, 1.3]), Rotation.from_euler("ZYX", 30.0 * angles, degrees=True)
+        return xyz + np.array([0.0, 0.0, 1.3]), Rotation.from_euler(
+            "ZYX", 30.0 * angles, degrees=True
+        )
     if motion is Motion.GROUND:
         xyz = np.stack([_sines(rng, t, k=6, f_lo=0.03, f_hi=0.2) for _ in range(2)], axis=1) * 3.0
         yaw = 120.0 * _sines(rng, t, k=6, f_lo=0.03, f_hi=0.5)
         xyz = np.column_stack([xyz, np.full(t.shape, 0.3)])
         return xyz, Rotation.from_euler("z", yaw[:, None], degrees=True)
     w = 2 * np.pi * t / 60.0
-    xyz = np.stack([4 * np.cos(w) + np.cos(2 * w + 0.4), 2.5 * np.sin(w) + 0.6 * np.sin(3 * w), 0.3 + 0 * w], 1)
-    vel = np.stack([-4 * np.sin(w) - 2 * np.sin(2 * w + 0.4), 2.5 * np.cos(w) + 1.8 * np.cos(3 * w)], 1)
+    xyz = np.stack(
+        [4 * np.cos(w) + np.cos(2 * w + 0.4), 2.5 * np.sin(w) + 0.6 * np.sin(3 * w), 0.3 + 0 * w], 1
+    )
+    vel = np.stack(
+        [-4 * np.sin(w) - 2 * np.sin(2 * w + 0.4), 2.5 * np.cos(w) + 1.8 * np.cos(3 * w)], 1
+    )
     return xyz, Rotation.from_euler("z", np.unwrap(np.arctan2(vel[:, 1], vel[:, 0]))[:, None])
 
 
@@ -103,8 +111,12 @@ def make_recording(
     t_ref = t_ref[keep]
     p_body, r_body = _body(np.random.default_rng(seed), t_ref, motion)
     reference = Trajectory(
-        T0_NS + np.rint(t_ref * 1e9).astype(np.int64), p_body, r_body.as_quat(),
-        name="reference", source="synthetic", frame_id="world",
+        T0_NS + np.rint(t_ref * 1e9).astype(np.int64),
+        p_body,
+        r_body.as_quat(),
+        name="reference",
+        source="synthetic",
+        frame_id="world",
     )
     t_est = np.arange(0.5, duration_s - 0.5, 1.0 / estimate_rate_hz)
     t_est = t_est + motion_rng.uniform(-1e-3, 1e-3, t_est.shape)  # capture jitter
@@ -121,8 +133,12 @@ def make_recording(
     p_est = world.apply(drift_r.apply(p_sensor) + drift_t) + world_t
     r_est = world * drift_r * r_sensor
     p_est = scale * p_est + rng.normal(0.0, position_noise_m, p_est.shape)
-    noise = Rotation.from_rotvec(np.radians(rng.normal(0.0, orientation_noise_deg, (t_est.size, 3))))
+    noise = Rotation.from_rotvec(
+        np.radians(rng.normal(0.0, orientation_noise_deg, (t_est.size, 3)))
+    )
     q_est = (r_est * noise).as_quat() if estimate_orientation else None
     stamps = T0_NS + np.rint((t_est - time_offset_s) * 1e9).astype(np.int64)
-    estimate = Trajectory(stamps, p_est, q_est, name="estimate", source="synthetic", frame_id="odom")
+    estimate = Trajectory(
+        stamps, p_est, q_est, name="estimate", source="synthetic", frame_id="odom"
+    )
     return Recording(reference, estimate, time_offset_s, device, scale)

@@ -137,7 +137,9 @@ def test_to_dict_is_the_contract(rng: np.random.Generator) -> None:
 
 def test_describe_offset_words() -> None:
     """Negative offsets lag, positive ones lead, with the sigma in ms."""
-    assert describe_offset(-0.0452, 0.0003) == "the estimate lags the ground truth by 45.2 +/- 0.3 ms"
+    assert (
+        describe_offset(-0.0452, 0.0003) == "the estimate lags the ground truth by 45.2 +/- 0.3 ms"
+    )
     assert describe_offset(0.010) == "the estimate leads the ground truth by 10.0 ms"
 
 

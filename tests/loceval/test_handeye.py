@@ -67,7 +67,9 @@ def test_ate_with_estimate_equals_ate_with_truth(rng: np.random.Generator) -> No
 
     def ate(offset_s: float, device: SimilarityTransform) -> float:
         config = EvaluationConfig(time_offset_s=offset_s, reference_offset=device)
-        return evaluate(rec.reference, [rec.estimate], config).estimates[0].ate_translation.stats.rmse
+        return (
+            evaluate(rec.reference, [rec.estimate], config).estimates[0].ate_translation.stats.rmse
+        )
 
     with_truth = ate(rec.time_offset_s, rec.device)
     with_estimate = ate(found.time_offset_s, found.transform)
