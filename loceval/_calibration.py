@@ -391,8 +391,7 @@ class _RelativeProblem:
         t_x = full[4:7]
         travel = self._travel(full, rot_x.as_matrix())
         r_t = rotate(a_q, np.broadcast_to(t_x, (self.n, 3))) + a_t - np.exp(full[7]) * travel
-        out = np.concatenate((r_rot / self.scales[0], (r_t - t_x) / self.scales[1]), axis=1)
-        return out
+        return np.concatenate((r_rot / self.scales[0], (r_t - t_x) / self.scales[1]), axis=1)
 
     def jacobian(self, full: FloatArray) -> FloatArray:
         """(n * rows, 11) analytic Jacobian, first order in the residual (under a degree).

@@ -294,7 +294,7 @@ def motion_signal(
     """
     sampler = PoseSampler(trajectory, origin_ns=int(trajectory.stamps_ns[0]), max_gap_ns=max_gap_ns)
     g = int(np.floor(trajectory.duration_s / dt_s)) + 1
-    t = np.arange(g) * dt_s
+    t = np.arange(g, dtype=np.float64) * np.float64(dt_s)
     ok = sampler.valid(t)
     values = np.zeros(g)
     mask = np.zeros(g, dtype=bool)
@@ -373,13 +373,20 @@ def _coarse_search(
             f"The motions correlate weakly (best {best:.2f}), so the estimated time offset "
             "may be wrong; check it against the plot of the correlation curve."
         )
-    sc = np.where(ok, score, -np.inf)
+    kept = _peaks_near_best(np.where(ok, score, -np.inf), best_i, dt_s)
+    sub = np.array([_parabolic(score, k) for k in kept])
+    candidates = base_s + (m[np.array(kept)] + sub) * dt_s
+    return _Coarse(lags_s, score, candidates, best, dt_s, tuple(notes))
+
+
+def _peaks_near_best(sc: FloatArray, best_i: int, dt_s: float) -> list[int]:
+    """Indices of the local maxima that fit almost as well as the best, one per peak."""
+    best = float(sc[best_i])
     peak = np.zeros(sc.shape, dtype=bool)
     peak[1:-1] = (sc[1:-1] >= sc[:-2]) & (sc[1:-1] >= sc[2:])
     peak[best_i] = True
-    near = (sc >= CANDIDATE_SHARE * best) & (
-        best - sc <= AMBIGUITY_NOISE_SHARE * (1.0 - best) + 0.02
-    )
+    noise = AMBIGUITY_NOISE_SHARE * (1.0 - best) + 0.02
+    near = (sc >= CANDIDATE_SHARE * best) & (best - sc <= noise)
     cand = np.flatnonzero(peak & near)
     cand = cand[np.argsort(-sc[cand])]
     kept: list[int] = []
@@ -387,9 +394,7 @@ def _coarse_search(
     for c in cand:  # a loop over the few peaks near the best, not over samples
         if all(abs(c - k) >= sep for k in kept):
             kept.append(int(c))
-    sub = np.array([_parabolic(score, k) for k in kept])
-    candidates = base_s + (m[np.array(kept)] + sub) * dt_s
-    return _Coarse(lags_s, score, candidates, best, dt_s, tuple(notes))
+    return kept
 
 
 def _parabolic(score: FloatArray, k: int) -> float:

@@ -1,7 +1,7 @@
-"""The device (hand-eye) offset: the fixed transform from the reference's tracked body to the
-estimated sensor, estimated from the motion together with the time offset.
+"""The device (hand-eye) offset from the motion, estimated together with the time offset.
 
-The framework paper (§3.3.2) has the user measure this offset by hand into a URDF. Here it
+The device offset is the fixed transform from the reference's tracked body to the estimated
+sensor. The framework paper (§3.3.2) has the user measure this offset by hand into a URDF. Here it
 comes from the data: between two stamps about a second apart, the body moves by ``A``
 (reference) and the sensor by ``B`` (estimate), and ``A X = X B`` for the offset ``X``
 (``T_world_sensor = T_world_body · X``, what :meth:`Trajectory.with_body_offset` applies).
@@ -30,6 +30,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -72,7 +73,7 @@ MIN_TRAVEL_M = 0.01
 """RMS travel per window across the only rotation axis that tells the rotation about it."""
 _MIN_PAIRS = 20
 # For each body axis: an Euler sequence that puts a rotation about it first (leftmost).
-_EULER_FIRST = ("XYZ", "YZX", "ZXY")
+_EULER_FIRST: tuple[Literal["XYZ"], Literal["YZX"], Literal["ZXY"]] = ("XYZ", "YZX", "ZXY")
 
 
 class DeviceOffsetSource(StrEnum):
@@ -205,7 +206,7 @@ def estimate_device_offset(
     p_ref[both] = sampler.positions_at(t_s[both])
     q_ref[both] = sampler.quat_at(t_s[both])
     a_q, a_t = relative_motions(p_ref, q_ref, pairs.i, pairs.j)
-    b_q, b_t = relative_motions(estimate.positions_xyz, estimate.quat_xyzw, pairs.i, pairs.j)
+    _, b_t = relative_motions(estimate.positions_xyz, estimate.quat_xyzw, pairs.i, pairs.j)
     alpha = rotvec_of(a_q)
     mean_angle_deg = float(np.degrees(np.linalg.norm(alpha, axis=1).mean()))
     if mean_angle_deg < MIN_ROTATION_DEG:

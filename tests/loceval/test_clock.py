@@ -152,7 +152,7 @@ def _still(trajectory: Trajectory) -> Trajectory:
 def test_constant_signal_is_an_input_error(rng: np.random.Generator) -> None:
     """An estimate that never moves cannot be correlated."""
     rec = make_recording(rng, duration_s=30.0)
-    with pytest.raises(InputError, match="nearly constant.*give the time offset") as err:
+    with pytest.raises(InputError, match=r"nearly constant.*give the time offset") as err:
         estimate_time_offset(rec.reference, _still(rec.estimate))
     assert err.value.option == "time_offset_s"
 
@@ -161,7 +161,7 @@ def test_too_few_poses_is_an_input_error(rng: np.random.Generator) -> None:
     """Ten poses are too few to estimate anything."""
     rec = make_recording(rng, duration_s=30.0)
     short = rec.estimate.select(np.arange(10))
-    with pytest.raises(InputError, match="has 10 poses.*give the offset instead"):
+    with pytest.raises(InputError, match=r"has 10 poses.*give the offset instead"):
         estimate_time_offset(rec.reference, short)
 
 

@@ -128,7 +128,8 @@ def test_comparison_with_a_urdf(rng: np.random.Generator) -> None:
     assert same.consistent
     assert same.translation_difference_m < TRANSLATION_TOLERANCE_M
     wrong = SimilarityTransform(
-        np.array(TRUE_DEVICE.rotation), np.array(TRUE_DEVICE.translation) + [0.010, 0.0, 0.0]
+        np.array(TRUE_DEVICE.rotation),
+        np.array(TRUE_DEVICE.translation) + np.array([0.010, 0.0, 0.0]),
     )
     off = compare_device_offset(found, wrong, given_source="tf_static link")
     assert not off.consistent
@@ -155,7 +156,7 @@ def test_to_dict_is_the_contract(rng: np.random.Generator) -> None:
 def test_position_only_is_an_input_error(rng: np.random.Generator) -> None:
     """A position-only estimate gets the time offset only, and says so."""
     rec = make_recording(rng, duration_s=30.0, estimate_orientation=False)
-    with pytest.raises(InputError, match="no orientations.*time offset only") as err:
+    with pytest.raises(InputError, match=r"no orientations.*time offset only") as err:
         estimate_device_offset(rec.reference, rec.estimate, time_offset_s=-0.045)
     assert err.value.option == "device"
 
@@ -165,7 +166,7 @@ def test_no_rotation_is_an_input_error(rng: np.random.Generator) -> None:
     rec = make_recording(rng, duration_s=30.0)
     quat = np.tile([0.0, 0.0, 0.0, 1.0], (len(rec.reference), 1))
     still_ref = dataclasses.replace(rec.reference, quat_xyzw=quat)
-    with pytest.raises(InputError, match="turns by 0.00 deg"):
+    with pytest.raises(InputError, match=r"turns by 0\.00 deg"):
         estimate_device_offset(still_ref, rec.estimate, time_offset_s=-0.045)
 
 
