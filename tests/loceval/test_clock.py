@@ -15,9 +15,10 @@ from loceval.clock import (
     estimate_time_offset,
 )
 from loceval.errors import AssociationError, InputError
-from loceval.readers import read_trajectory
+from loceval.readers import read_motive, read_trajectory
 from loceval.trajectory import Trajectory
 from tests.calibration_factory import T0_NS, Motion, make_recording
+from tests.factories import MOTIVE_START_NS, write_motive
 
 DELAY_TOLERANCE_S = 0.001  # the issue's "delay recovered within 1 ms"
 
@@ -209,3 +210,14 @@ def test_public_recordings(key: str, public_data: Path) -> None:
     assert found.sigma_s < 0.005
     assert len(found.candidates_s) == 1
     assert found.correlation > 0.9
+
+
+def test_motive_take_against_epoch_estimate(rng: np.random.Generator, tmp_path: Path) -> None:
+    """A Motive take (stamps from its capture start, 2019) against a 2023 epoch estimate."""
+    rec = make_recording(rng, duration_s=40.0)
+    path = write_motive(tmp_path / "take.csv", {"rig": rec.reference}, markers=False)
+    take = read_motive(path, rigid_body="rig")
+    found = estimate_time_offset(take, rec.estimate)
+    assert found.estimated_s is not None
+    expected_s = (MOTIVE_START_NS - T0_NS) / 1e9 + rec.time_offset_s  # about -1.3e8 s
+    assert abs(found.estimated_s - expected_s) < DELAY_TOLERANCE_S

@@ -20,6 +20,8 @@ from loceval.handeye import (
     estimate_device_offset,
 )
 from loceval.readers import read_trajectory
+from loceval.readers.rosbag import read_bag_static_transform, read_bag_trajectory
+from tests import bagfactory as bf
 from tests.calibration_factory import TRUE_DEVICE, Motion, Recording, make_recording
 
 TRANSLATION_TOLERANCE_M = 0.002  # the issue's "device translation within 2 mm"
@@ -184,3 +186,34 @@ def test_public_fr2_desk_monocular(public_data: Path) -> None:
     # time offset -5.5 +/- 0.3 ms: the estimate is the camera that TUM's ground truth tracks.
     assert np.linalg.norm(found.translation_m) < 0.02
     assert abs(found.time_offset_s) < 0.02
+
+
+def test_bag_with_tf_chain_and_static_device_link(rng: np.random.Generator, tmp_path: Path) -> None:
+    """From a bag: mocap topic vs tf chain, compared with the device link on /tf_static."""
+    rec = make_recording(rng, duration_s=40.0)
+    poses = bf.Poses(rec.reference.stamps_ns, rec.reference.positions_xyz, rec.reference.quat_xyzw)
+    est = rec.estimate
+    assert est.quat_xyzw is not None
+    odom = bf.Poses(est.stamps_ns, est.positions_xyz, est.quat_xyzw)
+    # The robot's URDF mounts the mocap rig on base_link: base_link -> rig is X^-1.
+    urdf = TRUE_DEVICE.inverse()
+    urdf_quat = Rotation.from_matrix(np.array(urdf.rotation)).as_quat()
+    static = bf.Tf(int(est.stamps_ns[0]), "base_link", "rig", urdf.translation, urdf_quat)
+    records = [
+        *bf.pose_records("/mocap/rig", bf.POSE, poses, frame_id="mocap", child_frame_id="rig"),
+        *bf.tf_records(bf.link_transforms("odom", "base_link", odom)),
+        *bf.tf_records([static], topic="/tf_static"),
+    ]
+    bag = bf.write_bag(bf.bag_path(tmp_path, "sqlite3"), records, fmt="sqlite3")
+    reference = read_bag_trajectory(bag, "/mocap/rig")
+    estimate = read_bag_trajectory(bag, "tf:odom:base_link")
+    clock = estimate_time_offset(reference, estimate)
+    assert clock.estimated_s is not None
+    assert abs(clock.estimated_s - rec.time_offset_s) < DELAY_TOLERANCE_S
+    found = estimate_device_offset(reference, estimate, time_offset_s=clock.estimated_s)
+    given = read_bag_static_transform(bag, "base_link", "rig").inverse()
+    comparison = compare_device_offset(found, given, given_source="/tf_static link")
+    assert comparison.consistent, comparison.message
+    assert comparison.translation_difference_m < TRANSLATION_TOLERANCE_M
+    assert comparison.rotation_difference_deg < ROTATION_TOLERANCE_DEG
+    assert "within 3 sigma" in comparison.message
