@@ -2,9 +2,9 @@
 
 - :class:`PoseSampler`: the reference interpolated at float times (seconds after its first
   pose), linear positions and SLERP orientations, with a mask that never bridges a gap.
-- :func:`hac_covariance`: the sandwich covariance of a least-squares fit whose residuals are
-  correlated in time (Newey and West 1987, Bartlett weights), so that sigmas stay honest when
-  neighbouring residuals share poses, interpolation and slow drift.
+- :func:`hac_covariance`: the sandwich covariance of an M-estimate whose residuals are
+  correlated in time up to a known lag (neighbours share interpolation, position fits share
+  drift), times a safety factor measured by Monte Carlo (see SIGMA_SAFETY).
 - :func:`fit_relative_motions`: the robust nonlinear least squares over relative motions
   ``A X = X B`` of short windows, jointly with the time offset (see :mod:`loceval.handeye`).
 """
@@ -99,13 +99,11 @@ def hac_covariance(
 
     Rows come in ``groups`` consecutive blocks of equal size (one block per time step); the
     score of each block is ``J_b^T psi_b``, and their autocovariance up to ``lag`` blocks is
-    summed with uniform weights into ``M`` (a truncated kernel, Hansen 1992: the residuals
-    here are correlated up to a known lag, where shared poses put it, and Newey and West's
-    Bartlett weights would halve exactly that correlation; measured: sigmas up to 2.2 times
-    too small with them). The bread is
-    ``A = J^T diag(psi') J``: for Huber's loss ``psi' = 0`` on clipped residuals, which then
-    carry no curvature (using the IRLS weights there would claim information they do not
-    give, and sigmas came out up to twice too small on heteroscedastic residuals).
+    summed with uniform weights into ``M`` (a truncated kernel: the residuals here are
+    correlated up to a known lag, and Newey and West's Bartlett weights would shrink exactly
+    that correlation). The bread is ``A = J^T diag(psi') J``: for Huber's loss ``psi' = 0``
+    on clipped residuals, which then carry no curvature (the IRLS weights there would claim
+    information those residuals do not give).
 
     Args:
         jac: (R, P) Jacobian of the scaled residuals.

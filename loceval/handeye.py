@@ -12,8 +12,8 @@ the whole run would push the drift into the offset.
    beta``, an orthogonal Procrustes problem), then the translation (and the monocular scale)
    by linear least squares on ``(R_A - I) t_X = s R_X t_B - t_A``.
 2. Robust Gauss-Newton (Huber weights) over all pairs, jointly with the time offset.
-3. A 1-sigma per component from the sandwich covariance with Newey-West weights (the
-   residuals of overlapping windows are correlated).
+3. A 1-sigma per component from the sandwich covariance (pairs share no pose, so their
+   residuals are nearly independent) times the measured safety factor ``SIGMA_SAFETY``.
 
 **Observability.** The translation along a direction is observable only when the body rotates
 about axes across it: the small eigenvalues of ``mean((R_A - I)^T (R_A - I))`` give the
@@ -181,6 +181,9 @@ def estimate_device_offset(
     if not (np.isfinite(window_s) and window_s > 0):
         msg = f"The relative-motion window must be positive seconds, got {window_s!r}."
         raise InputError(msg, option="device")
+    if not (np.isfinite(max_gap_s) and max_gap_s > 0):
+        msg = f"The longest bridged interval must be positive seconds, got {max_gap_s!r}."
+        raise InputError(msg, option="max_gap_s")
     max_gap_ns = round(max_gap_s * NS_PER_S)
     sampler = PoseSampler(reference, origin_ns=int(reference.stamps_ns[0]), max_gap_ns=max_gap_ns)
     offset_ns = round(time_offset_s * NS_PER_S)

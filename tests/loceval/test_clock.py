@@ -221,3 +221,10 @@ def test_motive_take_against_epoch_estimate(rng: np.random.Generator, tmp_path: 
     assert found.estimated_s is not None
     expected_s = (MOTIVE_START_NS - T0_NS) / 1e9 + rec.time_offset_s  # about -1.3e8 s
     assert abs(found.estimated_s - expected_s) < DELAY_TOLERANCE_S
+
+
+def test_bad_window_is_an_input_error(rng: np.random.Generator) -> None:
+    """A window of no length cannot hold a relative motion."""
+    rec = make_recording(rng, duration_s=30.0)
+    with pytest.raises(InputError, match=r"window must be positive seconds, got 0\.0"):
+        estimate_time_offset(rec.reference, rec.estimate, window_s=0.0)

@@ -217,3 +217,14 @@ def test_bag_with_tf_chain_and_static_device_link(rng: np.random.Generator, tmp_
     assert comparison.translation_difference_m < TRANSLATION_TOLERANCE_M
     assert comparison.rotation_difference_deg < ROTATION_TOLERANCE_DEG
     assert "within 3 sigma" in comparison.message
+
+
+def test_bad_window_and_gap_name_the_option(rng: np.random.Generator) -> None:
+    """A zero window or a negative longest gap is refused with the option's key."""
+    rec = make_recording(rng, duration_s=30.0)
+    with pytest.raises(InputError, match="window must be positive seconds") as err:
+        estimate_device_offset(rec.reference, rec.estimate, time_offset_s=0.0, window_s=0.0)
+    assert err.value.option == "device"
+    with pytest.raises(InputError, match="must be positive seconds, got -1") as err:
+        estimate_device_offset(rec.reference, rec.estimate, time_offset_s=0.0, max_gap_s=-1.0)
+    assert err.value.option == "max_gap_s"
