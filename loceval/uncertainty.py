@@ -36,7 +36,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy import fft as sp_fft
 
-from loceval._typing import FloatArray
+from loceval._typing import BoolArray, FloatArray
 from loceval.errors import InputError
 
 __all__ = [
@@ -52,6 +52,7 @@ __all__ = [
     "integrated_autocorrelation_time",
     "interval_stats",
     "n_effective",
+    "percentile_interval",
     "tolerance_verdict",
 ]
 
@@ -181,7 +182,7 @@ def _block_of(rho: FloatArray) -> int:
     bound = 2.0 * math.sqrt(math.log10(n) / n)
     insignificant = np.abs(rho[1 : m_max + k_n + 1]) < bound
     # windows[m] covers lags m+1 .. m+K_N
-    runs = sliding_window_view(insignificant, k_n).all(axis=1)[: m_max + 1]
+    runs: BoolArray = np.all(sliding_window_view(insignificant, k_n), axis=1)[: m_max + 1]
     first = np.flatnonzero(runs)
     if first.size:
         m_hat = int(first[0])
@@ -302,7 +303,7 @@ class BlockBootstrap:
         return float(order[lo[0]]), float(order[lo[1]])
 
 
-def _percentiles(samples: FloatArray) -> tuple[float, float]:
+def percentile_interval(samples: FloatArray) -> tuple[float, float]:
     """Return the 2.5 % and 97.5 % percentiles of bootstrap samples."""
     lo, hi = np.quantile(samples, [_ALPHA / 2, 1 - _ALPHA / 2])
     return float(lo), float(hi)
@@ -385,16 +386,14 @@ def interval_stats(
     automatic = block is None
     if block is None:
         block = max(_block_of(rhos[k]) for k in rhos if k != "median")
-    boot = BlockBootstrap.draw(
-        x.size, block, resamples=resamples, seed=seed, cap_blocks=automatic
-    )
+    boot = BlockBootstrap.draw(x.size, block, resamples=resamples, seed=seed, cap_blocks=automatic)
     means = boot.means(np.vstack([squared, x, indicators]))
     ci95 = {
-        "rmse": _percentiles(np.sqrt(means[0])),
-        "mean": _percentiles(means[1]),
+        "rmse": percentile_interval(np.sqrt(means[0])),
+        "mean": percentile_interval(means[1]),
         "median": boot.median_interval(x),
     }
-    within = {t: _percentiles(means[2 + i]) for i, t in enumerate(thresholds)}
+    within = {t: percentile_interval(means[2 + i]) for i, t in enumerate(thresholds)}
     n_eff = {k: x.size / _tau_of(rho) for k, rho in rhos.items()}
     return IntervalStats(
         ci95=ci95,
@@ -410,7 +409,7 @@ def interval_stats(
 class ToleranceOutcome(StrEnum):
     """A tolerance verdict that admits the uncertainty of the share within."""
 
-    PASS = "pass"
+    PASS = "pass"  # noqa: S105  (a verdict, not a password)
     FAIL = "fail"
     UNDECIDED = "undecided"
 
