@@ -321,10 +321,12 @@ def _notes(result: NEESResult, what: str) -> list[str]:
     """Return the sentences a NEES result warrants."""
     notes = []
     if result.planar:
-        block = "x-y block (dof 2)" if what == "position" else "yaw variance (dof 1)"
+        axes, block = ("z", "x-y block (dof 2)")
+        if what == "rotation":
+            axes, block = ("roll and pitch", "yaw variance (dof 1)")
         notes.append(
-            f"The {what} covariance leaves the third axis unestimated (zero, placeholder or "
-            f"constant variance), so the {what} NEES uses the {block}."
+            f"The {what} covariance leaves {axes} unestimated (zero, placeholder or constant "
+            f"variance), so the {what} NEES uses the {block}."
         )
     if result.skipped:
         notes.append(
