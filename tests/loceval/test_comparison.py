@@ -109,9 +109,7 @@ def test_units_in_sentences(rng):
         stamps, a, stamps, 10 * a, a="A", b="B", metric=ComparedMetric.RPE_RMSE, unit="deg"
     )
     assert deg.summary.endswith("°.")
-    metres = compare_errors(
-        stamps, a, stamps, 10 * a, a="A", b="B", metric=ComparedMetric.ATE_RMSE
-    )
+    metres = compare_errors(stamps, a, stamps, 10 * a, a="A", b="B", metric=ComparedMetric.ATE_RMSE)
     assert metres.summary.endswith(" m.")
 
 

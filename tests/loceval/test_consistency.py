@@ -226,10 +226,7 @@ def test_nav2_amcl_nees_equals_an_independent_computation(public_data: Path):
     )
     # Independent computation: a loop over poses with the x-y block and the yaw variance.
     expected_pos = np.array(
-        [
-            e[:2] @ np.linalg.solve(c[:2, :2], e[:2])
-            for e, c in zip(errors, est.cov6, strict=True)
-        ]
+        [e[:2] @ np.linalg.solve(c[:2, :2], e[:2]) for e, c in zip(errors, est.cov6, strict=True)]
     )
     expected_yaw = np.array(
         [r[2] ** 2 / c[5, 5] for r, c in zip(rot_errors, est.cov6, strict=True)]

@@ -80,7 +80,7 @@ def test_block_length_grows_with_correlation(rng):
     assert 150 <= long <= 320
 
 
-def test_constant_series_has_zero_width(rng):
+def test_constant_series_has_zero_width():
     """A constant error has point intervals and no correlation to speak of."""
     stats = interval_stats(np.full(100, 0.02), thresholds_m=[0.01, 0.05])
     assert stats.ci95["rmse"] == pytest.approx((0.02, 0.02))
