@@ -36,7 +36,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from scipy import fft as sp_fft
 
-from loceval._typing import BoolArray, FloatArray
+from loceval._typing import BoolArray, FloatArray, IntArray
 from loceval.errors import InputError
 
 __all__ = [
@@ -60,7 +60,7 @@ DEFAULT_RESAMPLES = 500
 """Resamples per interval: the 2.5 % and 97.5 % percentiles rest on 12-13 values each."""
 DEFAULT_SEED = 20240601
 """Seed of the resampling, fixed so the same run always gives the same intervals."""
-MAX_BLOCKS = 500
+MAX_BLOCKS = 250
 """Most blocks per resample with the automatic block length: shorter blocks are lengthened
 to ``ceil(n / MAX_BLOCKS)``.
 
@@ -285,21 +285,42 @@ class BlockBootstrap:
         the number of resamples whose median is ``≤ t`` is found from block sums of the
         indicator ``e ≤ t``; a bisection over the sorted values finds the smallest ``t``
         reached by 2.5 % and by 97.5 % of the resamples (inverted-CDF percentiles).
+
+        The bisection starts from a bracket around the Bahadur approximation
+        ``median* - m ≈ -(F*(m) - F(m)) / f(m)`` (read through the empirical quantile
+        function, so no density is estimated); a bracket that does not hold is widened to
+        all values, so the result is exact either way.
         """
         x = np.asarray(values, dtype=np.float64)
+        n = self.n
         order = np.sort(x)
-        need = math.ceil(self.n / 2) / self.n - 1e-12
+        half = math.ceil(n / 2)
+        need = half / n - 1e-12
         wanted = np.array(
             [math.ceil(_ALPHA / 2 * self.resamples), math.ceil((1 - _ALPHA / 2) * self.resamples)]
         )
-        lo = np.zeros(2, dtype=np.int64)
-        hi = np.full(2, self.n - 1, dtype=np.int64)
+
+        def reached(idx: IntArray) -> BoolArray:
+            shares = self.means((x[None, :] <= order[idx][:, None]).astype(np.float64))
+            out: BoolArray = (shares >= need).sum(axis=1) >= wanted
+            return out
+
+        f_star = self.means((x <= order[half - 1]).astype(np.float64))
+        q_lo, q_hi = np.quantile(f_star, [_ALPHA / 2, 1 - _ALPHA / 2])
+        f_m = float(np.count_nonzero(x <= order[half - 1])) / n
+        guess = n * (0.5 + f_m - np.array([q_hi, q_lo]))
+        margin = max(16.0, n * float(q_hi - q_lo) / 4.0)
+        below = np.clip(np.floor(guess - margin), 0, n - 1).astype(np.intp)
+        above = np.clip(np.ceil(guess + margin), 0, n - 1).astype(np.intp)
+        checks, checks_above = reached(below), reached(above)
+        # The answer lies in (below, above] when below is not reached and above is.
+        lo = np.where((below > 0) & ~checks, below + 1, 0)
+        hi = np.where(checks_above, above, n - 1)
         while (lo < hi).any():
             mid = (lo + hi) // 2
-            shares = self.means((x[None, :] <= order[mid][:, None]).astype(np.float64))
-            reached = (shares >= need).sum(axis=1) >= wanted
-            hi = np.where(reached, mid, hi)
-            lo = np.where(reached, lo, np.minimum(mid + 1, hi))
+            hit = reached(mid)
+            hi = np.where(hit, mid, hi)
+            lo = np.where(hit, lo, np.minimum(mid + 1, hi))
         return float(order[lo[0]]), float(order[lo[1]])
 
 

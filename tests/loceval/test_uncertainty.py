@@ -116,8 +116,8 @@ def test_intervals_contain_the_estimates_and_are_reproducible(rng):
 
 def test_median_interval_equals_percentiles_of_resampled_medians(rng):
     """The bisection gives exactly the percentiles of explicitly resampled lower medians."""
-    x = np.linalg.norm(ar1(rng, 301, 0.8, 1.0), axis=1)
-    boot = BlockBootstrap.draw(x.size, 7, resamples=200, seed=3)
+    x = np.linalg.norm(ar1(rng, 3001, 0.8, 1.0), axis=1)
+    boot = BlockBootstrap.draw(x.size, 17, resamples=200, seed=3)
     # Independent computation: build each resample's values from its blocks.
     offsets = np.arange(boot.block)
     medians = []
