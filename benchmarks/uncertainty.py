@@ -53,12 +53,21 @@ def main() -> int:
     cov = np.broadcast_to(np.diag([0.01, 0.01, 0.02]), (N, 3, 3))
     errors_xyz = rng.normal(0.0, 0.1, (N, 3))
     thresholds = (0.05, 0.10, 0.20)
+
+    def intervals(values: np.ndarray) -> Callable[[], object]:
+        return lambda: interval_stats(values, thresholds_m=thresholds)
+
+    def paired() -> object:
+        return compare_errors(
+            stamps, correlated, stamps, other, a="A", b="B", metric=ComparedMetric.ATE_RMSE
+        )
+
     cases: list[tuple[str, Callable[[], object], float | None]] = [
-        ("interval_stats, AR(1) phi=0.95", lambda: interval_stats(correlated, thresholds_m=thresholds), TARGET_S),
-        ("interval_stats, white errors", lambda: interval_stats(white, thresholds_m=thresholds), TARGET_S),
-        ("compare_errors (paired)", lambda: compare_errors(stamps, correlated, stamps, other, a="A", b="B", metric=ComparedMetric.ATE_RMSE), None),
+        ("interval_stats, AR(1) phi=0.95", intervals(correlated), TARGET_S),
+        ("interval_stats, white errors", intervals(white), TARGET_S),
+        ("compare_errors (paired)", paired, None),
         ("check_consistency (NEES)", lambda: check_consistency(errors_xyz, cov), None),
-    ]  # fmt: skip
+    ]
     print(f"{N} matched poses, median / min of {opts.repeat} runs")
     for name, fn, target in cases:
         med, best = timed(fn, opts.repeat)
