@@ -44,6 +44,11 @@ class Trajectory:
         frame_id: the frame the poses are expressed in, if known.
         child_frame_id: the frame whose poses these are, if known.
         warnings: what the reader noticed (sorted stamps, dropped rows, axis conversion).
+        cov6: (N, 6, 6) float64 covariance of each pose as the system reports it, or None.
+            ROS order ``x y z rx ry rz``: metres² for the position block, rad² for the
+            rotation block, the rotation about the fixed axes of ``frame_id`` (the
+            convention of ``geometry_msgs/PoseWithCovariance``). Symmetric and finite;
+            singular blocks are allowed (planar systems report zero z variance).
     """
 
     stamps_ns: StampsNs
@@ -54,6 +59,7 @@ class Trajectory:
     frame_id: str = ""
     child_frame_id: str = ""
     warnings: tuple[str, ...] = field(default=())
+    cov6: FloatArray | None = None
 
     def __post_init__(self) -> None:
         """Copy the arrays, make them read-only and check shape, dtype and values."""
@@ -106,9 +112,38 @@ class Trajectory:
                 raise TrajectoryError(msg)
             quat.flags.writeable = False
             object.__setattr__(self, "quat_xyzw", quat)
+        if self.cov6 is not None:
+            object.__setattr__(self, "cov6", self._checked_cov6(self.cov6, n))
         object.__setattr__(self, "warnings", tuple(self.warnings))
         # Names travel into CSV cells, DXF text and file metadata: one line, no controls.
         object.__setattr__(self, "name", " ".join(_CONTROL.sub(" ", self.name).split()))
+
+    def _checked_cov6(self, cov6: FloatArray, n: int) -> FloatArray:
+        """Return a read-only float64 copy of ``cov6`` after checking shape and values."""
+        cov = np.array(cov6, dtype=np.float64, copy=True)
+        if cov.shape != (n, 6, 6):
+            msg = (
+                f"Trajectory {self.name!r}: pose covariances must have shape ({n}, 6, 6), "
+                f"got {cov.shape!r}."
+            )
+            raise TrajectoryError(msg)
+        if not np.isfinite(cov).all():
+            msg = f"Trajectory {self.name!r}: pose covariances contain NaN or inf."
+            raise TrajectoryError(msg)
+        scale = max(float(np.abs(cov).max(initial=0.0)), 1.0)
+        if not np.allclose(cov, cov.transpose(0, 2, 1), rtol=0.0, atol=1e-9 * scale):
+            msg = (
+                f"Trajectory {self.name!r}: pose covariances must be symmetric; check the "
+                "order of the 36 values (row-major, x y z rx ry rz)."
+            )
+            raise TrajectoryError(msg)
+        cov.flags.writeable = False
+        return cov
+
+    @property
+    def has_covariance(self) -> bool:
+        """Whether the trajectory carries per-pose covariances."""
+        return self.cov6 is not None
 
     def __len__(self) -> int:
         """Return the number of poses."""
@@ -171,11 +206,13 @@ class Trajectory:
     def select(self, index: IntArray | BoolArray) -> Trajectory:
         """Return the poses at ``index`` (an increasing integer index or a boolean mask)."""
         quat = None if self.quat_xyzw is None else self.quat_xyzw[index]
+        cov = None if self.cov6 is None else self.cov6[index]
         return replace(
             self,
             stamps_ns=self.stamps_ns[index],
             positions_xyz=self.positions_xyz[index],
             quat_xyzw=quat,
+            cov6=cov,
         )
 
     def shifted(self, offset_ns: int) -> Trajectory:
@@ -183,10 +220,23 @@ class Trajectory:
         return replace(self, stamps_ns=self.stamps_ns + np.int64(offset_ns))
 
     def transformed(self, transform: SimilarityTransform) -> Trajectory:
-        """Return the trajectory mapped by ``transform`` (world frame change)."""
+        """Return the trajectory mapped by ``transform`` (world frame change).
+
+        Covariances follow the map: ``J Σ Jᵀ`` with ``J = diag(s R, R)`` (positions scale,
+        rotation vectors about fixed axes only turn).
+        """
         quat = None if self.quat_xyzw is None else transform.apply_orientations(self.quat_xyzw)
+        cov = None
+        if self.cov6 is not None:
+            jac = np.zeros((6, 6))
+            jac[:3, :3] = transform.scale * transform.rotation
+            jac[3:, 3:] = transform.rotation
+            cov = jac @ self.cov6 @ jac.T
         return replace(
-            self, positions_xyz=transform.apply_positions(self.positions_xyz), quat_xyzw=quat
+            self,
+            positions_xyz=transform.apply_positions(self.positions_xyz),
+            quat_xyzw=quat,
+            cov6=cov,
         )
 
     def with_body_offset(self, offset: SimilarityTransform) -> Trajectory:
@@ -208,14 +258,31 @@ class Trajectory:
             )
             raise TrajectoryError(msg)
         r_world_body = Rotation.from_quat(self.quat_xyzw)
-        positions = self.positions_xyz + r_world_body.apply(np.array(offset.translation))
+        lever_m = r_world_body.apply(np.array(offset.translation))
+        positions = self.positions_xyz + lever_m
         quat = (r_world_body * Rotation.from_matrix(offset.rotation)).as_quat()
-        return replace(self, positions_xyz=positions, quat_xyzw=quat)
+        cov = None
+        if self.cov6 is not None:
+            # A rotation error δθ about fixed axes moves the offset point by δθ × lever:
+            # δp' = δp - [lever]× δθ, and δθ' = δθ.
+            jac = np.broadcast_to(np.eye(6), (len(self), 6, 6)).copy()
+            jac[:, :3, 3:] = -_skew(lever_m)
+            cov = jac @ self.cov6 @ jac.transpose(0, 2, 1)
+        return replace(self, positions_xyz=positions, quat_xyzw=quat, cov6=cov)
 
     def with_warnings(self, *warnings: str) -> Trajectory:
         """Return the trajectory with ``warnings`` appended."""
         return replace(self, warnings=(*self.warnings, *warnings))
 
     def without_orientation(self) -> Trajectory:
-        """Return the positions only."""
+        """Return the positions only (a covariance stays: its position block still holds)."""
         return replace(self, quat_xyzw=None)
+
+
+def _skew(v: FloatArray) -> FloatArray:
+    """Return the (N, 3, 3) cross-product matrices ``[v]×`` of (N, 3) vectors."""
+    out = np.zeros((*v.shape[:-1], 3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out

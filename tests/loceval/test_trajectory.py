@@ -147,3 +147,77 @@ def test_positions_beyond_any_site_are_rejected() -> None:
     positions[1, 0] = 1e160
     with pytest.raises(TrajectoryError, match="beyond"):
         Trajectory(np.arange(3, dtype=np.int64), positions)
+
+
+class TestCovariance:
+    """Optional per-pose 6x6 covariances: checked, carried and transformed."""
+
+    @staticmethod
+    def with_cov(rng: np.random.Generator, n: int = 20) -> Trajectory:
+        a = rng.normal(0.0, 0.1, (n, 6, 6))
+        cov = a @ a.transpose(0, 2, 1)
+        positions = rng.normal(size=(n, 3))
+        quat = Rotation.random(n, random_state=rng).as_quat()
+        return Trajectory(np.arange(n, dtype=np.int64), positions, quat, cov6=cov)
+
+    def test_default_is_none(self, truth: Trajectory) -> None:
+        """Trajectories without covariance keep None through every operation."""
+        assert truth.cov6 is None
+        assert not truth.has_covariance
+        assert truth.select(np.arange(3)).cov6 is None
+        assert truth.transformed(SimilarityTransform.identity()).cov6 is None
+
+    def test_copied_read_only_and_selected(self, rng: np.random.Generator) -> None:
+        """The covariance is a read-only copy and follows select()."""
+        traj = self.with_cov(rng)
+        assert traj.cov6 is not None
+        assert traj.has_covariance
+        assert not traj.cov6.flags.writeable
+        picked = traj.select(np.array([2, 5]))
+        assert picked.cov6 is not None
+        np.testing.assert_array_equal(picked.cov6, traj.cov6[[2, 5]])
+        for kept in (traj.shifted(5), traj.without_orientation()):
+            assert kept.cov6 is not None
+            np.testing.assert_array_equal(kept.cov6, traj.cov6)
+
+    def test_transformed_rotates_and_scales(self, rng: np.random.Generator) -> None:
+        """A Sim(3) maps the position block to s² R S Rᵀ and the rotation block to R S Rᵀ."""
+        traj = self.with_cov(rng)
+        rot = Rotation.random(random_state=rng).as_matrix()
+        moved = traj.transformed(SimilarityTransform(rot, np.array([1.0, 2.0, 3.0]), 2.0))
+        assert moved.cov6 is not None
+        assert traj.cov6 is not None
+        np.testing.assert_allclose(moved.cov6[4, :3, :3], 4.0 * rot @ traj.cov6[4, :3, :3] @ rot.T)
+        np.testing.assert_allclose(moved.cov6[4, 3:, 3:], rot @ traj.cov6[4, 3:, 3:] @ rot.T)
+        np.testing.assert_allclose(moved.cov6[4, :3, 3:], 2.0 * rot @ traj.cov6[4, :3, 3:] @ rot.T)
+
+    def test_body_offset_adds_the_lever_arm(self) -> None:
+        """A yaw variance moves a point 1 m ahead sideways: its y variance grows by σ²·1 m²."""
+        cov = np.zeros((3, 6, 6))
+        cov[:, 5, 5] = 0.01
+        traj = Trajectory(
+            np.arange(3, dtype=np.int64),
+            np.zeros((3, 3)),
+            np.tile([0.0, 0.0, 0.0, 1.0], (3, 1)),
+            cov6=cov,
+        )
+        moved = traj.with_body_offset(SimilarityTransform(np.eye(3), np.array([1.0, 0.0, 0.0])))
+        assert moved.cov6 is not None
+        # δp = δθ × lever = (0, 0, δψ) × (1, 0, 0) = (0, δψ, 0): var y = 0.01, cov(y, ψ) = 0.01.
+        np.testing.assert_allclose(moved.cov6[0, 1, 1], 0.01)
+        np.testing.assert_allclose(moved.cov6[0, 1, 5], 0.01)
+        np.testing.assert_allclose(moved.cov6[0, 0, 0], 0.0)
+        np.testing.assert_allclose(moved.cov6[0, 5, 5], 0.01)
+
+    @pytest.mark.parametrize(
+        ("cov", "match"),
+        [
+            (np.zeros((3, 3, 3)), r"shape \(3, 6, 6\)"),
+            (np.full((3, 6, 6), np.nan), "NaN or inf"),
+            (np.triu(np.ones((3, 6, 6))), "must be symmetric"),
+        ],
+    )
+    def test_invalid_covariances(self, cov: np.ndarray, match: str) -> None:
+        """Wrong shape, NaN and asymmetric covariances are rejected."""
+        with pytest.raises(TrajectoryError, match=match):
+            Trajectory(np.arange(3, dtype=np.int64), np.zeros((3, 3)), cov6=cov)
