@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -60,3 +63,32 @@ def require_tool(name: str) -> str:
         skip_or_fail(f"{name!r} is not installed (see .ci/run for the package that has it)")
     assert path is not None
     return path
+
+
+@functools.cache
+def pdf_unavailable() -> str | None:
+    """Why WeasyPrint cannot render PDFs here (its system libraries), or None when it can.
+
+    Probed in a subprocess, so a missing library's import-time warning or error stays there.
+    """
+    probe = subprocess.run(
+        [sys.executable, "-W", "ignore", "-c", "import weasyprint"],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if probe.returncode == 0:
+        return None
+    last = (probe.stderr.strip().splitlines() or ["import failed"])[-1]
+    return (
+        f"WeasyPrint cannot load its system libraries ({last[:200]}); install the packages "
+        "that .ci/run installs (libpango-1.0-0 libpangoft2-1.0-0)"
+    )
+
+
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Tests marked ``pdf`` need WeasyPrint's system libraries: skip without them (fail in CI)."""
+    if item.get_closest_marker("pdf") is not None:
+        reason = pdf_unavailable()
+        if reason is not None:
+            skip_or_fail(reason)
