@@ -14,6 +14,8 @@ from typing import Final
 
 from loceval.errors import InputError, ReaderError
 from loceval.readers.csv import CSV_KEYS, read_csv
+from loceval.readers.euroc import read_euroc
+from loceval.readers.kitti import read_kitti
 from loceval.readers.motive import read_motive
 from loceval.readers.sniff import (
     SourceSpec,
@@ -22,7 +24,7 @@ from loceval.readers.sniff import (
     refuse_special_file,
     sniff_format,
 )
-from loceval.readers.text import read_euroc, read_kitti, read_tum
+from loceval.readers.tum import read_tum
 from loceval.trajectory import Trajectory
 
 __all__ = [
