@@ -14,6 +14,8 @@ Wall time on a shared machine moves with the other users' load, so every row als
 the process's CPU time (user + system), the steadier figure. ``--breakdown`` times the
 phases inside one process: interpreter start, importing the CLI, reading each file and
 the evaluation (``python -X importtime -c "import service.cli"`` itemizes the imports).
+A figure independent of the load is the instruction count of one run:
+``valgrind --tool=callgrind .venv/bin/loceval evaluate REF EST --json`` (about a minute).
 """
 
 from __future__ import annotations

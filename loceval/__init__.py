@@ -49,7 +49,7 @@ _LAZY: Final = {
     "Trajectory": "loceval.trajectory",
 }
 """Public name -> the module defining it, imported on first use so `import loceval` is cheap
-(the command line's ``--help`` and the errors module need none of the numeric modules)."""
+(the command line's help and the errors module need none of the numeric modules)."""
 
 __all__ = [
     "AlignMethod",
