@@ -6,31 +6,50 @@ measure the errors. ``evaluate`` is the one pipeline the command line and the se
 
 from __future__ import annotations
 
+import importlib
 import logging
+from typing import TYPE_CHECKING, Final
 
-__version__ = "0.1.0"
+from loceval._version import __version__
 
-# Re-exported below __version__: loceval.evaluation reads it while this package loads.
-from loceval.alignment import AlignMethod, AlignWindow
-from loceval.association import AssociationMethod
-from loceval.errors import (
-    AlignmentError,
-    AssociationError,
-    InputError,
-    LocevalError,
-    MetricError,
-    ReaderError,
-    TrajectoryError,
-)
-from loceval.evaluation import (
-    EvaluationConfig,
-    EvaluationResult,
-    Tolerance,
-    evaluate,
-)
-from loceval.metrics import RPEUnit
-from loceval.readers import read_trajectory
-from loceval.trajectory import Trajectory
+if TYPE_CHECKING:  # the names as the type checker sees them; at run time see __getattr__
+    from loceval.alignment import AlignMethod, AlignWindow
+    from loceval.association import AssociationMethod
+    from loceval.errors import (
+        AlignmentError,
+        AssociationError,
+        InputError,
+        LocevalError,
+        MetricError,
+        ReaderError,
+        TrajectoryError,
+    )
+    from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
+    from loceval.metrics import RPEUnit
+    from loceval.readers import read_trajectory
+    from loceval.trajectory import Trajectory
+
+_LAZY: Final = {
+    "AlignMethod": "loceval.alignment",
+    "AlignWindow": "loceval.alignment",
+    "AssociationMethod": "loceval.association",
+    "AlignmentError": "loceval.errors",
+    "AssociationError": "loceval.errors",
+    "InputError": "loceval.errors",
+    "LocevalError": "loceval.errors",
+    "MetricError": "loceval.errors",
+    "ReaderError": "loceval.errors",
+    "TrajectoryError": "loceval.errors",
+    "EvaluationConfig": "loceval.evaluation",
+    "EvaluationResult": "loceval.evaluation",
+    "Tolerance": "loceval.evaluation",
+    "evaluate": "loceval.evaluation",
+    "RPEUnit": "loceval.metrics",
+    "read_trajectory": "loceval.readers",
+    "Trajectory": "loceval.trajectory",
+}
+"""Public name -> the module defining it, imported on first use so `import loceval` is cheap
+(the command line's help and the errors module need none of the numeric modules)."""
 
 __all__ = [
     "AlignMethod",
@@ -54,3 +73,19 @@ __all__ = [
 ]
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())
+
+
+def __getattr__(name: str) -> object:
+    """Import a public name's module on first use (PEP 562) and cache the name here."""
+    module = _LAZY.get(name)
+    if module is None:
+        msg = f"module {__name__!r} has no attribute {name!r}"
+        raise AttributeError(msg)
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    """List the public names, loaded or not."""
+    return sorted({*globals(), *__all__})

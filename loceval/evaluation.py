@@ -9,8 +9,8 @@ from datetime import UTC, datetime
 
 import numpy as np
 
-from loceval import __version__
 from loceval._typing import BoolArray, IntArray
+from loceval._version import __version__
 from loceval.alignment import Alignment, AlignMethod, AlignWindow, align
 from loceval.association import (
     DEFAULT_MAX_DT_NS,

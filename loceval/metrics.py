@@ -13,11 +13,11 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from loceval._typing import FloatArray, IntArray, StampsNs
 from loceval.errors import MetricError
 from loceval.geometry import compose_quat, conjugate_quat, relative_angle_deg
+from loceval.rotation import Rotation
 from loceval.trajectory import Trajectory
 
 __all__ = [

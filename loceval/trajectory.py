@@ -6,11 +6,11 @@ import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import TrajectoryError
 from loceval.geometry import SimilarityTransform
+from loceval.rotation import Rotation
 
 __all__ = ["MAX_COORDINATE_M", "MAX_SPAN_S", "MIN_POSES", "Trajectory"]
 

@@ -18,11 +18,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from loceval._typing import FloatArray
 from loceval.errors import ReaderError
 from loceval.geometry import SimilarityTransform
+from loceval.rotation import Rotation
 
 __all__ = ["UrdfJoint", "UrdfRobot", "read_urdf", "read_urdf_joints", "read_urdf_offset"]
 

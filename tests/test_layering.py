@@ -1,10 +1,22 @@
-"""Dependency direction: the core never pulls in web, templating or CAD libraries."""
+"""Layering: dependency direction, import cycles, module length and core messages.
+
+The core never pulls in web, templating or CAD libraries; no module of loceval, exporters or
+service reaches itself through its imports; no module is longer than 600 lines; core and
+exporter strings name no command-line flag. The last three read the source with ``ast``, and
+each check is also run on small fake trees that hold a violation or none.
+"""
 
 from __future__ import annotations
 
+import ast
 import json
+import re
 import subprocess
 import sys
+import textwrap
+from collections.abc import Collection, Mapping, Sequence
+from pathlib import Path
+from typing import Final
 
 import pytest
 
@@ -33,3 +45,271 @@ def test_import_pulls_in_no_banned_module(module: str, allowed: tuple[str, ...])
     )
     loaded = set(json.loads(out.stdout))
     assert not (loaded & (set(BANNED) - set(allowed)))
+
+
+def test_import_loceval_loads_no_numeric_module() -> None:
+    """``import loceval`` is cheap: the public names load their modules on first use."""
+    code = (
+        "import json, sys; import loceval; before = sorted(sys.modules); "
+        "names = [getattr(loceval, n) for n in loceval.__all__]; "
+        "print(json.dumps([before, sorted(sys.modules)]))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd="."
+    )
+    before, after = (set(mods) for mods in json.loads(out.stdout))
+    assert not {"numpy", "scipy", "loceval.evaluation", "loceval.readers"} & before
+    assert {"numpy", "loceval.evaluation", "loceval.readers"} <= after
+
+
+def test_evaluate_path_loads_no_scipy() -> None:
+    """Reading text trajectories and evaluating them imports no scipy (its start-up cost)."""
+    code = (
+        "import json, sys; import loceval.evaluation, loceval.readers; "
+        "print(json.dumps(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy')))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd="."
+    )
+    assert json.loads(out.stdout) == []
+
+
+# --- Import graph, module length and messages, read from the source with ast ----------
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("loceval", "exporters", "service")
+CORE_PACKAGES = ("loceval", "exporters")
+MAX_MODULE_LINES = 600
+_FLAG = re.compile(r"(?<![-!\w])--[A-Za-z]")
+"""A command-line flag: ``--`` then a letter, not inside ``---`` or an XML ``<!--``."""
+
+
+def module_files(root: Path, packages: Sequence[str]) -> dict[str, Path]:
+    """Map every module of ``packages`` under ``root`` to its file (packages to __init__.py)."""
+    modules: dict[str, Path] = {}
+    for package in packages:
+        for path in sorted((root / package).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            modules[".".join(parts)] = path
+    return modules
+
+
+def imported_modules(path: Path, module: str, known: Collection[str]) -> set[str]:
+    """Return the modules of ``known`` that ``module`` imports anywhere in its source.
+
+    Every ``import`` and ``from ... import`` counts, at module level or inside functions,
+    classes, ``try`` or ``if TYPE_CHECKING`` blocks. Relative imports are resolved against
+    the module's package; ``from pkg import name`` is an import of ``pkg.name`` when that is
+    a module, else of ``pkg``; ``import a.b.c`` is an import of the longest known prefix.
+    """
+    is_package = path.name == "__init__.py"
+    package = module if is_package else module.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+        if isinstance(node, ast.Import):
+            found.update(_known_prefix(alias.name, known) for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - (node.level - 1)]
+                base = ".".join([*anchor, base] if base else anchor)
+            for alias in node.names:
+                candidate = f"{base}.{alias.name}"
+                found.add(candidate if candidate in known else _known_prefix(base, known))
+    found.discard("")
+    found.discard(module)  # `from . import x` inside x's own package is no self-import
+    return found
+
+
+def _known_prefix(name: str, known: Collection[str]) -> str:
+    parts = name.split(".")
+    for end in range(len(parts), 0, -1):
+        prefix = ".".join(parts[:end])
+        if prefix in known:
+            return prefix
+    return ""
+
+
+def import_cycles(root: Path, packages: Sequence[str]) -> list[list[str]]:
+    """Return one cycle (a closed path of modules) per group of modules that import each other."""
+    files = module_files(root, packages)
+    graph = {name: sorted(imported_modules(path, name, files)) for name, path in files.items()}
+    reach = {name: _reachable(graph, name) for name in graph}
+    groups = {
+        frozenset({name} | {other for other in reach[name] if name in reach[other]})
+        for name in graph
+        if name in reach[name]
+    }
+    return sorted(_cycle_within(graph, set(group)) for group in groups)
+
+
+def _reachable(graph: Mapping[str, Sequence[str]], start: str) -> set[str]:
+    """Return the modules reachable from ``start`` by one or more imports."""
+    seen: set[str] = set()
+    todo = list(graph[start])
+    while todo:
+        node = todo.pop()
+        if node not in seen:
+            seen.add(node)
+            todo.extend(graph[node])
+    return seen
+
+
+def _cycle_within(graph: Mapping[str, Sequence[str]], group: set[str]) -> list[str]:
+    """Return a shortest closed path through the group's first module (breadth first)."""
+    start = min(group)
+    parent: dict[str, str] = {}
+    queue = [start]
+    while queue:
+        node = queue.pop(0)
+        for nxt in graph[node]:
+            if nxt == start:
+                path = [node]
+                while path[-1] != start:
+                    path.append(parent[path[-1]])
+                return [start, *reversed(path[:-1]), start] if node != start else [start, start]
+            if nxt in group and nxt not in parent:
+                parent[nxt] = node
+                queue.append(nxt)
+    return sorted(group)  # unreachable for a strongly connected group
+
+
+def long_modules(root: Path, packages: Sequence[str], limit: int) -> dict[str, int]:
+    """Return the modules longer than ``limit`` lines, with their line counts."""
+    counts = {
+        name: len(path.read_text(encoding="utf-8").splitlines())
+        for name, path in module_files(root, packages).items()
+    }
+    return {name: n for name, n in counts.items() if n > limit}
+
+
+def flag_strings(root: Path, packages: Sequence[str]) -> list[str]:
+    """Return ``module:line: text`` for every string literal (not a docstring) naming a flag."""
+    hits: list[str] = []
+    for name, path in module_files(root, packages).items():
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        # A string standing alone as a statement is a docstring (of a module, class,
+        # function or attribute), never a message.
+        docstrings = {
+            id(node.value)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+        }
+        hits.extend(
+            f"{name}:{node.lineno}: {node.value!r}"
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Constant)
+            and isinstance(node.value, str)
+            and id(node) not in docstrings
+            and _FLAG.search(node.value)
+        )
+    return sorted(hits, key=lambda hit: (hit.split(":")[0], int(hit.split(":")[1])))
+
+
+def test_no_import_cycle() -> None:
+    """No module of loceval, exporters or service reaches itself through its imports."""
+    cycles = import_cycles(ROOT, PACKAGES)
+    assert cycles == [], "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
+
+
+def test_no_module_longer_than_600_lines() -> None:
+    """Every module can be read in one sitting."""
+    assert long_modules(ROOT, PACKAGES, MAX_MODULE_LINES) == {}
+
+
+def test_no_core_message_names_a_flag() -> None:
+    """Core and exporter strings name options by key, never by a command-line flag."""
+    assert flag_strings(ROOT, CORE_PACKAGES) == []
+
+
+def _write_tree(root: Path, files: Mapping[str, str]) -> Path:
+    for relative, source in files.items():
+        path = root / relative
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(textwrap.dedent(source), encoding="utf-8")
+    return root
+
+
+_CLEAN_TREE: Final = {
+    "core/__init__.py": "from core.a import A\nfrom core.sub import helper\n",
+    "core/a.py": '"""Docstring naming --flag is fine."""\nimport core.b\nA = 1\n',
+    "core/b.py": "# a comment naming --flag is fine\nfrom .sub import helper\nMSG = 'use 3--4'\n",
+    "core/sub/__init__.py": "from .helper import run\n",
+    "core/sub/helper.py": (
+        "import numpy\nfrom core import errors\n\ndef run():\n"
+        "    '''Run --it.'''\n    from core.errors import E\n    return E\n"
+    ),
+    "core/errors.py": (
+        "class E(Exception):\n    msg = 'no flag <!--comment-->, ---x'\n"
+        '    """An attribute docstring naming --flag is fine."""\n'
+    ),
+    "app/__init__.py": "",
+    "app/cli.py": "import core\nfrom core.sub.helper import run\nHELP = '--verbose'\n",
+}
+
+
+class TestLayeringChecksOnFakeTrees:
+    def test_clean_tree_passes_every_check(self, tmp_path: Path) -> None:
+        """A tree with packages, relative imports and docstring flags has no finding."""
+        root = _write_tree(tmp_path, _CLEAN_TREE)
+        assert import_cycles(root, ("core", "app")) == []
+        assert long_modules(root, ("core", "app"), 600) == {}
+        assert flag_strings(root, ("core",)) == []
+
+    def test_imports_are_resolved(self, tmp_path: Path) -> None:
+        """Relative, submodule and function-level imports name the right modules."""
+        root = _write_tree(tmp_path, _CLEAN_TREE)
+        known = module_files(root, ("core", "app"))
+        assert imported_modules(known["core.b"], "core.b", known) == {"core.sub.helper"}
+        assert imported_modules(known["core.sub"], "core.sub", known) == {"core.sub.helper"}
+        helper = imported_modules(known["core.sub.helper"], "core.sub.helper", known)
+        assert helper == {"core.errors"}  # numpy is outside; `from core import errors`
+        assert imported_modules(known["app.cli"], "app.cli", known) == {"core", "core.sub.helper"}
+
+    def test_function_level_import_cycle_is_found(self, tmp_path: Path) -> None:
+        """A cycle closed by an import inside a function counts."""
+        tree = {
+            **_CLEAN_TREE,
+            "core/errors.py": "def late():\n    from core.a import A\n    return A\n",
+        }
+        root = _write_tree(tmp_path, tree)
+        assert import_cycles(root, ("core", "app")) == [
+            ["core.a", "core.b", "core.sub.helper", "core.errors", "core.a"]
+        ]
+
+    def test_relative_and_type_checking_cycle_is_found(self, tmp_path: Path) -> None:
+        """A two-module cycle through a relative import under TYPE_CHECKING counts."""
+        tree = {
+            **_CLEAN_TREE,
+            "core/errors.py": (
+                "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from . import b\n"
+            ),
+            "core/b.py": "from core.errors import E\n",
+        }
+        root = _write_tree(tmp_path, tree)
+        assert import_cycles(root, ("core",)) == [["core.b", "core.errors", "core.b"]]
+
+    def test_long_module_is_found(self, tmp_path: Path) -> None:
+        """601 lines is too long; 600 is not."""
+        tree = {**_CLEAN_TREE, "core/a.py": "x = 1\n" * 601, "core/b.py": "x = 1\n" * 600}
+        root = _write_tree(tmp_path, tree)
+        assert long_modules(root, ("core", "app"), 600) == {"core.a": 601}
+
+    def test_flag_in_message_is_found(self, tmp_path: Path) -> None:
+        """A flag in a plain or f-string message is found, with its module and line."""
+        tree = {
+            **_CLEAN_TREE,
+            "core/errors.py": (
+                "def fail(x):\n"
+                "    msg = f'Bad {x!r}; choose a smaller --rpe-delta.'\n"
+                "    raise ValueError(msg)\n"
+                "HINT = 'pass --max-dt 0.1'\n"
+            ),
+        }
+        root = _write_tree(tmp_path, tree)
+        assert flag_strings(root, ("core",)) == [
+            "core.errors:2: '; choose a smaller --rpe-delta.'",
+            "core.errors:4: 'pass --max-dt 0.1'",
+        ]

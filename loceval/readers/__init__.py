@@ -15,10 +15,12 @@ from typing import Final
 
 from loceval.errors import InputError, ReaderError
 from loceval.readers.csv import CSV_KEYS, read_csv
+from loceval.readers.euroc import read_euroc
+from loceval.readers.kitti import read_kitti
 from loceval.readers.motive import read_motive
 from loceval.readers.sniff import sniff_format
 from loceval.readers.source import SourceSpec, TrajectoryFormat, parse_source, refuse_special_file
-from loceval.readers.text import read_euroc, read_kitti, read_tum
+from loceval.readers.tum import read_tum
 from loceval.trajectory import Trajectory
 
 __all__ = [

@@ -1,9 +1,11 @@
-"""Readers for whitespace and comma-separated trajectory files: TUM, EuRoC and KITTI.
+"""Shared parsing of whitespace and comma-separated trajectory tables.
 
-Also holds what the text readers share: :func:`load_text` (file errors, encodings) and
-:func:`parse_table`, which parses a table of numbers with NumPy's C parser
-(``np.loadtxt``) and, only when that fails, walks the lines in Python to name the exact
-line, cell and problem. Every reader finishes through
+:func:`load_text` reads a file (file errors, encodings) and :func:`parse_table` parses a
+table of numbers with NumPy's C parser (``np.loadtxt``) and, only when that fails, walks the
+lines in Python to name the exact line, cell and problem. :func:`stamps_from_values` turns
+stamp columns into int64 nanoseconds. The readers on top are :mod:`loceval.readers.tum`,
+:mod:`loceval.readers.euroc`, :mod:`loceval.readers.kitti`, :mod:`loceval.readers.csv` and
+:mod:`loceval.readers.motive`; each finishes through
 :func:`loceval.readers._common.build_trajectory` (NaN/inf, quaternion norms, sorting,
 duplicates, at least three poses).
 """
@@ -19,35 +21,24 @@ from pathlib import Path
 from typing import Final
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import ReaderError
-from loceval.readers._common import build_trajectory, seconds_to_ns
-from loceval.readers.source import SourceSpec, TrajectoryFormat, missing_file_error
-from loceval.trajectory import Trajectory
+from loceval.readers._common import seconds_to_ns
+from loceval.readers.source import missing_file_error
 
 __all__ = [
-    "KITTI_ROTATION_TOLERANCE",
+    "NS_PER_S",
     "NumericTable",
     "load_text",
     "parse_table",
-    "read_euroc",
-    "read_kitti",
-    "read_tum",
+    "positions_and_quat",
     "stamps_from_values",
 ]
 
-KITTI_ROTATION_TOLERANCE: Final = 1e-2
-"""Largest ``|R Rᵀ - I|`` entry and ``|det R - 1|`` accepted in a KITTI pose; scipy
-projects smaller deviations (print rounding) onto the nearest rotation."""
-
-_NS_PER_S: Final = 1_000_000_000
+NS_PER_S: Final = 1_000_000_000
 _INT64_MAX: Final = float(np.iinfo(np.int64).max)
 _NAN_SPELLINGS: Final = ("nan", "NaN", "NAN", "Nan")
-_TUM_HINT: Final = "every TUM line holds t x y z qx qy qz qw (8 values), t x y z (4) or t x y (3)"
-_KITTI_HINT: Final = "every KITTI line holds the 12 numbers of a 3x4 [R|t] matrix, row by row"
-_EUROC_NAMES: Final = ("timestamp", "p_x", "p_y", "p_z", "q_w", "q_x", "q_y", "q_z")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -187,10 +178,6 @@ def parse_table(
     )
 
 
-_SECONDS_LIKE_NS = 1e11
-"""Fractional EuRoC stamps below this (100 s after 1970) are seconds, not nanoseconds."""
-
-
 def stamps_from_values(
     values: FloatArray, *, ns_per_unit: float, lines: IntArray, where: str, unit: str
 ) -> StampsNs:
@@ -222,275 +209,25 @@ def stamps_from_values(
             )
         msg = f"{where}, line {int(lines[i])}: stamp {value!r} {unit} is not a usable time; {hint}."
         raise ReaderError(msg)
-    if ns_per_unit == _NS_PER_S:
+    if ns_per_unit == NS_PER_S:
         return seconds_to_ns(values)
     out: StampsNs = np.rint(values * ns_per_unit).astype(np.int64)
     return out
 
 
-# --- TUM -----------------------------------------------------------------------------
-
-
-def read_tum(path: Path, *, name: str = "") -> Trajectory:
-    """Read a TUM trajectory: ``t x y z qx qy qz qw`` per line, stamps in seconds.
-
-    ``#`` comments and blank lines are skipped. Position-only files with ``t x y z`` or
-    ``t x y`` (z = 0) lines are accepted; every line must have the same number of values.
-
-    Args:
-        path: the file.
-        name: the trajectory's name.
-
-    Returns:
-        The trajectory; ``source`` is ``tum:PATH``.
-
-    Raises:
-        ReaderError: the file is missing or unreadable, a line has the wrong number of
-            values or a non-number, a value is NaN/inf, a quaternion is not unit, or
-            fewer than three poses remain.
-    """
-    path = Path(path)
-    where = str(path)
-    table = parse_table(load_text(path), where=where, delimiter=None, hint=_TUM_HINT, comments="#")
-    values = table.values
-    width = values.shape[1] if values.ndim == 2 else 0
-    if len(table) and width not in {3, 4, 8}:
-        msg = (
-            f"{where}, line {int(table.lines[0])}: {width} values per line, but {_TUM_HINT}; "
-            "check the file or name its format with a prefix."
-        )
-        raise ReaderError(msg)
-    stamps = stamps_from_values(
-        values[:, 0] if len(table) else np.zeros(0),
-        ns_per_unit=_NS_PER_S,
-        lines=table.lines,
-        where=where,
-        unit="s",
-    )
-    positions, quat = _positions_and_quat(values, width, quat_cols=[4, 5, 6, 7])
-    return build_trajectory(
-        stamps,
-        positions,
-        quat,
-        where=where,
-        line_numbers=table.lines,
-        name=name,
-        source=str(SourceSpec(TrajectoryFormat.TUM, path)),
-    )
-
-
-# --- EuRoC ---------------------------------------------------------------------------
-
-
-def read_euroc(path: Path, *, name: str = "") -> Trajectory:
-    """Read a EuRoC ground-truth or estimate CSV.
-
-    Columns are ``timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z`` followed by any
-    number of ignored columns (velocities, biases); the quaternion is w-first in the file
-    and x y z w in the result. Stamps are parsed exactly as int64 nanoseconds. A ``#``
-    header (or one header row without ``#``) is skipped. Position-only files with
-    ``timestamp, x, y, z`` or ``timestamp, x, y`` rows are accepted.
-
-    Args:
-        path: the file.
-        name: the trajectory's name.
-
-    Returns:
-        The trajectory; ``source`` is ``euroc:PATH``.
-
-    Raises:
-        ReaderError: the file is missing or unreadable, a row is too short or holds a
-            non-number, a value is NaN/inf, a quaternion is not unit, or fewer than three
-            poses remain.
-    """
-    path = Path(path)
-    where = str(path)
-    text = load_text(path)
-    skip, first = _skip_header_row(text)
-    width = first.count(",") + 1 if first else 0
-    if first and width not in {3, 4} and width < 8:
-        msg = (
-            f"{where}, line {skip + 1}: {width} columns, but a EuRoC row holds "
-            "timestamp, p_x, p_y, p_z, q_w, q_x, q_y, q_z (8 or more) or timestamp, x, y[, z]; "
-            "check the file or name its format with a prefix."
-        )
-        raise ReaderError(msg)
-    used = min(8, width)
-    hint = "a EuRoC row holds timestamp, p_x, p_y, p_z, q_w, q_x, q_y, q_z"
-    table = parse_table(
-        text,
-        where=where,
-        delimiter=",",
-        hint=hint,
-        skip_lines=skip,
-        usecols=range(used),
-        names=_EUROC_NAMES[:used],
-        comments="#",
-        int_first=True,
-    )
-    notes: list[str] = []
-    if table.first_int is not None:
-        stamps = table.first_int
-    else:
-        first_stamps = table.values[:, 0]
-        if (
-            len(table)
-            and float(np.abs(first_stamps).max()) < _SECONDS_LIKE_NS
-            and bool((first_stamps != np.round(first_stamps)).any())
-        ):
-            msg = (
-                f"{where}, line {int(table.lines[0])}: EuRoC stamps are integer nanoseconds, "
-                f"but {float(table.values[0, 0])!r} looks like seconds; multiply the first "
-                "column by 1e9, or read the file as tum:FILE after swapping to x y z qx qy "
-                "qz qw order."
-            )
-            raise ReaderError(msg)
-        stamps = stamps_from_values(
-            table.values[:, 0] if len(table) else np.zeros(0),
-            ns_per_unit=1.0,
-            lines=table.lines,
-            where=where,
-            unit="ns",
-        )
-        if len(table):
-            notes.append(
-                f"{where}: stamps are not integer nanoseconds; they were rounded to the "
-                "nearest nanosecond."
-            )
-    positions, quat_wxyz = _positions_and_quat(table.values, used, quat_cols=[4, 5, 6, 7])
-    quat = None if quat_wxyz is None else quat_wxyz[:, [1, 2, 3, 0]]
-    return build_trajectory(
-        stamps,
-        positions,
-        quat,
-        where=where,
-        line_numbers=table.lines,
-        name=name,
-        source=str(SourceSpec(TrajectoryFormat.EUROC, path)),
-        warnings=tuple(notes),
-    )
-
-
-# --- KITTI ---------------------------------------------------------------------------
-
-
-def read_kitti(path: Path, *, times: Path | None = None, name: str = "") -> Trajectory:
-    """Read KITTI odometry poses: 12 numbers per line, the 3x4 matrix ``[R|t]`` row by row.
-
-    Poses stay in the KITTI camera frame (x right, y down, z forward). With a times file
-    (one time in seconds per line, as KITTI's ``times.txt``) pose i is stamped with line i.
-    Without one, pose i is stamped i seconds and a warning says so: two KITTI files without
-    times then pair by index, which is what KITTI evaluation does.
-
-    Args:
-        path: the poses file.
-        times: the times file, or None.
-        name: the trajectory's name.
-
-    Returns:
-        The trajectory; ``source`` is ``kitti:PATH`` or ``kitti:PATH@times=TIMES``.
-
-    Raises:
-        ReaderError: a file is missing or unreadable, a line does not hold 12 numbers, a
-            rotation is far from orthonormal, the times and poses differ in number, or
-            fewer than three poses remain.
-    """
-    path = Path(path)
-    where = str(path)
-    table = parse_table(
-        load_text(path), where=where, delimiter=None, hint=_KITTI_HINT, comments="#"
-    )
-    n = len(table)
-    width = table.values.shape[1] if n else 12
-    if width != 12:
-        msg = (
-            f"{where}, line {int(table.lines[0])}: {width} values per line, but "
-            f"{_KITTI_HINT}; check the file or name its format with a prefix."
-        )
-        raise ReaderError(msg)
-    matrices = table.values.reshape(n, 3, 4)
-    bad_rows = np.flatnonzero(~np.isfinite(table.values).all(axis=1))
-    if bad_rows.size:
-        msg = (
-            f"{where}, line {int(table.lines[bad_rows[0]])}: the pose holds NaN or inf; "
-            "remove that line or re-export the file."
-        )
-        raise ReaderError(msg)
-    rotations = matrices[:, :, :3]
-    _check_rotations(rotations, table.lines, where=where)
-    quat = Rotation.from_matrix(rotations).as_quat() if n else np.zeros((0, 4))
-    positions = matrices[:, :, 3]
-    notes: list[str] = []
-    options: dict[str, str] = {}
-    if times is None:
-        stamps = np.arange(n, dtype=np.int64) * _NS_PER_S
-        notes.append(
-            f"{where}: no times file, so pose i is stamped i seconds and poses are matched "
-            "by index; give one with kitti:PATH@times=TIMES for real stamps."
-        )
-    else:
-        times = Path(times)
-        options["times"] = str(times)
-        stamps = _read_kitti_times(times, n, poses_where=where)
-    return build_trajectory(
-        stamps,
-        positions,
-        quat,
-        where=where,
-        line_numbers=table.lines,
-        name=name,
-        source=str(SourceSpec(TrajectoryFormat.KITTI, path, None, options)),
-        warnings=tuple(notes),
-    )
-
-
-def _read_kitti_times(times: Path, n_poses: int, *, poses_where: str) -> StampsNs:
-    where = str(times)
-    hint = "a KITTI times file holds one time in seconds per line"
-    table = parse_table(load_text(times), where=where, delimiter=None, hint=hint, comments="#")
-    if len(table) and table.values.shape[1] != 1:
-        msg = (
-            f"{where}, line {int(table.lines[0])}: {table.values.shape[1]} values, but {hint}; "
-            "check that this is the times file."
-        )
-        raise ReaderError(msg)
-    if len(table) != n_poses:
-        msg = (
-            f"{where} holds {len(table)} times but {poses_where} holds {n_poses} poses; "
-            "use the times file of this sequence."
-        )
-        raise ReaderError(msg)
-    seconds = table.values[:, 0] if len(table) else np.zeros(0)
-    return stamps_from_values(
-        seconds, ns_per_unit=_NS_PER_S, lines=table.lines, where=where, unit="s"
-    )
-
-
-def _check_rotations(rotations: FloatArray, lines: IntArray, *, where: str) -> None:
-    if not len(rotations):
-        return
-    gram_error = np.abs(rotations @ rotations.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2))
-    det = np.linalg.det(rotations)
-    bad = np.flatnonzero(
-        (gram_error > KITTI_ROTATION_TOLERANCE) | (np.abs(det - 1.0) > KITTI_ROTATION_TOLERANCE)
-    )
-    if bad.size:
-        i = int(bad[0])
-        msg = (
-            f"{where}, line {int(lines[i])}: the 3x3 block is not a rotation (determinant "
-            f"{float(det[i]):.6g}, {bad.size} such lines); check that the file holds KITTI "
-            "poses [R|t] row by row."
-        )
-        raise ReaderError(msg)
-
-
-# --- Shared helpers ------------------------------------------------------------------
-
-
-def _positions_and_quat(
+def positions_and_quat(
     values: FloatArray, width: int, *, quat_cols: list[int]
 ) -> tuple[FloatArray, FloatArray | None]:
-    """Split ``t x y [z] [q...]`` rows into (N, 3) positions and (N, 4) quaternions or None."""
+    """Split ``t x y [z] [q...]`` rows into positions and quaternions.
+
+    Args:
+        values: (N, K) rows of a table.
+        width: the number of used columns (3: ``t x y``, 4: ``t x y z``, 8 or more: poses).
+        quat_cols: the four columns of the quaternion, in the order wanted.
+
+    Returns:
+        (N, 3) positions (z = 0 for ``t x y``) and (N, 4) quaternions, or None without them.
+    """
     n = values.shape[0] if values.ndim == 2 else 0
     positions = np.zeros((n, 3))
     if n:
@@ -498,29 +235,6 @@ def _positions_and_quat(
         positions[:, :xyz] = values[:, 1 : 1 + xyz]
     quat = values[:, quat_cols] if n and width >= 8 else None
     return positions, quat
-
-
-def _skip_header_row(text: str) -> tuple[int, str]:
-    """Return (lines to skip, first data line) for a CSV whose first row may be a header."""
-    for index, raw in enumerate(io.StringIO(text)):
-        line = raw.strip()
-        if not line or line.startswith("#"):
-            continue
-        first_cell = line.split(",", 1)[0].strip()
-        try:
-            float(first_cell)
-        except ValueError:
-            return index + 1, _next_data_line(text, index + 1)
-        return 0, line
-    return 0, ""
-
-
-def _next_data_line(text: str, start: int) -> str:
-    for index, raw in enumerate(io.StringIO(text)):
-        line = raw.strip()
-        if index >= start and line and not line.startswith("#"):
-            return line
-    return ""
 
 
 def _fill_empty_cells(text: str, delimiter: str) -> str:

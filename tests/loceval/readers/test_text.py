@@ -434,6 +434,16 @@ class TestPublicData:
         last = (public_data / "KITTI_00_gt_times.txt").read_text().split()[-1]
         assert abs(int(read.stamps_ns[-1]) - float(last) * 1e9) < 1e3
 
+    @pytest.mark.parametrize("file", ["KITTI_00_gt.txt", "KITTI_00_ORB.txt"])
+    def test_kitti_quaternions_match_scipy(self, public_data: Path, file):
+        """KITTI's printed matrices give scipy's quaternions (the oracle), rounding included."""
+        read = read_kitti(public_data / file)
+        matrices = np.loadtxt(public_data / file).reshape(-1, 3, 4)[:, :, :3]
+        assert read.quat_xyzw is not None
+        np.testing.assert_allclose(
+            read.quat_xyzw, Rotation.from_matrix(matrices).as_quat(), rtol=0.0, atol=1e-15
+        )
+
 
 def test_tum_positions_beyond_any_site_name_the_line(tmp_path: Path) -> None:
     """A TUM line with a 1e160 m coordinate is refused with its line number."""
