@@ -14,7 +14,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from loceval._typing import BoolArray, FloatArray
 from loceval.alignment import AlignMethod, align_umeyama, align_yaw
@@ -22,6 +21,7 @@ from loceval.controlpoints import ControlPoints, Visits
 from loceval.errors import AlignmentError, InputError
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import DEFAULT_THRESHOLDS_M, ErrorSeries, ErrorStats, share_within
+from loceval.rotation import Rotation
 from loceval.scores import hilti_score, lamaria_score, recall
 from loceval.stops import (
     DEFAULT_STOP_MAX_SPEED_MPS,
@@ -255,7 +255,8 @@ def fit_points(
     rot0 = Rotation.from_matrix(start.rotation)
     shift0 = start.apply_positions(centre)
     if method is AlignMethod.YAW:
-        x0 = np.concatenate([[rot0.as_euler("zyx")[0]], shift0])
+        yaw0 = np.arctan2(start.rotation[1, 0], start.rotation[0, 0])
+        x0 = np.concatenate([[yaw0], shift0])
     else:
         x0 = np.concatenate([rot0.as_rotvec(), shift0])
         if method is AlignMethod.SIM3:
