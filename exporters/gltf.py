@@ -113,8 +113,7 @@ def _read_building(path: Path, units: Units) -> tuple[FloatArray, NDArray[np.uin
         mesh = trimesh.load(str(path), force="mesh")
     except Exception as err:  # trimesh's many parsers raise anything
         msg = (
-            f"The building model {str(path)!r} cannot be read as {suffix} ({err}); check "
-            "the file."
+            f"The building model {str(path)!r} cannot be read as {suffix} ({err}); check the file."
         )
         raise ExportOptionsError(msg, option="building") from err
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:

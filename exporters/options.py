@@ -14,6 +14,8 @@ from loceval.options import Units, choice_default, number_default
 
 __all__ = ["ExportOptions", "Units"]
 
+_DEFAULT_UNITS = Units(choice_default("units"))
+
 
 @dataclass(frozen=True, slots=True)
 class ExportOptions:
@@ -31,7 +33,7 @@ class ExportOptions:
         templates_dir: where the report templates live (``templates/`` by default).
     """
 
-    units: Units = Units(choice_default("units"))
+    units: Units = _DEFAULT_UNITS
     site: SimilarityTransform = field(default_factory=SimilarityTransform.identity)
     simplify_m: float = number_default("simplify_m")
     building: Path | None = None

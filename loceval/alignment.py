@@ -43,7 +43,6 @@ _RANK_TOLERANCE = 1e-9
 """Relative size below which a singular value of the cross-covariance counts as zero."""
 
 
-
 @dataclass(frozen=True, slots=True)
 class AlignWindow:
     """The leading part of the matched poses used to estimate the transform.

@@ -37,7 +37,6 @@ DEFAULT_MAX_GAP_NS = round(number_default("max_gap_s") * 1_000_000_000)
 """0.1 s: a longer interval between reference poses is tracking loss, never bridged."""
 
 
-
 @dataclass(frozen=True, slots=True, eq=False)
 class Association:
     """Matched pose pairs.

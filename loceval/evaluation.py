@@ -49,6 +49,10 @@ _NS_PER_S = 1_000_000_000
 
 _RPE_UNIT_WORDS = {RPEUnit.FRAMES: "frames", RPEUnit.METRES: "metres", RPEUnit.SECONDS: "seconds"}
 
+_DEFAULT_ASSOCIATION = AssociationMethod(choice_default("association"))
+_DEFAULT_ALIGN = AlignMethod(choice_default("align"))
+_DEFAULT_RPE_UNIT = RPEUnit(choice_default("rpe_unit"))
+
 ProgressCallback = Callable[[str, float], None]
 """Called with a stage name and the fraction of the evaluation done (0..1)."""
 
@@ -173,16 +177,16 @@ class EvaluationConfig:
         worst_count: how many greatest errors to list.
     """
 
-    association: AssociationMethod = AssociationMethod(choice_default("association"))
+    association: AssociationMethod = _DEFAULT_ASSOCIATION
     max_dt_s: float = number_default("max_dt_s")
     max_gap_s: float = number_default("max_gap_s")
     time_offset_s: float = number_default("time_offset_s")
-    align: AlignMethod = AlignMethod(choice_default("align"))
+    align: AlignMethod = _DEFAULT_ALIGN
     align_first: AlignWindow = field(default_factory=AlignWindow)
     calibrate_at_s: float | None = None
     reference_offset: SimilarityTransform | None = None
     rpe_delta: float = number_default("rpe_delta")
-    rpe_unit: RPEUnit = RPEUnit(choice_default("rpe_unit"))
+    rpe_unit: RPEUnit = _DEFAULT_RPE_UNIT
     rpe_all_pairs: bool = False
     thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
     tolerance: Tolerance | None = None

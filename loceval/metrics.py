@@ -132,7 +132,6 @@ class ErrorSeries:
         return sorted_values, shares
 
 
-
 @dataclass(frozen=True, slots=True)
 class WorstPose:
     """One of the greatest errors: where and when.

@@ -235,7 +235,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "stamp",
         OptionKind.CHOICE,
         StampSource.HEADER.value,
-        "bags: stamps from the message header (default) or the bag's receive time",
+        "bags: stamps from the message header or the bag's receive time",
         "the stamp source",
         "--stamp",
         choices=tuple(StampSource),
