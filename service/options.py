@@ -19,6 +19,7 @@ from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, Tolerance, parse_offset
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import RPEUnit
+from loceval.options import check_option
 
 if TYPE_CHECKING:
     from exporters.options import ExportOptions
@@ -173,6 +174,7 @@ def export_from_options(
     elif matrix is not None:
         values = [float(v) for row in matrix for v in row]
         transform = site_from_values(values, where="the site matrix")
+    check_option("simplify_m", options.simplify_m, unit="metres")
     export = ExportOptions(
         units=parse_units(options.units),
         site=transform,

@@ -114,10 +114,8 @@ def _field(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any b
         extra["pattern"] = spec.pattern
     if spec.example is not None:
         extra["examples"] = [spec.example]
-    default = spec.default
-    if isinstance(default, tuple):
-        return Field(default_factory=lambda: list(default), description=spec.help, **extra)
-    return Field(default=default, description=spec.help, **extra)
+    default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
+    return Field(default=default, description=spec.help, **extra)  # pydantic copies a list
 
 
 _Matrix4 = Annotated[

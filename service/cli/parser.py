@@ -12,13 +12,13 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, NoReturn
 
 from loceval import __version__
 from loceval.errors import InputError
 from loceval.options import OPTIONS, OptionKind, OptionSpec
-from loceval.readers import TrajectoryFormat
 
 __all__ = ["EXIT_BUG", "EXIT_INPUT", "build_parser", "names", "numbers"]
 
@@ -39,6 +39,22 @@ class _Parser(argparse.ArgumentParser):
             message += f"; for a value that starts with '-' write {flag}=VALUE"
         self.print_usage(sys.stderr)
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
+
+
+class _FormatNames:
+    """The names of the trajectory formats, read from the readers when first needed.
+
+    argparse checks a value with ``in`` and lists the names in ``--help``; neither happens
+    for ``loceval --help``, which therefore does not import the readers (and numpy).
+    """
+
+    def __contains__(self, name: object) -> bool:
+        return name in set(self)
+
+    def __iter__(self) -> Iterator[str]:
+        from loceval.readers import TrajectoryFormat  # noqa: PLC0415
+
+        return iter([f.value for f in TrajectoryFormat])
 
 
 def numbers(text: str) -> tuple[float, ...]:
@@ -147,9 +163,11 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
     ev.add_argument("--reference-name", default=None, help="name of the reference")
     ev.add_argument(
         "--format",
-        choices=[f.value for f in TrajectoryFormat],
+        choices=_FormatNames(),
         default=None,
-        help="format of sources without a FORMAT: prefix (default: sniffed from content)",
+        metavar="FORMAT",
+        help="format of sources without a FORMAT: prefix, one of %(choices)s (default: sniffed "
+        "from content)",
     )
     for spec in OPTIONS:
         if spec.cli:
