@@ -131,13 +131,17 @@ class TestUnitsAndOptions:
 
     def test_unknown_units(self):
         """Feet are not an output unit."""
-        with pytest.raises(ExportOptionsError, match=r"CAD units must be one of mm, cm, m, got 'ft'"):
+        with pytest.raises(
+            ExportOptionsError, match=r"CAD units must be one of mm, cm, m, got 'ft'"
+        ):
             parse_units("ft")
 
     @pytest.mark.parametrize("value", [-0.001, float("nan"), float("inf")])
     def test_bad_simplify(self, value: float):
         """A negative or non-finite tolerance is an options error naming --simplify."""
-        with pytest.raises(ExportOptionsError, match="simplification tolerance must be zero or a positive"):
+        with pytest.raises(
+            ExportOptionsError, match="simplification tolerance must be zero or a positive"
+        ):
             check_options(ExportOptions(simplify_m=value))
 
     @pytest.mark.parametrize(
