@@ -162,14 +162,18 @@ def align(
     if method in {AlignMethod.ORIGIN, AlignMethod.CALIBRATE, AlignMethod.NONE} and (
         window.poses is not None or window.seconds is not None
     ):
-        notes.append(f"--align-first {window} is ignored by --align {method.value}.")
+        notes.append(
+            f"The alignment window ({window}) is ignored by the alignment method '{method.value}'."
+        )
         window = AlignWindow()
     if method is AlignMethod.CALIBRATE:
         index = _calibration_index(estimate, calibrate_at_s)
         transform = align_calibrate(reference, estimate, index=index)
         return Alignment(method, transform, 1, window, tuple(notes))
     if calibrate_at_s is not None:
-        notes.append("--calibrate-at is only used by --align calibrate; ignored.")
+        notes.append(
+            "The calibration time is only used by the alignment method 'calibrate'; ignored."
+        )
     if method is AlignMethod.NONE:
         return Alignment(method, SimilarityTransform.identity(), 0, window, tuple(notes))
     if method is AlignMethod.ORIGIN:
