@@ -196,7 +196,10 @@ def write_artifacts(
 def _staging_folder(out_dir: Path) -> Path:
     """Create the hidden folder beside ``out_dir`` that artifacts are rendered into."""
     if out_dir.exists() and not out_dir.is_dir():
-        msg = f"--out {str(out_dir)!r} is a file, not a folder; name a folder for the artifacts."
+        msg = (
+            f"The artifact folder {str(out_dir)!r} is a file, not a folder; name a folder for "
+            "the artifacts."
+        )
         raise ExportOptionsError(msg)
     try:
         out_dir.parent.mkdir(parents=True, exist_ok=True)

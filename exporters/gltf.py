@@ -1,7 +1,7 @@
 """glTF 2.0 binary (GLB) export: one node, mesh and material per trajectory, LINE_STRIP.
 
-Conventions (glTF 2.0 §3.4): distances are metres and +Y is up, whatever ``--units`` says
-(the DXF and 3DM files follow ``--units``; glTF importers such as Rhino's and Blender's
+Conventions (glTF 2.0 §3.4): distances are metres and +Y is up, whatever the CAD units say
+(the DXF and 3DM files follow the units; glTF importers such as Rhino's and Blender's
 expect metres and convert to the document's units themselves). Each node's matrix is
 
     M = [[R, R @ b], [0, 1]],   R: (x, y, z) -> (x, z, -y)   (-90° about X, Z-up -> Y-up)
@@ -112,11 +112,13 @@ def _read_building(path: Path, units: Units) -> tuple[FloatArray, NDArray[np.uin
     try:
         mesh = trimesh.load(str(path), force="mesh")
     except Exception as err:  # trimesh's many parsers raise anything
-        msg = f"--building {str(path)!r} cannot be read as {suffix} ({err}); check the file."
-        raise ExportOptionsError(msg) from err
+        msg = (
+            f"The building model {str(path)!r} cannot be read as {suffix} ({err}); check the file."
+        )
+        raise ExportOptionsError(msg, option="building") from err
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        msg = f"--building {str(path)!r} holds no triangles; export the model as a mesh."
-        raise ExportOptionsError(msg)
+        msg = f"The building model {str(path)!r} holds no triangles; export it as a mesh."
+        raise ExportOptionsError(msg, option="building")
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     # a GLB is Y up in metres: back to Z up (v @ R is R^-1 v, R being orthogonal)
     vertices = vertices @ Z_UP_TO_Y_UP if suffix == ".glb" else vertices / units.per_metre

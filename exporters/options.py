@@ -1,27 +1,20 @@
-"""Options shared by the exporters: model placement for CAD files, report settings."""
+"""Options shared by the exporters: model placement for CAD files, report settings.
+
+The user-facing ones (units, site, simplification, building) are declared with the other
+options in :data:`loceval.options.OPTIONS`; :class:`Units` is re-exported from there.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import StrEnum
 from pathlib import Path
 
 from loceval.geometry import SimilarityTransform
+from loceval.options import Units, choice_default, number_default
 
 __all__ = ["ExportOptions", "Units"]
 
-
-class Units(StrEnum):
-    """Length units of CAD output."""
-
-    MM = "mm"
-    CM = "cm"
-    M = "m"
-
-    @property
-    def per_metre(self) -> float:
-        """How many of these units make a metre."""
-        return {"mm": 1000.0, "cm": 100.0, "m": 1.0}[self.value]
+_DEFAULT_UNITS = Units(choice_default("units"))
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,9 +33,9 @@ class ExportOptions:
         templates_dir: where the report templates live (``templates/`` by default).
     """
 
-    units: Units = Units.MM
+    units: Units = _DEFAULT_UNITS
     site: SimilarityTransform = field(default_factory=SimilarityTransform.identity)
-    simplify_m: float = 0.001
+    simplify_m: float = number_default("simplify_m")
     building: Path | None = None
     evaluation_id: str = "local"
     title: str = "loceval evaluation"

@@ -92,7 +92,7 @@ class PathKind(StrEnum):
 
 
 def parse_units(text: str) -> Units:
-    """Parse ``--units`` (``mm``, ``cm`` or ``m``).
+    """Parse the CAD units (``mm``, ``cm`` or ``m``).
 
     Raises:
         ExportOptionsError: another unit.
@@ -101,12 +101,12 @@ def parse_units(text: str) -> Units:
         return Units(text.strip().lower())
     except ValueError:
         choices = ", ".join(u.value for u in Units)
-        msg = f"--units must be one of {choices}, got {text!r}."
-        raise ExportOptionsError(msg) from None
+        msg = f"The CAD units must be one of {choices}, got {text!r}."
+        raise ExportOptionsError(msg, option="units") from None
 
 
 def parse_site(text: str) -> SimilarityTransform:
-    """Parse ``--site "tx ty tz yaw_deg"`` into the evaluation-frame -> model transform.
+    """Parse a site ``"tx ty tz yaw_deg"`` into the evaluation-frame -> model transform.
 
     The translation is in metres (model coordinates of the evaluation frame's origin) and
     the yaw is a rotation about Z in degrees, counter-clockwise seen from above. ``"tx ty
@@ -121,10 +121,10 @@ def parse_site(text: str) -> SimilarityTransform:
         values = []
     if len(values) not in (3, 4) or not all(math.isfinite(v) for v in values):
         msg = (
-            f"--site takes {SITE_FORMAT} (metres, degrees about Z), for example "
+            f"The site transform takes {SITE_FORMAT} (metres, degrees about Z), for example "
             f'"512340.0 5403210.5 112.3 37.5", got {text!r}.'
         )
-        raise ExportOptionsError(msg)
+        raise ExportOptionsError(msg, option="site")
     yaw_deg = values[3] if len(values) == 4 else 0.0
     rotation = Rotation.from_euler("z", yaw_deg, degrees=True).as_matrix()
     return SimilarityTransform(rotation, np.array(values[:3]), 1.0)
@@ -145,7 +145,7 @@ def read_site_matrix(path: Path) -> SimilarityTransform:
         text = Path(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as err:
         msg = f"Cannot read the site matrix file {str(path)!r} ({err}); check the path."
-        raise ExportOptionsError(msg) from err
+        raise ExportOptionsError(msg, option="site_matrix") from err
     return site_from_values(_matrix_numbers(text), where=f"the site matrix file {str(path)!r}")
 
 
@@ -164,7 +164,7 @@ def site_from_values(values: Sequence[float] | None, *, where: str) -> Similarit
             f"{where[0].upper()}{where[1:]} must hold 16 numbers (a 4x4 row-major "
             "matrix, or JSON [[...], [...], [...], [...]]); check its contents."
         )
-        raise ExportOptionsError(msg)
+        raise ExportOptionsError(msg, option="site_matrix")
     matrix = np.array(values, dtype=np.float64).reshape(4, 4)
     if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]) and np.allclose(
         matrix[:, 3], [0.0, 0.0, 0.0, 1.0]
@@ -173,11 +173,11 @@ def site_from_values(values: Sequence[float] | None, *, where: str) -> Similarit
             f"The matrix of {where} looks column-major (glTF/three.js order); "
             "write it row by row with the translation in the last column."
         )
-        raise ExportOptionsError(msg)
+        raise ExportOptionsError(msg, option="site_matrix")
     det = float(np.linalg.det(matrix[:3, :3]))
     if abs(det) < 1e-12:
         msg = f"The matrix of {where} is singular (det={det:.3g}); check its values."
-        raise ExportOptionsError(msg)
+        raise ExportOptionsError(msg, option="site_matrix")
     try:
         return SimilarityTransform.from_matrix(matrix)
     except InputError as err:
@@ -185,7 +185,7 @@ def site_from_values(values: Sequence[float] | None, *, where: str) -> Similarit
             f"The matrix of {where} is not a rotation with uniform scale and a "
             f"translation ({err}); check its values."
         )
-        raise ExportOptionsError(msg) from err
+        raise ExportOptionsError(msg, option="site_matrix") from err
 
 
 def _matrix_numbers(text: str) -> list[float] | None:
@@ -220,19 +220,22 @@ def check_options(options: ExportOptions) -> None:
     parse_units(str(options.units))  # a plain string passed for Units must still be valid
     if not (math.isfinite(options.simplify_m) and options.simplify_m >= 0.0):
         msg = (
-            f"--simplify must be zero or a positive number of metres, got "
+            f"The simplification tolerance must be zero or a positive number of metres, got "
             f"{options.simplify_m!r}; use 0 to keep every pose."
         )
-        raise ExportOptionsError(msg)
+        raise ExportOptionsError(msg, option="simplify_m")
     building = options.building
     if building is not None:
         if building.suffix.lower() not in BUILDING_SUFFIXES:
             kinds = ", ".join(s.lstrip(".").upper() for s in BUILDING_SUFFIXES)
-            msg = f"--building {str(building)!r} is not a supported mesh; export it as {kinds}."
-            raise ExportOptionsError(msg)
+            msg = (
+                f"The building model {str(building)!r} is not a supported mesh; export it "
+                f"as {kinds}."
+            )
+            raise ExportOptionsError(msg, option="building")
         if not building.is_file():
-            msg = f"--building {str(building)!r} does not exist; check the path."
-            raise ExportOptionsError(msg)
+            msg = f"The building model {str(building)!r} does not exist; check the path."
+            raise ExportOptionsError(msg, option="building")
 
 
 # --- names and colours -----------------------------------------------------------------

@@ -18,13 +18,13 @@ Methods:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import StrEnum
 
 import numpy as np
 
 from loceval._typing import FloatArray, StampsNs
 from loceval.errors import AlignmentError
 from loceval.geometry import SimilarityTransform
+from loceval.options import AlignMethod
 from loceval.trajectory import MAX_SPAN_S, Trajectory
 
 __all__ = [
@@ -41,17 +41,6 @@ __all__ = [
 _NS_PER_S = 1_000_000_000
 _RANK_TOLERANCE = 1e-9
 """Relative size below which a singular value of the cross-covariance counts as zero."""
-
-
-class AlignMethod(StrEnum):
-    """How the estimate is brought into the reference's frame."""
-
-    SE3 = "se3"
-    SIM3 = "sim3"
-    ORIGIN = "origin"
-    YAW = "yaw"
-    CALIBRATE = "calibrate"
-    NONE = "none"
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,11 +71,14 @@ class AlignWindow:
                 return cls(seconds=seconds)
             poses = int(raw)
         except ValueError:
-            msg = f"--align-first takes a number of poses or seconds like 100 or 5s, got {text!r}."
-            raise AlignmentError(msg) from None
+            msg = (
+                f"The alignment window takes a number of poses or seconds like 100 or 5s, "
+                f"got {text!r}."
+            )
+            raise AlignmentError(msg, option="align_first") from None
         if poses < 1:
-            msg = f"--align-first needs at least one pose, got {text!r}."
-            raise AlignmentError(msg)
+            msg = f"The alignment window needs at least one pose, got {text!r}."
+            raise AlignmentError(msg, option="align_first")
         return cls(poses=poses)
 
     def __str__(self) -> str:
@@ -170,14 +162,18 @@ def align(
     if method in {AlignMethod.ORIGIN, AlignMethod.CALIBRATE, AlignMethod.NONE} and (
         window.poses is not None or window.seconds is not None
     ):
-        notes.append(f"--align-first {window} is ignored by --align {method.value}.")
+        notes.append(
+            f"The alignment window ({window}) is ignored by the alignment method '{method.value}'."
+        )
         window = AlignWindow()
     if method is AlignMethod.CALIBRATE:
         index = _calibration_index(estimate, calibrate_at_s)
         transform = align_calibrate(reference, estimate, index=index)
         return Alignment(method, transform, 1, window, tuple(notes))
     if calibrate_at_s is not None:
-        notes.append("--calibrate-at is only used by --align calibrate; ignored.")
+        notes.append(
+            "The calibration time is only used by the alignment method 'calibrate'; ignored."
+        )
     if method is AlignMethod.NONE:
         return Alignment(method, SimilarityTransform.identity(), 0, window, tuple(notes))
     if method is AlignMethod.ORIGIN:
@@ -211,8 +207,11 @@ def align_umeyama(
     """
     n = src_xyz.shape[0]
     if n < 3:
-        msg = f"Umeyama alignment needs at least 3 matched poses, got {n}; use --align origin."
-        raise AlignmentError(msg)
+        msg = (
+            f"Umeyama alignment needs at least 3 matched poses, got {n}; use the alignment "
+            "method 'origin'."
+        )
+        raise AlignmentError(msg, option="align")
     mu_src = src_xyz.mean(axis=0)
     mu_dst = dst_xyz.mean(axis=0)
     src_c = src_xyz - mu_src
@@ -223,10 +222,10 @@ def align_umeyama(
     if d[0] <= 0.0 or d[1] <= _RANK_TOLERANCE * d[0]:
         msg = (
             f"The {n} matched positions lie on a line (or a point), so the rotation about "
-            "it is undetermined; use a path that turns, --align yaw, --align origin, or "
-            "--align calibrate."
+            "it is undetermined; use a path that turns, or the alignment method 'yaw', "
+            "'origin' or 'calibrate'."
         )
-        raise AlignmentError(msg)
+        raise AlignmentError(msg, option="align")
     S = np.eye(3)
     if np.linalg.det(U) * np.linalg.det(Vt) < 0:  # eq. 39: reflection guard
         S[2, 2] = -1.0
@@ -251,8 +250,11 @@ def align_yaw(src_xyz: FloatArray, dst_xyz: FloatArray) -> SimilarityTransform:
     """
     n = src_xyz.shape[0]
     if n < 2:
-        msg = f"Yaw alignment needs at least 2 matched poses, got {n}; use --align origin."
-        raise AlignmentError(msg)
+        msg = (
+            f"Yaw alignment needs at least 2 matched poses, got {n}; use the alignment method "
+            "'origin'."
+        )
+        raise AlignmentError(msg, option="align")
     mu_src = src_xyz.mean(axis=0)
     mu_dst = dst_xyz.mean(axis=0)
     a = src_xyz[:, :2] - mu_src[:2]
@@ -263,9 +265,9 @@ def align_yaw(src_xyz: FloatArray, dst_xyz: FloatArray) -> SimilarityTransform:
     if np.hypot(cross, dot) <= _RANK_TOLERANCE * max(float((a**2).sum()), 1e-300):
         msg = (
             "The matched positions have no horizontal extent, so the yaw is undetermined; "
-            "use --align origin or --align calibrate."
+            "use the alignment method 'origin' or 'calibrate'."
         )
-        raise AlignmentError(msg)
+        raise AlignmentError(msg, option="align")
     theta = np.arctan2(cross, dot)
     c, s = np.cos(theta), np.sin(theta)
     rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
@@ -296,10 +298,10 @@ def align_calibrate(
     if reference.quat_xyzw is None or estimate.quat_xyzw is None:
         side = "reference" if reference.quat_xyzw is None else "estimate"
         msg = (
-            f"--align calibrate needs orientations, but the {side} is position-only; "
-            "use --align origin, se3 or yaw."
+            f"The alignment method 'calibrate' needs orientations, but the {side} is "
+            "position-only; use the alignment method 'origin', 'se3' or 'yaw'."
         )
-        raise AlignmentError(msg)
+        raise AlignmentError(msg, option="align")
     Q = SimilarityTransform.from_pose(reference.positions_xyz[index], reference.quat_xyzw[index])
     P = SimilarityTransform.from_pose(estimate.positions_xyz[index], estimate.quat_xyzw[index])
     return Q.compose(P.inverse())
@@ -309,15 +311,18 @@ def _calibration_index(estimate: Trajectory, calibrate_at_s: float | None) -> in
     if calibrate_at_s is None:
         return 0
     if not np.isfinite(calibrate_at_s) or calibrate_at_s < 0:
-        msg = f"--calibrate-at takes seconds after the first matched pose, got {calibrate_at_s!r}."
-        raise AlignmentError(msg)
+        msg = (
+            f"The calibration time takes seconds after the first matched pose, got "
+            f"{calibrate_at_s!r}."
+        )
+        raise AlignmentError(msg, option="calibrate_at_s")
     target = estimate.stamps_ns[0] + round(calibrate_at_s * _NS_PER_S)
     if target > estimate.stamps_ns[-1]:
         msg = (
-            f"--calibrate-at {calibrate_at_s:g} s is after the last matched pose "
-            f"({estimate.duration_s:.3f} s after the first)."
+            f"The calibration time {calibrate_at_s:g} s is after the last matched pose "
+            f"({estimate.duration_s:.3f} s after the first); choose an earlier time."
         )
-        raise AlignmentError(msg)
+        raise AlignmentError(msg, option="calibrate_at_s")
     i = int(np.searchsorted(estimate.stamps_ns, target))
     if i > 0 and target - estimate.stamps_ns[i - 1] <= estimate.stamps_ns[i] - target:
         i -= 1

@@ -14,13 +14,13 @@ Two methods, both ``O((n + m) log m)`` with :func:`numpy.searchsorted`:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import StrEnum
 
 import numpy as np
 
 from loceval._typing import FloatArray, IntArray, StampsNs
 from loceval.errors import AssociationError
 from loceval.geometry import slerp_pairs
+from loceval.options import AssociationMethod, number_default
 from loceval.trajectory import Trajectory
 
 __all__ = [
@@ -31,17 +31,10 @@ __all__ = [
     "associate",
 ]
 
-DEFAULT_MAX_DT_NS = 10_000_000
+DEFAULT_MAX_DT_NS = round(number_default("max_dt_s") * 1_000_000_000)
 """0.01 s: the TUM benchmark's and evo's default for nearest-stamp matching."""
-DEFAULT_MAX_GAP_NS = 100_000_000
+DEFAULT_MAX_GAP_NS = round(number_default("max_gap_s") * 1_000_000_000)
 """0.1 s: a longer interval between reference poses is tracking loss, never bridged."""
-
-
-class AssociationMethod(StrEnum):
-    """How estimate poses find their reference pose."""
-
-    INTERPOLATE = "interpolate"
-    NEAREST = "nearest"
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -132,9 +125,9 @@ def associate(
             f"reference {reference.name!r} ({method.value}, max_dt={max_dt_ns / 1e9:g} s, "
             f"max_gap={max_gap_ns / 1e9:g} s, time offset {offset_ns / 1e9:g} s); reference "
             f"covers {_span(t_ref)}, estimate (with offset) covers {_span(t_est)}; check "
-            "that both record the same run in the same clock, or set --time-offset."
+            "that both record the same run in the same clock, or set the time offset."
         )
-        raise AssociationError(msg)
+        raise AssociationError(msg, option="time_offset_s")
     matched_est = shifted.select(est_idx)
     positions, quats = ref_pose
     matched_ref = Trajectory(

@@ -12,17 +12,10 @@ import numpy as np
 from loceval._typing import BoolArray, IntArray
 from loceval._version import __version__
 from loceval.alignment import Alignment, AlignMethod, AlignWindow, align
-from loceval.association import (
-    DEFAULT_MAX_DT_NS,
-    DEFAULT_MAX_GAP_NS,
-    Association,
-    AssociationMethod,
-    associate,
-)
+from loceval.association import Association, AssociationMethod, associate
 from loceval.errors import InputError
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import (
-    DEFAULT_THRESHOLDS_M,
     ErrorSeries,
     RPEUnit,
     WorstPose,
@@ -33,7 +26,13 @@ from loceval.metrics import (
     rpe_pairs,
     share_within,
 )
-from loceval.trajectory import MAX_SPAN_S, Trajectory
+from loceval.options import (
+    DEFAULT_THRESHOLDS_M,
+    check_option,
+    choice_default,
+    number_default,
+)
+from loceval.trajectory import Trajectory
 
 __all__ = [
     "EstimateResult",
@@ -47,6 +46,12 @@ __all__ = [
 ]
 
 _NS_PER_S = 1_000_000_000
+
+_RPE_UNIT_WORDS = {RPEUnit.FRAMES: "frames", RPEUnit.METRES: "metres", RPEUnit.SECONDS: "seconds"}
+
+_DEFAULT_ASSOCIATION = AssociationMethod(choice_default("association"))
+_DEFAULT_ALIGN = AlignMethod(choice_default("align"))
+_DEFAULT_RPE_UNIT = RPEUnit(choice_default("rpe_unit"))
 
 ProgressCallback = Callable[[str, float], None]
 """Called with a stage name and the fraction of the evaluation done (0..1)."""
@@ -66,10 +71,10 @@ class Tolerance:
         """Check the values."""
         if not (np.isfinite(self.distance_m) and self.distance_m > 0):
             msg = f"The tolerance distance must be positive metres, got {self.distance_m!r}."
-            raise InputError(msg)
+            raise InputError(msg, option="tolerance")
         if not (0.0 < self.share <= 1.0):
             msg = f"The tolerance share must be in (0, 100] percent, got {self.share * 100!r}."
-            raise InputError(msg)
+            raise InputError(msg, option="tolerance")
 
     @classmethod
     def parse(cls, text: str) -> Tolerance:
@@ -86,10 +91,10 @@ class Tolerance:
             share = float(match.group(2)) / 100.0 if match.group(2) else 0.95
         except ValueError:
             msg = (
-                f"--tolerance takes METRES@PERCENT like 0.10@95 (95 % of poses within "
+                f"The tolerance takes METRES@PERCENT like 0.10@95 (95 % of poses within "
                 f"0.10 m), got {text!r}."
             )
-            raise InputError(msg) from None
+            raise InputError(msg, option="tolerance") from None
         return cls(distance, share)
 
     def __str__(self) -> str:
@@ -172,48 +177,39 @@ class EvaluationConfig:
         worst_count: how many greatest errors to list.
     """
 
-    association: AssociationMethod = AssociationMethod.INTERPOLATE
-    max_dt_s: float = DEFAULT_MAX_DT_NS / _NS_PER_S
-    max_gap_s: float = DEFAULT_MAX_GAP_NS / _NS_PER_S
-    time_offset_s: float = 0.0
-    align: AlignMethod = AlignMethod.SE3
+    association: AssociationMethod = _DEFAULT_ASSOCIATION
+    max_dt_s: float = number_default("max_dt_s")
+    max_gap_s: float = number_default("max_gap_s")
+    time_offset_s: float = number_default("time_offset_s")
+    align: AlignMethod = _DEFAULT_ALIGN
     align_first: AlignWindow = field(default_factory=AlignWindow)
     calibrate_at_s: float | None = None
     reference_offset: SimilarityTransform | None = None
-    rpe_delta: float = 1
-    rpe_unit: RPEUnit = RPEUnit.FRAMES
+    rpe_delta: float = number_default("rpe_delta")
+    rpe_unit: RPEUnit = _DEFAULT_RPE_UNIT
     rpe_all_pairs: bool = False
     thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
     tolerance: Tolerance | None = None
-    worst_count: int = 10
+    worst_count: int = round(number_default("worst"))
 
     def __post_init__(self) -> None:
-        """Check the values a user can get wrong."""
-        spans = {"--max-dt": self.max_dt_s, "--max-gap": self.max_gap_s}
-        spans["--time-offset"] = self.time_offset_s
+        """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
+
+        Raises:
+            InputError: a value out of bounds; the error carries the option's key.
+        """
+        check_option("max_dt_s", self.max_dt_s, unit="seconds")
+        check_option("max_gap_s", self.max_gap_s, unit="seconds")
+        check_option("time_offset_s", self.time_offset_s, unit="seconds")
         if self.calibrate_at_s is not None:
-            spans["--calibrate-at"] = self.calibrate_at_s
-        if self.rpe_unit is RPEUnit.SECONDS:
-            spans["--rpe-delta"] = self.rpe_delta
-        for name, value in spans.items():
-            if not (np.isfinite(value) and abs(value) <= MAX_SPAN_S):
-                msg = (
-                    f"{name} must be a finite number of seconds within ±{MAX_SPAN_S:g}, "
-                    f"got {value!r}."
-                )
-                raise InputError(msg)
-        if self.max_dt_s < 0 or self.max_gap_s < 1e-9:
-            msg = (
-                f"--max-dt must not be negative and --max-gap at least 1 ns, got "
-                f"{self.max_dt_s!r} and {self.max_gap_s!r}."
-            )
-            raise InputError(msg)
-        if any(not (np.isfinite(t) and t > 0) for t in self.thresholds_m):
-            msg = f"--thresholds must be positive metres, got {self.thresholds_m!r}."
-            raise InputError(msg)
-        if self.worst_count < 0:
-            msg = f"--worst must not be negative, got {self.worst_count!r}."
-            raise InputError(msg)
+            check_option("calibrate_at_s", self.calibrate_at_s, unit="seconds")
+        check_option("rpe_delta", self.rpe_delta, unit=_RPE_UNIT_WORDS[self.rpe_unit])
+        for threshold in self.thresholds_m:
+            check_option("thresholds_m", threshold, unit="metres")
+        check_option("worst", self.worst_count)
+        if self.max_gap_s < 1e-9:
+            msg = f"The maximum gap must be at least 1 ns, got {self.max_gap_s!r} s."
+            raise InputError(msg, option="max_gap_s")
 
     def to_dict(self) -> dict[str, object]:
         """Return the options as JSON (for the report's provenance)."""
@@ -339,15 +335,15 @@ def parse_offset(text: str) -> SimilarityTransform:
         values = []
     if len(values) not in (3, 7) or not np.isfinite(values).all():
         msg = (
-            f'--offset takes "x y z qx qy qz qw" in metres and a unit quaternion '
+            f'The device offset takes "x y z qx qy qz qw" in metres and a unit quaternion '
             f'(or just "x y z"), got {text!r}.'
         )
-        raise InputError(msg)
+        raise InputError(msg, option="offset")
     quat = np.array(values[3:] if len(values) == 7 else [0.0, 0.0, 0.0, 1.0])
     norm = float(np.linalg.norm(quat))
     if abs(norm - 1.0) > 1e-3:
-        msg = f"--offset quaternion must be unit (x y z w), its norm is {norm:.6g}."
-        raise InputError(msg)
+        msg = f"The device offset's quaternion must be unit (x y z w), its norm is {norm:.6g}."
+        raise InputError(msg, option="offset")
     return SimilarityTransform.from_pose(np.array(values[:3]), quat / norm)
 
 

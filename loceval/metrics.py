@@ -10,13 +10,13 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from enum import StrEnum
 
 import numpy as np
 
 from loceval._typing import FloatArray, IntArray, StampsNs
 from loceval.errors import MetricError
 from loceval.geometry import compose_quat, conjugate_quat, relative_angle_deg
+from loceval.options import DEFAULT_THRESHOLDS_M, RPEUnit
 from loceval.rotation import Rotation
 from loceval.trajectory import Trajectory
 
@@ -35,8 +35,6 @@ __all__ = [
     "share_within",
 ]
 
-DEFAULT_THRESHOLDS_M: tuple[float, ...] = (0.05, 0.10, 0.15)
-"""The reference-system paper's Fig. 7 thresholds."""
 
 _NS_PER_S = 1_000_000_000
 
@@ -134,14 +132,6 @@ class ErrorSeries:
         return sorted_values, shares
 
 
-class RPEUnit(StrEnum):
-    """What the RPE delta counts."""
-
-    FRAMES = "frames"
-    METRES = "m"
-    SECONDS = "s"
-
-
 @dataclass(frozen=True, slots=True)
 class WorstPose:
     """One of the greatest errors: where and when.
@@ -212,11 +202,11 @@ def rpe_pairs(
     n = len(reference)
     if not (np.isfinite(delta) and delta > 0):
         msg = f"The RPE delta must be positive, got {delta!r}."
-        raise MetricError(msg)
+        raise MetricError(msg, option="rpe_delta")
     if unit is RPEUnit.FRAMES:
         if delta != int(delta):
             msg = f"An RPE delta in frames must be a whole number, got {delta!r}."
-            raise MetricError(msg)
+            raise MetricError(msg, option="rpe_delta")
         step = int(delta)
         starts = np.arange(0, n - step, 1 if all_pairs else step)
         return starts, starts + step
@@ -277,9 +267,9 @@ def compute_rpe(
         msg = (
             f"The RPE delta {delta:g} {unit.value} is longer than the matched trajectory "
             f"({len(reference)} poses, {reference.length_m:.2f} m, "
-            f"{reference.duration_s:.2f} s); choose a smaller --rpe-delta."
+            f"{reference.duration_s:.2f} s); choose a smaller RPE delta."
         )
-        raise MetricError(msg)
+        raise MetricError(msg, option="rpe_delta")
     stamps = reference.stamps_ns[i]
     q_pos, p_pos = reference.positions_xyz, aligned.positions_xyz
     if reference.quat_xyzw is None or aligned.quat_xyzw is None:

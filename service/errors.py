@@ -8,7 +8,6 @@ routes and wrong methods are rendered the same way, so a client parses one error
 from __future__ import annotations
 
 import logging
-import re
 import uuid
 from collections.abc import Mapping
 from typing import Any, ClassVar, Final
@@ -128,40 +127,17 @@ def problem(
     return {"type": type_, "title": title, "status": status, "detail": detail, **extra}
 
 
-_OPTION_NAMES: Final = {
-    "--align-first": "align_first",
-    "--align": "align",
-    "--associate": "association",
-    "--calibrate-at": "calibrate_at_s",
-    "--max-dt": "max_dt_s",
-    "--max-gap": "max_gap_s",
-    "--offset": "offset",
-    "--rpe-delta": "rpe_delta",
-    "--simplify": "simplify_m",
-    "--site-matrix": "site_matrix",
-    "--site": "site",
-    "--stamp": "stamp",
-    "--thresholds": "thresholds_m",
-    "--time-offset": "time_offset_s",
-    "--tolerance": "tolerance",
-    "--units": "units",
-    "--worst": "worst",
-}
-_FLAG: Final = re.compile(r"(?<![\w-])--[a-z][a-z-]*[a-z]")
-
-
-def api_wording(message: str) -> str:
-    """Name options as the API does (the core says ``--time-offset``: ``time_offset_s``)."""
-    return _FLAG.sub(
-        lambda m: f"options.{_OPTION_NAMES[m.group(0)]}" if m.group(0) in _OPTION_NAMES
-        else m.group(0),
-        message,
-    )  # fmt: skip
-
-
 def problem_for(exc: LocevalError) -> dict[str, Any]:
-    """Return the problem document of a domain error (also stored with failed jobs)."""
-    return problem(status_for(exc), exc.code, type(exc).__name__, api_wording(str(exc)))
+    """Return the problem document of a domain error (also stored with failed jobs).
+
+    An error about an option names it as the API does: ``options.max_dt_s: ...`` in the
+    detail, and ``"option": "options.max_dt_s"`` as a member a client can point at.
+    """
+    if exc.option is None:
+        return problem(status_for(exc), exc.code, type(exc).__name__, str(exc))
+    name = f"options.{exc.option}"
+    detail = f"{name}: {exc}"
+    return problem(status_for(exc), exc.code, type(exc).__name__, detail, option=name)
 
 
 def internal_problem(error_id: str | None = None) -> dict[str, Any]:

@@ -11,7 +11,7 @@ from loceval.errors import InputError
 from service.db import Dataset, Evaluation, EvaluationStatus, get_owned, utcnow
 from service.errors import NotFoundError, ServiceUnavailableError
 from service.jobs import Runtime
-from service.pipeline import build_config, build_export_options, offset_or_none
+from service.options import config_from_options, export_from_options, offset_or_none
 from service.schemas import (
     ArtifactPublic,
     EvaluationCreate,
@@ -98,23 +98,8 @@ def check_options(options: EvaluationOptions) -> None:
     if options.device is not None and options.offset:
         msg = "Give the device offset either as offset or as device, not both."
         raise InputError(msg)
-    build_config(
-        association=options.association,
-        align=options.align,
-        align_first=options.align_first,
-        reference_offset=offset_or_none(options.offset),
-        rpe_unit=options.rpe_unit,
-        thresholds_m=options.thresholds_m,
-        tolerance=options.tolerance,
-    )
-    build_export_options(
-        units=options.units,
-        site=options.site,
-        site_matrix=None
-        if options.site_matrix is None
-        else [v for row in options.site_matrix for v in row],
-        simplify_m=options.simplify_m,
-    )
+    config_from_options(options, reference_offset=offset_or_none(options.offset))
+    export_from_options(options)
 
 
 def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:

@@ -42,16 +42,14 @@ from service.db import (
     utcnow,
 )
 from service.errors import internal_problem, problem, problem_for
-from service.pipeline import (
-    Job,
-    JobSource,
+from service.options import (
     config_from_options,
     device_offset,
     export_from_options,
-    file_provenance,
     offset_or_none,
-    run_job,
 )
+from service.runner import Job, JobSource, file_provenance, run_job
+from service.schemas import EvaluationOptions
 from service.settings import Settings
 from service.storage import BlobStore
 
@@ -383,21 +381,21 @@ class Heartbeat:
 
 def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     request = evaluation.request
-    options: dict[str, Any] = request.get("options", {})
+    options = EvaluationOptions.model_validate(request.get("options", {}))
     reference = _source(session, runtime, evaluation.project_id, request["reference"], "reference")
     estimates = [
         _source(session, runtime, evaluation.project_id, e, "estimate")
         for e in request["estimates"]
     ]
-    offset = offset_or_none(options.get("offset"))
-    device = options.get("device")
+    offset = offset_or_none(options.offset)
+    device = options.device
     if device:
-        dataset = _dataset(session, evaluation.project_id, device["dataset_id"])
+        dataset = _dataset(session, evaluation.project_id, device.dataset_id)
         offset = device_offset(
             runtime.store.path(dataset.storage_path),
-            from_link=device["from_link"],
-            to_link=device["to_link"],
-            offset=options.get("offset"),
+            from_link=device.from_link,
+            to_link=device.to_link,
+            offset=options.offset,
         )
     config = config_from_options(options, reference_offset=offset)
     export = export_from_options(options, evaluation_id=evaluation.id)
@@ -405,9 +403,9 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
         reference=reference,
         estimates=estimates,
         config=config,
-        stamp=options.get("stamp", "header"),
+        stamp=options.stamp,
         export=export,
-        formats=options.get("formats"),
+        formats=options.formats,
     )
 
 

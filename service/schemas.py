@@ -5,10 +5,11 @@ from __future__ import annotations
 import datetime as dt
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, GetCoreSchemaHandler, field_validator
+from pydantic_core import core_schema
 
 from exporters import ARTIFACTS
-from loceval.metrics import DEFAULT_THRESHOLDS_M
+from loceval.options import OptionKind, option
 
 __all__ = [
     "ArtifactPublic",
@@ -76,48 +77,82 @@ class DeviceOffset(_Strict):
     to_link: Annotated[str, Field(min_length=1, max_length=200)]
 
 
-class EvaluationOptions(_Strict):
-    """The CLI's options (``loceval evaluate --help``), with the same defaults."""
+class _Choices:
+    """``Annotated`` metadata: the value is one of the option's choices (a JSON ``enum``)."""
 
-    association: Literal["interpolate", "nearest"] = "interpolate"
-    max_dt_s: Annotated[_Finite, Field(gt=0, le=3600)] = 0.01
-    max_gap_s: Annotated[_Finite, Field(gt=0, le=1e6)] = 0.1
-    time_offset_s: Annotated[_Finite, Field(ge=-1e9, le=1e9)] = 0.0
-    stamp: Literal["header", "receive"] = "header"
-    align: Literal["se3", "sim3", "origin", "yaw", "calibrate", "none"] = "se3"
-    align_first: (
-        Annotated[str, Field(pattern=r"^\s*\d+(\.\d+)?\s*s?\s*$", max_length=32)] | None
-    ) = Field(default=None, description="align on the first N poses or N seconds (10s)")
-    calibrate_at_s: Annotated[_Finite, Field(ge=0, le=1e9)] | None = None
-    offset: Annotated[str, Field(max_length=300)] | None = Field(
-        default=None, description='rigid body -> sensor "x y z qx qy qz qw"'
-    )
-    device: DeviceOffset | None = None
-    rpe_delta: Annotated[_Finite, Field(gt=0, le=1e9)] = 1.0
-    rpe_unit: Literal["frames", "m", "s"] = "frames"
-    rpe_all_pairs: bool = False
-    thresholds_m: Annotated[list[Annotated[_Finite, Field(gt=0, le=1e6)]], Field(max_length=20)] = (
-        Field(default_factory=lambda: list(DEFAULT_THRESHOLDS_M))
-    )
-    tolerance: Annotated[str, Field(max_length=40, examples=["0.10@95"])] | None = None
-    worst: Annotated[int, Field(ge=0, le=1000)] = 10
-    units: Literal["mm", "cm", "m"] = "mm"
-    site: Annotated[str, Field(max_length=200, examples=["12.5 3.2 0 90"])] | None = None
-    site_matrix: (
-        Annotated[
-            list[Annotated[list[_Finite], Field(min_length=4, max_length=4)]],
-            Field(min_length=4, max_length=4),
-        ]
-        | None
-    ) = None
-    simplify_m: Annotated[_Finite, Field(ge=0, le=1000)] = 0.001
-    formats: (
-        Annotated[
-            list[Annotated[str, Field(max_length=40, json_schema_extra={"enum": list(ARTIFACTS)})]],
-            Field(min_length=1, max_length=20),
-        ]
-        | None
-    ) = Field(default=None, description=f"artifacts to write (default: all of {list(ARTIFACTS)})")
+    def __init__(self, key: str) -> None:
+        self.choices = [str(c) for c in option(key).choices]
+
+    def __get_pydantic_core_schema__(
+        self, _source: type[Any], _handler: GetCoreSchemaHandler
+    ) -> core_schema.CoreSchema:
+        return core_schema.literal_schema(self.choices)
+
+
+def _bounds(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any by pydantic)
+    """Return the bounds of a number (or of each item of a list) of the options table."""
+    spec = option(key)
+    if spec.exclusive_minimum:
+        return Field(allow_inf_nan=False, gt=spec.minimum, le=spec.maximum)
+    return Field(allow_inf_nan=False, ge=spec.minimum, le=spec.maximum)
+
+
+def _field(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any by pydantic)
+    """Return the field of an option: default, description, bounds, lengths and example."""
+    spec = option(key)
+    extra: dict[str, Any] = {}
+    if spec.kind in {OptionKind.NUMBER, OptionKind.INTEGER}:
+        extra["le"] = spec.maximum
+        extra["gt" if spec.exclusive_minimum else "ge"] = spec.minimum
+    if spec.kind is OptionKind.NUMBER:
+        extra["allow_inf_nan"] = False
+    if spec.kind in {OptionKind.TEXT, OptionKind.NUMBERS, OptionKind.NAMES}:
+        extra["max_length"] = spec.max_length
+    if spec.kind is OptionKind.NAMES:
+        extra["min_length"] = spec.min_length
+    if spec.pattern is not None:
+        extra["pattern"] = spec.pattern
+    if spec.example is not None:
+        extra["examples"] = [spec.example]
+    default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
+    return Field(default=default, description=spec.help, **extra)  # pydantic copies a list
+
+
+_Matrix4 = Annotated[
+    list[Annotated[list[_Finite], Field(min_length=4, max_length=4)]],
+    Field(min_length=4, max_length=4),
+]
+_Artifact = Annotated[str, Field(max_length=40, json_schema_extra={"enum": list(ARTIFACTS)})]
+
+
+class EvaluationOptions(_Strict):
+    """The evaluation options, as ``POST /evaluations`` takes them.
+
+    Every field's default, bounds, choices and help come from :data:`loceval.options.OPTIONS`
+    (the CLI's flags are built from the same table); the annotations give the JSON types.
+    """
+
+    association: Annotated[str, _Choices("association")] = _field("association")
+    max_dt_s: float = _field("max_dt_s")
+    max_gap_s: float = _field("max_gap_s")
+    time_offset_s: float = _field("time_offset_s")
+    stamp: Annotated[str, _Choices("stamp")] = _field("stamp")
+    align: Annotated[str, _Choices("align")] = _field("align")
+    align_first: str | None = _field("align_first")
+    calibrate_at_s: float | None = _field("calibrate_at_s")
+    offset: str | None = _field("offset")
+    device: DeviceOffset | None = _field("device")
+    rpe_delta: float = _field("rpe_delta")
+    rpe_unit: Annotated[str, _Choices("rpe_unit")] = _field("rpe_unit")
+    rpe_all_pairs: bool = _field("rpe_all_pairs")
+    thresholds_m: list[Annotated[float, _bounds("thresholds_m")]] = _field("thresholds_m")
+    tolerance: str | None = _field("tolerance")
+    worst: int = _field("worst")
+    units: Annotated[str, _Choices("units")] = _field("units")
+    site: str | None = _field("site")
+    site_matrix: _Matrix4 | None = _field("site_matrix")
+    simplify_m: float = _field("simplify_m")
+    formats: list[_Artifact] | None = _field("formats")
 
     @field_validator("formats")
     @classmethod

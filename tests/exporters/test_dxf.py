@@ -209,7 +209,7 @@ def test_markers_at_worst_errors_and_gaps(two_estimates: EvaluationResult):
 
 def test_bad_options(two_estimates: EvaluationResult):
     """A negative tolerance is an options error, before anything is drawn."""
-    with pytest.raises(ExportOptionsError, match="--simplify"):
+    with pytest.raises(ExportOptionsError, match="simplification tolerance"):
         dxf.export_dxf(two_estimates, ExportOptions(simplify_m=-1.0))
 
 

@@ -232,8 +232,9 @@ def test_bad_building(
     path = tmp_path / name
     if content is not None:
         path.write_bytes(content)
-    with pytest.raises(ExportOptionsError, match=rf"--building .*{name}.* ({match})"):
+    with pytest.raises(ExportOptionsError, match=rf"building model .*{name}.* ({match})") as err:
         gltf.export_glb(two_estimates, ExportOptions(building=path))
+    assert err.value.option == "building"
 
 
 def test_serialization_failure_becomes_export_error(

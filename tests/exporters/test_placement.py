@@ -55,7 +55,7 @@ class TestParseSite:
     @pytest.mark.parametrize("text", ["", "1 2", "a b c d", "1 2 3 4 5", "nan 0 0 0", "1 2 3 inf"])
     def test_rejects_bad_text(self, text):
         """Anything but three or four finite numbers is an options error naming --site."""
-        with pytest.raises(ExportOptionsError, match=r"--site takes .*tx ty tz yaw_deg"):
+        with pytest.raises(ExportOptionsError, match=r"site transform takes .*tx ty tz yaw_deg"):
             parse_site(text)
 
 
@@ -128,13 +128,17 @@ class TestUnitsAndOptions:
 
     def test_unknown_units(self):
         """Feet are not an output unit."""
-        with pytest.raises(ExportOptionsError, match=r"--units must be one of mm, cm, m, got 'ft'"):
+        with pytest.raises(
+            ExportOptionsError, match=r"CAD units must be one of mm, cm, m, got 'ft'"
+        ):
             parse_units("ft")
 
     @pytest.mark.parametrize("value", [-0.001, float("nan"), float("inf")])
     def test_bad_simplify(self, value: float):
         """A negative or non-finite tolerance is an options error naming --simplify."""
-        with pytest.raises(ExportOptionsError, match="--simplify must be zero or a positive"):
+        with pytest.raises(
+            ExportOptionsError, match="simplification tolerance must be zero or a positive"
+        ):
             check_options(ExportOptions(simplify_m=value))
 
     @pytest.mark.parametrize(

@@ -166,7 +166,7 @@ def test_error_coloured_point_cloud(model_file: Path, two_estimates: EvaluationR
 
 def test_bad_options(two_estimates: EvaluationResult):
     """Unknown units are an options error."""
-    with pytest.raises(ExportOptionsError, match="--units must be one of"):
+    with pytest.raises(ExportOptionsError, match="CAD units must be one of"):
         rhino.export_3dm(two_estimates, ExportOptions(units="ft"))  # type: ignore[arg-type]
 
 

@@ -98,9 +98,10 @@ def test_align_first_window(truth: Trajectory) -> None:
 
 @pytest.mark.parametrize("text", ["0", "-3", "abc", "0s", "nans"])
 def test_bad_windows_are_rejected(text: str) -> None:
-    """--align-first takes a positive count or seconds."""
-    with pytest.raises(AlignmentError, match="--align-first"):
+    """The alignment window takes a positive count or seconds."""
+    with pytest.raises(AlignmentError, match="alignment window") as err:
         AlignWindow.parse(text)
+    assert err.value.option == "align_first"
 
 
 def test_collinear_points_are_degenerate() -> None:

@@ -84,9 +84,10 @@ def test_reference_offset_is_applied(rng: np.random.Generator) -> None:
 
 @pytest.mark.parametrize("text", ["1 2", "a b c", "0 0 0 0 0 0 2", "nan 0 0"])
 def test_bad_offsets_are_rejected(text: str) -> None:
-    """--offset needs 3 or 7 finite numbers with a unit quaternion."""
-    with pytest.raises(InputError, match="--offset"):
+    """The device offset needs 3 or 7 finite numbers with a unit quaternion."""
+    with pytest.raises(InputError, match="device offset") as err:
         parse_offset(text)
+    assert err.value.option == "offset"
 
 
 @pytest.mark.parametrize(
@@ -107,17 +108,20 @@ def test_bad_tolerances_are_rejected(text: str) -> None:
 
 
 @pytest.mark.parametrize(
-    ("kwargs", "match"),
+    ("kwargs", "match", "key"),
     [
-        ({"max_dt_s": float("nan")}, "finite"),
-        ({"max_gap_s": 0.0}, "--max-gap"),
-        ({"thresholds_m": (0.1, -1.0)}, "--thresholds"),
+        ({"max_dt_s": float("nan")}, "finite", "max_dt_s"),
+        ({"max_gap_s": 0.0}, "maximum gap", "max_gap_s"),
+        ({"max_gap_s": 1e-300}, "maximum gap must be at least 1 ns", "max_gap_s"),
+        ({"thresholds_m": (0.1, -1.0)}, "thresholds", "thresholds_m"),
+        ({"worst_count": -1}, "number of worst poses", "worst"),
     ],
 )
-def test_bad_config_values_are_rejected(kwargs: dict[str, object], match: str) -> None:
-    """Option values a user can get wrong raise InputError."""
-    with pytest.raises(InputError, match=match):
+def test_bad_config_values_are_rejected(kwargs: dict[str, object], match: str, key: str) -> None:
+    """Option values a user can get wrong raise InputError carrying the option's key."""
+    with pytest.raises(InputError, match=match) as err:
         EvaluationConfig(**kwargs)  # type: ignore[arg-type]
+    assert err.value.option == key
 
 
 def test_no_estimate_is_an_input_error(truth: Trajectory) -> None:

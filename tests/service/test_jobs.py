@@ -143,8 +143,8 @@ def test_bad_input_fails_the_job_with_the_core_message(
     """A LocevalError becomes a failed job with a problem document and no half artifacts."""
 
     def fail(*_args, **_kwargs):
-        msg = f"No overlap in {runtime.store.root}/datasets/{evaluation_id}/est.txt; --time-offset?"
-        raise AssociationError(msg)
+        msg = f"No overlap in {runtime.store.root}/datasets/{evaluation_id}/est.txt; time offset?"
+        raise AssociationError(msg, option="time_offset_s")
 
     monkeypatch.setattr(jobs, "run_job", fail)
     execute_evaluation(runtime, evaluation_id)
@@ -153,7 +153,8 @@ def test_bad_input_fails_the_job_with_the_core_message(
     assert row.error is not None
     assert row.error["type"] == "association.no_matches"
     assert row.error["status"] == 422
-    assert row.error["detail"] == "No overlap in est.txt; options.time_offset_s?"  # API names
+    assert row.error["detail"] == "options.time_offset_s: No overlap in est.txt; time offset?"
+    assert row.error["option"] == "options.time_offset_s"  # the API's name of the option
     assert row.stage == "starting"  # the stage it failed in is kept
     assert not runtime.store.artifacts_dir(evaluation_id).exists()
 

@@ -1,0 +1,484 @@
+"""The one table of evaluation options: key, kind, default, bounds, choices and help of each.
+
+Every front door is built from :data:`OPTIONS`: the CLI's ``loceval evaluate`` flags, the
+HTTP API's ``EvaluationOptions`` schema, and the defaults and checks of
+:class:`~loceval.evaluation.EvaluationConfig`. A key (``max_dt_s``) is what the API and the
+options document call the option; ``flag`` (``--max-dt``) is the CLI's name for it and
+``words`` ("the maximum time difference") is how messages name it without naming a front
+door. Errors about an option carry its key (``InputError(msg, option="max_dt_s")``).
+
+This module is pure Python (no numpy), so the CLI can build its parser without the
+numeric stack; the enums of the choices live here and are re-exported where they are used.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Final
+
+from loceval.errors import InputError
+
+__all__ = [
+    "DEFAULT_THRESHOLDS_M",
+    "OPTIONS",
+    "AlignMethod",
+    "AssociationMethod",
+    "OptionKind",
+    "OptionSpec",
+    "RPEUnit",
+    "StampSource",
+    "Units",
+    "check_option",
+    "choice_default",
+    "number_default",
+    "option",
+]
+
+
+class AssociationMethod(StrEnum):
+    """How estimate poses are matched to reference poses in time."""
+
+    INTERPOLATE = "interpolate"
+    NEAREST = "nearest"
+
+
+class AlignMethod(StrEnum):
+    """How the estimate is brought into the reference's frame."""
+
+    SE3 = "se3"
+    SIM3 = "sim3"
+    ORIGIN = "origin"
+    YAW = "yaw"
+    CALIBRATE = "calibrate"
+    NONE = "none"
+
+
+class RPEUnit(StrEnum):
+    """What the RPE delta counts."""
+
+    FRAMES = "frames"
+    METRES = "m"
+    SECONDS = "s"
+
+
+class StampSource(StrEnum):
+    """Which stamps a bag's poses take: the message header's or the bag's receive time."""
+
+    HEADER = "header"
+    RECEIVE = "receive"
+
+
+class Units(StrEnum):
+    """Length units of CAD output."""
+
+    MM = "mm"
+    CM = "cm"
+    M = "m"
+
+    @property
+    def per_metre(self) -> float:
+        """How many of these units make a metre."""
+        return {"mm": 1000.0, "cm": 100.0, "m": 1.0}[self.value]
+
+
+class OptionKind(StrEnum):
+    """The type of an option's value (each front door spells it its own way)."""
+
+    NUMBER = "number"
+    """A finite float."""
+    INTEGER = "integer"
+    """An int."""
+    SWITCH = "switch"
+    """A bool, false by default (a CLI flag without a value)."""
+    CHOICE = "choice"
+    """One of ``choices``."""
+    TEXT = "text"
+    """A string in the option's own syntax, parsed by the core (``"0.10@95"``)."""
+    NUMBERS = "numbers"
+    """A list of finite floats (the CLI: separated by commas)."""
+    NAMES = "names"
+    """A list of names (the CLI: separated by commas)."""
+    MATRIX = "matrix"
+    """A 4x4 matrix (the CLI: a file holding it)."""
+    DEVICE = "device"
+    """A device file and two links (the API: an uploaded dataset's id and the links)."""
+    FILE = "file"
+    """A local file (CLI only)."""
+
+
+OptionValue = float | int | bool | str | tuple[float, ...] | None
+"""The type of a default."""
+
+
+@dataclass(frozen=True, slots=True)
+class OptionSpec:
+    """One option, as every front door shows it.
+
+    Attributes:
+        key: the option's key (the API's field, the options document's key, ``option=``
+            of errors).
+        kind: the type of its value.
+        default: the value when not given (None: not set).
+        help: one line for ``--help`` and the API schema's description.
+        words: how messages name it, front-door neutral ("the maximum time difference").
+        flag: the CLI's flag.
+        metavar: the CLI's placeholder of the value.
+        minimum: the least value (of each item, for lists), if bounded below.
+        maximum: the greatest value (of each item, for lists), if bounded above.
+        exclusive_minimum: ``minimum`` itself is not allowed.
+        choices: the allowed values of a ``CHOICE``.
+        max_length: the longest text, or the most items of a list.
+        min_length: the fewest items of a list.
+        pattern: a regular expression the text must match (the API checks it).
+        example: an example value for the API's documentation.
+        group: ``evaluation`` (the core's), ``reading`` or ``export``.
+        api: the HTTP API takes it.
+        cli: the CLI takes it.
+    """
+
+    key: str
+    kind: OptionKind
+    default: OptionValue
+    help: str
+    words: str
+    flag: str
+    metavar: str | None = None
+    minimum: float | None = None
+    maximum: float | None = None
+    exclusive_minimum: bool = False
+    choices: tuple[str, ...] = ()
+    max_length: int | None = None
+    min_length: int | None = None
+    pattern: str | None = None
+    example: str | None = None
+    group: str = "evaluation"
+    api: bool = True
+    cli: bool = True
+
+    @property
+    def bounds_text(self) -> str:
+        """Return the allowed range in words: ``"more than 0 and at most 3600"``."""
+        parts = []
+        if self.minimum is not None:
+            below = "more than" if self.exclusive_minimum else "at least"
+            parts.append(f"{below} {self.minimum:g}")
+        if self.maximum is not None:
+            parts.append(f"at most {self.maximum:g}")
+        return " and ".join(parts)
+
+    def within_bounds(self, value: float) -> bool:
+        """Return whether ``value`` is finite and within the bounds."""
+        if not math.isfinite(value):
+            return False
+        if self.minimum is not None and (
+            value < self.minimum or (self.exclusive_minimum and value == self.minimum)
+        ):
+            return False
+        return self.maximum is None or value <= self.maximum
+
+
+DEFAULT_THRESHOLDS_M: Final[tuple[float, ...]] = (0.05, 0.10, 0.15)
+"""The reference-system paper's Fig. 7 thresholds, metres."""
+
+_MAX_S: Final = 1e9
+"""Largest span of seconds an option takes (about 31 years; more is a mistake)."""
+
+OPTIONS: Final[tuple[OptionSpec, ...]] = (
+    OptionSpec(
+        "association",
+        OptionKind.CHOICE,
+        AssociationMethod.INTERPOLATE.value,
+        "how estimate poses are matched to reference poses in time",
+        "the association method",
+        "--associate",
+        choices=tuple(AssociationMethod),
+    ),
+    OptionSpec(
+        "max_dt_s",
+        OptionKind.NUMBER,
+        0.01,
+        "nearest association: the largest time difference of a match, seconds",
+        "the maximum time difference",
+        "--max-dt",
+        "S",
+        minimum=0.0,
+        maximum=3600.0,
+        exclusive_minimum=True,
+    ),
+    OptionSpec(
+        "max_gap_s",
+        OptionKind.NUMBER,
+        0.1,
+        "the longest reference gap bridged by interpolation, seconds",
+        "the maximum gap",
+        "--max-gap",
+        "S",
+        minimum=0.0,
+        maximum=1e6,
+        exclusive_minimum=True,
+    ),
+    OptionSpec(
+        "time_offset_s",
+        OptionKind.NUMBER,
+        0.0,
+        "added to every estimate stamp, seconds",
+        "the time offset",
+        "--time-offset",
+        "S",
+        minimum=-_MAX_S,
+        maximum=_MAX_S,
+    ),
+    OptionSpec(
+        "stamp",
+        OptionKind.CHOICE,
+        StampSource.HEADER.value,
+        "bags: stamps from the message header or the bag's receive time",
+        "the stamp source",
+        "--stamp",
+        choices=tuple(StampSource),
+        group="reading",
+    ),
+    OptionSpec(
+        "align",
+        OptionKind.CHOICE,
+        AlignMethod.SE3.value,
+        "how the estimate is brought into the reference's frame",
+        "the alignment method",
+        "--align",
+        choices=tuple(AlignMethod),
+    ),
+    OptionSpec(
+        "align_first",
+        OptionKind.TEXT,
+        None,
+        "align on the first N poses or N seconds (10s)",
+        "the alignment window",
+        "--align-first",
+        "N|Ns",
+        max_length=32,
+        pattern=r"^\s*\d+(\.\d+)?\s*s?\s*$",
+    ),
+    OptionSpec(
+        "calibrate_at_s",
+        OptionKind.NUMBER,
+        None,
+        "calibrate alignment: seconds after the first matched pose",
+        "the calibration time",
+        "--calibrate-at",
+        "S",
+        minimum=0.0,
+        maximum=_MAX_S,
+    ),
+    OptionSpec(
+        "offset",
+        OptionKind.TEXT,
+        None,
+        'rigid body -> sensor "x y z qx qy qz qw", applied to the reference',
+        "the device offset",
+        "--offset",
+        '"x y z qx qy qz qw"',
+        max_length=300,
+    ),
+    OptionSpec(
+        "device",
+        OptionKind.DEVICE,
+        None,
+        "URDF (or a bag with /tf_static) giving the device offset between two links",
+        "the device file",
+        "--device",
+        "FILE",
+    ),
+    OptionSpec(
+        "rpe_delta",
+        OptionKind.NUMBER,
+        1.0,
+        "the RPE delta (step), in the RPE unit",
+        "the RPE delta",
+        "--rpe-delta",
+        "D",
+        minimum=0.0,
+        maximum=_MAX_S,
+        exclusive_minimum=True,
+    ),
+    OptionSpec(
+        "rpe_unit",
+        OptionKind.CHOICE,
+        RPEUnit.FRAMES.value,
+        "what the RPE step counts: frames, metres or seconds",
+        "the RPE unit",
+        "--rpe-unit",
+        choices=tuple(RPEUnit),
+    ),
+    OptionSpec(
+        "rpe_all_pairs",
+        OptionKind.SWITCH,
+        False,  # noqa: FBT003  (a default, not a flag argument)
+        "every pose starts an RPE pair (default: consecutive segments)",
+        "all RPE pairs",
+        "--rpe-all-pairs",
+    ),
+    OptionSpec(
+        "thresholds_m",
+        OptionKind.NUMBERS,
+        DEFAULT_THRESHOLDS_M,
+        "distances for the share-within figures, metres",
+        "the thresholds",
+        "--thresholds",
+        "M,M,...",
+        minimum=0.0,
+        maximum=1e6,
+        exclusive_minimum=True,
+        max_length=20,
+    ),
+    OptionSpec(
+        "tolerance",
+        OptionKind.TEXT,
+        None,
+        "pass/fail verdict: METRES@PERCENT of poses within, e.g. 0.10@95",
+        "the tolerance",
+        "--tolerance",
+        "M@PCT",
+        max_length=40,
+        example="0.10@95",
+    ),
+    OptionSpec(
+        "worst",
+        OptionKind.INTEGER,
+        10,
+        "how many of the greatest errors are listed",
+        "the number of worst poses",
+        "--worst",
+        "N",
+        minimum=0,
+        maximum=1000,
+    ),
+    OptionSpec(
+        "units",
+        OptionKind.CHOICE,
+        Units.MM.value,
+        "length units of the CAD files",
+        "the CAD units",
+        "--units",
+        choices=tuple(Units),
+        group="export",
+    ),
+    OptionSpec(
+        "site",
+        OptionKind.TEXT,
+        None,
+        'evaluation frame -> model frame "tx ty tz yaw_deg" (metres, degrees about Z)',
+        "the site transform",
+        "--site",
+        '"tx ty tz yaw_deg"',
+        max_length=200,
+        example="12.5 3.2 0 90",
+        group="export",
+    ),
+    OptionSpec(
+        "site_matrix",
+        OptionKind.MATRIX,
+        None,
+        "evaluation frame -> model frame as a 4x4 matrix (the CLI: a file holding it)",
+        "the site matrix",
+        "--site-matrix",
+        "FILE",
+        group="export",
+    ),
+    OptionSpec(
+        "simplify_m",
+        OptionKind.NUMBER,
+        0.001,
+        "largest deviation the CAD polyline simplification may introduce, metres",
+        "the simplification tolerance",
+        "--simplify",
+        "M",
+        minimum=0.0,
+        maximum=1000.0,
+        group="export",
+    ),
+    OptionSpec(
+        "formats",
+        OptionKind.NAMES,
+        None,
+        "artifacts to write (default: all)",
+        "the artifact names",
+        "--formats",
+        "NAME,...",
+        min_length=1,
+        max_length=20,
+        group="export",
+    ),
+    OptionSpec(
+        "building",
+        OptionKind.FILE,
+        None,
+        "a building mesh (OBJ, PLY, STL, GLB) to put in the glTF scene",
+        "the building model",
+        "--building",
+        "FILE",
+        group="export",
+        api=False,
+    ),
+)
+"""Every option, in the order ``--help`` and the API schema list them."""
+
+_BY_KEY: Final[Mapping[str, OptionSpec]] = {spec.key: spec for spec in OPTIONS}
+
+
+def option(key: str) -> OptionSpec:
+    """Return the option named ``key``.
+
+    Raises:
+        KeyError: no such option (a bug: keys are fixed in :data:`OPTIONS`).
+    """
+    return _BY_KEY[key]
+
+
+def number_default(key: str) -> float:
+    """Return the default of a number option.
+
+    Raises:
+        TypeError: the option has no number default (a bug).
+    """
+    default = option(key).default
+    if isinstance(default, bool) or not isinstance(default, int | float):
+        msg = f"Option {key!r} has no number default."
+        raise TypeError(msg)
+    return float(default)
+
+
+def choice_default(key: str) -> str:
+    """Return the default of a choice or text option.
+
+    Raises:
+        TypeError: the option has no text default (a bug).
+    """
+    default = option(key).default
+    if not isinstance(default, str):
+        msg = f"Option {key!r} has no text default."
+        raise TypeError(msg)
+    return default
+
+
+def check_option(key: str, value: float, *, unit: str = "") -> None:
+    """Check a number (or one item of a list) against the option's bounds.
+
+    Args:
+        key: the option's key.
+        value: the value given.
+        unit: the unit named in the message ("seconds").
+
+    Raises:
+        InputError: the value is not finite or out of bounds; the error carries ``key``.
+    """
+    spec = option(key)
+    if spec.within_bounds(value):
+        return
+    what = f"a finite number of {unit}" if unit else "a finite number"
+    bounds = f" {spec.bounds_text}" if spec.bounds_text else ""
+    words = spec.words[0].upper() + spec.words[1:]
+    msg = f"{words} must be {what}{bounds}, got {value!r}."
+    raise InputError(msg, option=key)

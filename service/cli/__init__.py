@@ -1,0 +1,61 @@
+"""The ``loceval`` command line: evaluate, inspect, demo, report, serve, worker, keys.
+
+A :class:`~loceval.errors.LocevalError` prints its message and exits 1 (bad input, no
+traceback); an error about an option is prefixed with the option's flag (``--max-dt: ...``).
+Anything else is a bug: the traceback is printed and the exit code is 2.
+
+Each command lives in its own module, imported only when that command runs: ``loceval
+--help`` loads the parser and the options table, not numpy, pydantic or the service.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import traceback
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, cast
+
+from loceval.errors import LocevalError
+from service.cli.parser import EXIT_BUG, EXIT_INPUT, build_parser
+
+if TYPE_CHECKING:
+    import argparse
+
+__all__ = ["main"]
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit code."""
+    try:
+        args = build_parser().parse_args(argv)
+        return int(_handler(args.handler)(args))
+    except LocevalError as err:
+        print(f"loceval: error: {describe(err)}", file=sys.stderr)  # noqa: T201
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        return 130
+    except Exception:  # noqa: BLE001  (the documented bug path: traceback, exit 2)
+        traceback.print_exc()
+        print(  # noqa: T201
+            "loceval: internal error; this is a bug, please report it with the traceback above.",
+            file=sys.stderr,
+        )
+        return EXIT_BUG
+
+
+def describe(err: LocevalError) -> str:
+    """Return the error's message, prefixed with the flag of the option at fault, if any."""
+    if err.option is None:
+        return str(err)
+    from loceval.options import option  # noqa: PLC0415
+
+    return f"{option(err.option).flag}: {err}"
+
+
+def _handler(target: str) -> Callable[[argparse.Namespace], int]:
+    """Import ``module:function`` of a command (each command's libraries load on use)."""
+    module_name, _, name = target.partition(":")
+    return cast(
+        "Callable[[argparse.Namespace], int]", getattr(importlib.import_module(module_name), name)
+    )

@@ -1,0 +1,125 @@
+"""``loceval evaluate`` and ``loceval demo``: read, evaluate, print, write the artifacts.
+
+The parsed arguments hold the options under the table's keys, so they go to the same
+builders as the API's options (:mod:`service.options`).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import TYPE_CHECKING, cast
+
+from loceval.errors import InputError
+from loceval.readers import TrajectoryFormat, parse_source
+from service.options import (
+    EvaluationValues,
+    ExportValues,
+    config_from_options,
+    device_offset,
+    export_from_options,
+    offset_or_none,
+)
+from service.runner import Job, JobSource, default_name, file_provenance, run_job, unique_names
+
+if TYPE_CHECKING:
+    import argparse
+
+    from loceval.geometry import SimilarityTransform
+
+__all__ = ["run_demo", "run_evaluate"]
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    """Evaluate the estimates against the reference; print tables or JSON; write artifacts."""
+    config = config_from_options(
+        cast("EvaluationValues", args), reference_offset=_device_offset(args)
+    )
+    default_format = TrajectoryFormat(args.format) if args.format else None
+    if args.name and len(args.name) != len(args.estimates):
+        msg = (
+            f"Give --name once per estimate: {len(args.estimates)} estimates but "
+            f"{len(args.name)} names."
+        )
+        raise InputError(msg)
+    export = None
+    if args.out is not None:
+        export = export_from_options(
+            cast("ExportValues", args),
+            evaluation_id=args.out.resolve().name,
+            building=args.building,
+        )
+    ref_spec = parse_source(args.reference, default_format=default_format)
+    est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
+    names = args.name or unique_names([default_name(s) for s in est_specs])
+    job = Job(
+        reference=JobSource(
+            ref_spec,
+            args.reference_name or default_name(ref_spec),
+            file_provenance("reference", ref_spec),
+        ),
+        estimates=[
+            JobSource(spec, name, file_provenance("estimate", spec))
+            for spec, name in zip(est_specs, names, strict=True)
+        ],
+        config=config,
+        stamp=args.stamp,
+        export=export,
+        formats=args.formats,
+    )
+    result = run_job(job, args.out)
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
+    else:
+        from service.cli.tables import format_tables  # noqa: PLC0415
+
+        print(format_tables(result))  # noqa: T201
+        if args.out is not None:
+            print(f"\nArtifacts written to {args.out}")  # noqa: T201
+    return 0
+
+
+def _device_offset(args: argparse.Namespace) -> SimilarityTransform | None:
+    if args.device is None:
+        if args.device_from or args.device_to:
+            msg = "--device-from and --device-to need --device FILE (a URDF or a bag)."
+            raise InputError(msg)
+        return offset_or_none(args.offset)
+    if args.offset:
+        msg = "Give the device offset either with --offset or with --device, not both."
+        raise InputError(msg)
+    if not (args.device_from and args.device_to):
+        msg = (
+            "--device needs --device-from LINK (the rigid body) and --device-to LINK "
+            "(the sensor), e.g. --device-from rigid_body --device-to camera_link."
+        )
+        raise InputError(msg)
+    return device_offset(args.device, from_link=args.device_from, to_link=args.device_to)
+
+
+def run_demo(args: argparse.Namespace) -> int:
+    """Write a synthetic recording and evaluate it as ``loceval evaluate`` would."""
+    from service.cli import main  # noqa: PLC0415
+    from service.demo import write_demo_recording  # noqa: PLC0415
+
+    try:
+        inputs = write_demo_recording(args.out / "inputs")
+    except OSError as err:
+        msg = f"Cannot write the demo into {str(args.out)!r} ({err.strerror}); name a folder."
+        raise InputError(msg) from err
+    argv = [
+        "evaluate",
+        str(inputs["reference"]),
+        str(inputs["RTAB-Map"]),
+        str(inputs["ISAAC"]),
+        "--name",
+        "RTAB-Map",
+        "--name",
+        "ISAAC",
+        "--reference-name",
+        "OptiTrack",
+        "--tolerance",
+        "0.10@95",
+        "--out",
+        str(args.out / "evaluation"),
+    ]
+    return main(argv)

@@ -1,0 +1,229 @@
+"""The argument parser of every command; ``loceval evaluate``'s options come from the table.
+
+The flags of :data:`loceval.options.OPTIONS` are generated here: each option's flag,
+default, choices and help, stored under its key (``--max-dt`` in ``args.max_dt_s``), so
+:func:`service.options.config_from_options` reads the parsed arguments as the API's options.
+Bounds are checked where both front doors meet them: in the core's ``EvaluationConfig``.
+Handlers are named ``"module:function"`` and imported only when their command runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, NoReturn
+
+from loceval import __version__
+from loceval.errors import InputError
+from loceval.options import OPTIONS, OptionKind, OptionSpec
+
+__all__ = ["EXIT_BUG", "EXIT_INPUT", "build_parser", "names", "numbers"]
+
+EXIT_INPUT = 1
+EXIT_BUG = 2
+
+_DESCRIPTION = "The loceval command line: evaluate, inspect, demo, report, serve, worker, keys."
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that exits 1 on a usage error: a bad option is bad input, not a bug."""
+
+    def error(self, message: str) -> NoReturn:
+        missing = re.fullmatch(r"argument (--[\w-]+).*: expected one argument", message)
+        if missing:
+            # argparse takes "-1e6" or "-0.1,0.2" for an option unless glued to its flag.
+            flag = missing.group(1)
+            message += f"; for a value that starts with '-' write {flag}=VALUE"
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
+
+
+class _FormatNames:
+    """The names of the trajectory formats, read from the readers when first needed.
+
+    argparse checks a value with ``in`` and lists the names in ``--help``; neither happens
+    for ``loceval --help``, which therefore does not import the readers (and numpy).
+    """
+
+    def __contains__(self, name: object) -> bool:
+        return name in set(self)
+
+    def __iter__(self) -> Iterator[str]:
+        from loceval.readers import TrajectoryFormat  # noqa: PLC0415
+
+        return iter([f.value for f in TrajectoryFormat])
+
+
+def numbers(text: str) -> tuple[float, ...]:
+    """Parse the CLI's ``0.05,0.1`` list of metres (the thresholds).
+
+    Raises:
+        InputError: an item is not a number (the error names the thresholds option).
+    """
+    try:
+        return tuple(float(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        msg = f"The thresholds take metres separated by commas like 0.05,0.1, got {text!r}."
+        raise InputError(msg, option="thresholds_m") from None
+
+
+def names(text: str) -> list[str] | None:
+    """Parse the CLI's ``report.html,paths.dxf`` list of names; None when empty."""
+    parsed = [n.strip() for n in text.split(",") if n.strip()]
+    return parsed or None
+
+
+def _folder(text: str) -> Path:
+    """Return the --out folder; an empty name is a usage error."""
+    if not text.strip():
+        msg = "needs a folder name, e.g. --out results/run1"
+        raise argparse.ArgumentTypeError(msg)
+    return Path(text)
+
+
+def _shown(spec: OptionSpec) -> str:
+    """Return the option's help with its default, as the table gives them."""
+    default = spec.default
+    if default is None or spec.kind is OptionKind.SWITCH:
+        return spec.help
+    if isinstance(default, tuple):
+        return f"{spec.help} (default: {','.join(f'{v:g}' for v in default)})"
+    return f"{spec.help} (default: {default})"
+
+
+def add_option(parser: argparse.ArgumentParser, spec: OptionSpec) -> None:
+    """Add one option of the table as a flag stored under its key."""
+    common: dict[str, Any] = {"dest": spec.key, "help": _shown(spec)}
+    if spec.kind is OptionKind.SWITCH:
+        parser.add_argument(spec.flag, action="store_true", **common)
+        return
+    common.update(default=spec.default, metavar=spec.metavar)
+    kind = spec.kind
+    if kind is OptionKind.CHOICE:
+        common.update(choices=[str(c) for c in spec.choices], metavar=None)
+    elif kind is OptionKind.NUMBER:
+        common["type"] = float
+    elif kind is OptionKind.INTEGER:
+        common["type"] = int
+    elif kind is OptionKind.NUMBERS:
+        common["type"] = numbers
+    elif kind is OptionKind.NAMES:
+        common["type"] = names
+    elif kind in {OptionKind.FILE, OptionKind.MATRIX, OptionKind.DEVICE}:
+        common["type"] = Path
+    parser.add_argument(spec.flag, **common)
+    if kind is OptionKind.DEVICE:
+        parser.add_argument(
+            "--device-from", default=None, metavar="LINK", help="the rigid body's link"
+        )
+        parser.add_argument("--device-to", default=None, metavar="LINK", help="the sensor's link")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of every subcommand."""
+    parser = _Parser(prog="loceval", description=_DESCRIPTION)
+    parser.add_argument("--version", action="version", version=f"loceval {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    _add_evaluate(sub)
+
+    ins = sub.add_parser("inspect", help="list what a recording holds")
+    ins.add_argument("path", help="a bag, bag directory, zip, MCAP or trajectory file")
+    ins.add_argument("--json", action="store_true", help="print the inspection as JSON")
+    ins.set_defaults(handler="service.cli.inspection:run_inspect")
+
+    demo = sub.add_parser(
+        "demo", help="write a synthetic recording and evaluate it (no data needed)"
+    )
+    demo.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR")
+    demo.set_defaults(handler="service.cli.evaluate:run_demo")
+
+    _add_report(sub)
+    _add_service(sub)
+    return parser
+
+
+def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparsers action)
+    ev = sub.add_parser(
+        "evaluate",
+        help="evaluate estimates against a reference",
+        description=(
+            "Evaluate one or more estimated trajectories against a reference. A source is "
+            "[FORMAT:]PATH[@SELECTOR]: tum:gt.txt, kitti:poses.txt@times=times.txt, "
+            "motive:take.csv@RigidBody, run.mcap@/amcl_pose, run.bag@tf:map:base_link."
+        ),
+    )
+    ev.add_argument("reference", help="the ground truth source")
+    ev.add_argument("estimates", nargs="+", metavar="estimate", help="estimate sources")
+    ev.add_argument(
+        "--name", action="append", default=[], help="estimate name, once per estimate in order"
+    )
+    ev.add_argument("--reference-name", default=None, help="name of the reference")
+    ev.add_argument(
+        "--format",
+        choices=_FormatNames(),
+        default=None,
+        metavar="FORMAT",
+        help="format of sources without a FORMAT: prefix, one of %(choices)s (default: sniffed "
+        "from content)",
+    )
+    for spec in OPTIONS:
+        if spec.cli:
+            add_option(ev, spec)
+    ev.add_argument("--json", action="store_true", help="print the result as JSON")
+    ev.add_argument("--out", type=_folder, default=None, metavar="DIR", help="write artifacts here")
+    ev.set_defaults(handler="service.cli.evaluate:run_evaluate")
+
+
+def _add_report(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparsers action)
+    report = sub.add_parser(
+        "report",
+        help="one summary report over many recordings (as a schedule run makes it)",
+        description=(
+            "Evaluate each recording with the same template and write one summary report "
+            "(summary.html, summary.pdf): a row per recording, a trend per system, the "
+            "systems side by side, and the repeatability of the reference paths."
+        ),
+    )
+    report.add_argument(
+        "--datasets", nargs="+", required=True, type=Path, metavar="FILE", help="recordings"
+    )
+    report.add_argument(
+        "--template",
+        required=True,
+        type=Path,
+        metavar="FILE",
+        help='JSON: {"reference": {"selector": ...}, "estimates": [...], "options": {...}}',
+    )
+    report.add_argument("--out", required=True, type=_folder, metavar="DIR")
+    report.add_argument("--title", default="Summary report", help="the report's title")
+    report.set_defaults(handler="service.cli.report:run_report")
+
+
+def _add_service(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparsers action)
+    serve = sub.add_parser(
+        "serve",
+        help="start the HTTP service with its queue consumer (settings: LOCEVAL_* variables)",
+    )
+    serve.add_argument("--host", default="127.0.0.1", help="address to listen on")
+    serve.add_argument("--port", type=int, default=8000, help="port to listen on")
+    serve.add_argument(
+        "--no-consumer",
+        action="store_true",
+        help="do not run jobs in this process (run `loceval worker` processes instead)",
+    )
+    serve.set_defaults(handler="service.cli.serve:run_serve")
+
+    worker = sub.add_parser("worker", help="run queue consumers only (scale-out)")
+    worker.set_defaults(handler="service.cli.serve:run_worker")
+
+    keys = sub.add_parser("keys", help="create or revoke API keys")
+    keys_sub = keys.add_subparsers(dest="keys_command", required=True, parser_class=_Parser)
+    create = keys_sub.add_parser("create", help="create a key and print it (shown only once)")
+    create.add_argument("--project", required=True, help="the project (created if new)")
+    create.set_defaults(handler="service.cli.serve:run_keys_create")
+    revoke = keys_sub.add_parser("revoke", help="revoke a key")
+    revoke.add_argument("key", help="the key, or its first 12 characters")
+    revoke.set_defaults(handler="service.cli.serve:run_keys_revoke")

@@ -1,0 +1,132 @@
+"""``loceval report``: one summary report over many recordings, as a schedule run makes it.
+
+The template is the API's ``EvaluationTemplate`` (validated by pydantic, so its options are
+the API's, named ``options.<key>`` in messages).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from loceval.errors import InputError, LocevalError
+from loceval.readers import SourceSpec
+from service.options import config_from_options, offset_or_none
+from service.runner import Job, JobSource, default_name, file_provenance, run_job
+
+if TYPE_CHECKING:
+    import argparse
+
+    from loceval.evaluation import EvaluationConfig
+    from service.schemas import EvaluationTemplate, TemplateSource
+
+__all__ = ["run_report"]
+
+
+def run_report(args: argparse.Namespace) -> int:
+    """Evaluate each recording with the template and write summary.html and summary.pdf."""
+    from exporters.summary import SummaryInput, SummaryRun, render_summary  # noqa: PLC0415
+    from loceval.evaluation import Tolerance  # noqa: PLC0415
+
+    template = _read_template(args.template)
+    options = template.options
+    try:
+        config = config_from_options(options, reference_offset=offset_or_none(options.offset))
+    except LocevalError as err:
+        msg = f"The template {str(args.template)!r}: {_api_words(err)}"
+        raise InputError(msg) from err
+    runs = []
+    for path in args.datasets:
+        recorded = (
+            dt.datetime.fromtimestamp(path.stat().st_mtime, dt.UTC)
+            if path.exists()
+            else (dt.datetime.now(dt.UTC))
+        )
+        job = _template_job(path, template, config)
+        try:
+            result = run_job(job, None)
+        except LocevalError as err:
+            runs.append(SummaryRun(path.name, recorded, "failed", error=_api_words(err)))
+            continue
+        runs.append(
+            SummaryRun.from_result(
+                result.to_dict(),
+                dataset=path.name,
+                recorded_at=recorded,
+                reference_xyz=result.reference.positions_xyz,
+            )
+        )
+    tolerance = options.tolerance
+    summary = SummaryInput(
+        title=args.title,
+        generated_at=dt.datetime.now(dt.UTC),
+        selection=f"the {len(args.datasets)} recordings named on the command line",
+        runs=runs,
+        tolerance=Tolerance.parse(tolerance) if tolerance else None,
+    )
+    from service.settings import Settings  # noqa: PLC0415
+
+    html, pdf = render_summary(summary, templates_dir=Settings().templates_dir)
+    _write_all(args.out, {"summary.html": html, "summary.pdf": pdf})
+    for run in runs:
+        figures = ", ".join(
+            f"{name} ATE {fig.ate_rmse_m:.3f} m" if fig.ate_rmse_m is not None else name
+            for name, fig in run.systems.items()
+        )
+        print(f"{run.dataset}: {run.status}" + (f" ({run.error})" if run.error else f", {figures}"))  # noqa: T201
+    print(f"\nSummary written to {args.out}")  # noqa: T201
+    return 0
+
+
+def _api_words(err: LocevalError) -> str:
+    """Name the option at fault as the template does (``options.max_dt_s: ...``)."""
+    return str(err) if err.option is None else f"options.{err.option}: {err}"
+
+
+def _read_template(path: Path) -> EvaluationTemplate:
+    from pydantic import ValidationError  # noqa: PLC0415
+
+    from service.schemas import EvaluationTemplate  # noqa: PLC0415
+
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        msg = f"Cannot read the template {str(path)!r} ({err}); check the path."
+        raise InputError(msg) from err
+    try:
+        return EvaluationTemplate.model_validate_json(text)
+    except ValidationError as err:
+        where = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc']) or 'template'}: {e['msg']}"
+            for e in err.errors()[:5]
+        )
+        msg = f"The template {str(path)!r} is not valid: {where}."
+        raise InputError(msg) from None
+
+
+def _template_job(path: Path, template: EvaluationTemplate, config: EvaluationConfig) -> Job:
+    def source(entry: TemplateSource, role: str) -> JobSource:
+        spec = SourceSpec(None, path, entry.selector)
+        name = entry.name or default_name(spec)
+        return JobSource(spec, name, file_provenance(role, spec))
+
+    return Job(
+        reference=source(template.reference, "reference"),
+        estimates=[source(e, "estimate") for e in template.estimates],
+        config=config,
+        stamp=template.options.stamp,
+    )
+
+
+def _write_all(out: Path, files: dict[str, bytes]) -> None:
+    """Write the files into ``out`` through temporary names: each appears whole or not at all."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for name, data in files.items():
+            partial = out / f".{name}.partial"
+            partial.write_bytes(data)
+            partial.replace(out / name)
+    except OSError as err:
+        msg = f"Cannot write into {str(out)!r} ({err.strerror}); name a folder you can write to."
+        raise InputError(msg) from err

@@ -1,0 +1,218 @@
+"""From the front doors' typed options to the core's and the exporters' option objects.
+
+Both front doors hold the options of :data:`loceval.options.OPTIONS` under the same keys:
+the CLI in its parsed arguments (``args.max_dt_s``), the HTTP API in
+:class:`service.schemas.EvaluationOptions`. :func:`config_from_options` and
+:func:`export_from_options` take either, so a value means the same thing, and fails with
+the same message, on both. Nothing here supplies a default: the table does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
+
+from loceval.alignment import AlignMethod, AlignWindow
+from loceval.association import AssociationMethod
+from loceval.errors import InputError
+from loceval.evaluation import EvaluationConfig, Tolerance, parse_offset
+from loceval.geometry import SimilarityTransform
+from loceval.metrics import RPEUnit
+from loceval.options import check_option
+
+if TYPE_CHECKING:
+    from exporters.options import ExportOptions
+
+__all__ = [
+    "EvaluationValues",
+    "ExportValues",
+    "config_from_options",
+    "device_offset",
+    "export_from_options",
+    "offset_or_none",
+]
+
+
+class EvaluationValues(Protocol):
+    """The evaluation options as a front door holds them (keys of ``OPTIONS``)."""
+
+    @property
+    def association(self) -> str:
+        """The association method."""
+
+    @property
+    def max_dt_s(self) -> float:
+        """Nearest matching's largest time difference, seconds."""
+
+    @property
+    def max_gap_s(self) -> float:
+        """The longest reference gap bridged, seconds."""
+
+    @property
+    def time_offset_s(self) -> float:
+        """Added to the estimate's stamps, seconds."""
+
+    @property
+    def align(self) -> str:
+        """The alignment method."""
+
+    @property
+    def align_first(self) -> str | None:
+        """The alignment window (``"100"`` poses or ``"5s"``)."""
+
+    @property
+    def calibrate_at_s(self) -> float | None:
+        """Calibrate alignment: seconds after the first matched pose."""
+
+    @property
+    def rpe_delta(self) -> float:
+        """The RPE delta."""
+
+    @property
+    def rpe_unit(self) -> str:
+        """What the RPE delta counts."""
+
+    @property
+    def rpe_all_pairs(self) -> bool:
+        """Every pose starts an RPE pair."""
+
+    @property
+    def thresholds_m(self) -> Sequence[float]:
+        """Distances of the share-within figures, metres."""
+
+    @property
+    def tolerance(self) -> str | None:
+        """The verdict's tolerance, ``METRES@PERCENT``."""
+
+    @property
+    def worst(self) -> int:
+        """How many greatest errors to list."""
+
+
+class ExportValues(Protocol):
+    """The artifact options as a front door holds them (keys of ``OPTIONS``)."""
+
+    @property
+    def units(self) -> str:
+        """CAD units."""
+
+    @property
+    def site(self) -> str | None:
+        """The site transform, ``"tx ty tz yaw_deg"``."""
+
+    @property
+    def site_matrix(self) -> Path | Sequence[Sequence[float]] | None:
+        """The site as a 4x4 matrix (the CLI: a file holding it)."""
+
+    @property
+    def simplify_m(self) -> float:
+        """CAD polyline tolerance, metres."""
+
+
+def config_from_options(
+    options: EvaluationValues, *, reference_offset: SimilarityTransform | None = None
+) -> EvaluationConfig:
+    """Return the core's options.
+
+    Args:
+        options: the front door's options.
+        reference_offset: the device offset, already read (see :func:`device_offset`).
+
+    Raises:
+        InputError: a value cannot be used (the error carries the option's key).
+    """
+    return EvaluationConfig(
+        association=AssociationMethod(options.association),
+        max_dt_s=options.max_dt_s,
+        max_gap_s=options.max_gap_s,
+        time_offset_s=options.time_offset_s,
+        align=AlignMethod(options.align),
+        align_first=AlignWindow.parse(options.align_first),
+        calibrate_at_s=options.calibrate_at_s,
+        reference_offset=reference_offset,
+        rpe_delta=options.rpe_delta,
+        rpe_unit=RPEUnit(options.rpe_unit),
+        rpe_all_pairs=options.rpe_all_pairs,
+        thresholds_m=tuple(options.thresholds_m),
+        tolerance=Tolerance.parse(options.tolerance) if options.tolerance else None,
+        worst_count=options.worst,
+    )
+
+
+def export_from_options(
+    options: ExportValues, *, evaluation_id: str = "", building: Path | None = None
+) -> ExportOptions:
+    """Return the artifact options, checked before the evaluation runs so bad ones fail fast.
+
+    Args:
+        options: the front door's options.
+        evaluation_id: the id named in every file's metadata.
+        building: a building mesh for the glTF scene (the CLI only).
+
+    Raises:
+        InputError: both a site and a site matrix, or an option's value cannot be used.
+    """
+    from exporters import ExportOptions  # noqa: PLC0415
+    from exporters.placement import (  # noqa: PLC0415
+        check_options,
+        parse_site,
+        parse_units,
+        read_site_matrix,
+        site_from_values,
+    )
+
+    matrix = options.site_matrix
+    if options.site and matrix is not None:
+        msg = "Give the site transform either as a site or as a site matrix, not both."
+        raise InputError(msg, option="site_matrix")
+    transform = SimilarityTransform.identity()
+    if options.site:
+        transform = parse_site(options.site)
+    elif isinstance(matrix, Path):
+        transform = read_site_matrix(matrix)
+    elif matrix is not None:
+        values = [float(v) for row in matrix for v in row]
+        transform = site_from_values(values, where="the site matrix")
+    check_option("simplify_m", options.simplify_m, unit="metres")
+    export = ExportOptions(
+        units=parse_units(options.units),
+        site=transform,
+        simplify_m=options.simplify_m,
+        building=building,
+        evaluation_id=evaluation_id,
+    )
+    check_options(export)
+    return export
+
+
+def device_offset(
+    path: Path, *, from_link: str, to_link: str, offset: str | None = None
+) -> SimilarityTransform:
+    """Return the rigid body -> sensor offset from a URDF or from a bag's ``/tf_static``.
+
+    Raises:
+        InputError: an ``offset`` is given as well, or a link is not named.
+        ReaderError: the file cannot be read or the links are not connected.
+    """
+    if offset:
+        msg = "Give the device offset either as an offset or from a device file, not both."
+        raise InputError(msg, option="device")
+    if not (from_link and to_link):
+        msg = (
+            "A device file needs the rigid body's link and the sensor's link, e.g. "
+            "from rigid_body to camera_link."
+        )
+        raise InputError(msg, option="device")
+    if path.suffix.lower() in {".urdf", ".xml"}:
+        from loceval.urdf import read_urdf_offset  # noqa: PLC0415
+
+        return read_urdf_offset(path, from_link=from_link, to_link=to_link)
+    from loceval.readers.rosbag import read_bag_static_transform  # noqa: PLC0415
+
+    return read_bag_static_transform(path, from_link, to_link)
+
+
+def offset_or_none(offset: str | None) -> SimilarityTransform | None:
+    """Parse an ``"x y z qx qy qz qw"`` offset; None when not given."""
+    return parse_offset(offset) if offset else None

@@ -1,0 +1,173 @@
+"""One evaluation job, run the same way by the CLI and by the service's queue.
+
+:func:`run_job` reads the sources, evaluates and writes the artifacts. The options it runs
+with are built from the front doors' options by :mod:`service.options`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from loceval.evaluation import EvaluationConfig, EvaluationResult, ProgressCallback, evaluate
+from loceval.options import choice_default
+from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
+from loceval.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from exporters.options import ExportOptions
+
+__all__ = [
+    "Job",
+    "JobSource",
+    "default_name",
+    "file_provenance",
+    "run_job",
+    "unique_names",
+]
+
+# Shares of the progress bar: reading, evaluating, writing the artifacts.
+_READ, _EVALUATE = 0.25, 0.45
+
+
+@dataclass(frozen=True, slots=True)
+class JobSource:
+    """A trajectory to read and what to record about where it came from.
+
+    Attributes:
+        spec: the parsed source.
+        name: the trajectory's name in the result.
+        provenance: the input record of the result (file, checksum, selector, dataset id).
+        display_path: shown instead of the file's path in the result and the reports (the
+            service shows the uploaded file name, not its folders on the server).
+    """
+
+    spec: SourceSpec
+    name: str
+    provenance: Mapping[str, object] = field(default_factory=dict)
+    display_path: str | None = None
+
+    def read(self, *, stamp: str) -> Trajectory:
+        """Read the trajectory, naming the file by ``display_path`` when given."""
+        trajectory = read_trajectory(self.spec, name=self.name, stamp=stamp)
+        if self.display_path is None:
+            return trajectory
+        path, shown = str(self.spec.path), self.display_path
+        return replace(
+            trajectory,
+            source=trajectory.source.replace(path, shown),
+            warnings=tuple(w.replace(path, shown) for w in trajectory.warnings),
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Job:
+    """Everything one evaluation needs.
+
+    Attributes:
+        reference: the ground truth.
+        estimates: the systems under evaluation.
+        config: the core's options.
+        stamp: bags: ``header`` or ``receive`` stamps.
+        export: artifact options; None writes no artifacts.
+        formats: the artifacts to write (None: all).
+    """
+
+    reference: JobSource
+    estimates: Sequence[JobSource]
+    config: EvaluationConfig
+    stamp: str = choice_default("stamp")
+    export: ExportOptions | None = None
+    formats: Sequence[str] | None = None
+
+
+def run_job(
+    job: Job, out_dir: Path | None, progress: ProgressCallback | None = None
+) -> EvaluationResult:
+    """Read, evaluate and (with ``out_dir`` and ``job.export``) write the artifacts.
+
+    Args:
+        job: the job.
+        out_dir: the artifact folder, written all or nothing; None writes nothing.
+        progress: called with (stage, overall fraction done).
+
+    Returns:
+        The evaluation result.
+
+    Raises:
+        LocevalError: bad input (reader, association, alignment, metric or export errors).
+    """
+    report = progress or (lambda _stage, _fraction: None)
+    sources = [job.reference, *job.estimates]
+    trajectories = []
+    for k, source in enumerate(sources):
+        report(f"reading {source.name}", _READ * k / len(sources))
+        trajectories.append(source.read(stamp=job.stamp))
+
+    def evaluating(stage: str, fraction: float) -> None:
+        report(stage, _READ + (_EVALUATE - _READ) * fraction)
+
+    result = evaluate(
+        trajectories[0],
+        trajectories[1:],
+        job.config,
+        inputs=[dict(s.provenance) for s in sources],
+        progress=evaluating,
+    )
+    if out_dir is not None and job.export is not None:
+        from exporters import write_artifacts  # noqa: PLC0415
+
+        def writing(stage: str, fraction: float) -> None:
+            report(stage, _EVALUATE + (1.0 - _EVALUATE) * fraction)
+
+        title = f"{result.reference.name} vs {', '.join(e.name for e in result.estimates)}"
+        names = None
+        if job.formats is not None:
+            names = list(dict.fromkeys(["result.json", *job.formats]))
+        write_artifacts(
+            result, out_dir, replace(job.export, title=title), names=names, progress=writing
+        )
+    report("done", 1.0)
+    return result
+
+
+def default_name(spec: SourceSpec) -> str:
+    """Return a source's default name: its selector (bags, Motive) or the file's stem."""
+    if spec.selector and spec.format in {TrajectoryFormat.BAG, TrajectoryFormat.MOTIVE, None}:
+        return spec.selector
+    return spec.path.stem
+
+
+def unique_names(names: Sequence[str]) -> list[str]:
+    """Number repeated names: ``["a", "a"] -> ["a", "a (2)"]``."""
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(name if seen[name] == 1 else f"{name} ({seen[name]})")
+    return out
+
+
+def file_provenance(role: str, spec: SourceSpec, *, sha256: str | None = None) -> dict[str, object]:
+    """Return the input record of a source: file, format, selector and SHA-256."""
+    path = spec.path
+    info: dict[str, object] = {
+        "role": role,
+        "path": str(path),
+        "file": path.name,
+        "format": spec.format.value if spec.format else None,
+        "selector": spec.selector,
+    }
+    if path.is_file():
+        if sha256 is None:
+            digest = hashlib.sha256()
+            with path.open("rb") as fh:
+                for chunk in iter(lambda: fh.read(1 << 20), b""):
+                    digest.update(chunk)
+            sha256 = digest.hexdigest()
+        info["sha256"] = sha256
+        info["bytes"] = path.stat().st_size
+    return info
