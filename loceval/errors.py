@@ -28,14 +28,19 @@ class LocevalError(Exception):
             ``option`` and each front door names that option its own way (the CLI as
             ``--max-dt``, the HTTP API as ``options.max_dt_s``).
         option: the key of the evaluation option at fault (``"max_dt_s"``), if any.
+        suggest: the value of that option that would fix it (``"receive"``), if one would;
+            each front door spells the setting out in its own words.
     """
 
     code: ClassVar[str] = "error"
 
-    def __init__(self, message: str = "", *, option: str | None = None) -> None:
-        """Keep the message and the option's key."""
+    def __init__(
+        self, message: str = "", *, option: str | None = None, suggest: str | None = None
+    ) -> None:
+        """Keep the message, the option's key and the value to suggest."""
         super().__init__(message)
         self.option = option
+        self.suggest = suggest
 
 
 class InputError(LocevalError):

@@ -7,6 +7,7 @@ routes and wrong methods are rendered the same way, so a client parses one error
 
 from __future__ import annotations
 
+import json
 import logging
 import uuid
 from collections.abc import Mapping
@@ -137,6 +138,8 @@ def problem_for(exc: LocevalError) -> dict[str, Any]:
         return problem(status_for(exc), exc.code, type(exc).__name__, str(exc))
     name = f"options.{exc.option}"
     detail = f"{name}: {exc}"
+    if exc.suggest is not None:
+        detail += f" Set {name} to {json.dumps(exc.suggest)}."
     return problem(status_for(exc), exc.code, type(exc).__name__, detail, option=name)
 
 

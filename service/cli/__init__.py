@@ -50,7 +50,11 @@ def describe(err: LocevalError) -> str:
         return str(err)
     from loceval.options import option  # noqa: PLC0415
 
-    return f"{option(err.option).flag}: {err}"
+    flag = option(err.option).flag
+    text = f"{flag}: {err}"
+    if err.suggest is not None:
+        text += f" Use {flag} {err.suggest}."
+    return text
 
 
 def _handler(target: str) -> Callable[[argparse.Namespace], int]:

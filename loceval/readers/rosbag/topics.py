@@ -209,10 +209,10 @@ def _finish(
     if stamps.size >= MIN_POSES and np.unique(stamps).size < MIN_POSES:
         msg = (
             f"{where}: {stamps.size} messages but only {np.unique(stamps).size} distinct "
-            "header stamps (the publisher does not fill header.stamp); set the stamp source "
-            "to receive to use the bag's receive times."
+            "header stamps (the publisher does not fill header.stamp); read the bag's "
+            "receive times instead."
         )
-        raise ReaderError(msg, option="stamp")
+        raise ReaderError(msg, option="stamp", suggest="receive")
     frame_id = min(frame_ids) if frame_ids else ""
     if len(frame_ids) > 1:
         notes.append(f"{where}: poses in several frames ({', '.join(sorted(frame_ids))}).")
