@@ -11,6 +11,7 @@ import logging
 import re
 import uuid
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, ClassVar, Final
 
 from fastapi import FastAPI, Request
@@ -43,6 +44,8 @@ __all__ = [
     "internal_problem",
     "problem",
     "problem_for",
+    "register_private_root",
+    "scrub",
     "status_for",
 ]
 
@@ -159,9 +162,32 @@ def api_wording(message: str) -> str:
     )  # fmt: skip
 
 
+_PRIVATE_ROOTS: set[str] = set()
+_ID_FOLDER: Final = re.compile(
+    r"(?:datasets|evaluations|runs)/[0-9a-f-]{36}/(?:\.staging-[0-9a-f]+/|artifacts/)?"
+)
+
+
+def register_private_root(root: Path) -> None:
+    """Name a server folder (the data directory) that no message to a client may show."""
+    _PRIVATE_ROOTS.add(f"{root.resolve()}/")
+
+
+def scrub(message: str) -> str:
+    """Remove the server's private folders from a message, keeping file names."""
+    for root in sorted(_PRIVATE_ROOTS, key=len, reverse=True):
+        message = message.replace(root, "")
+    return _ID_FOLDER.sub("", message)
+
+
 def problem_for(exc: LocevalError) -> dict[str, Any]:
-    """Return the problem document of a domain error (also stored with failed jobs)."""
-    return problem(status_for(exc), exc.code, type(exc).__name__, api_wording(str(exc)))
+    """Return the problem document of a domain error (also stored with failed jobs).
+
+    This is the one place where messages are scrubbed of server paths: every problem a
+    client sees, from a route or stored with a failed job, is built here.
+    """
+    detail = scrub(api_wording(str(exc)))
+    return problem(status_for(exc), exc.code, type(exc).__name__, detail)
 
 
 def internal_problem(error_id: str | None = None) -> dict[str, Any]:
