@@ -73,7 +73,7 @@ def test_configuring_again_replaces_the_handler_and_takes_over_uvicorn() -> None
     )
 
 
-def _tum_pair(tmp_path: Path, rng: Any) -> tuple[Path, Path]:  # noqa: ANN401
+def _tum_pair(tmp_path: Path, rng: Any) -> tuple[Path, Path]:
     """Write a ground truth and a noisy estimate of it (different bytes: two datasets)."""
     truth = make_trajectory(rng, 120)
     return (
@@ -169,7 +169,8 @@ def test_loceval_serve_logs_requests_and_jobs_as_json(tmp_path: Path, rng) -> No
     ]
     assert all(r["request_id"] and r["project"] for r in posted)
     polls = [r for r in requests if r["path"] == f"/api/v1/evaluations/{evaluation['id']}"]
-    assert polls and all(r["status"] == 200 for r in polls)
+    assert polls
+    assert all(r["status"] == 200 for r in polls)
     job = [line for line in lines if line.get("job_id") == evaluation["id"] and "kind" in line]
     events = [j["event"] for j in job if j.get("event")]
     assert events == ["queued", "started", "succeeded"]
