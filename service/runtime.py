@@ -86,10 +86,6 @@ class Runtime:
     tasks: dict[str, Callable[[str], object]] = field(default_factory=dict)
     release: Callable[[Runtime], int] = lambda _runtime: 0
 
-    def kind_of(self, model: JobModel) -> JobKind:
-        """Return the job kind stored in ``model``."""
-        return next(kind for kind in self.kinds.values() if kind.model is model)
-
     def enqueue(self, kind: str, job_id: str, *, requeued: str | None = None) -> None:
         """Queue a job of a kind (in immediate mode: run it now).
 
