@@ -80,9 +80,7 @@ def test_datasets_filter_by_tag_and_page_in_sql(tmp_path: Path) -> None:
     """?tag= matches whole tags in SQL; the total counts the tagged datasets only."""
     with open_api(tmp_path) as api:
         tagged = [
-            api.dataset(
-                f"run{k}.txt", _TUM + f"3 {k} 0 0 0 0 0 1\n".encode(), tags=tags
-            )
+            api.dataset(f"run{k}.txt", _TUM + f"3 {k} 0 0 0 0 0 1\n".encode(), tags=tags)
             for k, tags in enumerate(["level2, amcl", "level2", "level20", "level3"])
         ]
         with _statements(api) as sql:
