@@ -8,10 +8,12 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import pytest
 from sqlalchemy import event, update
 
 from service.db import Evaluation
 from tests.service._api_fixtures import Api, open_api
+from tests.service.test_e2e_scaleout import postgres_url  # noqa: F401  (a fixture)
 
 _TUM = b"0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n2 2 0 0 0 0 0 1\n"
 
@@ -76,9 +78,13 @@ def test_the_status_filter_counts_in_sql(tmp_path: Path) -> None:
     assert [e["id"] for e in page["items"]] == [queued]
 
 
-def test_datasets_filter_by_tag_and_page_in_sql(tmp_path: Path) -> None:
-    """?tag= matches whole tags in SQL; the total counts the tagged datasets only."""
-    with open_api(tmp_path) as api:
+@pytest.mark.parametrize("database", ["sqlite", "postgresql"])
+def test_datasets_filter_by_tag_and_page_in_sql(
+    tmp_path: Path, database: str, request: pytest.FixtureRequest
+) -> None:
+    """?tag= matches whole tags in SQL (SQLite and PostgreSQL); the total counts those only."""
+    url = "" if database == "sqlite" else request.getfixturevalue("postgres_url")
+    with open_api(tmp_path, database_url=url) as api:
         tagged = [
             api.dataset(f"run{k}.txt", _TUM + f"3 {k} 0 0 0 0 0 1\n".encode(), tags=tags)
             for k, tags in enumerate(["level2, amcl", "level2", "level20", "level3"])
@@ -92,4 +98,4 @@ def test_datasets_filter_by_tag_and_page_in_sql(tmp_path: Path) -> None:
     assert [d["id"] for d in page["items"] + rest["items"]] == [tagged[1]["id"], tagged[0]["id"]]
     (listing,) = [s for s in sql if "FROM datasets" in s and "count(" not in s]
     assert "LIMIT" in listing
-    assert "json_each" in listing
+    assert ("json_each" if database == "sqlite" else "@>") in listing
