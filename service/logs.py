@@ -177,7 +177,12 @@ def log_transition(
         kind,
         job_id,
         event,
-        extra={"event": event, "kind": kind, "job_id": job_id, **fields},
+        extra={
+            "event": event,
+            "kind": kind,
+            "job_id": job_id,
+            **{key: value for key, value in fields.items() if value is not None},
+        },
     )
 
 

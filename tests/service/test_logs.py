@@ -119,6 +119,7 @@ def test_the_app_logs_each_request_and_each_job_transition(tmp_path: Path, rng, 
     assert (started["project"], started["attempt"]) == (project, 1)
     assert (succeeded["project"], succeeded["attempt"]) == (project, 1)
     assert succeeded["duration_s"] > 0
+    assert "error" not in succeeded  # fields without a value are left out
 
 
 def test_a_failed_job_logs_its_problem_type(tmp_path: Path, rng, capsys) -> None:
