@@ -7,6 +7,7 @@ relative to the data directory, so the same rows work on every machine that moun
 from __future__ import annotations
 
 import datetime as dt
+import enum
 import uuid
 from pathlib import Path
 from typing import Any, Final, TypeVar
@@ -36,12 +37,14 @@ from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, sess
 from service.errors import NotFoundError
 
 __all__ = [
+    "ACTIVE_STATUSES",
     "ApiKey",
     "Base",
     "Dataset",
     "Evaluation",
     "EvaluationStatus",
     "JobState",
+    "JobStatus",
     "Project",
     "Schedule",
     "ScheduleRun",
@@ -147,14 +150,20 @@ class Dataset(Base):
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
 
 
-class EvaluationStatus:
-    """The states of an evaluation job."""
+class JobStatus(enum.StrEnum):
+    """The states of a queued job (an evaluation or a schedule run); the values are stored."""
 
-    QUEUED: Final = "queued"
-    RUNNING: Final = "running"
-    SUCCEEDED: Final = "succeeded"
-    FAILED: Final = "failed"
-    ACTIVE: Final = frozenset({"queued", "running"})
+    QUEUED = "queued"
+    RUNNING = "running"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+
+
+ACTIVE_STATUSES: Final = frozenset({JobStatus.QUEUED, JobStatus.RUNNING})
+"""The states of a job that has not finished."""
+
+EvaluationStatus = JobStatus
+"""The former name of :class:`JobStatus`, kept for code written against it."""
 
 
 class JobState:
@@ -164,7 +173,7 @@ class JobState:
     work on either table through these columns.
     """
 
-    status: Mapped[str] = mapped_column(String(16), default=EvaluationStatus.QUEUED)
+    status: Mapped[str] = mapped_column(String(16), default=JobStatus.QUEUED)
     stage: Mapped[str] = mapped_column(String(200), default="queued")
     fraction: Mapped[float] = mapped_column(Float, default=0.0)
     error: Mapped[dict[str, Any] | None] = mapped_column(default=None)

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import uuid
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, ClassVar, Final
 
 from fastapi import FastAPI, Request
@@ -43,6 +45,8 @@ __all__ = [
     "internal_problem",
     "problem",
     "problem_for",
+    "register_private_root",
+    "scrub",
     "status_for",
 ]
 
@@ -128,16 +132,37 @@ def problem(
     return {"type": type_, "title": title, "status": status, "detail": detail, **extra}
 
 
+_PRIVATE_ROOTS: set[str] = set()
+_ID_FOLDER: Final = re.compile(
+    r"(?:datasets|evaluations|runs)/[0-9a-f-]{36}/(?:\.staging-[0-9a-f]+/|artifacts/)?"
+)
+
+
+def register_private_root(root: Path) -> None:
+    """Name a server folder (the data directory) that no message to a client may show."""
+    _PRIVATE_ROOTS.add(f"{root.resolve()}/")
+
+
+def scrub(message: str) -> str:
+    """Remove the server's private folders from a message, keeping file names."""
+    for root in sorted(_PRIVATE_ROOTS, key=len, reverse=True):
+        message = message.replace(root, "")
+    return _ID_FOLDER.sub("", message)
+
+
 def problem_for(exc: LocevalError) -> dict[str, Any]:
     """Return the problem document of a domain error (also stored with failed jobs).
 
-    An error about an option names it as the API does: ``options.max_dt_s: ...`` in the
-    detail, and ``"option": "options.max_dt_s"`` as a member a client can point at.
+    This is the one place where messages are scrubbed of server paths: every problem a
+    client sees, from a route or stored with a failed job, is built here. An error about an
+    option names it as the API does: ``options.max_dt_s: ...`` in the detail, and
+    ``"option": "options.max_dt_s"`` as a member a client can point at.
     """
+    detail = scrub(str(exc))
     if exc.option is None:
-        return problem(status_for(exc), exc.code, type(exc).__name__, str(exc))
+        return problem(status_for(exc), exc.code, type(exc).__name__, detail)
     name = f"options.{exc.option}"
-    detail = f"{name}: {exc}"
+    detail = f"{name}: {detail}"
     if exc.suggest is not None:
         detail += f" Set {name} to {json.dumps(exc.suggest)}."
     return problem(status_for(exc), exc.code, type(exc).__name__, detail, option=name)

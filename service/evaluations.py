@@ -1,17 +1,34 @@
-"""Create evaluations (checked before they are queued) and show them."""
+"""The evaluations resource: create (checked before queued), list, show, artifacts.
+
+The routes in :mod:`service.api.evaluations` only translate HTTP to these calls.
+"""
 
 from __future__ import annotations
 
+import json
 import logging
-from typing import Any
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Final
 
-from sqlalchemy import select
+from fastapi.exceptions import RequestValidationError
+from pydantic import ValidationError
+from sqlalchemy import func, select
+from sqlalchemy.orm import defer
 
+from exporters import ARTIFACTS
 from loceval.errors import InputError
-from service.db import Dataset, Evaluation, EvaluationStatus, get_owned, utcnow
-from service.errors import NotFoundError, ServiceUnavailableError
-from service.jobs import Runtime
+from service.datasets import store_upload
+from service.db import ACTIVE_STATUSES, Dataset, Evaluation, JobStatus, get_owned, utcnow
+from service.errors import (
+    NotFoundError,
+    NotReadyError,
+    ServiceUnavailableError,
+    UploadError,
+    problem_for,
+)
 from service.options import config_from_options, export_from_options, offset_or_none
+from service.runtime import Runtime
 from service.schemas import (
     ArtifactPublic,
     EvaluationCreate,
@@ -20,10 +37,22 @@ from service.schemas import (
     ProgressPublic,
     SourceRef,
 )
+from service.uploads import ReceivedForm
 
-__all__ = ["check_options", "create_evaluation", "evaluation_public"]
+__all__ = [
+    "EVALUATION",
+    "artifact_path",
+    "check_options",
+    "create_evaluation",
+    "evaluate_form",
+    "evaluation_public",
+    "list_evaluations",
+]
 
 logger = logging.getLogger(__name__)
+
+EVALUATION: Final = "evaluation"
+"""The job kind of evaluations (see :data:`service.jobs.JOB_KINDS`)."""
 
 
 def create_evaluation(
@@ -69,23 +98,21 @@ def create_evaluation(
     if not enqueue:
         return evaluation
     try:
-        runtime.enqueue(evaluation.id)
-    except Exception as err:
-        logger.exception("Cannot queue evaluation %s", evaluation.id)
+        runtime.enqueue(EVALUATION, evaluation.id)
+    except ServiceUnavailableError as err:
+        logger.error("Cannot queue evaluation %s: %s", evaluation.id, err)  # noqa: TRY400
         with runtime.sessions() as session:
             row = session.get_one(Evaluation, evaluation.id)
-            if row.status == EvaluationStatus.QUEUED:
-                row.status = EvaluationStatus.FAILED
+            if row.status == JobStatus.QUEUED:
+                row.status = JobStatus.FAILED
                 row.stage = "failed"
-                row.error = {
-                    "type": "service.unavailable",
-                    "title": "ServiceUnavailableError",
-                    "status": 503,
-                    "detail": "The job queue could not be reached; start the evaluation again.",
-                }
+                row.error = problem_for(
+                    ServiceUnavailableError(
+                        "The job queue could not be reached; start the evaluation again."
+                    )
+                )
                 session.commit()
-        msg = "The job queue cannot be reached; try again in a minute (see GET /readyz)."
-        raise ServiceUnavailableError(msg) from err
+        raise
     return get_owned(runtime.sessions, Evaluation, evaluation.id, project_id)
 
 
@@ -142,7 +169,7 @@ def evaluation_public(
 ) -> EvaluationPublic:
     """Return the HTTP view of an evaluation."""
     request = evaluation.request
-    succeeded = evaluation.status == EvaluationStatus.SUCCEEDED
+    succeeded = evaluation.status == JobStatus.SUCCEEDED
     artifacts = None
     if succeeded and evaluation.artifacts is not None:
         artifacts = [
@@ -169,3 +196,122 @@ def evaluation_public(
             "result": evaluation.result if (succeeded and with_result) else None,
         }
     )
+
+
+def list_evaluations(
+    runtime: Runtime, project_id: str, *, status: str | None, limit: int, offset: int
+) -> tuple[Sequence[Evaluation], int]:
+    """Return a page of the project's evaluations, newest first, and how many there are.
+
+    The page is cut in SQL and the result documents (the large column) are not loaded.
+    """
+    where = [Evaluation.project_id == project_id]
+    if status is not None:
+        where.append(Evaluation.status == status)
+    with runtime.sessions() as session:
+        count = session.scalar(select(func.count()).select_from(Evaluation).where(*where))
+        rows = session.scalars(
+            select(Evaluation)
+            .where(*where)
+            .options(defer(Evaluation.result, raiseload=True))
+            .order_by(Evaluation.created_at.desc(), Evaluation.id)
+            .limit(limit)
+            .offset(offset)
+        ).all()
+    return rows, int(count or 0)
+
+
+def artifact_path(runtime: Runtime, project_id: str, evaluation_id: str, name: str) -> Path:
+    """Return the file of an evaluation's artifact.
+
+    Raises:
+        NotFoundError: no such evaluation, artifact name, or file (its formats left it out).
+        NotReadyError: the evaluation has not succeeded.
+    """
+    evaluation = get_owned(runtime.sessions, Evaluation, evaluation_id, project_id)
+    if name not in ARTIFACTS:
+        msg = f"No artifact {name!r}; the artifacts are {', '.join(ARTIFACTS)}."
+        raise NotFoundError(msg)
+    if evaluation.status != JobStatus.SUCCEEDED:
+        msg = f"Evaluation {evaluation_id!r} is {evaluation.status}, so it has no artifacts" + (
+            " yet; poll GET /evaluations/{id} until it succeeds."
+            if evaluation.status in ACTIVE_STATUSES
+            else "; see its error."
+        )
+        raise NotReadyError(msg)
+    path = runtime.store.artifacts_dir(evaluation.id) / name
+    if not path.is_file():
+        msg = f"Evaluation {evaluation_id!r} did not write {name!r} (its formats left it out)."
+        raise NotFoundError(msg)
+    return path
+
+
+def evaluate_form(runtime: Runtime, project_id: str, form: ReceivedForm) -> Evaluation:
+    """Store the files of a one-shot upload as datasets and create their evaluation.
+
+    Everything about the form is checked before any file is stored.
+
+    Raises:
+        UploadError: the form's fields do not fit together.
+        RequestValidationError: the options or names are not valid (each error names its
+            place, ``options.max_dt_s``, ``estimates.0.name``).
+    """
+    references = [f for f in form.files if f.field == "reference"]
+    estimates = [f for f in form.files if f.field == "estimate"]
+    if len(references) != 1:
+        msg = f"Send exactly one file in the field 'reference', got {len(references)}."
+        raise UploadError(msg)
+    options = _form_options(form.value("options"))
+    selectors = form.values("estimate_selector")
+    names = form.values("estimate_name")
+    count = len(estimates) or len(selectors)
+    if count == 0:
+        msg = (
+            "Name the estimates: send 'estimate' files, or 'estimate_selector' values when "
+            "the reference file holds them (a bag)."
+        )
+        raise UploadError(msg)
+    if estimates and selectors and len(selectors) != len(estimates):
+        msg = f"Send one estimate_selector per estimate file ({len(estimates)}), or none."
+        raise UploadError(msg)
+    if names and len(names) != count:
+        msg = f"Send one estimate_name per estimate ({count}), or none."
+        raise UploadError(msg)
+    reference_ref: dict[str, str | None] = {
+        "dataset_id": "pending",
+        "selector": form.value("reference_selector"),
+    }
+    estimate_refs: list[dict[str, str | None]] = [
+        {
+            "dataset_id": "pending",
+            "selector": (selectors[k] or None) if selectors else None,
+            "name": (names[k] or None) if names else None,
+        }
+        for k in range(count)
+    ]
+    draft = {"reference": reference_ref, "estimates": estimate_refs, "options": options}
+    try:  # checked before any file is stored; every error names its place (estimates.0.name)
+        EvaluationCreate.model_validate(draft)
+    except ValidationError as err:
+        raise RequestValidationError(err.errors()) from None
+    reference, _ = store_upload(runtime, project_id, references[0])
+    stored = [store_upload(runtime, project_id, f)[0] for f in estimates]
+    reference_ref["dataset_id"] = reference.id
+    for k, estimate in enumerate(estimate_refs):
+        estimate["dataset_id"] = stored[k].id if stored else reference.id
+    return create_evaluation(runtime, project_id, EvaluationCreate.model_validate(draft))
+
+
+def _form_options(text: str | None) -> EvaluationOptions:
+    if not text:
+        return EvaluationOptions()
+    try:
+        json.loads(text)
+    except json.JSONDecodeError as err:
+        msg = f"The 'options' field is not JSON ({err.msg} at character {err.pos})."
+        raise UploadError(msg) from None
+    try:
+        return EvaluationOptions.model_validate_json(text)
+    except ValidationError as err:
+        errors = [{**e, "loc": ("options", *e["loc"])} for e in err.errors()]
+        raise RequestValidationError(errors) from None

@@ -13,12 +13,16 @@ from contextlib import asynccontextmanager
 from fastapi import APIRouter, FastAPI
 
 from loceval import __version__
+from service import web
 from service.api import datasets, evaluations, health, schedules
 from service.api.middleware import ApiKeyMiddleware
 from service.errors import install_error_handlers
-from service.jobs import Runtime, create_runtime, recover
+from service.jobs import create_runtime
+from service.logs import RequestLogMiddleware, configure_logging
+from service.runtime import Runtime
 from service.schedules import tick
 from service.settings import Settings, get_settings
+from service.tracking import recover
 
 __all__ = ["create_app"]
 
@@ -54,6 +58,7 @@ def create_app(
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        configure_logging()  # here, after uvicorn set up its loggers: they go through ours
         swept = runtime.store.sweep()
         if swept:
             logger.warning("Removed %d uploads left half-received by a crash", swept)
@@ -61,7 +66,7 @@ def create_app(
         if running is not None:
             requeued = recover(runtime)
             if requeued:
-                logger.warning("Queued %d interrupted evaluations again", len(requeued))
+                logger.warning("Queued %d interrupted jobs again", len(requeued))
             fired = tick(runtime)  # a fire missed while the service was down runs now, once
             if fired:
                 logger.warning("Started %d schedule runs that were due", len(fired))
@@ -82,16 +87,12 @@ def create_app(
     app.state.settings = settings
     install_error_handlers(app)
     app.add_middleware(ApiKeyMiddleware)
+    app.add_middleware(RequestLogMiddleware)  # added last: the outermost, it sees every request
     api = APIRouter(prefix="/api/v1")
     api.include_router(datasets.router)
     api.include_router(evaluations.router)
     api.include_router(schedules.router)
     app.include_router(api)
     app.include_router(health.router)
-    try:
-        from service import web  # noqa: PLC0415
-    except ImportError:  # pragma: no cover  (the page is optional for API-only deployments)
-        logger.warning("The web page is not available (service.web missing)")
-    else:
-        app.include_router(web.router)
+    app.include_router(web.router)
     return app

@@ -1,74 +1,78 @@
-"""Scheduled summary reports: when schedules fire, and what one run does.
+"""The schedules resource: recurring summary reports, when they fire, and their runs.
 
 A schedule fires from the queue's periodic tick (every consumer process ticks once a minute,
 and once on start). :func:`tick` moves a due schedule's ``next_fire_at`` forward with a
 conditional update, so of several processes ticking at once exactly one wins and records the
 run (a unique ``(schedule, due time)`` backs this up). A fire missed while the service was
-down is run once, late, and the run says so. A run evaluates every selected recording with
-the schedule's template (as evaluation jobs, listed with the others), then renders one
-summary report and, if asked, posts a JSON summary to a webhook.
+down is run once, late, and the run says so. What a run does is in
+:mod:`service.schedule_runs`; the routes in :mod:`service.api.schedules` call the functions
+here.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import fnmatch
-import json
 import logging
-import shutil
-import time
-import urllib.error
-import urllib.request
 import zoneinfo
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
-import numpy as np
 from croniter import CroniterBadCronError, croniter
-from sqlalchemy import select, update
+from sqlalchemy import func, select, update
 from sqlalchemy.exc import IntegrityError
 
-from loceval.errors import InputError, LocevalError
-from loceval.evaluation import Tolerance
-from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
+from loceval.errors import InputError
 from service.db import (
+    ACTIVE_STATUSES,
     Dataset,
-    Evaluation,
-    EvaluationStatus,
+    JobStatus,
     Schedule,
     ScheduleRun,
+    get_owned,
     new_id,
     utcnow,
 )
-from service.errors import internal_problem, problem_for
-from service.jobs import (
-    Heartbeat,
-    ProgressWriter,
-    Runtime,
-    claim,
-    execute_evaluation,
-    finish,
+from service.errors import NotFoundError, NotReadyError
+from service.evaluations import check_options
+from service.runtime import Runtime
+from service.schemas import (
+    ArtifactPublic,
+    ProgressPublic,
+    ScheduleCreate,
+    SchedulePatch,
+    SchedulePublic,
+    ScheduleRunPublic,
+    Selection,
 )
 
 __all__ = [
+    "RUN",
     "SUMMARY_ARTIFACTS",
     "check_cron",
+    "create_schedule",
+    "delete_schedule",
     "describe_selection",
-    "execute_schedule_run",
+    "get_run",
+    "list_runs",
+    "list_schedules",
     "next_fire",
+    "run_artifact_path",
+    "run_public",
+    "schedule_public",
     "select_datasets",
     "tick",
     "trigger_run",
-    "webhook_payload",
+    "update_schedule",
 ]
 
 logger = logging.getLogger(__name__)
 
+RUN: Final = "run"
+"""The job kind of schedule runs (see :data:`service.jobs.JOB_KINDS`)."""
 _LATE: Final = dt.timedelta(seconds=90)  # a fire found later than this was missed
 _MAX_COUNTED_MISSES: Final = 10_000
-_WEBHOOK_ATTEMPTS: Final = 3
-_WEBHOOK_TIMEOUT_S: Final = 10.0
 SUMMARY_ARTIFACTS: Final = {"summary.html": "text/html", "summary.pdf": "application/pdf"}
 
 
@@ -132,7 +136,7 @@ def tick(runtime: Runtime, now: dt.datetime | None = None) -> list[str]:
         if run_id is not None:
             fired.append(run_id)
     for run_id in fired:
-        runtime.enqueue_schedule_run(run_id)
+        runtime.enqueue(RUN, run_id)
     return fired
 
 
@@ -200,15 +204,20 @@ def trigger_run(runtime: Runtime, schedule: Schedule, *, now: dt.datetime | None
     with runtime.sessions() as session:
         session.add(run)
         session.commit()
-    runtime.enqueue_schedule_run(run.id)
+    runtime.enqueue(RUN, run.id)
     return run.id
 
 
 # --- selecting recordings ---------------------------------------------------------------
 
 
+def _selection(selection: Selection | Mapping[str, Any]) -> Selection:
+    """Return a stored selection re-validated into its model."""
+    return selection if isinstance(selection, Selection) else Selection.model_validate(selection)
+
+
 def select_datasets(
-    datasets: Sequence[Dataset], selection: Mapping[str, Any], *, as_of: dt.datetime
+    datasets: Sequence[Dataset], selection: Selection | Mapping[str, Any], *, as_of: dt.datetime
 ) -> list[Dataset]:
     """Return the datasets a selection picks, oldest first.
 
@@ -217,9 +226,10 @@ def select_datasets(
     ``uploaded_within_days`` (counted back from ``as_of``); a missing key selects all.
     Recordings uploaded after ``as_of`` are not included.
     """
-    tags = set(selection.get("tags") or [])
-    pattern = (selection.get("name_pattern") or "").lower()
-    days = selection.get("uploaded_within_days")
+    chosen = _selection(selection)
+    tags = set(chosen.tags)
+    pattern = (chosen.name_pattern or "").lower()
+    days = chosen.uploaded_within_days
     since = as_of - dt.timedelta(days=days) if days is not None else None
     picked = [
         d
@@ -237,288 +247,202 @@ def select_datasets(
     return sorted(picked, key=lambda d: (d.created_at, d.id))
 
 
-def describe_selection(selection: Mapping[str, Any], *, as_of: dt.datetime) -> str:
+def describe_selection(selection: Selection | Mapping[str, Any], *, as_of: dt.datetime) -> str:
     """Return the selection in words, for the report and the webhook."""
+    chosen = _selection(selection)
     parts = ["recordings"]
-    if selection.get("tags"):
-        parts.append("tagged " + ", ".join(repr(t) for t in selection["tags"]))
-    if selection.get("name_pattern"):
-        parts.append(f"named like {selection['name_pattern']!r}")
-    days = selection.get("uploaded_within_days")
-    if days is not None:
+    if chosen.tags:
+        parts.append("tagged " + ", ".join(repr(t) for t in chosen.tags))
+    if chosen.name_pattern:
+        parts.append(f"named like {chosen.name_pattern!r}")
+    if chosen.uploaded_within_days is not None:
+        days = chosen.uploaded_within_days
         parts.append(f"uploaded in the {days:g} days before {as_of:%Y-%m-%d %H:%M} UTC")
     else:
         parts.append(f"uploaded before {as_of:%Y-%m-%d %H:%M} UTC")
     return " ".join(parts)
 
 
-# --- one run ----------------------------------------------------------------------------
+# --- the resource ------------------------------------------------------------------------
 
 
-def execute_schedule_run(runtime: Runtime, run_id: str) -> None:
-    """Evaluate the selected recordings, render the summary and notify; never raises."""
-    if not claim(runtime, ScheduleRun, run_id, stage="selecting recordings"):
-        return
-    heartbeat = Heartbeat(runtime, ScheduleRun, run_id)
-    heartbeat.start()
-    staging: Path | None = None
-    try:
-        run, schedule, datasets = _load(runtime, run_id)
-        picked = select_datasets(datasets, schedule.selection, as_of=run.due_at)
-        progress = ProgressWriter(runtime, ScheduleRun, run_id)
-        rows, summary_runs = _evaluate_all(runtime, run, schedule, picked, progress)
-        staging = runtime.store.run_staging_dir(run_id)
-        progress("writing the summary report", 0.85)
-        _render(run, schedule, summary_runs, staging, runtime.settings.templates_dir)
-        artifacts = _publish(runtime, run_id, staging)
-        staging = None
-        finish(
-            runtime,
-            ScheduleRun,
-            run_id,
-            status=EvaluationStatus.SUCCEEDED,
-            rows=rows,
-            artifacts=artifacts,
-        )
-    except LocevalError as err:
-        body = problem_for(err)
-        body["detail"] = runtime.store.scrub(body["detail"])
-        finish(runtime, ScheduleRun, run_id, status=EvaluationStatus.FAILED, error=body)
-    except Exception:
-        error_id = new_id()[:12]
-        logger.exception("Schedule run %s failed with a bug (error_id=%s)", run_id, error_id)
-        finish(
-            runtime,
-            ScheduleRun,
-            run_id,
-            status=EvaluationStatus.FAILED,
-            error=internal_problem(error_id),
-        )
-    finally:
-        heartbeat.stop()
-        if staging is not None:
-            shutil.rmtree(staging, ignore_errors=True)
-    _notify(runtime, run_id)
+def schedule_public(schedule: Schedule) -> SchedulePublic:
+    """Return the HTTP view of a schedule."""
+    return SchedulePublic.model_validate(schedule, from_attributes=True)
 
 
-def _load(runtime: Runtime, run_id: str) -> tuple[ScheduleRun, Schedule, Sequence[Dataset]]:
-    with runtime.sessions() as session:
-        run = session.get_one(ScheduleRun, run_id)
-        schedule = session.get(Schedule, run.schedule_id)
-        if schedule is None:
-            msg = "The schedule was deleted before its run started."
-            raise InputError(msg)
-        datasets = session.scalars(select(Dataset).where(Dataset.project_id == run.project_id))
-        return run, schedule, datasets.all()
-
-
-def _evaluate_all(
-    runtime: Runtime,
-    run: ScheduleRun,
-    schedule: Schedule,
-    picked: Sequence[Dataset],
-    progress: ProgressWriter,
-) -> tuple[list[dict[str, Any]], list[Any]]:
-    """Run the template on every picked recording; failures become rows with the reason."""
-    from exporters.summary import SummaryRun  # noqa: PLC0415
-    from service.evaluations import create_evaluation  # noqa: PLC0415
-    from service.schemas import EvaluationCreate  # noqa: PLC0415
-
-    template = schedule.template
-    per_run = bool(schedule.produce.get("per_run_artifacts"))
-    rows: list[dict[str, Any]] = []
-    summary_runs = []
-    for k, dataset in enumerate(picked):
-        progress(f"evaluating {dataset.name}", 0.8 * k / max(len(picked), 1))
-        row: dict[str, Any] = {"dataset_id": dataset.id, "dataset": dataset.name}
-        options = dict(template.get("options") or {})
-        if not per_run:
-            options["formats"] = ["result.json"]
-        body = EvaluationCreate.model_validate(
-            {
-                "reference": {**template["reference"], "dataset_id": dataset.id},
-                "estimates": [{**e, "dataset_id": dataset.id} for e in template["estimates"]],
-                "options": options,
-            }
-        )
-        try:
-            evaluation = create_evaluation(runtime, run.project_id, body, enqueue=False)
-        except LocevalError as err:
-            reason = runtime.store.scrub(str(err))
-            rows.append({**row, "status": "failed", "error": reason, "evaluation_id": None})
-            summary_runs.append(_failed_run(dataset, reason))
-            continue
-        execute_evaluation(runtime, evaluation.id)
-        with runtime.sessions() as session:
-            done = session.get_one(Evaluation, evaluation.id)
-        row["evaluation_id"] = done.id
-        if done.status != EvaluationStatus.SUCCEEDED or done.result is None:
-            reason = (done.error or {}).get("detail", "The evaluation did not finish.")
-            rows.append({**row, "status": "failed", "error": reason})
-            summary_runs.append(_failed_run(dataset, reason, done.id))
-            continue
-        rows.append({**row, "status": "succeeded", "error": None, "summary": done.summary})
-        summary_runs.append(
-            SummaryRun.from_result(
-                done.result,
-                dataset=dataset.name,
-                recorded_at=dataset.created_at,
-                evaluation_id=done.id,
-                reference_xyz=_reference_xyz(runtime, dataset, template),
-            )
-        )
-    return rows, summary_runs
-
-
-def _failed_run(dataset: Dataset, reason: str, evaluation_id: str | None = None) -> Any:  # noqa: ANN401
-    from exporters.summary import SummaryRun  # noqa: PLC0415
-
-    return SummaryRun(
-        dataset=dataset.name,
-        recorded_at=dataset.created_at,
-        status="failed",
-        error=reason,
-        evaluation_id=evaluation_id,
-    )
-
-
-def _reference_xyz(
-    runtime: Runtime, dataset: Dataset, template: Mapping[str, Any]
-) -> np.ndarray[Any, np.dtype[np.float64]] | None:
-    """Re-read the run's reference path for the repeatability table (None if unreadable)."""
-    fmt = dataset.inspection.get("format")
-    try:
-        spec = SourceSpec(
-            TrajectoryFormat(str(fmt)),
-            runtime.store.path(dataset.storage_path),
-            template["reference"].get("selector"),
-        )
-        stamp = (template.get("options") or {}).get("stamp", "header")
-        return read_trajectory(spec, stamp=stamp).positions_xyz
-    except (LocevalError, ValueError):
-        return None
-
-
-def _render(
-    run: ScheduleRun,
-    schedule: Schedule,
-    summary_runs: Sequence[Any],
-    staging: Path,
-    templates_dir: Path,
-) -> None:
-    from exporters.summary import SummaryInput, render_summary  # noqa: PLC0415
-
-    tolerance = (schedule.template.get("options") or {}).get("tolerance")
-    notes = [run.note] if run.note else []
-    summary = SummaryInput(
-        title=schedule.name,
-        generated_at=utcnow(),
-        selection=describe_selection(schedule.selection, as_of=run.due_at),
-        runs=summary_runs,
-        tolerance=Tolerance.parse(tolerance) if tolerance else None,
-        notes=notes,
-        schedule_id=schedule.id,
-        run_id=run.id,
-    )
-    html, pdf = render_summary(summary, templates_dir=templates_dir)
-    wanted = schedule.produce.get("summary_formats") or list(SUMMARY_ARTIFACTS)
-    staging.mkdir(parents=True, exist_ok=True)
-    if "summary.html" in wanted:
-        (staging / "summary.html").write_bytes(html)
-    if "summary.pdf" in wanted:
-        (staging / "summary.pdf").write_bytes(pdf)
-
-
-def _publish(runtime: Runtime, run_id: str, staging: Path) -> list[dict[str, Any]]:
-    final = runtime.store.publish_run_artifacts(run_id, staging)
-    return [
-        {"name": name, "media_type": media, "size_bytes": (final / name).stat().st_size}
-        for name, media in SUMMARY_ARTIFACTS.items()
-        if (final / name).is_file()
-    ]
-
-
-# --- the webhook ------------------------------------------------------------------------
-
-
-def webhook_payload(runtime: Runtime, run: ScheduleRun, schedule: Schedule) -> dict[str, Any]:
-    """Return the JSON a webhook receives: the run, its links and each recording's verdicts."""
-    base = runtime.settings.public_url.rstrip("/")
-    run_url = f"{base}/api/v1/schedules/{schedule.id}/runs/{run.id}"
-    return {
-        "event": "schedule.run.finished",
-        "schedule": {"id": schedule.id, "name": schedule.name},
-        "run": {
+def run_public(run: ScheduleRun, base_url: str) -> ScheduleRunPublic:
+    """Return the HTTP view of a run, with links to its reports once it succeeded."""
+    artifacts = None
+    if run.status == JobStatus.SUCCEEDED and run.artifacts is not None:
+        prefix = f"{base_url}api/v1/schedules/{run.schedule_id}/runs/{run.id}/artifacts/"
+        artifacts = [ArtifactPublic(**a, url=prefix + a["name"]) for a in run.artifacts]
+    return ScheduleRunPublic.model_validate(
+        {
             "id": run.id,
-            "status": run.status,
+            "schedule_id": run.schedule_id,
             "trigger": run.trigger,
-            "due_at": run.due_at.isoformat(),
-            "finished_at": run.finished_at.isoformat() if run.finished_at else None,
+            "due_at": run.due_at,
+            "status": run.status,
+            "progress": ProgressPublic(stage=run.stage, fraction=run.fraction),
             "note": run.note,
+            "rows": run.rows,
             "error": run.error,
-            "url": run_url,
-        },
-        "links": {a["name"]: f"{run_url}/artifacts/{a['name']}" for a in run.artifacts or []},
-        "recordings": [
-            {
-                "dataset": row.get("dataset"),
-                "status": row.get("status"),
-                "error": row.get("error"),
-                "evaluation_url": (
-                    f"{base}/api/v1/evaluations/{row['evaluation_id']}"
-                    if row.get("evaluation_id")
-                    else None
-                ),
-                "systems": row.get("summary") or [],
-            }
-            for row in run.rows or []
-        ],
-    }
+            "artifacts": artifacts,
+            "webhook": run.webhook,
+            "attempts": run.attempts,
+            "created_at": run.created_at,
+            "started_at": run.started_at,
+            "finished_at": run.finished_at,
+        }
+    )
 
 
-def _notify(runtime: Runtime, run_id: str) -> None:
-    """Post the run's summary to the schedule's webhook, retrying; record what happened."""
-    try:
-        with runtime.sessions() as session:
-            run = session.get_one(ScheduleRun, run_id)
-            schedule = session.get(Schedule, run.schedule_id)
-        if schedule is None or not schedule.webhook_url or run.worker != runtime.worker_id:
-            return
-        body = json.dumps(webhook_payload(runtime, run, schedule)).encode("utf-8")
-        record = _deliver(schedule.webhook_url, body)
-        with runtime.sessions() as session:
-            session.execute(
-                update(ScheduleRun).where(ScheduleRun.id == run_id).values(webhook=record)
-            )
-            session.commit()
-    except Exception:  # the run is done; a notification problem must not undo it
-        logger.exception("Webhook of schedule run %s could not be handled", run_id)
+def create_schedule(runtime: Runtime, project_id: str, body: ScheduleCreate) -> Schedule:
+    """Check and record a new schedule; it fires first at the cron's next time.
+
+    Raises:
+        InputError: the cron, the time zone or an option of the template is not usable.
+    """
+    check_cron(body.cron, body.timezone)
+    check_options(body.template.options)
+    now = utcnow()
+    schedule = Schedule(
+        project_id=project_id,
+        name=body.name,
+        cron=body.cron,
+        timezone=body.timezone,
+        paused=body.paused,
+        selection=body.selection.model_dump(mode="json"),
+        template=body.template.model_dump(mode="json"),
+        produce=body.produce.model_dump(mode="json"),
+        webhook_url=body.webhook_url,
+        next_fire_at=next_fire(body.cron, body.timezone, now),
+        created_at=now,
+        updated_at=now,
+    )
+    with runtime.sessions() as session:
+        session.add(schedule)
+        session.commit()
+    return schedule
 
 
-def _deliver(url: str, body: bytes) -> dict[str, Any]:
-    record: dict[str, Any] = {"url": url, "delivered": False, "attempts": []}
-    for attempt in range(_WEBHOOK_ATTEMPTS):
-        if attempt:
-            time.sleep(2.0**attempt)
-        entry: dict[str, Any] = {"at": utcnow().isoformat()}
-        request = urllib.request.Request(  # noqa: S310  (http/https checked at creation)
-            url,
-            data=body,
-            headers={"Content-Type": "application/json", "User-Agent": "loceval-webhook"},
-            method="POST",
-        )
-        try:
-            with urllib.request.urlopen(request, timeout=_WEBHOOK_TIMEOUT_S) as response:  # noqa: S310
-                entry["status"] = response.status
-        except urllib.error.HTTPError as err:
-            entry["status"] = err.code
-            entry["error"] = f"HTTP {err.code} {err.reason}"
-        except (urllib.error.URLError, OSError, TimeoutError) as err:
-            entry["error"] = str(getattr(err, "reason", err))
-        record["attempts"].append(entry)
-        if 200 <= int(entry.get("status", 0)) < 300:
-            record["delivered"] = True
-            break
-    if not record["delivered"]:
-        logger.warning("Webhook %s not delivered after %d attempts", url, _WEBHOOK_ATTEMPTS)
-    return record
+def list_schedules(runtime: Runtime, project_id: str) -> Sequence[Schedule]:
+    """Return the project's schedules, oldest first."""
+    with runtime.sessions() as session:
+        return session.scalars(
+            select(Schedule)
+            .where(Schedule.project_id == project_id)
+            .order_by(Schedule.created_at, Schedule.id)
+        ).all()
+
+
+def update_schedule(
+    runtime: Runtime, project_id: str, schedule_id: str, body: SchedulePatch
+) -> Schedule:
+    """Apply a patch; a changed cron or zone, or resuming, counts the next fire from now.
+
+    Raises:
+        NotFoundError: no such schedule in the project.
+        InputError: the cron, the time zone or an option of the template is not usable.
+    """
+    schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
+    changes = body.model_dump(exclude_unset=True, mode="json")
+    cron = changes.get("cron", schedule.cron)
+    timezone = changes.get("timezone", schedule.timezone)
+    check_cron(cron, timezone)
+    if body.template is not None:
+        check_options(body.template.options)
+    now = utcnow()
+    resumed = schedule.paused and changes.get("paused") is False
+    if resumed or "cron" in changes or "timezone" in changes:
+        changes["next_fire_at"] = next_fire(cron, timezone, now)
+    with runtime.sessions() as session:
+        row = session.get_one(Schedule, schedule.id)
+        for key, value in changes.items():
+            setattr(row, key, value)
+        row.updated_at = now
+        session.commit()
+    return row
+
+
+def delete_schedule(runtime: Runtime, project_id: str, schedule_id: str) -> None:
+    """Delete a schedule with its runs and their reports (the evaluations stay).
+
+    Raises:
+        NotFoundError: no such schedule in the project.
+    """
+    schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
+    with runtime.sessions() as session:
+        runs = session.scalars(
+            select(ScheduleRun).where(ScheduleRun.schedule_id == schedule.id)
+        ).all()
+        run_ids = [run.id for run in runs]
+        for run in runs:
+            session.delete(run)
+        session.delete(session.get_one(Schedule, schedule.id))
+        session.commit()
+    for run_id in run_ids:
+        runtime.store.remove_run(run_id)
+
+
+def list_runs(
+    runtime: Runtime, project_id: str, schedule_id: str, *, limit: int
+) -> tuple[Sequence[ScheduleRun], int]:
+    """Return the newest ``limit`` runs of a schedule and how many it has.
+
+    Raises:
+        NotFoundError: no such schedule in the project.
+    """
+    schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
+    where = ScheduleRun.schedule_id == schedule.id
+    with runtime.sessions() as session:
+        count = session.scalar(select(func.count()).select_from(ScheduleRun).where(where))
+        runs = session.scalars(
+            select(ScheduleRun)
+            .where(where)
+            .order_by(ScheduleRun.due_at.desc(), ScheduleRun.id)
+            .limit(limit)
+        ).all()
+    return runs, int(count or 0)
+
+
+def get_run(runtime: Runtime, project_id: str, schedule_id: str, run_id: str) -> ScheduleRun:
+    """Return a run of a schedule of the project.
+
+    Raises:
+        NotFoundError: no such schedule in the project, or no such run of it.
+    """
+    get_owned(runtime.sessions, Schedule, schedule_id, project_id)
+    with runtime.sessions() as session:
+        run = session.get(ScheduleRun, run_id)
+    if run is None or run.schedule_id != schedule_id:
+        msg = f"No run {run_id!r} of schedule {schedule_id!r}; list them with GET .../runs."
+        raise NotFoundError(msg)
+    return run
+
+
+def run_artifact_path(
+    runtime: Runtime, project_id: str, schedule_id: str, run_id: str, name: str
+) -> Path:
+    """Return the file of a run's summary report (summary.html or summary.pdf).
+
+    Raises:
+        NotFoundError: no such run, report name, or file (the schedule's formats left it out).
+        NotReadyError: the run has not succeeded.
+    """
+    run = get_run(runtime, project_id, schedule_id, run_id)
+    if name not in SUMMARY_ARTIFACTS:
+        msg = f"No artifact {name!r}; a run has {', '.join(SUMMARY_ARTIFACTS)}."
+        raise NotFoundError(msg)
+    if run.status != JobStatus.SUCCEEDED:
+        msg = f"Run {run_id!r} is {run.status}, so it has no report" + (
+            " yet; poll the run until it succeeds." if run.status in ACTIVE_STATUSES
+            else "; see its error."
+        )  # fmt: skip
+        raise NotReadyError(msg)
+    path = runtime.store.run_artifacts_dir(run.id) / name
+    if not path.is_file():
+        msg = f"Run {run_id!r} did not write {name!r} (the schedule's formats left it out)."
+        raise NotFoundError(msg)
+    return path

@@ -22,12 +22,16 @@ import uuid
 from pathlib import Path
 from typing import Final
 
-__all__ = ["BlobStore", "safe_filename"]
+from service.errors import register_private_root
+
+__all__ = ["EVALUATIONS", "RUNS", "BlobStore", "safe_filename"]
+
+EVALUATIONS: Final = "evaluations"
+"""The folder of evaluation jobs."""
+RUNS: Final = "runs"
+"""The folder of schedule runs."""
 
 _UNSAFE: Final = re.compile(r"[^\w.\-+]+")
-_ID_FOLDER: Final = re.compile(
-    r"(?:datasets|evaluations|runs)/[0-9a-f-]{36}/(?:\.staging-[0-9a-f]+/|artifacts/)?"
-)
 
 
 def safe_filename(name: str, *, default: str = "upload") -> str:
@@ -49,14 +53,11 @@ class BlobStore:
         self.root = root.resolve()
         self.incoming = self.root / "incoming"
         self.datasets = self.root / "datasets"
-        self.evaluations = self.root / "evaluations"
-        self.runs = self.root / "runs"
+        self.evaluations = self.root / EVALUATIONS
+        self.runs = self.root / RUNS
         for folder in (self.incoming, self.datasets, self.evaluations, self.runs):
             folder.mkdir(parents=True, exist_ok=True)
-
-    def scrub(self, message: str) -> str:
-        """Remove the server's folders from a message for a client, keeping file names."""
-        return _ID_FOLDER.sub("", message.replace(f"{self.root}/", ""))
+        register_private_root(self.root)  # problem documents never show it
 
     def path(self, relative: str) -> Path:
         """Return the absolute path of a stored blob."""
@@ -78,44 +79,44 @@ class BlobStore:
         """Delete a dataset's files."""
         shutil.rmtree(self.datasets / dataset_id, ignore_errors=True)
 
+    def job_folder(self, folder: str, job_id: str) -> Path:
+        """Return a job's folder in ``folder`` (``evaluations``, ``runs``)."""
+        return self.root / folder / job_id
+
+    def job_artifacts_dir(self, folder: str, job_id: str) -> Path:
+        """Return the folder of a job's artifacts (present once it succeeded)."""
+        return self.job_folder(folder, job_id) / "artifacts"
+
+    def job_staging_dir(self, folder: str, job_id: str) -> Path:
+        """Return a fresh folder to write a job's artifacts into (not yet created)."""
+        return _new_staging(self.job_folder(folder, job_id))
+
+    def publish_job_artifacts(self, folder: str, job_id: str, staging: Path) -> Path:
+        """Rename a job's finished staging folder into place, replacing an earlier attempt's."""
+        return _publish(staging, self.job_artifacts_dir(folder, job_id))
+
+    def clear_job(self, folder: str, job_id: str) -> None:
+        """Remove a job's staging leftovers and artifacts (before a new attempt)."""
+        parent = self.job_folder(folder, job_id)
+        if parent.exists():
+            for child in parent.iterdir():
+                shutil.rmtree(child, ignore_errors=True)
+
+    def remove_job(self, folder: str, job_id: str) -> None:
+        """Delete everything of a job."""
+        shutil.rmtree(self.job_folder(folder, job_id), ignore_errors=True)
+
     def artifacts_dir(self, evaluation_id: str) -> Path:
         """Return the folder of an evaluation's artifacts (present once it succeeded)."""
-        return self.evaluations / evaluation_id / "artifacts"
-
-    def staging_dir(self, evaluation_id: str) -> Path:
-        """Return a fresh folder to write an evaluation's artifacts into."""
-        return _new_staging(self.evaluations / evaluation_id)
-
-    def publish_artifacts(self, evaluation_id: str, staging: Path) -> Path:
-        """Rename a finished staging folder into place, replacing an earlier attempt's."""
-        return _publish(staging, self.artifacts_dir(evaluation_id))
+        return self.job_artifacts_dir(EVALUATIONS, evaluation_id)
 
     def run_artifacts_dir(self, run_id: str) -> Path:
         """Return the folder of a schedule run's summary report."""
-        return self.runs / run_id / "artifacts"
-
-    def run_staging_dir(self, run_id: str) -> Path:
-        """Return a fresh folder to write a schedule run's report into."""
-        return _new_staging(self.runs / run_id)
-
-    def publish_run_artifacts(self, run_id: str, staging: Path) -> Path:
-        """Rename a run's finished staging folder into place."""
-        return _publish(staging, self.run_artifacts_dir(run_id))
+        return self.job_artifacts_dir(RUNS, run_id)
 
     def remove_run(self, run_id: str) -> None:
         """Delete a schedule run's files."""
-        shutil.rmtree(self.runs / run_id, ignore_errors=True)
-
-    def clear_evaluation(self, evaluation_id: str) -> None:
-        """Remove an evaluation's staging leftovers and artifacts (before a new attempt)."""
-        folder = self.evaluations / evaluation_id
-        if folder.exists():
-            for child in folder.iterdir():
-                shutil.rmtree(child, ignore_errors=True)
-
-    def remove_evaluation(self, evaluation_id: str) -> None:
-        """Delete everything of an evaluation."""
-        shutil.rmtree(self.evaluations / evaluation_id, ignore_errors=True)
+        self.remove_job(RUNS, run_id)
 
     def sweep(self, *, older_than_s: float = 3600.0) -> int:
         """Delete uploads abandoned mid-transfer (by a crash); return how many."""

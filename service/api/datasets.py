@@ -6,13 +6,11 @@ from typing import Annotated
 
 import anyio.to_thread
 from fastapi import APIRouter, Query, Request, Response, status
-from sqlalchemy import select
 
+from service import datasets
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
-from service.datasets import parse_tags, store_upload
-from service.db import Dataset, Evaluation, EvaluationStatus, get_owned
-from service.errors import ConflictError, UploadError
+from service.db import Dataset, get_owned
 from service.schemas import DatasetPublic, DatasetsPublic
 from service.uploads import receive_multipart
 
@@ -67,14 +65,8 @@ async def create_dataset(
         file_fields=frozenset({"file"}),
     )
     try:
-        if not form.files:
-            msg = "The upload has no file; send it in the multipart field 'file'."
-            raise UploadError(msg)
-        tags = parse_tags(",".join(form.values("tags")))
         dataset, created = await anyio.to_thread.run_sync(
-            lambda: store_upload(
-                runtime, project_id, form.files[0], name=form.value("name"), tags=tags
-            )
+            lambda: datasets.store_form(runtime, project_id, form)
         )
     finally:
         form.discard()
@@ -93,13 +85,8 @@ def read_datasets(
     offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
 ) -> DatasetsPublic:
     """List the project's datasets, newest first (optionally those with a tag)."""
-    with runtime.sessions() as session:
-        query = select(Dataset).where(Dataset.project_id == project_id)
-        rows = session.scalars(query.order_by(Dataset.created_at.desc(), Dataset.id)).all()
-    if tag is not None:
-        rows = [d for d in rows if tag in d.tags]
-    page = rows[offset : offset + limit]
-    return DatasetsPublic(items=[dataset_public(d) for d in page], count=len(rows))
+    rows, count = datasets.list_datasets(runtime, project_id, tag=tag, limit=limit, offset=offset)
+    return DatasetsPublic(items=[dataset_public(d) for d in rows], count=count)
 
 
 @router.get("/{dataset_id}", response_model=DatasetPublic, responses=problems(404))
@@ -116,21 +103,5 @@ def delete_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep)
 
     Finished evaluations keep their results and artifacts.
     """
-    dataset = get_owned(runtime.sessions, Dataset, dataset_id, project_id)
-    with runtime.sessions() as session:
-        active = session.scalars(
-            select(Evaluation.dataset_ids).where(
-                Evaluation.project_id == project_id,
-                Evaluation.status.in_(EvaluationStatus.ACTIVE),
-            )
-        ).all()
-        if any(dataset.id in ids for ids in active):
-            msg = (
-                f"Dataset {dataset.name!r} is used by an evaluation that has not finished; "
-                "delete it when the evaluation is done."
-            )
-            raise ConflictError(msg)
-        session.delete(session.get_one(Dataset, dataset.id))
-        session.commit()
-    runtime.store.remove_dataset(dataset.id)
+    datasets.delete_dataset(runtime, project_id, dataset_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -9,7 +9,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from service.auth import authenticate
 from service.errors import AuthenticationError
-from service.jobs import Runtime
+from service.runtime import Runtime
 
 __all__ = ["ProjectDep", "RuntimeDep", "get_runtime"]
 

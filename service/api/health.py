@@ -8,9 +8,10 @@ import anyio.to_thread
 from fastapi import APIRouter
 from sqlalchemy import text
 
+from service.adapters import converted
 from service.api.deps import RuntimeDep
 from service.errors import ServiceUnavailableError
-from service.jobs import Runtime
+from service.runtime import Runtime
 
 __all__ = ["router"]
 
@@ -25,19 +26,15 @@ def read_health() -> dict[str, str]:
 
 
 def _check(runtime: Runtime) -> dict[str, str]:
+    """Ask the database and the queue; an outage is a 503, anything else a bug (500)."""
     try:
-        with runtime.engine.connect() as connection:
+        with converted("database"), runtime.engine.connect() as connection:
             connection.execute(text("SELECT 1"))
-    except Exception as err:
-        logger.warning("Readiness: database unreachable: %s", err)
-        msg = f"The metadata database cannot be reached ({type(err).__name__})."
-        raise ServiceUnavailableError(msg) from err
-    try:
-        runtime.huey.pending_count()
-    except Exception as err:
-        logger.warning("Readiness: queue unreachable: %s", err)
-        msg = f"The job queue cannot be reached ({type(err).__name__})."
-        raise ServiceUnavailableError(msg) from err
+        with converted("queue"):
+            runtime.huey.pending_count()
+    except ServiceUnavailableError as err:
+        logger.warning("Readiness: %s", err)
+        raise
     return {"status": "ready", "database": "ok", "queue": "ok"}
 
 

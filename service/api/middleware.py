@@ -16,7 +16,8 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.auth import authenticate
 from service.errors import PROBLEM_JSON, AuthenticationError, problem_for
-from service.jobs import Runtime
+from service.logs import log_context
+from service.runtime import Runtime
 
 __all__ = ["PROJECT_STATE_KEY", "ApiKeyMiddleware"]
 
@@ -51,7 +52,8 @@ class ApiKeyMiddleware:
             await _refuse(send, _MISSING if key is None else _UNKNOWN)
             return
         scope.setdefault("state", {})[PROJECT_STATE_KEY] = project_id
-        await self.app(scope, receive, send)
+        with log_context(project=project_id):
+            await self.app(scope, receive, send)
 
 
 def _bearer(scope: Scope) -> str | None:

@@ -131,7 +131,8 @@ def bearer(key: str) -> dict[str, str]:
 
 def make_settings(data_dir: Path, **overrides: Any) -> Settings:
     """Return test settings: a fresh data folder, jobs run inside the request."""
-    return Settings(data_dir=data_dir, queue_url="immediate", database_url="", **overrides)
+    values: dict[str, Any] = {"queue_url": "immediate", "database_url": "", **overrides}
+    return Settings(data_dir=data_dir, **values)
 
 
 @contextmanager

@@ -26,11 +26,20 @@ from typing import Any
 import httpx2
 import pytest
 
+from service.logs import reset_logging
+
 REPO = Path(__file__).resolve().parents[2]
 READY_TIMEOUT_S = 30.0
 STOP_TIMEOUT_S = 15.0
 EVALUATION_TIMEOUT_S = 180.0
 _KEY_LINE = re.compile(r"API key for project 'default' \(shown once\): (\S+)")
+
+
+@pytest.fixture(autouse=True)
+def _reset_logging() -> Iterator[None]:
+    """Undo ``configure_logging`` (an app's start-up calls it) after every test."""
+    yield
+    reset_logging()
 
 
 def free_port() -> int:

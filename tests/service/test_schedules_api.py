@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from service import schedules
+from service import schedule_runs
 from service.auth import create_key
 from service.main import create_app
 from service.settings import Settings
@@ -238,8 +238,13 @@ class _Hook:
 
 @pytest.fixture
 def no_backoff(monkeypatch):
-    """Retry webhooks without waiting."""
-    monkeypatch.setattr(schedules.time, "sleep", lambda _s: None)
+    """Webhook retries are the queue's: no thread sleeps between attempts (immediate mode)."""
+
+    def refuse(seconds: float) -> None:
+        msg = f"a webhook attempt slept {seconds} s in the worker thread"
+        raise AssertionError(msg)
+
+    monkeypatch.setattr(schedule_runs.time, "sleep", refuse)
 
 
 @pytest.mark.usefixtures("no_backoff")

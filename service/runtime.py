@@ -1,0 +1,152 @@
+"""What a service or worker process shares: settings, database, blobs, the queue, job kinds.
+
+This module knows no job kind by name: the kinds (evaluations, schedule runs) are given to
+:class:`Runtime` by :func:`service.jobs.create_runtime`, which wires them to the queue. Code that
+runs or queues a job does it through the runtime (``runtime.enqueue("evaluation", id)``), so no
+job module imports another job module to reach its executor.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Final
+
+from huey import Huey, MemoryHuey, RedisHuey, SqliteHuey
+from huey.consumer import Consumer
+from sqlalchemy import Engine
+from sqlalchemy.orm import Session, sessionmaker
+
+from service.adapters import converted
+from service.db import Evaluation, ScheduleRun
+from service.logs import configure_logging, log_transition
+from service.settings import Settings
+from service.storage import BlobStore
+
+__all__ = ["JobKind", "JobModel", "Runtime", "create_huey"]
+
+logger = logging.getLogger(__name__)
+
+_CONSUMER_SHUTDOWN_S: Final = 10.0
+
+JobModel = type[Evaluation] | type[ScheduleRun]
+"""A table of queued jobs (both have the :class:`~service.db.JobState` columns)."""
+
+
+@dataclass(frozen=True)
+class JobKind:
+    """One kind of tracked job: its table, its storage folder, what runs it, how it ends.
+
+    Attributes:
+        name: the kind's key (``"evaluation"``, ``"run"``); also in log lines.
+        task_name: the queue task that runs it (stored in queued messages: never rename).
+        model: the table holding the job's state.
+        folder: the blob store folder of its artifacts (``evaluations``, ``runs``).
+        execute: runs one job to its end; never raises for the job's own failures.
+        interrupted_code: problem type of a job given up after repeated interruptions.
+        interrupted_title: problem title of that failure.
+        interrupted_detail: its detail, with ``{n}`` for the number of interruptions.
+    """
+
+    name: str
+    task_name: str
+    model: JobModel
+    folder: str
+    execute: Callable[[Runtime, str], None]
+    interrupted_code: str
+    interrupted_title: str
+    interrupted_detail: str
+
+
+@dataclass
+class Runtime:
+    """What a service or worker process shares: settings, database, blobs and the queue.
+
+    Attributes:
+        settings: the process's settings.
+        engine: the metadata database.
+        sessions: its session factory.
+        store: uploads and artifacts.
+        huey: the queue.
+        worker_id: this process's name in job rows (``host:pid:random``).
+        kinds: the job kinds by name.
+        tasks: the queue task of each job kind by kind name, and ``"webhook"``.
+        release: queues again the jobs this process still runs when it stops
+            (:func:`service.tracking.release`; given by the wiring, which knows both).
+    """
+
+    settings: Settings
+    engine: Engine
+    sessions: sessionmaker[Session]
+    store: BlobStore
+    huey: Huey
+    worker_id: str
+    kinds: Mapping[str, JobKind] = field(default_factory=dict)
+    tasks: dict[str, Callable[[str], object]] = field(default_factory=dict)
+    release: Callable[[Runtime], int] = lambda _runtime: 0
+
+    def enqueue(self, kind: str, job_id: str, *, requeued: str | None = None) -> None:
+        """Queue a job of a kind (in immediate mode: run it now).
+
+        Args:
+            kind: the job kind's name.
+            job_id: the job's row id.
+            requeued: why a job is queued again (``"interrupted"``, ``"stop"``), if it is.
+
+        Raises:
+            ServiceUnavailableError: the queue cannot be reached.
+        """
+        if requeued is None:
+            log_transition("queued", kind, job_id)
+        else:
+            log_transition("requeued", kind, job_id, level=logging.WARNING, reason=requeued)
+        with converted("queue"):
+            self.tasks[kind](job_id)
+
+    def run_inline(self, kind: str, job_id: str) -> None:
+        """Run a queued job in this thread (a schedule run runs its evaluations so)."""
+        self.kinds[kind].execute(self, job_id)
+
+    def start_consumer(self, *, periodic: bool = True) -> Consumer:
+        """Start queue consumer threads in this process (no signal handlers of its own)."""
+        configure_logging()
+        consumer = _EmbeddedConsumer(
+            self.huey,
+            workers=self.settings.workers,
+            worker_type="thread",
+            periodic=periodic,
+            max_delay=2.0,
+            check_worker_health=True,
+            shutdown_timeout=_CONSUMER_SHUTDOWN_S,
+        )
+        consumer.start()
+        return consumer
+
+    def stop_consumer(self, consumer: Consumer) -> None:
+        """Stop the consumer (running jobs get 10 s) and queue again what did not finish."""
+        consumer.stop(graceful=True)
+        released = self.release(self)
+        if released:
+            logger.warning("Queued %d unfinished jobs again for the next start", released)
+
+    def close(self) -> None:
+        """Release the database connections."""
+        self.engine.dispose()
+
+
+class _EmbeddedConsumer(Consumer):  # type: ignore[misc]
+    """huey's consumer without its signal handlers: uvicorn owns the signals in ``serve``."""
+
+    def _set_signal_handlers(self) -> None:
+        """Leave the process's signal handlers alone."""
+
+
+def create_huey(settings: Settings) -> Huey:
+    """Return the queue the settings name: immediate (in memory), Redis or SQLite."""
+    if settings.queue_url == "immediate":
+        return MemoryHuey("loceval", immediate=True, results=False)
+    if settings.queue_url.startswith(("redis://", "rediss://")):
+        return RedisHuey("loceval", url=settings.queue_url, results=False)
+    queue_db = (settings.data_dir / "queue.db").resolve()
+    return SqliteHuey("loceval", filename=str(queue_db), results=False, timeout=30)

@@ -1,0 +1,314 @@
+"""What one schedule run does: evaluate the selected recordings, render the summary, notify.
+
+A run is a tracked job (:func:`service.tracking.tracked_job`) of the kind ``run``. It
+evaluates every selected recording with the schedule's template (as evaluation jobs, listed
+with the others, run in this thread), renders one summary report and, if the schedule has a
+webhook, queues its delivery: a queue task of its own, retried by the queue
+(:func:`service.jobs.create_runtime` gives it ``retries`` and ``retry_delay``), so no
+consumer thread sleeps between attempts. Every attempt is recorded with the run.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Final
+
+import numpy as np
+from sqlalchemy import select, update
+
+from loceval.errors import InputError, LocevalError
+from loceval.evaluation import Tolerance
+from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
+from service.db import Dataset, Evaluation, JobStatus, Schedule, ScheduleRun, utcnow
+from service.errors import ServiceUnavailableError, problem_for
+from service.evaluations import EVALUATION, create_evaluation
+from service.runtime import Runtime
+from service.schedules import RUN, SUMMARY_ARTIFACTS, describe_selection, select_datasets
+from service.schemas import EvaluationCreate, EvaluationTemplate, Produce, Selection, SourceRef
+from service.tracking import ProgressWriter, tracked_job
+
+__all__ = [
+    "WEBHOOK",
+    "WEBHOOK_ATTEMPTS",
+    "WebhookNotDeliveredError",
+    "deliver_webhook",
+    "execute_schedule_run",
+    "webhook_payload",
+]
+
+logger = logging.getLogger(__name__)
+
+WEBHOOK: Final = "webhook"
+"""The queue task that delivers a run's webhook (one attempt per execution)."""
+WEBHOOK_ATTEMPTS: Final = 3
+"""How often a webhook is posted before the run records it as undelivered."""
+_WEBHOOK_TIMEOUT_S: Final = 10.0
+
+
+class WebhookNotDeliveredError(Exception):
+    """A webhook attempt failed; raised inside the queue task so that the queue retries it."""
+
+
+def execute_schedule_run(runtime: Runtime, run_id: str) -> None:
+    """Evaluate the selected recordings, render the summary and queue the webhook."""
+    with tracked_job(runtime, RUN, run_id, stage="selecting recordings") as job:
+        if job is None:
+            return
+        run, schedule, datasets = _load(runtime, run_id)
+        selection = Selection.model_validate(schedule.selection)
+        picked = select_datasets(datasets, selection.model_dump(), as_of=run.due_at)
+        rows, summary_runs = _evaluate_all(runtime, run, schedule, picked, job.progress)
+        staging = job.staging_dir()
+        job.progress("writing the summary report", 0.85)
+        _render(run, schedule, summary_runs, staging, runtime.settings.templates_dir)
+        final = job.publish(staging)
+        job.succeed(
+            rows=rows,
+            artifacts=[
+                {"name": name, "media_type": media, "size_bytes": (final / name).stat().st_size}
+                for name, media in SUMMARY_ARTIFACTS.items()
+                if (final / name).is_file()
+            ],
+        )
+    if job.finished_here:
+        with runtime.sessions() as session:
+            webhook_url = session.scalar(
+                select(Schedule.webhook_url).where(Schedule.id == ScheduleRun.schedule_id)
+                .where(ScheduleRun.id == run_id)
+            )  # fmt: skip
+        if webhook_url:
+            try:
+                runtime.enqueue(WEBHOOK, run_id)
+            except ServiceUnavailableError:  # the run is done; only its notification is lost
+                logger.warning("The webhook of run %s could not be queued", run_id, exc_info=True)
+
+
+def _load(runtime: Runtime, run_id: str) -> tuple[ScheduleRun, Schedule, Sequence[Dataset]]:
+    with runtime.sessions() as session:
+        run = session.get_one(ScheduleRun, run_id)
+        schedule = session.get(Schedule, run.schedule_id)
+        if schedule is None:
+            msg = "The schedule was deleted before its run started."
+            raise InputError(msg)
+        datasets = session.scalars(select(Dataset).where(Dataset.project_id == run.project_id))
+        return run, schedule, datasets.all()
+
+
+def _evaluate_all(
+    runtime: Runtime,
+    run: ScheduleRun,
+    schedule: Schedule,
+    picked: Sequence[Dataset],
+    progress: ProgressWriter,
+) -> tuple[list[dict[str, Any]], list[Any]]:
+    """Run the template on every picked recording; failures become rows with the reason."""
+    # exporters.summary draws with matplotlib: imported when a run renders, not at start-up.
+    from exporters.summary import SummaryRun  # noqa: PLC0415
+
+    template = EvaluationTemplate.model_validate(schedule.template)
+    per_run = Produce.model_validate(schedule.produce).per_run_artifacts
+    rows: list[dict[str, Any]] = []
+    summary_runs = []
+    for k, dataset in enumerate(picked):
+        progress(f"evaluating {dataset.name}", 0.8 * k / max(len(picked), 1))
+        row: dict[str, Any] = {"dataset_id": dataset.id, "dataset": dataset.name}
+        options = template.options
+        if not per_run:
+            options = options.model_copy(update={"formats": ["result.json"]})
+        body = EvaluationCreate(
+            reference=SourceRef(dataset_id=dataset.id, **template.reference.model_dump()),
+            estimates=[
+                SourceRef(dataset_id=dataset.id, **e.model_dump()) for e in template.estimates
+            ],
+            options=options,
+        )
+        try:
+            evaluation = create_evaluation(runtime, run.project_id, body, enqueue=False)
+        except LocevalError as err:
+            reason = problem_for(err)["detail"]
+            rows.append({**row, "status": "failed", "error": reason, "evaluation_id": None})
+            summary_runs.append(_failed_run(dataset, reason))
+            continue
+        runtime.run_inline(EVALUATION, evaluation.id)
+        with runtime.sessions() as session:
+            done = session.get_one(Evaluation, evaluation.id)
+        row["evaluation_id"] = done.id
+        if done.status != JobStatus.SUCCEEDED or done.result is None:
+            reason = (done.error or {}).get("detail", "The evaluation did not finish.")
+            rows.append({**row, "status": "failed", "error": reason})
+            summary_runs.append(_failed_run(dataset, reason, done.id))
+            continue
+        rows.append({**row, "status": "succeeded", "error": None, "summary": done.summary})
+        summary_runs.append(
+            SummaryRun.from_result(
+                done.result,
+                dataset=dataset.name,
+                recorded_at=dataset.created_at,
+                evaluation_id=done.id,
+                reference_xyz=_reference_xyz(runtime, dataset, template),
+            )
+        )
+    return rows, summary_runs
+
+
+def _failed_run(dataset: Dataset, reason: str, evaluation_id: str | None = None) -> Any:  # noqa: ANN401
+    from exporters.summary import SummaryRun  # noqa: PLC0415  (heavy, see _evaluate_all)
+
+    return SummaryRun(
+        dataset=dataset.name,
+        recorded_at=dataset.created_at,
+        status="failed",
+        error=reason,
+        evaluation_id=evaluation_id,
+    )
+
+
+def _reference_xyz(
+    runtime: Runtime, dataset: Dataset, template: EvaluationTemplate
+) -> np.ndarray[Any, np.dtype[np.float64]] | None:
+    """Re-read the run's reference path for the repeatability table (None if unreadable)."""
+    fmt = dataset.inspection.get("format")
+    try:
+        spec = SourceSpec(
+            TrajectoryFormat(str(fmt)),
+            runtime.store.path(dataset.storage_path),
+            template.reference.selector,
+        )
+        return read_trajectory(spec, stamp=template.options.stamp).positions_xyz
+    except (LocevalError, ValueError):
+        return None
+
+
+def _render(
+    run: ScheduleRun,
+    schedule: Schedule,
+    summary_runs: Sequence[Any],
+    staging: Path,
+    templates_dir: Path,
+) -> None:
+    from exporters.summary import SummaryInput, render_summary  # noqa: PLC0415  (heavy)
+
+    tolerance = EvaluationTemplate.model_validate(schedule.template).options.tolerance
+    summary = SummaryInput(
+        title=schedule.name,
+        generated_at=utcnow(),
+        selection=describe_selection(schedule.selection, as_of=run.due_at),
+        runs=summary_runs,
+        tolerance=Tolerance.parse(tolerance) if tolerance else None,
+        notes=[run.note] if run.note else [],
+        schedule_id=schedule.id,
+        run_id=run.id,
+    )
+    html, pdf = render_summary(summary, templates_dir=templates_dir)
+    wanted = Produce.model_validate(schedule.produce).summary_formats
+    staging.mkdir(parents=True, exist_ok=True)
+    if "summary.html" in wanted:
+        (staging / "summary.html").write_bytes(html)
+    if "summary.pdf" in wanted:
+        (staging / "summary.pdf").write_bytes(pdf)
+
+
+# --- the webhook ------------------------------------------------------------------------
+
+
+def webhook_payload(runtime: Runtime, run: ScheduleRun, schedule: Schedule) -> dict[str, Any]:
+    """Return the JSON a webhook receives: the run, its links and each recording's verdicts."""
+    base = runtime.settings.public_url.rstrip("/")
+    run_url = f"{base}/api/v1/schedules/{schedule.id}/runs/{run.id}"
+    return {
+        "event": "schedule.run.finished",
+        "schedule": {"id": schedule.id, "name": schedule.name},
+        "run": {
+            "id": run.id,
+            "status": run.status,
+            "trigger": run.trigger,
+            "due_at": run.due_at.isoformat(),
+            "finished_at": run.finished_at.isoformat() if run.finished_at else None,
+            "note": run.note,
+            "error": run.error,
+            "url": run_url,
+        },
+        "links": {a["name"]: f"{run_url}/artifacts/{a['name']}" for a in run.artifacts or []},
+        "recordings": [
+            {
+                "dataset": row.get("dataset"),
+                "status": row.get("status"),
+                "error": row.get("error"),
+                "evaluation_url": (
+                    f"{base}/api/v1/evaluations/{row['evaluation_id']}"
+                    if row.get("evaluation_id")
+                    else None
+                ),
+                "systems": row.get("summary") or [],
+            }
+            for row in run.rows or []
+        ],
+    }
+
+
+def deliver_webhook(runtime: Runtime, run_id: str, *, attempt: int) -> None:
+    """Post a finished run's summary to its schedule's webhook once and record the attempt.
+
+    Raises:
+        WebhookNotDeliveredError: the attempt failed and the queue has attempts left (the
+            queue task retries on it); the last failed attempt is recorded and logged only.
+    """
+    with runtime.sessions() as session:
+        run = session.get_one(ScheduleRun, run_id)
+        schedule = session.get(Schedule, run.schedule_id)
+    if schedule is None or not schedule.webhook_url:
+        return
+    url = schedule.webhook_url
+    body = json.dumps(webhook_payload(runtime, run, schedule)).encode("utf-8")
+    entry = _post(url, body)
+    delivered = 200 <= int(entry.get("status", 0)) < 300
+    record: dict[str, Any] = dict(run.webhook or {}) if attempt > 1 else {}
+    record = {
+        "url": url,
+        "delivered": delivered,
+        "attempts": [*record.get("attempts", []), entry],
+    }
+    with runtime.sessions() as session:
+        session.execute(update(ScheduleRun).where(ScheduleRun.id == run_id).values(webhook=record))
+        session.commit()
+    if delivered:
+        return
+    if attempt < WEBHOOK_ATTEMPTS:
+        msg = f"Webhook {url} attempt {attempt} failed: {entry.get('error')}; the queue retries."
+        raise WebhookNotDeliveredError(msg)
+    logger.warning("Webhook %s not delivered after %d attempts", url, WEBHOOK_ATTEMPTS)
+
+
+def _post(url: str, body: bytes) -> dict[str, Any]:
+    """Post once; return the attempt's record (time, status or error, duration)."""
+    entry: dict[str, Any] = {"at": utcnow().isoformat()}
+    started = time.monotonic()
+    request = urllib.request.Request(  # noqa: S310  (http/https checked at creation)
+        url,
+        data=body,
+        headers={"Content-Type": "application/json", "User-Agent": "loceval-webhook"},
+        method="POST",
+    )
+    try:
+        with urllib.request.urlopen(request, timeout=_WEBHOOK_TIMEOUT_S) as response:  # noqa: S310
+            entry["status"] = response.status
+    except urllib.error.HTTPError as err:
+        entry["status"] = err.code
+        entry["error"] = f"HTTP {err.code} {err.reason}"
+    except (urllib.error.URLError, OSError, TimeoutError) as err:
+        entry["error"] = str(getattr(err, "reason", err))
+    logger.info(
+        "webhook attempt",
+        extra={
+            "event": "webhook",
+            "status": entry.get("status"),
+            "duration_ms": round((time.monotonic() - started) * 1000, 1),
+        },
+    )
+    return entry

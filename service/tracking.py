@@ -1,0 +1,405 @@
+"""The life of a tracked job, the same for every job kind: claim, beat, finish, recover.
+
+Job state lives in the database, not in the queue or in process memory: the queue carries
+only job ids. A worker claims a job with a conditional update (``queued -> running``), so a
+job enqueued twice runs once; while it runs it beats a heartbeat. A job whose heartbeat stops
+(the worker crashed or the service restarted) is found by :func:`recover`, on start and once a
+minute, and is queued again (the work is idempotent: artifacts are rebuilt from the inputs) or,
+after ``job_attempts`` starts, marked failed with the reason.
+
+:func:`tracked_job` is the one sequence every executor runs inside; each transition (queued,
+started, succeeded, failed, requeued) is one log line with the kind, job id, project,
+attempt and duration.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import logging
+import shutil
+import threading
+import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+from sqlalchemy import or_, select, update
+
+from loceval.errors import LocevalError
+from service.adapters import DATABASE_ERRORS
+from service.db import JobStatus, utcnow
+from service.errors import internal_problem, problem, problem_for
+from service.logs import log_context, log_transition
+from service.runtime import JobKind, JobModel, Runtime
+
+__all__ = [
+    "Heartbeat",
+    "ProgressWriter",
+    "TrackedJob",
+    "claim",
+    "finish",
+    "recover",
+    "release",
+    "tracked_job",
+]
+
+logger = logging.getLogger(__name__)
+
+_PROGRESS_INTERVAL_S: Final = 0.5
+
+
+@dataclass
+class TrackedJob:
+    """A claimed job inside :func:`tracked_job`: where to write, what to store at the end.
+
+    Attributes:
+        runtime: the process's runtime.
+        kind: the job's kind.
+        job_id: its row id.
+        project_id: its project.
+        attempt: how often it has been started, this start included.
+        progress: writes the stage and fraction done.
+        values: the columns stored when the job succeeds (set by :meth:`succeed`).
+        finished_here: whether this worker recorded the end (False: a recovered copy owns it).
+    """
+
+    runtime: Runtime
+    kind: JobKind
+    job_id: str
+    project_id: str
+    attempt: int
+    progress: ProgressWriter
+    values: dict[str, Any] = field(default_factory=dict)
+    finished_here: bool = False
+    _staging: Path | None = None
+
+    def staging_dir(self) -> Path:
+        """Return a fresh folder (not yet created) to write the artifacts into."""
+        self._staging = self.runtime.store.job_staging_dir(self.kind.folder, self.job_id)
+        return self._staging
+
+    def publish(self, staging: Path) -> Path:
+        """Rename the finished staging folder into place; return the artifacts folder."""
+        final = self.runtime.store.publish_job_artifacts(self.kind.folder, self.job_id, staging)
+        self._staging = None
+        return final
+
+    def succeed(self, **values: Any) -> None:  # noqa: ANN401
+        """Store ``values`` (result, artifacts, ...) when the job ends successfully."""
+        self.values = values
+
+    def discard_staging(self) -> None:
+        """Remove a staging folder left by a failure."""
+        if self._staging is not None:
+            shutil.rmtree(self._staging, ignore_errors=True)
+            self._staging = None
+
+
+@contextmanager
+def tracked_job(
+    runtime: Runtime, kind: str, job_id: str, *, stage: str = "starting"
+) -> Iterator[TrackedJob | None]:
+    """Run a job's work inside the claim / heartbeat / finish / cleanup sequence.
+
+    Yields ``None`` when another worker has claimed the job (the caller does nothing).
+    A :class:`LocevalError` raised inside fails the job with its problem document; any
+    other exception is a bug: it is logged with its traceback and the job fails with an
+    error id. Leaving normally stores what :meth:`TrackedJob.succeed` was given.
+    """
+    spec = runtime.kinds[kind]
+    claimed = claim(runtime, spec.model, job_id, stage=stage)
+    if claimed is None:
+        yield None
+        return
+    project_id, attempt = claimed
+    job = TrackedJob(
+        runtime, spec, job_id, project_id, attempt, ProgressWriter(runtime, spec.model, job_id)
+    )
+    heartbeat = Heartbeat(runtime, spec.model, job_id)
+    heartbeat.start()
+    started = time.monotonic()
+    with log_context(job_id=job_id, kind=kind, project=project_id):
+        log_transition("started", kind, job_id, project=project_id, attempt=attempt)
+        status, values = JobStatus.SUCCEEDED, job.values
+        try:
+            yield job
+            values = job.values
+        except LocevalError as err:
+            status, values = JobStatus.FAILED, {"error": problem_for(err)}
+        except Exception:  # a bug in the job: it must not kill the consumer thread
+            error_id = uuid.uuid4().hex[:12]
+            logger.exception("%s %s failed with a bug (error_id=%s)", kind, job_id, error_id)
+            status, values = JobStatus.FAILED, {"error": internal_problem(error_id)}
+        finally:
+            heartbeat.stop()
+            job.discard_staging()
+        job.finished_here = finish(runtime, spec.model, job_id, status=status, **values)
+        log_transition(
+            str(status),
+            kind,
+            job_id,
+            level=logging.INFO if status == JobStatus.SUCCEEDED else logging.WARNING,
+            project=project_id,
+            attempt=attempt,
+            duration_s=round(time.monotonic() - started, 3),
+            error=values.get("error", {}).get("type") if "error" in values else None,
+        )
+
+
+def claim(
+    runtime: Runtime, model: JobModel, job_id: str, *, stage: str = "starting"
+) -> tuple[str, int] | None:
+    """Move a queued job to running for this worker.
+
+    Returns:
+        The job's project and attempt number, or None if someone else has it.
+    """
+    now = utcnow()
+    with runtime.sessions() as session:
+        claimed = session.execute(
+            update(model)
+            .where(model.id == job_id, model.status == JobStatus.QUEUED)
+            .values(
+                status=JobStatus.RUNNING,
+                attempts=model.attempts + 1,
+                worker=runtime.worker_id,
+                heartbeat_at=now,
+                started_at=now,
+                stage=stage,
+                fraction=0.0,
+            )
+        )
+        session.commit()
+        if not claimed.rowcount:  # type: ignore[attr-defined]
+            return None
+        project_id, attempts = session.execute(
+            select(model.project_id, model.attempts).where(model.id == job_id)
+        ).one()
+        return str(project_id), int(attempts)
+
+
+def finish(
+    runtime: Runtime,
+    model: JobModel,
+    job_id: str,
+    *,
+    status: str,
+    **values: Any,  # noqa: ANN401
+) -> bool:
+    """Record a job's end, if this worker still holds it (else a recovered copy owns it)."""
+    succeeded = status == JobStatus.SUCCEEDED
+    with runtime.sessions() as session:
+        done = session.execute(
+            update(model)
+            .where(model.id == job_id, model.worker == runtime.worker_id)
+            .values(
+                status=status,
+                # A failed job keeps the stage it failed in ("reading est", "writing report.pdf").
+                stage="done" if succeeded else model.stage,
+                fraction=1.0 if succeeded else model.fraction,
+                finished_at=utcnow(),
+                heartbeat_at=None,
+                **values,
+            )
+        )
+        session.commit()
+        return bool(done.rowcount)  # type: ignore[attr-defined]
+
+
+class ProgressWriter:
+    """Store a job's progress, at most twice a second (and whenever the stage changes)."""
+
+    def __init__(self, runtime: Runtime, model: JobModel, job_id: str) -> None:
+        """Write to the row ``job_id`` of ``model``."""
+        self.runtime = runtime
+        self.model = model
+        self.job_id = job_id
+        self._last = 0.0
+        self._stage = ""
+
+    def __call__(self, stage: str, fraction: float) -> None:
+        """Record the stage and the fraction done."""
+        now = time.monotonic()
+        if stage == self._stage and now - self._last < _PROGRESS_INTERVAL_S:
+            return
+        self._last, self._stage = now, stage
+        with self.runtime.sessions() as session:
+            session.execute(
+                update(self.model)
+                .where(self.model.id == self.job_id)
+                .values(stage=stage[:200], fraction=min(max(fraction, 0.0), 1.0))
+            )
+            session.commit()
+
+
+class Heartbeat:
+    """A thread that stamps a job's ``heartbeat_at`` while it runs."""
+
+    def __init__(self, runtime: Runtime, model: JobModel, job_id: str) -> None:
+        """Beat for the row ``job_id`` of ``model`` (start it with :meth:`start`)."""
+        self.runtime = runtime
+        self.model = model
+        self.job_id = job_id
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"heartbeat-{job_id[:8]}")
+        self._thread.daemon = True
+
+    def start(self) -> None:
+        """Start beating."""
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop beating (waits up to 5 s for the thread)."""
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+    def _run(self) -> None:
+        interval = max(self.runtime.settings.job_lease_s / 4, 0.2)
+        model = self.model
+        while not self._stop.wait(interval):
+            try:
+                with self.runtime.sessions() as session:
+                    session.execute(
+                        update(model)
+                        .where(model.id == self.job_id, model.status == JobStatus.RUNNING)
+                        .values(heartbeat_at=utcnow())
+                    )
+                    session.commit()
+            except DATABASE_ERRORS:  # a lost beat is retried; the job itself goes on
+                logger.warning("Heartbeat of %s failed", self.job_id, exc_info=True)
+
+
+# --- recovery --------------------------------------------------------------------------
+
+
+def recover(runtime: Runtime, *, now: dt.datetime | None = None) -> list[str]:
+    """Re-queue or fail jobs whose worker stopped; return the ids that were re-queued.
+
+    A running job (of any kind) whose heartbeat is older than the lease was abandoned: it is
+    queued again unless it has been started ``job_attempts`` times, then it fails with the
+    reason. A queued job that the queue no longer holds (a Redis without persistence
+    restarted) is enqueued again; the claim makes a duplicate harmless.
+    """
+    now = now or utcnow()
+    kinds = list(runtime.kinds.values())
+    stale = {kind.name: _requeue_stale(runtime, kind, now) for kind in kinds}
+    lost: dict[str, list[str]] = {kind.name: [] for kind in kinds}
+    if not runtime.huey.immediate:
+        queued = {kind.name: _queued_before(runtime, kind.model, now) for kind in kinds}
+        if any(queued.values()):
+            pending = {(t.name, str(t.args[0])) for t in runtime.huey.pending() if t.args}
+            for kind in kinds:
+                held = {job_id for name, job_id in pending if name == kind.task_name}
+                lost[kind.name] = sorted(queued[kind.name] - held - set(stale[kind.name]))
+    for kind in kinds:
+        for job_id in stale[kind.name] + lost[kind.name]:
+            runtime.enqueue(kind.name, job_id, requeued="interrupted")
+    return [job_id for kind in kinds for job_id in stale[kind.name] + lost[kind.name]]
+
+
+def _requeue_stale(runtime: Runtime, kind: JobKind, now: dt.datetime) -> list[str]:
+    """Mark abandoned running jobs queued (or failed at the attempt limit); return the queued."""
+    model = kind.model
+    cutoff = now - dt.timedelta(seconds=runtime.settings.job_lease_s)
+    requeued: list[str] = []
+    with runtime.sessions() as session:
+        stale = session.execute(
+            select(model.id, model.attempts, model.heartbeat_at, model.project_id).where(
+                model.status == JobStatus.RUNNING,
+                or_(model.heartbeat_at.is_(None), model.heartbeat_at < cutoff),
+            )
+        ).all()
+        for job_id, attempts, beat, project_id in stale:
+            given_up = attempts >= runtime.settings.job_attempts
+            if given_up:
+                detail = kind.interrupted_detail.format(n=attempts)
+                values: dict[str, Any] = {
+                    "status": JobStatus.FAILED,
+                    "stage": "failed",
+                    "finished_at": now,
+                    "error": problem(500, kind.interrupted_code, kind.interrupted_title, detail),
+                }
+            else:
+                values = {
+                    "status": JobStatus.QUEUED,
+                    "stage": f"queued again after an interruption (attempt {attempts})",
+                    "fraction": 0.0,
+                }
+            done = session.execute(
+                update(model)
+                .where(
+                    model.id == job_id,
+                    model.status == JobStatus.RUNNING,
+                    model.heartbeat_at == beat,
+                )
+                .values(**values)
+            )
+            if not done.rowcount:  # type: ignore[attr-defined]
+                continue
+            if given_up:
+                log_transition(
+                    "failed",
+                    kind.name,
+                    job_id,
+                    level=logging.WARNING,
+                    project=project_id,
+                    attempt=attempts,
+                    error=kind.interrupted_code,
+                )
+            else:
+                requeued.append(job_id)
+        session.commit()
+    return requeued
+
+
+def _queued_before(runtime: Runtime, model: JobModel, now: dt.datetime) -> set[str]:
+    """Return the jobs queued for more than a minute (candidates for a lost queue entry)."""
+    with runtime.sessions() as session:
+        return set(
+            session.scalars(
+                select(model.id).where(
+                    model.status == JobStatus.QUEUED,
+                    model.created_at < now - dt.timedelta(seconds=60),
+                )
+            ).all()
+        )
+
+
+def release(runtime: Runtime) -> int:
+    """Queue again the jobs this process was running when it stopped; return how many.
+
+    Their threads are abandoned (daemon threads end with the process); whatever they still
+    write is ignored, because a finished job is recorded only by the worker that holds it.
+    """
+    released = 0
+    for kind in runtime.kinds.values():
+        model = kind.model
+        with runtime.sessions() as session:
+            ids = session.scalars(
+                select(model.id).where(
+                    model.status == JobStatus.RUNNING, model.worker == runtime.worker_id
+                )
+            ).all()
+            session.execute(
+                update(model)
+                .where(
+                    model.id.in_(ids),
+                    model.status == JobStatus.RUNNING,
+                    model.worker == runtime.worker_id,
+                )
+                .values(
+                    status=JobStatus.QUEUED,
+                    worker=None,
+                    heartbeat_at=None,
+                    stage="queued again: the service stopped while it ran",
+                    fraction=0.0,
+                )
+            )
+            session.commit()
+        for job_id in ids:
+            runtime.enqueue(kind.name, job_id, requeued="service stopped")
+        released += len(ids)
+    return released

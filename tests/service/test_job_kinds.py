@@ -1,0 +1,120 @@
+"""The job registry, and webhook delivery as a queue task retried by the queue itself."""
+
+from __future__ import annotations
+
+import datetime as dt
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from service.db import Evaluation, Project, Schedule, ScheduleRun, utcnow
+from service.jobs import JOB_KINDS, create_runtime
+from service.runtime import Runtime
+from service.schedule_runs import WEBHOOK
+from service.settings import Settings
+from service.storage import EVALUATIONS, RUNS
+from tests.service.test_schedules_api import _Hook
+
+
+@pytest.fixture
+def runtime(tmp_path: Path) -> Iterator[Runtime]:
+    """A runtime on huey's SQLite queue with no consumer: tasks wait until executed here."""
+    rt = create_runtime(Settings(data_dir=tmp_path / "data"))
+    yield rt
+    rt.close()
+
+
+def test_each_kind_has_its_table_folder_and_a_stable_task_name() -> None:
+    """Queued messages name the task: the names stay those of earlier releases."""
+    table = {k.name: (k.model, k.folder, k.task_name) for k in JOB_KINDS}
+    assert table == {
+        "evaluation": (Evaluation, EVALUATIONS, "run_evaluation"),
+        "run": (ScheduleRun, RUNS, "run_schedule"),
+    }
+    assert all("{n}" in k.interrupted_detail for k in JOB_KINDS)
+
+
+def _finished_run(rt: Runtime, webhook_url: str) -> str:
+    """Record a succeeded schedule run whose schedule posts to ``webhook_url``."""
+    now = utcnow()
+    with rt.sessions() as session:
+        project = Project(name="site")
+        session.add(project)
+        session.flush()
+        schedule = Schedule(
+            project_id=project.id,
+            name="weekly",
+            cron="0 7 * * mon",
+            timezone="UTC",
+            selection={},
+            template={},
+            produce={},
+            webhook_url=webhook_url,
+        )
+        session.add(schedule)
+        session.flush()
+        run = ScheduleRun(
+            schedule_id=schedule.id,
+            project_id=project.id,
+            trigger="manual",
+            due_at=now,
+            status="succeeded",
+            rows=[],
+            finished_at=now,
+        )
+        session.add(run)
+        session.commit()
+        return run.id
+
+
+def test_a_failed_webhook_is_retried_by_the_queue_not_by_sleeping(runtime: Runtime) -> None:
+    """Each attempt is one task execution; a failure is rescheduled 2 s, then 4 s later."""
+    hook = _Hook(503)
+    try:
+        run_id = _finished_run(runtime, hook.url)
+        runtime.enqueue(WEBHOOK, run_id)
+        delays_s: list[float] = []
+        executed_at: dt.datetime | None = None
+        for _attempt in range(3):
+            (task,) = [*runtime.huey.pending(), *runtime.huey.scheduled()]
+            assert (task.name, task.args) == ("deliver_webhook", (run_id,))
+            if executed_at is not None:
+                delays_s.append((task.eta - executed_at).total_seconds())
+            runtime.huey.storage.flush_all()  # take it out of the queue, as a consumer does
+            # The consumer runs a retry at its eta; here it runs at once (timestamp=eta), and
+            # huey counts the next eta from the wall clock when the attempt failed.
+            executed_at = dt.datetime.now(dt.UTC).replace(tzinfo=None)  # huey's naive UTC
+            runtime.huey.execute(task, timestamp=task.eta or executed_at)
+        assert not runtime.huey.pending()
+        assert not runtime.huey.scheduled()  # no fourth attempt
+    finally:
+        hook.close()
+    assert len(hook.bodies) == 3
+    assert delays_s == [pytest.approx(2.0, abs=0.5), pytest.approx(4.0, abs=0.5)]  # 2 s, x2
+    with runtime.sessions() as session:
+        record = session.get_one(ScheduleRun, run_id).webhook
+    assert record is not None
+    assert record["delivered"] is False
+    assert [a["status"] for a in record["attempts"]] == [503, 503, 503]
+
+
+def test_a_delivered_webhook_runs_once(runtime: Runtime) -> None:
+    """A 2xx answer records delivered after one attempt and schedules nothing more."""
+    hook = _Hook(204)
+    try:
+        run_id = _finished_run(runtime, hook.url)
+        runtime.enqueue(WEBHOOK, run_id)
+        (task,) = runtime.huey.pending()
+        runtime.huey.storage.flush_all()
+        runtime.huey.execute(task)
+        assert not runtime.huey.scheduled()
+    finally:
+        hook.close()
+    (payload,) = hook.bodies
+    assert payload["run"]["id"] == run_id
+    with runtime.sessions() as session:
+        record = session.get_one(ScheduleRun, run_id).webhook
+    assert record is not None
+    assert record["delivered"] is True
+    assert [a["status"] for a in record["attempts"]] == [204]
