@@ -483,7 +483,8 @@ def _association_notes(matched: Association, total: int) -> list[str]:
         if matched.dropped_gap > total // 2:
             note += (
                 " Most poses were dropped: if the reference is sparse by design (AMCL, "
-                "surveyed points), use --associate nearest --max-dt S or a larger --max-gap."
+                "surveyed points), match nearest poses within a maximum time difference, or "
+                "allow a larger gap."
             )
         notes.append(note)
     if matched.dropped_unmatched:

@@ -3,7 +3,7 @@
 Every front door is built from :data:`OPTIONS`: the CLI's ``loceval evaluate`` flags, the
 HTTP API's ``EvaluationOptions`` schema, and the defaults and checks of
 :class:`~loceval.evaluation.EvaluationConfig`. A key (``max_dt_s``) is what the API and the
-options document call the option; ``flag`` (``--max-dt``) is the CLI's name for it and
+options document call the option; ``flag`` (``--max-dt``, from ``cli_name``) is the CLI's name for it and
 ``words`` ("the maximum time difference") is how messages name it without naming a front
 door. Errors about an option carry its key (``InputError(msg, option="max_dt_s")``).
 
@@ -124,7 +124,7 @@ class OptionSpec:
         default: the value when not given (None: not set).
         help: one line for ``--help`` and the API schema's description.
         words: how messages name it, front-door neutral ("the maximum time difference").
-        flag: the CLI's flag.
+        cli_name: the CLI's name of the flag, without its dashes (``max-dt``).
         metavar: the CLI's placeholder of the value.
         minimum: the least value (of each item, for lists), if bounded below.
         maximum: the greatest value (of each item, for lists), if bounded above.
@@ -144,7 +144,7 @@ class OptionSpec:
     default: OptionValue
     help: str
     words: str
-    flag: str
+    cli_name: str
     metavar: str | None = None
     minimum: float | None = None
     maximum: float | None = None
@@ -157,6 +157,11 @@ class OptionSpec:
     group: str = "evaluation"
     api: bool = True
     cli: bool = True
+
+    @property
+    def flag(self) -> str:
+        """Return the CLI's flag (``--max-dt``)."""
+        return f"--{self.cli_name}"
 
     @property
     def bounds_text(self) -> str:
@@ -193,7 +198,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         AssociationMethod.INTERPOLATE.value,
         "how estimate poses are matched to reference poses in time",
         "the association method",
-        "--associate",
+        "associate",
         choices=tuple(AssociationMethod),
     ),
     OptionSpec(
@@ -202,7 +207,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         0.01,
         "nearest association: the largest time difference of a match, seconds",
         "the maximum time difference",
-        "--max-dt",
+        "max-dt",
         "S",
         minimum=0.0,
         maximum=3600.0,
@@ -214,7 +219,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         0.1,
         "the longest reference gap bridged by interpolation, seconds",
         "the maximum gap",
-        "--max-gap",
+        "max-gap",
         "S",
         minimum=0.0,
         maximum=1e6,
@@ -226,7 +231,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         0.0,
         "added to every estimate stamp, seconds",
         "the time offset",
-        "--time-offset",
+        "time-offset",
         "S",
         minimum=-_MAX_S,
         maximum=_MAX_S,
@@ -237,7 +242,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         StampSource.HEADER.value,
         "bags: stamps from the message header or the bag's receive time",
         "the stamp source",
-        "--stamp",
+        "stamp",
         choices=tuple(StampSource),
         group="reading",
     ),
@@ -247,7 +252,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         AlignMethod.SE3.value,
         "how the estimate is brought into the reference's frame",
         "the alignment method",
-        "--align",
+        "align",
         choices=tuple(AlignMethod),
     ),
     OptionSpec(
@@ -256,7 +261,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         "align on the first N poses or N seconds (10s)",
         "the alignment window",
-        "--align-first",
+        "align-first",
         "N|Ns",
         max_length=32,
         pattern=r"^\s*\d+(\.\d+)?\s*s?\s*$",
@@ -267,7 +272,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         "calibrate alignment: seconds after the first matched pose",
         "the calibration time",
-        "--calibrate-at",
+        "calibrate-at",
         "S",
         minimum=0.0,
         maximum=_MAX_S,
@@ -278,7 +283,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         'rigid body -> sensor "x y z qx qy qz qw", applied to the reference',
         "the device offset",
-        "--offset",
+        "offset",
         '"x y z qx qy qz qw"',
         max_length=300,
     ),
@@ -288,7 +293,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         "URDF (or a bag with /tf_static) giving the device offset between two links",
         "the device file",
-        "--device",
+        "device",
         "FILE",
     ),
     OptionSpec(
@@ -297,7 +302,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         1.0,
         "the RPE delta (step), in the RPE unit",
         "the RPE delta",
-        "--rpe-delta",
+        "rpe-delta",
         "D",
         minimum=0.0,
         maximum=_MAX_S,
@@ -309,7 +314,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         RPEUnit.FRAMES.value,
         "what the RPE step counts: frames, metres or seconds",
         "the RPE unit",
-        "--rpe-unit",
+        "rpe-unit",
         choices=tuple(RPEUnit),
     ),
     OptionSpec(
@@ -318,7 +323,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         False,  # noqa: FBT003  (a default, not a flag argument)
         "every pose starts an RPE pair (default: consecutive segments)",
         "all RPE pairs",
-        "--rpe-all-pairs",
+        "rpe-all-pairs",
     ),
     OptionSpec(
         "thresholds_m",
@@ -326,7 +331,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         DEFAULT_THRESHOLDS_M,
         "distances for the share-within figures, metres",
         "the thresholds",
-        "--thresholds",
+        "thresholds",
         "M,M,...",
         minimum=0.0,
         maximum=1e6,
@@ -339,7 +344,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         "pass/fail verdict: METRES@PERCENT of poses within, e.g. 0.10@95",
         "the tolerance",
-        "--tolerance",
+        "tolerance",
         "M@PCT",
         max_length=40,
         example="0.10@95",
@@ -350,7 +355,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         10,
         "how many of the greatest errors are listed",
         "the number of worst poses",
-        "--worst",
+        "worst",
         "N",
         minimum=0,
         maximum=1000,
@@ -361,7 +366,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         Units.MM.value,
         "length units of the CAD files",
         "the CAD units",
-        "--units",
+        "units",
         choices=tuple(Units),
         group="export",
     ),
@@ -371,7 +376,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         'evaluation frame -> model frame "tx ty tz yaw_deg" (metres, degrees about Z)',
         "the site transform",
-        "--site",
+        "site",
         '"tx ty tz yaw_deg"',
         max_length=200,
         example="12.5 3.2 0 90",
@@ -383,7 +388,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         "evaluation frame -> model frame as a 4x4 matrix (the CLI: a file holding it)",
         "the site matrix",
-        "--site-matrix",
+        "site-matrix",
         "FILE",
         group="export",
     ),
@@ -393,7 +398,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         0.001,
         "largest deviation the CAD polyline simplification may introduce, metres",
         "the simplification tolerance",
-        "--simplify",
+        "simplify",
         "M",
         minimum=0.0,
         maximum=1000.0,
@@ -405,7 +410,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         "artifacts to write (default: all)",
         "the artifact names",
-        "--formats",
+        "formats",
         "NAME,...",
         min_length=1,
         max_length=20,
@@ -417,7 +422,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         "a building mesh (OBJ, PLY, STL, GLB) to put in the glTF scene",
         "the building model",
-        "--building",
+        "building",
         "FILE",
         group="export",
         api=False,
