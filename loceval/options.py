@@ -3,9 +3,9 @@
 Every front door is built from :data:`OPTIONS`: the CLI's ``loceval evaluate`` flags, the
 HTTP API's ``EvaluationOptions`` schema, and the defaults and checks of
 :class:`~loceval.evaluation.EvaluationConfig`. A key (``max_dt_s``) is what the API and the
-options document call the option; ``flag`` (``--max-dt``, from ``cli_name``) is the CLI's name for it and
-``words`` ("the maximum time difference") is how messages name it without naming a front
-door. Errors about an option carry its key (``InputError(msg, option="max_dt_s")``).
+options document call the option; ``flag`` (``--max-dt``, from ``cli_name``) is the CLI's
+name for it and ``words`` ("the maximum time difference") is how messages name it without
+naming a front door. Errors about an option carry its key (``InputError(msg, option="max_dt_s")``).
 
 This module is pure Python (no numpy), so the CLI can build its parser without the
 numeric stack; the enums of the choices live here and are re-exported where they are used.
