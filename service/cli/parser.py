@@ -52,7 +52,7 @@ class _FormatNames:
         return name in set(self)
 
     def __iter__(self) -> Iterator[str]:
-        from loceval.readers import TrajectoryFormat  # noqa: PLC0415
+        from loceval.readers.source import TrajectoryFormat  # noqa: PLC0415
 
         return iter([f.value for f in TrajectoryFormat])
 
