@@ -30,6 +30,7 @@ from ezdxf.filemanagement import new as new_drawing
 from ezdxf.layouts.layout import Modelspace
 from ezdxf.lldxf.const import DXFError
 
+from exporters._dxf_bulk import BulkPolylines
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
 from exporters.placement import (
@@ -71,18 +72,19 @@ def export_dxf(
     """
     placement = placement or place_evaluation(result, options)
     try:
-        doc = _drawing(placement)
+        doc, bulk = _drawing(placement)
         stream = io.StringIO()
         doc.write(stream)
     except DXFError as err:
         msg = f"ezdxf could not write the DXF drawing ({err}); please report this."
         raise ExportError(msg) from err
-    return stream.getvalue().encode("utf-8")
+    return bulk.splice(stream.getvalue()).encode("utf-8")
 
 
-def _drawing(placement: Placement) -> Drawing:
+def _drawing(placement: Placement) -> tuple[Drawing, BulkPolylines]:
     per_metre = placement.units.per_metre
     doc = new_drawing("R2013", setup=False, units=_INSUNITS[placement.units])
+    bulk = BulkPolylines(doc)
     doc.header["$MEASUREMENT"] = 1  # metric
     doc.header["$LUNITS"] = 2  # decimal
     doc.header["$PDMODE"] = _PDMODE_CIRCLE_CROSS
@@ -107,12 +109,12 @@ def _drawing(placement: Placement) -> Drawing:
     markers = placement.markers()
     legend_y = float(lo[1]) - 2 * text_h  # legends stack below the drawing
     for path in placement.paths:
-        _add_path(doc, msp, path)
+        _add_path(doc, msp, bulk, path)
         _add_markers(doc, msp, path, [m for m in markers if m.path == path.name], text_h)
         if path.estimate is not None:
             corner = (float(lo[0]), legend_y, float(lo[2]))
             legend_y = _add_ate_layer(
-                doc, msp, placement, path, est=path.estimate, corner=corner, text_h=text_h
+                doc, msp, bulk, placement, path, est=path.estimate, corner=corner, text_h=text_h
             )
 
     center = (lo[:2] + hi[:2]) / 2.0
@@ -121,7 +123,7 @@ def _drawing(placement: Placement) -> Drawing:
     # ezdxf copies the model space's extents into $EXTMIN/$EXTMAX when it saves.
     msp.dxf.extmin = tuple(float(v) for v in lo)
     msp.dxf.extmax = tuple(float(v) for v in hi)
-    return doc
+    return doc, bulk
 
 
 def _write_metadata(doc: Drawing, placement: Placement) -> None:
@@ -160,9 +162,9 @@ def _layer(doc: Drawing, name: str, rgb: RGB, description: str, *, on: bool = Tr
         layer.freeze()
 
 
-def _add_path(doc: Drawing, msp: Modelspace, path: PlacedPath) -> None:
+def _add_path(doc: Drawing, msp: Modelspace, bulk: BulkPolylines, path: PlacedPath) -> None:
     _layer(doc, path.layer, path.color_rgb, f"loceval {path.kind.value}: {path.name}")
-    polyline = msp.add_polyline3d(path.vertices.tolist(), dxfattribs={"layer": path.layer})
+    polyline = bulk.add(msp, path.vertices, {"layer": path.layer})
     meta = path.metadata()
     ate = meta["ate_translation_m"]
     tags = [
@@ -201,6 +203,7 @@ def _add_markers(
 def _add_ate_layer(
     doc: Drawing,
     msp: Modelspace,
+    bulk: BulkPolylines,
     placement: Placement,
     path: PlacedPath,
     *,
@@ -224,9 +227,10 @@ def _add_ate_layer(
         piece = model[start : end + 1]
         kept, _ = simplify_rdp(piece, tolerance)
         rgb = bins[which[start]].color_rgb
-        msp.add_polyline3d(
-            piece[kept].tolist(),
-            dxfattribs={"layer": name, "color": _nearest_aci(rgb), "true_color": _int_rgb(rgb)},
+        bulk.add(
+            msp,
+            piece[kept],
+            {"layer": name, "color": _nearest_aci(rgb), "true_color": _int_rgb(rgb)},
         )
     x, y, z = corner
     y -= text_h

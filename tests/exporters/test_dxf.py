@@ -6,6 +6,7 @@ import io
 import itertools
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -260,3 +261,43 @@ def test_extents_cover_the_paths(drawing: ezdxf.document.Drawing):
         points = np.array([v.dxf.location for v in polyline.vertices])
         assert np.all(points >= lo - 1e-6)
         assert np.all(points <= hi + 1e-6)
+
+
+class _OneEntityPerVertex:
+    """ezdxf's own way: every vertex an entity object (the slow path the bulk writer replaces)."""
+
+    def __init__(self, doc: ezdxf.document.Drawing) -> None:
+        del doc
+
+    @staticmethod
+    def add(msp, vertices, dxfattribs):
+        return msp.add_polyline3d(vertices.tolist(), dxfattribs=dict(dxfattribs))
+
+    @staticmethod
+    def splice(text: str) -> str:
+        return text
+
+
+_PER_DRAWING = {"$TDCREATE", "$TDUCREATE", "$TDUPDATE", "$TDUUPDATE", "$FINGERPRINTGUID"}
+_PER_DRAWING |= {"$VERSIONGUID"}
+
+
+_WRITTEN_AT = re.compile(r"^\d+\.\d+\.\d+ @ \d{4}-\d\d-\d\dT")  # ezdxf's "written by" stamp
+
+
+def _without_stamps(text: str) -> list[str]:
+    """The drawing's group-code lines, minus the values that differ per drawing and save."""
+    lines = text.splitlines()
+    skip = {i + k for i, line in enumerate(lines) if line in _PER_DRAWING for k in (1, 2, 3)}
+    return [line for i, line in enumerate(lines) if i not in skip and not _WRITTEN_AT.match(line)]
+
+
+def test_bulk_vertices_equal_ezdxf_byte_for_byte(
+    monkeypatch: pytest.MonkeyPatch, two_estimates: EvaluationResult, options: ExportOptions
+):
+    """The spliced VERTEX records are the file ezdxf writes with one entity per vertex."""
+    fast = dxf.export_dxf(two_estimates, options).decode("utf-8")
+    monkeypatch.setattr(dxf, "BulkPolylines", _OneEntityPerVertex)
+    slow = dxf.export_dxf(two_estimates, options).decode("utf-8")
+    assert fast.count("\nVERTEX\n") == slow.count("\nVERTEX\n") > 1000
+    assert _without_stamps(fast) == _without_stamps(slow)
