@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
+from typing import Final
 
+from exporters.errors import ExportOptionsError
 from loceval.geometry import SimilarityTransform
 
 __all__ = ["ExportOptions", "Units"]
+
+_CRS_NAME: Final = re.compile(r"[A-Za-z][A-Za-z0-9_.-]*:[A-Za-z0-9_.-]+")
 
 
 class Units(StrEnum):
@@ -38,6 +43,9 @@ class ExportOptions:
         evaluation_id: the id named in every file's metadata.
         title: a human title for reports and file metadata.
         templates_dir: where the report templates live (``templates/`` by default).
+        crs: the projected coordinate reference system the site transform places the
+            evaluation in (``"EPSG:25832"``), if any; the IFC then carries the site
+            transform as its map conversion.
     """
 
     units: Units = Units.MM
@@ -47,3 +55,17 @@ class ExportOptions:
     evaluation_id: str = "local"
     title: str = "loceval evaluation"
     templates_dir: Path | None = None
+    crs: str | None = None
+
+    def __post_init__(self) -> None:
+        """Check that the coordinate reference system reads ``AUTHORITY:CODE``.
+
+        Raises:
+            ExportOptionsError: a CRS that is not of the form ``EPSG:25832``.
+        """
+        if self.crs is not None and not _CRS_NAME.fullmatch(self.crs):
+            msg = (
+                f"The coordinate reference system {self.crs!r} is not of the form "
+                f"AUTHORITY:CODE; give it as, for example, 'EPSG:25832'."
+            )
+            raise ExportOptionsError(msg, option="crs")
