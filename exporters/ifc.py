@@ -32,6 +32,7 @@ clockwise). Without a CRS the vertices are the DXF's model coordinates, as they 
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import tempfile
@@ -44,6 +45,7 @@ import ifcopenshell
 import ifcopenshell.guid
 import numpy as np
 
+from exporters.building import georeferenced_options
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
 from exporters.placement import Marker, PlacedPath, Placement, place_evaluation
@@ -105,7 +107,7 @@ def split_at_gaps(stamps_ns: StampsNs, gaps_ns: Sequence[tuple[int, int]]) -> li
     ends = np.array([end for _, end in gaps_ns], dtype=np.int64)
     cuts = np.unique(np.searchsorted(stamps, ends, side="left"))
     bounds = [0, *(int(c) for c in cuts if 0 < c < len(stamps)), len(stamps)]
-    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
+    return [slice(a, b) for a, b in itertools.pairwise(bounds)]
 
 
 class Georeference:
@@ -142,9 +144,13 @@ class Georeference:
 def georeference(options: ExportOptions) -> Georeference:
     """Return the CRS and site transform the IFC is placed with.
 
+    They are the options' own, or else those of an IFC building's map conversion.
+
     Raises:
-        ExportOptionsError: a CRS with a site transform that tilts the evaluation frame.
+        ExportOptionsError: a CRS with a site transform that tilts the evaluation frame,
+            or an IFC building that cannot be read.
     """
+    options = georeferenced_options(options)
     return Georeference(options.crs, options.site)
 
 
@@ -165,8 +171,12 @@ def export_ifc(
         ExportOptionsError: unusable placement options.
         ExportError: ifcopenshell refused the model.
     """
-    placement = placement or place_evaluation(result, options)
     geo = georeference(options)
+    same_site = placement is not None and np.allclose(
+        placement.site.as_matrix(), geo.site.as_matrix(), rtol=0.0, atol=1e-12
+    )
+    if placement is None or not same_site:
+        placement = place_evaluation(result, options)
     try:
         model = _IfcBuilder(placement, geo).build()
         with tempfile.TemporaryDirectory() as tmp:
@@ -306,14 +316,16 @@ class _IfcBuilder:
         items = []
         for piece in pieces:
             points = vertices[piece]
-            if len(points) >= 2:  # noqa: PLR2004  (a curve needs two points)
+            if len(points) >= 2:
                 point_list = f.createIfcCartesianPointList3D([tuple(p) for p in points.tolist()])
-                items.append(f.createIfcIndexedPolyCurve(point_list, None, False))
+                items.append(
+                    f.create_entity("IfcIndexedPolyCurve", Points=point_list, SelfIntersect=False)
+                )
             else:  # a lone pose between two tracking losses
                 items.append(f.createIfcCartesianPoint(tuple(points[0].tolist())))
         for item in items:
             self._style(item, path.layer, path.color_rgb)
-        curves_only = all(i.is_a("IfcCurve") for i in items)
+        curves_only = all(len(vertices[p]) >= 2 for p in pieces)
         representation = f.create_entity(
             "IfcShapeRepresentation",
             ContextOfItems=self.annotation_ctx,
@@ -367,9 +379,7 @@ class _IfcBuilder:
     ) -> None:
         f = self.f
         properties = [
-            f.create_entity(
-                "IfcPropertySingleValue", Name=key, NominalValue=self._value(value)
-            )
+            f.create_entity("IfcPropertySingleValue", Name=key, NominalValue=self._value(value))
             for key, value in values.items()
             if value is not None
         ]
@@ -401,7 +411,9 @@ class _IfcBuilder:
 def _evaluation_properties(placement: Placement) -> dict[str, object]:
     meta = placement.metadata()
     frame = meta["frame"]
-    assert isinstance(frame, dict)
+    if not isinstance(frame, dict):  # pragma: no cover  (metadata() always nests it)
+        msg = f"placement metadata has no frame dictionary: {frame!r}"
+        raise TypeError(msg)
     return {
         "Generator": meta["generator"],
         "EvaluationId": placement.evaluation_id,

@@ -11,7 +11,7 @@ from typing import Final
 from exporters.errors import ExportOptionsError
 from loceval.geometry import SimilarityTransform
 
-__all__ = ["ExportOptions", "Units"]
+__all__ = ["ExportOptions", "Units", "UpAxis"]
 
 _CRS_NAME: Final = re.compile(r"[A-Za-z][A-Za-z0-9_.-]*:[A-Za-z0-9_.-]+")
 
@@ -29,6 +29,13 @@ class Units(StrEnum):
         return {"mm": 1000.0, "cm": 100.0, "m": 1.0}[self.value]
 
 
+class UpAxis(StrEnum):
+    """The up axis of a building mesh file (OBJ, PLY, STL): CAD's Z, or Y as many exporters."""
+
+    Z = "z"
+    Y = "y"
+
+
 @dataclass(frozen=True, slots=True)
 class ExportOptions:
     """How an evaluation becomes files.
@@ -39,7 +46,8 @@ class ExportOptions:
             the building model's coordinates (metres); identity by default.
         simplify_m: largest deviation, in metres, that polyline simplification may
             introduce (0 keeps every vertex).
-        building: a building mesh (OBJ/PLY/STL/GLB) to put in the glTF scene, if any.
+        building: a building model (OBJ/PLY/STL/GLB/IFC) to put in the glTF scene, if any.
+        building_up: the up axis of an OBJ, PLY or STL building (``"y"`` for Y-up exports).
         evaluation_id: the id named in every file's metadata.
         title: a human title for reports and file metadata.
         templates_dir: where the report templates live (``templates/`` by default).
@@ -56,6 +64,7 @@ class ExportOptions:
     title: str = "loceval evaluation"
     templates_dir: Path | None = None
     crs: str | None = None
+    building_up: UpAxis = UpAxis.Z
 
     def __post_init__(self) -> None:
         """Check that the coordinate reference system reads ``AUTHORITY:CODE``.

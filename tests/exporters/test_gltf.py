@@ -232,7 +232,9 @@ def test_bad_building(
     path = tmp_path / name
     if content is not None:
         path.write_bytes(content)
-    with pytest.raises(ExportOptionsError, match=rf"--building .*{name}.* ({match})"):
+    with pytest.raises(
+        ExportOptionsError, match=rf"(--building|building model) .*{name}.* ({match})"
+    ):
         gltf.export_glb(two_estimates, ExportOptions(building=path))
 
 

@@ -18,9 +18,10 @@ from loceval.geometry import SimilarityTransform
 from loceval.readers import read_trajectory
 from tests.exporters.conftest import noisy, walk
 
-ifcopenshell = pytest.importorskip("ifcopenshell")
+pytest.importorskip("ifcopenshell")
 ezdxf = pytest.importorskip("ezdxf")
-import ifcopenshell.validate  # noqa: E402  (after the importorskip of its library)
+import ifcopenshell  # noqa: E402  (after the importorskip of its library)
+import ifcopenshell.validate  # noqa: E402
 
 from exporters import dxf, ifc  # noqa: E402
 
@@ -106,7 +107,7 @@ def property_set(element: ifcopenshell.entity_instance, name: str) -> dict[str, 
 def assert_same_as_dxf(
     model: ifcopenshell.file, dxf_data: bytes, options: ExportOptions, names: list[str]
 ) -> None:
-    """Each trajectory's curves, joined (and mapped to the map), are the DXF polyline within 1 mm."""
+    """Each trajectory's curves, joined (and mapped), are its DXF polyline within 1 mm."""
     expected = dxf_paths(dxf_data)
     found = trajectories(model)
     assert sorted(found) == sorted(names)
