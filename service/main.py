@@ -13,7 +13,7 @@ from contextlib import asynccontextmanager
 from fastapi import APIRouter, FastAPI
 
 from loceval import __version__
-from service.api import datasets, evaluations, health, schedules
+from service.api import datasets, evaluations, health, hops, schedules
 from service.api.middleware import ApiKeyMiddleware
 from service.errors import install_error_handlers
 from service.jobs import Runtime, create_runtime, recover
@@ -88,6 +88,7 @@ def create_app(
     api.include_router(schedules.router)
     app.include_router(api)
     app.include_router(health.router)
+    app.include_router(hops.router)  # Grasshopper Hops: /hops/ and POST /solve at the root
     try:
         from service import web  # noqa: PLC0415
     except ImportError:  # pragma: no cover  (the page is optional for API-only deployments)
