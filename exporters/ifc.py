@@ -35,10 +35,9 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import tempfile
+import re
 import uuid
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Final
 
 import ifcopenshell
@@ -73,6 +72,11 @@ _PREFIX: Final = {Units.MM: "MILLI", Units.CM: "CENTI", Units.M: None}
 _NS_PER_S: Final = 1_000_000_000
 _GUID_NAMESPACE: Final = uuid.UUID("5f0c7c57-6d1e-4c1b-9a43-7b1f0f1c1e15")
 _YAW_ONLY_ATOL: Final = 1e-9
+_PLACEHOLDER: Final = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+_PLACEHOLDER_TEXT: Final = "((0.,0.,0.),(0.,0.,0.))"
+_PLACEHOLDER_LINE: Final = re.compile(
+    r"^#(\d+)=IFCCARTESIANPOINTLIST3D\(" + re.escape(_PLACEHOLDER_TEXT), re.MULTILINE
+)
 
 
 def tracking_losses(result: EvaluationResult, trajectory: Trajectory) -> list[tuple[int, int]]:
@@ -178,18 +182,23 @@ def export_ifc(
     if placement is None or not same_site:
         placement = place_evaluation(result, options)
     try:
-        model = _IfcBuilder(placement, geo).build()
-        with tempfile.TemporaryDirectory() as tmp:
-            target = Path(tmp) / "paths.ifc"
-            model.write(str(target))
-            return target.read_bytes()
+        builder = _IfcBuilder(placement, geo)
+        text = builder.build().to_string()  # type: ignore[no-untyped-call]
     except (RuntimeError, TypeError, ValueError) as err:
         msg = f"ifcopenshell could not write the IFC model ({err}); please report this."
         raise ExportError(msg) from err
+    return builder.splice_point_lists(text).encode("utf-8")
 
 
 class _IfcBuilder:
-    """Builds the IFC entities of one placement."""
+    """Builds the IFC entities of one placement.
+
+    ifcopenshell spends about 80 us per coordinate serializing a point list (16 s for
+    100,000 poses of two paths), so each path's ``IfcCartesianPointList3D`` is created with
+    a two-point placeholder and its coordinates are written into the text afterwards
+    (:meth:`splice_point_lists`), fixed-point with 6 decimals (1 nm in millimetres, 1 um
+    in metres), in bulk.
+    """
 
     def __init__(self, placement: Placement, geo: Georeference) -> None:
         self.placement = placement
@@ -197,6 +206,24 @@ class _IfcBuilder:
         self.f = ifcopenshell.file(schema="IFC4")
         # with a CRS the file keeps evaluation-frame coordinates: model -> evaluation frame
         self.to_local = geo.site.inverse() if geo.crs is not None else None
+        self.point_lists: dict[int, FloatArray] = {}  # entity id -> (M, 3) coordinates
+
+    def point_list(self, points: FloatArray) -> ifcopenshell.entity_instance:
+        """Return an ``IfcCartesianPointList3D`` placeholder for (M, 3) coordinates."""
+        placeholder = self.f.create_entity("IfcCartesianPointList3D", CoordList=_PLACEHOLDER)
+        self.point_lists[int(placeholder.id())] = points
+        return placeholder
+
+    def splice_point_lists(self, text: str) -> str:
+        """Write each point list's coordinates over its placeholder in the STEP text."""
+
+        def coordinates(match: re.Match[str]) -> str:
+            points = self.point_lists[int(match.group(1))]
+            flat = np.ascontiguousarray(points, dtype=np.float64).reshape(-1).tolist()
+            body = ",".join(["(%.6f,%.6f,%.6f)"] * len(points)) % tuple(flat)
+            return f"{match.group(0)[: -len(_PLACEHOLDER_TEXT)]}({body})"
+
+        return _PLACEHOLDER_LINE.sub(coordinates, text)
 
     def guid(self, key: str) -> str:
         """Return a GlobalId stable for the same evaluation and object."""
@@ -317,7 +344,7 @@ class _IfcBuilder:
         for piece in pieces:
             points = vertices[piece]
             if len(points) >= 2:
-                point_list = f.createIfcCartesianPointList3D([tuple(p) for p in points.tolist()])
+                point_list = self.point_list(points)
                 items.append(
                     f.create_entity("IfcIndexedPolyCurve", Points=point_list, SelfIntersect=False)
                 )
