@@ -36,6 +36,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from loceval.errors import InputError, LocevalError
 from service.api.deps import RuntimeDep
+from service.api.responses import problems
 from service.auth import authenticate
 from service.db import Evaluation, EvaluationStatus, get_owned
 from service.errors import AuthenticationError, NotFoundError, NotReadyError, status_for
@@ -159,6 +160,30 @@ class HopsSolve(BaseModel):
     modelunits: str | None = Field(default=None, max_length=50)
 
 
+class HopsAnswer(BaseModel):
+    """A Hops solve answer: the output trees, and messages the component shows."""
+
+    pointer: str | None = None
+    values: list[dict[str, Any]]
+    errors: list[str]
+    warnings: list[str]
+
+
+_SOLVE_RESPONSES: Final[dict[int | str, dict[str, Any]]] = {
+    **problems(),
+    **{
+        status: {
+            "model": HopsAnswer,
+            "description": f"{description}: the message is in the document's errors",
+        }
+        for status, description in (
+            (404, "no such evaluation in this key's project, or it wrote no paths.3dm.json"),
+            (409, "the evaluation has not succeeded (yet)"),
+        )
+    },
+}
+
+
 def hops_project(request: Request, runtime: RuntimeDep) -> str:
     """Return the project of the key in ``RhinoComputeKey`` (or ``Authorization: Bearer``).
 
@@ -194,8 +219,8 @@ def read_hops_component(name: str) -> dict[str, Any]:
     return _component(name)
 
 
-@router.post("/solve")
-@router.post("/hops/solve")
+@router.post("/solve", response_model=HopsAnswer, responses=_SOLVE_RESPONSES)
+@router.post("/hops/solve", response_model=HopsAnswer, include_in_schema=False)
 async def solve_hops(
     body: HopsSolve, runtime: RuntimeDep, project_id: HopsProjectDep
 ) -> JSONResponse:
@@ -204,7 +229,7 @@ async def solve_hops(
     return await _solve(name, body, runtime, project_id)
 
 
-@router.post("/hops/{name}")
+@router.post("/hops/{name}", response_model=HopsAnswer, responses=_SOLVE_RESPONSES)
 async def solve_hops_component(
     name: str, body: HopsSolve, runtime: RuntimeDep, project_id: HopsProjectDep
 ) -> JSONResponse:
