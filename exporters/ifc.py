@@ -38,6 +38,7 @@ import math
 import re
 import uuid
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Final
 
 import ifcopenshell
@@ -114,35 +115,39 @@ def split_at_gaps(stamps_ns: StampsNs, gaps_ns: Sequence[tuple[int, int]]) -> li
     return [slice(a, b) for a, b in itertools.pairwise(bounds)]
 
 
+@dataclass(frozen=True, slots=True, eq=False)
 class Georeference:
     """How the IFC places its coordinates (see the module docstring).
 
     Attributes:
         crs: the projected CRS name, or None (then the vertices are model coordinates).
         site: evaluation frame (metres) -> model coordinates (metres).
-        yaw_rad: the site's rotation about Z, counter-clockwise, radians.
     """
 
-    __slots__ = ("crs", "site", "yaw_rad")
+    crs: str | None
+    site: SimilarityTransform
 
-    def __init__(self, crs: str | None, site: SimilarityTransform) -> None:
+    def __post_init__(self) -> None:
         """Check that a site with a CRS only turns about Z.
 
         Raises:
             ExportOptionsError: a CRS with a site transform that tilts the evaluation frame.
         """
-        self.crs = crs
-        self.site = site
-        r = site.rotation
-        self.yaw_rad = math.atan2(float(r[1, 0]), float(r[0, 0]))
+        r = self.site.rotation
         tilted = not np.allclose(r[2], [0.0, 0.0, 1.0], atol=_YAW_ONLY_ATOL)
-        if crs is not None and tilted:
+        if self.crs is not None and tilted:
             msg = (
                 f"The site transform tilts the evaluation frame (rotation row z = "
-                f"{r[2].tolist()!r}), which a map conversion to {crs!r} cannot express; "
+                f"{r[2].tolist()!r}), which a map conversion to {self.crs!r} cannot express; "
                 f"give a site transform that only turns about the vertical axis."
             )
             raise ExportOptionsError(msg, option="site")
+
+    @property
+    def yaw_rad(self) -> float:
+        """Return the site's rotation about Z, counter-clockwise from the map's x axis."""
+        r = self.site.rotation
+        return math.atan2(float(r[1, 0]), float(r[0, 0]))
 
 
 def georeference(options: ExportOptions) -> Georeference:
@@ -175,6 +180,7 @@ def export_ifc(
         ExportOptionsError: unusable placement options.
         ExportError: ifcopenshell refused the model.
     """
+    options = georeferenced_options(options)  # read an IFC building's georeference once
     geo = georeference(options)
     same_site = placement is not None and np.allclose(
         placement.site.as_matrix(), geo.site.as_matrix(), rtol=0.0, atol=1e-12
