@@ -237,8 +237,11 @@ def read_georeference(path: Path) -> tuple[SimilarityTransform, str] | None:
 def georeferenced_options(options: ExportOptions) -> ExportOptions:
     """Return the options with the site and CRS of an IFC building when they are not given.
 
-    A site transform counts as not given when it is the identity; the CRS is taken only
-    together with the site it belongs to, or when the site given is the identity.
+    The building's map conversion is used only when the options give neither a CRS nor a
+    site transform (the identity counts as not given): a site or CRS the user gives wins.
+
+    Raises:
+        ExportOptionsError: an IFC building that cannot be read.
     """
     building = options.building
     if building is None or building.suffix.lower() != ".ifc" or options.crs is not None:

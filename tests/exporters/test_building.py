@@ -18,8 +18,9 @@ trimesh = pytest.importorskip("trimesh")
 ezdxf = pytest.importorskip("ezdxf")
 ifcopenshell = pytest.importorskip("ifcopenshell")
 
-from exporters import building, gltf, ifc  # noqa: E402  (after the importorskip of its libraries)
+from exporters import building, dxf, gltf, ifc  # noqa: E402  (after the importorskip of its libraries)
 from tests.exporters.ifcfactory import DOOR_X_M, write_room  # noqa: E402
+from tests.exporters.test_ifc import NAMES, assert_same_as_dxf  # noqa: E402
 
 YAW_DEG = 30.0
 CONVERSION = {
@@ -105,6 +106,8 @@ def test_ifc_building_places_the_paths(room: Path, two_estimates: EvaluationResu
     assert (conversion.Eastings, conversion.Northings) == (512340.0, 5403210.5)
     assert conversion.XAxisOrdinate == pytest.approx(0.5)
     assert conversion.TargetCRS.Name == "EPSG:25832"
+    # the paths in the IFC, mapped by its conversion, are the DXF's (placed the same way)
+    assert_same_as_dxf(model, dxf.export_dxf(two_estimates, options), resolved, NAMES)
 
 
 def test_given_site_or_crs_wins(room: Path) -> None:
