@@ -241,6 +241,9 @@ def test_split_at_gaps_lone_vertex() -> None:
     gaps = [(20, 100), (100, 200)]
     assert ifc.split_at_gaps(stamps, gaps) == [slice(0, 3), slice(3, 4), slice(4, 6)]
     assert ifc.split_at_gaps(stamps, []) == [slice(0, 6)]
+    # simplification kept neither end of the loss 20 .. 100: the cut is still between them
+    kept = np.array([0, 10, 150, 200], dtype=np.int64)
+    assert ifc.split_at_gaps(kept, [(20, 100)]) == [slice(0, 2), slice(2, 4)]
 
 
 def test_bad_crs_is_refused() -> None:
