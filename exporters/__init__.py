@@ -94,12 +94,17 @@ ARTIFACTS: Final[Mapping[str, ArtifactSpec]] = {
             "paths.3dm.json", "application/json", "exporters.rhino:export_3dm_json", "cad"
         ),
         ArtifactSpec("paths.glb", "model/gltf-binary", "exporters.gltf:export_glb", "cad"),
+        # IFC is an ISO 10303-21 (STEP) file with no IFC-specific registered type: viewers
+        # go by the .ifc suffix, and application/x-step makes browsers save it as a file
+        ArtifactSpec("paths.ifc", "application/x-step", "exporters.ifc:export_ifc", "cad"),
     )
 }
 """Every artifact, by file name, in the order they are written."""
 
 
-CAD_ARTIFACTS: Final = frozenset({"paths.dxf", "paths.3dm", "paths.3dm.json", "paths.glb"})
+CAD_ARTIFACTS: Final = frozenset(
+    {"paths.dxf", "paths.3dm", "paths.3dm.json", "paths.glb", "paths.ifc"}
+)
 """The artifacts that place the paths on the building model."""
 
 

@@ -13,10 +13,12 @@ model origin keeps millimetre precision; the offset lives in the node matrix, wr
 full double precision in the JSON. Primitives are ``LINE_STRIP`` (mode 3), not ``LINES``:
 importers turn each ``LINES`` pair into its own curve.
 
-A building mesh (OBJ, PLY, STL or GLB, read by trimesh) joins the same scene as a
-``TRIANGLES`` mesh. OBJ, PLY and STL are taken to be in model coordinates, in the output
-units, Z up (as CAD programs export them); a GLB building is taken to follow glTF (metres,
-Y up) in model coordinates. Either way it gets the same base point and Z-up -> Y-up matrix.
+A building model (OBJ, PLY, STL, GLB or IFC, read by :func:`exporters.building.read_building`)
+joins the same scene as a ``TRIANGLES`` mesh. OBJ, PLY and STL are taken to be in model
+coordinates, in the output units, Z up (as CAD programs export them; ``building_up="y"``
+for Y-up exports); a GLB building is taken to follow glTF (metres, Y up) in model
+coordinates; an IFC gives its own units and, with a map conversion, map coordinates.
+Either way it gets the same base point and Z-up -> Y-up matrix.
 """
 
 from __future__ import annotations
@@ -27,11 +29,11 @@ from typing import Final
 
 import numpy as np
 import pygltflib
-import trimesh
 from numpy.typing import NDArray
 
-from exporters.errors import ExportError, ExportOptionsError
-from exporters.options import ExportOptions, Units
+from exporters.building import read_building
+from exporters.errors import ExportError
+from exporters.options import ExportOptions
 from exporters.placement import Placement, place_evaluation
 from loceval._typing import FloatArray
 from loceval.evaluation import EvaluationResult
@@ -82,9 +84,9 @@ def export_glb(
         extras = {**path.metadata(), "units": "m", "output_units": placement.units.value}
         scene.add_lines(path.name, local_m, _linear_rgba(path.color_rgb), extras)
     if options.building is not None:
-        vertices_m, faces = _read_building(options.building, placement.units)
-        local_m = (vertices_m - placement.base_point_m).astype(np.float32)
-        scene.add_building(options.building, local_m, faces)
+        building = read_building(options.building, units=placement.units, up=options.building_up)
+        local_m = (building.vertices_m - placement.base_point_m).astype(np.float32)
+        scene.add_building(options.building, local_m, building.faces.astype(np.uint32))
     meta = placement.metadata()
     meta.update(
         units="m",
@@ -104,25 +106,6 @@ def _linear_rgba(rgb: tuple[int, int, int]) -> list[float]:
     c = np.asarray(rgb, dtype=np.float64) / 255.0
     linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
     return [*(round(float(v), 6) for v in linear), 1.0]
-
-
-def _read_building(path: Path, units: Units) -> tuple[FloatArray, NDArray[np.uint32]]:
-    """Return the building's vertices in model metres, Z up, and its (F, 3) faces."""
-    suffix = path.suffix.lower()  # the suffix and existence were checked by check_options
-    try:
-        mesh = trimesh.load(str(path), force="mesh")
-    except Exception as err:  # trimesh's many parsers raise anything
-        msg = (
-            f"The building model {str(path)!r} cannot be read as {suffix} ({err}); check the file."
-        )
-        raise ExportOptionsError(msg, option="building") from err
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        msg = f"The building model {str(path)!r} holds no triangles; export it as a mesh."
-        raise ExportOptionsError(msg, option="building")
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    # a GLB is Y up in metres: back to Z up (v @ R is R^-1 v, R being orthogonal)
-    vertices = vertices @ Z_UP_TO_Y_UP if suffix == ".glb" else vertices / units.per_metre
-    return vertices, np.asarray(mesh.faces, dtype=np.uint32)
 
 
 @dataclass

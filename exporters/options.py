@@ -6,13 +6,18 @@ options in :data:`loceval.options.OPTIONS`; :class:`Units` is re-exported from t
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Final
 
+from exporters.errors import ExportOptionsError
 from loceval.geometry import SimilarityTransform
-from loceval.options import Units, choice_default, number_default
+from loceval.options import Units, UpAxis, choice_default, number_default
 
-__all__ = ["ExportOptions", "Units"]
+__all__ = ["ExportOptions", "Units", "UpAxis"]
+
+_CRS_NAME: Final = re.compile(r"[A-Za-z][A-Za-z0-9_.-]*:[A-Za-z0-9_.-]+")
 
 _DEFAULT_UNITS = Units(choice_default("units"))
 
@@ -27,10 +32,14 @@ class ExportOptions:
             the building model's coordinates (metres); identity by default.
         simplify_m: largest deviation, in metres, that polyline simplification may
             introduce (0 keeps every vertex).
-        building: a building mesh (OBJ/PLY/STL/GLB) to put in the glTF scene, if any.
+        building: a building model (OBJ/PLY/STL/GLB/IFC) to put in the glTF scene, if any.
+        building_up: the up axis of an OBJ, PLY or STL building (``"y"`` for Y-up exports).
         evaluation_id: the id named in every file's metadata.
         title: a human title for reports and file metadata.
         templates_dir: where the report templates live (``templates/`` by default).
+        crs: the projected coordinate reference system the site transform places the
+            evaluation in (``"EPSG:25832"``), if any; the IFC then carries the site
+            transform as its map conversion.
     """
 
     units: Units = _DEFAULT_UNITS
@@ -40,3 +49,18 @@ class ExportOptions:
     evaluation_id: str = "local"
     title: str = "loceval evaluation"
     templates_dir: Path | None = None
+    crs: str | None = None
+    building_up: UpAxis = UpAxis.Z
+
+    def __post_init__(self) -> None:
+        """Check that the coordinate reference system reads ``AUTHORITY:CODE``.
+
+        Raises:
+            ExportOptionsError: a CRS that is not of the form ``EPSG:25832``.
+        """
+        if self.crs is not None and not _CRS_NAME.fullmatch(self.crs):
+            msg = (
+                f"The coordinate reference system {self.crs!r} is not of the form "
+                f"AUTHORITY:CODE; give it as, for example, 'EPSG:25832'."
+            )
+            raise ExportOptionsError(msg, option="crs")

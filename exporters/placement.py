@@ -28,6 +28,7 @@ from typing import Final, TypeAlias
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from exporters.building import georeferenced_options
 from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval import __version__
@@ -73,8 +74,8 @@ PALETTE: Final[tuple[RGB, ...]] = (
 """Trajectory colours in order: the reference first, then the estimates."""
 
 SITE_FORMAT: Final = '"tx ty tz yaw_deg"'
-BUILDING_SUFFIXES: Final = (".obj", ".ply", ".stl", ".glb")
-"""Building mesh formats accepted for the glTF scene (read with trimesh)."""
+BUILDING_SUFFIXES: Final = (".obj", ".ply", ".stl", ".glb", ".ifc")
+"""Building model formats accepted (read by :mod:`exporters.building`)."""
 _NS_PER_S: Final = 1_000_000_000
 _WORST_SEPARATION_S: Final = 2.0  # greatest errors closer in time than this share a marker
 _INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f]+')
@@ -532,6 +533,7 @@ def place_evaluation(result: EvaluationResult, options: ExportOptions) -> Placem
         ExportOptionsError: unknown units or a negative tolerance.
     """
     check_options(options)
+    options = georeferenced_options(options)  # an IFC building's own site, if none is given
     units = Units(options.units)
     site = options.site
     # the base point: the reference's bounding-box centre in model metres, rounded so it

@@ -71,6 +71,13 @@ class StampSource(StrEnum):
     RECEIVE = "receive"
 
 
+class UpAxis(StrEnum):
+    """The up axis of a building mesh file (OBJ, PLY, STL): CAD's Z, or Y as many exporters."""
+
+    Z = "z"
+    Y = "y"
+
+
 class Units(StrEnum):
     """Length units of CAD output."""
 
@@ -405,6 +412,30 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         group="export",
     ),
     OptionSpec(
+        "crs",
+        OptionKind.TEXT,
+        None,
+        "the projected coordinate reference system the site places the paths in, e.g. "
+        "EPSG:25832 (the IFC then carries the site as its map conversion)",
+        "the coordinate reference system",
+        "crs",
+        "AUTHORITY:CODE",
+        max_length=64,
+        pattern=r"^[A-Za-z][A-Za-z0-9_.-]*:[A-Za-z0-9_.-]+$",
+        example="EPSG:25832",
+        group="export",
+    ),
+    OptionSpec(
+        "building_up",
+        OptionKind.CHOICE,
+        UpAxis.Z.value,
+        "the up axis of an OBJ, PLY or STL building model (y for Y-up exports)",
+        "the building model's up axis",
+        "building-up",
+        choices=tuple(UpAxis),
+        group="export",
+    ),
+    OptionSpec(
         "formats",
         OptionKind.NAMES,
         None,
@@ -420,7 +451,8 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "building",
         OptionKind.FILE,
         None,
-        "a building mesh (OBJ, PLY, STL, GLB) to put in the glTF scene",
+        "a building model (OBJ, PLY, STL, GLB or IFC) to put in the glTF scene; an IFC's "
+        "map conversion places the paths when no site is given",
         "the building model",
         "building",
         "FILE",

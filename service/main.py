@@ -14,7 +14,7 @@ from fastapi import APIRouter, FastAPI
 
 from loceval import __version__
 from service import web
-from service.api import datasets, evaluations, health, schedules
+from service.api import datasets, evaluations, health, hops, schedules
 from service.api.middleware import ApiKeyMiddleware
 from service.errors import install_error_handlers
 from service.jobs import create_runtime
@@ -94,5 +94,6 @@ def create_app(
     api.include_router(schedules.router)
     app.include_router(api)
     app.include_router(health.router)
+    app.include_router(hops.router)  # Grasshopper Hops: /hops/ and POST /solve at the root
     app.include_router(web.router)
     return app

@@ -109,6 +109,14 @@ class ExportValues(Protocol):
     def simplify_m(self) -> float:
         """CAD polyline tolerance, metres."""
 
+    @property
+    def crs(self) -> str | None:
+        """The projected coordinate reference system, ``"EPSG:25832"``."""
+
+    @property
+    def building_up(self) -> str:
+        """The up axis of a building mesh file."""
+
 
 def config_from_options(
     options: EvaluationValues, *, reference_offset: SimilarityTransform | None = None
@@ -154,6 +162,7 @@ def export_from_options(
         InputError: both a site and a site matrix, or an option's value cannot be used.
     """
     from exporters import ExportOptions  # noqa: PLC0415
+    from exporters.options import UpAxis  # noqa: PLC0415
     from exporters.placement import (  # noqa: PLC0415
         check_options,
         parse_site,
@@ -181,6 +190,8 @@ def export_from_options(
         simplify_m=options.simplify_m,
         building=building,
         evaluation_id=evaluation_id,
+        crs=options.crs,
+        building_up=UpAxis(options.building_up),
     )
     check_options(export)
     return export

@@ -152,6 +152,8 @@ class EvaluationOptions(_Strict):
     site: str | None = _field("site")
     site_matrix: _Matrix4 | None = _field("site_matrix")
     simplify_m: float = _field("simplify_m")
+    crs: str | None = _field("crs")
+    building_up: Annotated[str, _Choices("building_up")] = _field("building_up")
     formats: list[_Artifact] | None = _field("formats")
 
     @field_validator("formats")

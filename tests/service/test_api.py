@@ -481,6 +481,7 @@ def test_all_artifacts(api: Api, datasets: tuple[str, str]) -> None:
         "paths.3dm": ("model/vnd.3dm", "attachment"),
         "paths.3dm.json": ("application/json", "attachment"),
         "paths.glb": ("model/gltf-binary", "attachment"),
+        "paths.ifc": ("application/x-step", "attachment"),
     }
     listed = {a["name"]: a for a in evaluation["artifacts"]}
     assert list(listed) == list(expected)

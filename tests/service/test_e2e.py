@@ -17,6 +17,7 @@ from typing import Any
 
 import ezdxf
 import httpx2
+import ifcopenshell
 import pypdf
 import pytest
 import rhino3dm
@@ -113,7 +114,17 @@ def _check_artifact(
         text = "".join(page.extract_text() for page in reader.pages)
         assert "ATE" in text
         assert evaluation["result"]["estimates"][0]["name"] in text
-    elif name == "paths.dxf":
+    elif name.startswith("paths."):
+        _check_cad_artifact(name, content, evaluation, tmp_path)
+    else:  # pragma: no cover  (a new artifact needs a check here)
+        pytest.fail(f"no check for the artifact {name!r}")
+
+
+def _check_cad_artifact(
+    name: str, content: bytes, evaluation: dict[str, Any], tmp_path: Path
+) -> None:
+    """Open one CAD file with the library that reads its format."""
+    if name == "paths.dxf":
         path = tmp_path / name
         path.write_bytes(content)
         drawing = ezdxf.readfile(path)
@@ -126,6 +137,10 @@ def _check_artifact(
         assert json.loads(content)
     elif name == "paths.glb":
         assert content.startswith(b"glTF")
+    elif name == "paths.ifc":
+        ifc = ifcopenshell.file.from_string(content.decode("utf-8"))
+        trajectories = [a for a in ifc.by_type("IfcAnnotation") if a.ObjectType == "trajectory"]
+        assert len(trajectories) == 1 + len(evaluation["result"]["estimates"])
     else:  # pragma: no cover  (a new artifact needs a check here)
         pytest.fail(f"no check for the artifact {name!r}")
 
