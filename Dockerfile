@@ -24,7 +24,8 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PIP_NO_CACHE_DIR=1
 
 # System libraries WeasyPrint loads at runtime (PDF reports: Pango, HarfBuzz font subsetting,
-# a font to render with) and make for `make setup`. Only what is named, then drop apt's lists.
+# a font to render with), make for `make setup` and tini as process 1 (below). Only what is
+# named, then drop apt's lists.
 RUN apt-get update \
     && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
         libpango-1.0-0 \
@@ -32,6 +33,7 @@ RUN apt-get update \
         libharfbuzz-subset0 \
         fonts-dejavu-core \
         make \
+        tini \
     && rm -rf /var/lib/apt/lists/*
 
 # The unprivileged user the service runs as, with a home for matplotlib's and fontconfig's
@@ -75,6 +77,11 @@ HEALTHCHECK --interval=30s --timeout=5s --start-period=30s --retries=3 \
     CMD ["/app/.venv/bin/python", "-c", "import urllib.request; urllib.request.urlopen('http://127.0.0.1:8000/healthz', timeout=4)"]
 
 USER loceval
+
+# tini is process 1 and passes `docker stop`'s SIGTERM on to the service. Process 1 gets no
+# signal it has no handler for, and `loceval serve` keeps none for SIGTERM, so without tini
+# every stop and restart waited out Docker's 10 s and ended in SIGKILL.
+ENTRYPOINT ["/usr/bin/tini", "--"]
 
 # Listen on all interfaces inside the container; publish the port with -p.
 CMD [".venv/bin/loceval", "serve", "--host", "0.0.0.0", "--port", "8000"]
