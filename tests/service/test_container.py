@@ -18,7 +18,7 @@ import subprocess
 import tempfile
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -205,6 +205,10 @@ class Container:
         )
 
 
+RunContainer = Callable[[str], tuple[Container, float]]
+"""Start a container on a volume, wait until healthy; return it and the seconds that took."""
+
+
 @pytest.fixture
 def volume() -> Iterator[str]:
     """A fresh named volume, removed at the end."""
@@ -215,7 +219,7 @@ def volume() -> Iterator[str]:
 
 
 @pytest.fixture
-def run_container(image: str) -> Iterator[Any]:
+def run_container(image: str) -> Iterator[RunContainer]:
     """Start containers of the image (``docker run -d``); each is removed at the end."""
     names: list[str] = []
 
@@ -260,7 +264,7 @@ def _get_evaluation(container: Container, api_key: str, evaluation_id: str) -> d
 
 
 def test_image_serves_evaluates_and_keeps_its_state(
-    volume: str, run_container: Any, public_data: Path
+    volume: str, run_container: RunContainer, public_data: Path
 ) -> None:
     """The image runs unprivileged, turns healthy, evaluates, and keeps it across restarts."""
     container, to_healthy_s = run_container(volume)
