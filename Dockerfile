@@ -79,9 +79,10 @@ HEALTHCHECK --interval=30s --timeout=5s --start-period=30s --retries=3 \
 USER loceval
 
 # tini is process 1 and passes `docker stop`'s SIGTERM on to the service. Process 1 gets no
-# signal it has no handler for, and `loceval serve` keeps none for SIGTERM, so without tini
-# every stop and restart waited out Docker's 10 s and ended in SIGKILL.
-ENTRYPOINT ["/usr/bin/tini", "--"]
+# signal it has no handler for: in the seconds before `loceval serve` has installed uvicorn's
+# handlers (imports, migrations) a stop would wait out Docker's 10 s and end in SIGKILL.
+# uvicorn shuts down gracefully and then re-raises SIGTERM (exit 143); -e 143 makes that 0.
+ENTRYPOINT ["/usr/bin/tini", "-e", "143", "--"]
 
 # Listen on all interfaces inside the container; publish the port with -p.
 CMD [".venv/bin/loceval", "serve", "--host", "0.0.0.0", "--port", "8000"]

@@ -305,8 +305,13 @@ def test_image_serves_evaluates_and_keeps_its_state(
     assert again["result"] == evaluation["result"]
     assert len(_KEY_LINE.findall(container.logs)) == 1, "a restart made a new key"
 
+    # A clean stop: the service shut down on SIGTERM and the container exited with 0.
+    _docker("stop", "--time", "15", container.name, timeout=60)
+    assert _docker("inspect", "--format", "{{.State.ExitCode}}", container.name).strip() == "0"
+    assert container.logs.count("Application shutdown complete") == 2
+
     # A new container on the same volume: the state lives in /data, not in the container.
-    _docker("rm", "--force", container.name)
+    _docker("rm", container.name)
     fresh, _ = run_container(volume)
     assert _KEY_LINE.findall(fresh.logs) == [], "the database in the volume was not reused"
     assert _get_evaluation(fresh, api_key, evaluation_id)["status"] == "succeeded"
