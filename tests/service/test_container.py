@@ -26,6 +26,7 @@ from typing import Any
 import httpx2
 import pytest
 
+from exporters import ARTIFACTS
 from tests.conftest import require_tool, skip_or_fail
 from tests.service.conftest import REPO, assert_same_ate, cli_json, succeeded, wait_for_evaluation
 
@@ -285,6 +286,8 @@ def test_image_serves_evaluates_and_keeps_its_state(
         evaluation_id = answer.json()["id"]
         evaluation = succeeded(wait_for_evaluation(http, evaluation_id))
         pdf = http.get(f"/api/v1/evaluations/{evaluation_id}/artifacts/report.pdf")
+    # Every artifact was written: the CAD and PDF libraries load in the image.
+    assert {a["name"] for a in evaluation["artifacts"]} == set(ARTIFACTS)
     assert pdf.status_code == 200, pdf.text[:500]
     assert pdf.headers["content-type"].startswith("application/pdf")
     assert pdf.content.startswith(b"%PDF")
