@@ -23,11 +23,19 @@ so they all agree on where a path breaks.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from loceval._typing import IntArray, StampsNs
+from loceval._typing import BoolArray, IntArray, StampsNs
 
-__all__ = ["GAP_RATE_FACTOR", "gap_threshold_ns", "loss_indices", "tracking_losses"]
+__all__ = [
+    "GAP_RATE_FACTOR",
+    "gap_threshold_ns",
+    "loss_indices",
+    "path_breaks",
+    "tracking_losses",
+]
 
 GAP_RATE_FACTOR = 5
 """An interval longer than this many median intervals of its source is tracking loss."""
@@ -79,3 +87,37 @@ def tracking_losses(stamps_ns: StampsNs, *, min_gap_ns: int) -> list[tuple[int, 
     """
     idx = loss_indices(stamps_ns, min_gap_ns=min_gap_ns)
     return [(int(stamps_ns[i]), int(stamps_ns[i + 1])) for i in idx]
+
+
+def path_breaks(
+    stamps_ns: StampsNs, *, min_gap_ns: int, losses: Sequence[tuple[int, int]] = ()
+) -> BoolArray:
+    """Return where a drawn path must break: its own tracking loss or the reference's.
+
+    A path (the reference, or an aligned estimate at its matched stamps) is drawn as one
+    line per continuous piece. It breaks after pose ``i`` when the interval to pose
+    ``i + 1`` is a tracking loss of its own (:func:`loss_indices`) or overlaps one of
+    ``losses`` (the reference's tracking losses: the estimate poses inside one were not
+    evaluated, so a line across it would be a chord nobody measured).
+
+    Args:
+        stamps_ns: (N,) int64 strictly increasing stamps of the path.
+        min_gap_ns: the floor of the path's own threshold (see :func:`gap_threshold_ns`).
+        losses: ``(start_ns, end_ns)`` intervals in time order that never overlap, such
+            as :func:`tracking_losses` of the reference.
+
+    Returns:
+        (max(N - 1, 0),) True after each pose that ends a piece.
+    """
+    n = int(stamps_ns.shape[0])
+    out: BoolArray = np.zeros(max(n - 1, 0), dtype=bool)
+    if n < 2:
+        return out
+    out[loss_indices(stamps_ns, min_gap_ns=min_gap_ns)] = True
+    if losses:
+        spans = np.asarray(losses, dtype=np.int64).reshape(-1, 2)
+        # interval (s_i, s_i+1) overlaps loss (a, b) when a < s_i+1 and b > s_i
+        started = np.searchsorted(spans[:, 0], stamps_ns[1:], side="left")
+        ended = np.searchsorted(spans[:, 1], stamps_ns[:-1], side="right")
+        out |= started > ended
+    return out

@@ -22,8 +22,8 @@ from exporters.plots.figure import (
     _breaks,
     _dense,
     _legend_above,
-    _max_gap_ns,
     _new_figure,
+    _path_jumps,
     _plot,
     _style,
     _with_nan_breaks,
@@ -82,9 +82,8 @@ def _draw_reference_xy(
     kept = decimate_uniform(len(ref), max_points)
     a, b = _with_nan_breaks(
         [ref.positions_xyz[:, axes_ij[0]], ref.positions_xyz[:, axes_ij[1]]],
-        ref.stamps_ns,
+        _path_jumps(result, ref.stamps_ns),
         kept,
-        _max_gap_ns(result),
     )
     # Under an error-coloured path the truth is a wide band; over noisy estimates it is
     # drawn last and thinner, so it stays visible.
@@ -115,9 +114,8 @@ def _draw_estimate(
     kept = decimate_uniform(len(aligned), max_points)
     a, b = _with_nan_breaks(
         [aligned.positions_xyz[:, axes_ij[0]], aligned.positions_xyz[:, axes_ij[1]]],
-        aligned.stamps_ns,
+        _path_jumps(result, aligned.stamps_ns),
         kept,
-        _max_gap_ns(result),
     )
     ax.plot(
         a,
@@ -189,7 +187,7 @@ def plot_ate_path(
     kept = decimate_minmax(ate, max_points)
     xy = e.aligned.positions_xyz[kept, :2]
     segments = np.stack([xy[:-1], xy[1:]], axis=1)
-    keep_segment = ~_breaks(e.aligned.stamps_ns, kept, _max_gap_ns(result))
+    keep_segment = ~_breaks(_path_jumps(result, e.aligned.stamps_ns), kept)
     # Each drawn segment takes the larger error of its two ends, so a peak shows.
     seg_err = np.maximum(ate[kept][:-1], ate[kept][1:])
     vmax = float(np.percentile(ate, 99.5)) if ate.size else 1.0
