@@ -393,7 +393,8 @@ def evaluate(
         longest = max(b - a for a, b in gaps) / _NS_PER_S
         ref_gap_s = gap_threshold_ns(reference.stamps_ns, min_gap_ns=min_gap_ns) / _NS_PER_S
         ref_notes.append(
-            f"The reference has {len(gaps)} gaps longer than {ref_gap_s:g} s "
+            f"The reference has {len(gaps)} {'gap' if len(gaps) == 1 else 'gaps'} longer than "
+            f"{ref_gap_s:g} s "
             f"(tracking loss; longest {longest:.3f} s); estimate poses in them are not "
             "evaluated."
         )
@@ -432,7 +433,8 @@ def _evaluate_one(
         after_s = (start - int(reference.stamps_ns[0])) / _NS_PER_S
         own_gap_s = gap_threshold_ns(estimate.stamps_ns, min_gap_ns=min_gap_ns) / _NS_PER_S
         notes.append(
-            f"The estimate itself has {len(own_gaps)} gaps longer than {own_gap_s:g} s "
+            f"The estimate itself has {len(own_gaps)} {'gap' if len(own_gaps) == 1 else 'gaps'} "
+            f"longer than {own_gap_s:g} s "
             f"(its own tracking loss; the longest, {(end - start) / _NS_PER_S:.2f} s, starts "
             f"{abs(after_s):.2f} s {'after' if after_s >= 0 else 'before'} the reference's "
             "first pose)."

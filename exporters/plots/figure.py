@@ -24,9 +24,7 @@ from dataclasses import dataclass
 from typing import Literal, TypeAlias
 
 import numpy as np
-from matplotlib import colormaps
 from matplotlib.axes import Axes
-from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
@@ -96,11 +94,6 @@ ImageFormat: TypeAlias = Literal["svg", "png"]
 _NS_PER_S = 1_000_000_000
 _MIN_ERROR_AXIS = 0.01
 _WIDTH_IN = 7.0
-# plasma without its palest yellow, so the largest errors stay visible on white paper.
-_ERROR_CMAP = ListedColormap(
-    np.asarray(colormaps["plasma"](np.linspace(0.0, 0.88, 256)), dtype=np.float64),
-    name="plasma_print",
-)
 
 
 @dataclass(frozen=True, slots=True)

@@ -7,10 +7,10 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
-from matplotlib.colors import Normalize
+from matplotlib.colors import BoundaryNorm, ListedColormap
 
+from exporters.placement import ate_bins, ate_edges_m
 from exporters.plots.figure import (
-    _ERROR_CMAP,
     _WIDTH_IN,
     DEFAULT_MAX_POINTS,
     MAX_SPAN_MARKERS,
@@ -190,18 +190,22 @@ def plot_ate_path(
     keep_segment = ~_breaks(_path_jumps(result, e.aligned.stamps_ns), kept)
     # Each drawn segment takes the larger error of its two ends, so a peak shows.
     seg_err = np.maximum(ate[kept][:-1], ate[kept][1:])
-    vmax = float(np.percentile(ate, 99.5)) if ate.size else 1.0
+    # The one ATE colour scale of every output (DXF, .3dm, GLB): the evaluation's bins.
+    bins = ate_bins(ate_edges_m(result))
+    inner = [b.high_m for b in bins[:-1]]
+    top = max([1.5 * inner[-1]] if inner else [1.0])
+    top = max(top, float(ate.max()) if ate.size else 0.0)
+    bounds = [0.0, *inner, top]
+    cmap = ListedColormap([tuple(c / 255.0 for c in b.color_rgb) for b in bins])
+    norm = BoundaryNorm(bounds, cmap.N)
     tolerance = e.verdict.tolerance.distance_m if e.verdict is not None else None
-    if tolerance is not None:
-        vmax = max(vmax, tolerance * 1.25)
-    vmax = max(vmax, 1e-6)
     fig = _new_figure(_xy_figure_height(result, plot_width_in=_WIDTH_IN - 1.8))
     ax = fig.add_subplot()
     _draw_reference_xy(ax, result, max_points)
     collection = LineCollection(
         list(segments[keep_segment]),
-        cmap=_ERROR_CMAP,
-        norm=Normalize(0.0, vmax),
+        cmap=cmap,
+        norm=norm,
         linewidths=1.8,
         capstyle="round",
         zorder=3,
@@ -211,10 +215,9 @@ def plot_ate_path(
     ax.add_collection(collection)
     ax.update_datalim(xy)
     ax.autoscale_view()
-    colorbar = fig.colorbar(
-        collection, ax=ax, extend="max" if float(ate.max()) > vmax else "neither", shrink=0.85
-    )
-    colorbar.set_label("ATE [m]")
+    colorbar = fig.colorbar(collection, ax=ax, shrink=0.85, ticks=bounds[:-1])
+    colorbar.ax.set_yticklabels([f"{b:g}" for b in bounds[:-1]])
+    colorbar.set_label("ATE [m] (bins as in the CAD files)")
     if tolerance is not None:
         colorbar.ax.axhline(tolerance, color="black", linewidth=1.2)
         colorbar.ax.text(

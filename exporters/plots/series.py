@@ -302,16 +302,6 @@ def plot_error_cdf(
         )
     for t in thresholds:
         ax.axvline(t, color="#616161", linestyle=":", linewidth=1.0)
-        ax.text(
-            t,
-            1.01,
-            f"{t:g} m",
-            transform=ax.get_xaxis_transform(),
-            ha="center",
-            va="bottom",
-            fontsize=7,
-            color="#424242",
-        )
     tol = result.config.tolerance
     if tol is not None:
         ax.plot(
@@ -326,6 +316,7 @@ def plot_error_cdf(
         )
     ax.set_xlim(left=0.0)
     ax.set_ylim(0.0, 101.0)
+    _label_thresholds(ax, thresholds)
     ax.set_xlabel("ATE [m]")
     ax.set_ylabel("poses with error ≤ x [%]")
     _style(ax)
@@ -343,6 +334,39 @@ def plot_error_cdf(
         title="Error distribution (CDF)",
         caption=caption,
     )
+
+
+_LABEL_GAP_AXES = 0.08  # threshold labels closer than this share of the axis stack up
+_LABEL_ROWS = 3
+
+
+def _label_thresholds(ax: Axes, thresholds: Sequence[float]) -> None:
+    """Label the threshold lines above the axes, stacking labels that would overlap.
+
+    Each label goes on the lowest of three rows where it keeps 8 % of the axis width from
+    the previous label on that row; a label with no room (or outside the axis) is left out,
+    its dotted line stays.
+    """
+    lo, hi = ax.get_xlim()
+    last = [-1.0] * _LABEL_ROWS
+    for t in sorted(thresholds):  # a handful of thresholds
+        frac = (t - lo) / (hi - lo) if hi > lo else 0.0
+        if not 0.0 <= frac <= 1.0:
+            continue
+        row = next((r for r in range(_LABEL_ROWS) if frac - last[r] >= _LABEL_GAP_AXES), None)
+        if row is None:
+            continue
+        last[row] = frac
+        ax.text(
+            t,
+            1.01 + 0.055 * row,
+            f"{t:g} m",
+            transform=ax.get_xaxis_transform(),
+            ha="center",
+            va="bottom",
+            fontsize=7,
+            color="#424242",
+        )
 
 
 def describe_rpe_step(config: EvaluationConfig) -> str:
