@@ -88,7 +88,7 @@ _WORST_SEPARATION_S: Final = 2.0  # greatest errors closer in time than this sha
 _INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f]+')
 _BIN_COLORS: Final[tuple[RGB, ...]] = ((0, 170, 0), (230, 200, 0), (255, 120, 0), (220, 0, 0))
 _MAX_EXTRA_EDGES: Final = 4  # at most this many 1-2-5 edges above the last threshold
-_GAP_MERGE_S: Final = 2.0  # tracking losses closer in time than this share one marker
+_MARKER_MERGE_SHARE: Final = 0.03  # losses closer than 3 % of the drawing share a marker
 
 
 class PathKind(StrEnum):
@@ -583,9 +583,9 @@ class Placement:
 
         A tracking loss of the reference is marked once (at its last pose before the
         loss), not once per trajectory; an estimate's own loss is marked where the
-        reference kept tracking. Losses, and greatest errors, closer than 2 s to a
-        marked one share its marker: they belong to one outage or one excursion, and their
-        labels would only pile up.
+        reference kept tracking. Losses whose markers lie within 3 % of the drawing's size
+        of each other share one, labelled by the longest; greatest errors closer than 2 s
+        to a greater one are left out (one excursion). Their labels would only pile up.
         """
         out = self._gap_markers()
         for path in self.paths:
@@ -631,35 +631,60 @@ class Placement:
                 losses = [
                     (int(trajectory.stamps_ns[i]), int(trajectory.stamps_ns[i + 1])) for i in idx
                 ]
-            for group in _group_losses(losses):
-                start, end = group[0][0], group[-1][1]
-                k = int(np.searchsorted(trajectory.stamps_ns, start))
-                lost_s = sum(b - a for a, b in group) / _NS_PER_S
+            if not losses:
+                continue
+            where = np.searchsorted(trajectory.stamps_ns, [a for a, _ in losses])
+            positions = self.to_model(trajectory.positions_xyz[where])
+            for group in _group_losses(losses, positions, self._marker_radius()):
+                # labelled by its longest loss, placed at that loss's last pose before it
+                k = max(group, key=lambda i: losses[i][1] - losses[i][0])
+                start, end = losses[k]
                 from_s = (start - t0) / _NS_PER_S
-                label = f"{path.name}: no pose for {lost_s:.1f} s from t={from_s:.1f} s"
+                label = (
+                    f"{path.name}: no pose for {(end - start) / _NS_PER_S:.1f} s "
+                    f"from t={from_s:.1f} s"
+                )
                 if len(group) > 1:
-                    label += f" ({len(group)} losses until t={(end - t0) / _NS_PER_S:.1f} s)"
+                    total_s = sum(losses[i][1] - losses[i][0] for i in group) / _NS_PER_S
+                    label += f" (+{len(group) - 1} shorter nearby, {total_s:.1f} s in all)"
                 out.append(
                     Marker(
                         path=path.name,
                         kind="gap",
-                        position=_xyz(self.to_model(trajectory.positions_xyz[k : k + 1])[0]),
+                        position=_xyz(positions[k]),
                         target=None,
                         label=label,
                     )
                 )
         return out
 
+    def _marker_radius(self) -> float:
+        """Return the distance, in output units, within which loss markers share one."""
+        vertices = np.concatenate([p.vertices for p in self.paths])
+        diagonal = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+        return _MARKER_MERGE_SHARE * diagonal
 
-def _group_losses(losses: Sequence[tuple[int, int]]) -> list[list[tuple[int, int]]]:
-    """Group losses that start less than 2 s after the previous one ended."""
-    groups: list[list[tuple[int, int]]] = []
-    for loss in losses:  # one iteration per tracking loss, not per pose
-        if groups and loss[0] - groups[-1][-1][1] < _GAP_MERGE_S * _NS_PER_S:
-            groups[-1].append(loss)
+
+def _group_losses(
+    losses: Sequence[tuple[int, int]], positions: FloatArray, radius: float
+) -> list[list[int]]:
+    """Group losses whose markers would lie within ``radius`` of a longer loss's marker.
+
+    Losses at one spot (a body that keeps leaving the cameras' view at the same corner)
+    would draw their labels on top of each other; they share one marker instead.
+    """
+    groups: list[list[int]] = []
+    longest_first = sorted(range(len(losses)), key=lambda i: losses[i][0] - losses[i][1])
+    for i in longest_first:  # one iteration per tracking loss, not per pose
+        near = next(
+            (g for g in groups if np.linalg.norm(positions[i] - positions[g[0]]) <= radius),
+            None,
+        )
+        if near is None:
+            groups.append([i])
         else:
-            groups.append([loss])
-    return groups
+            near.append(i)
+    return sorted(groups, key=lambda g: losses[g[0]][0])  # in time order of their anchors
 
 
 def _jumps(result: EvaluationResult, stamps_ns: StampsNs) -> BoolArray:

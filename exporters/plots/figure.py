@@ -26,6 +26,7 @@ from typing import Literal, TypeAlias
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.evaluation import EvaluationResult
@@ -245,6 +246,16 @@ def _plot(
     if "png" in formats:
         png = _png(fig)
     return Plot(key=key, title=title, caption=caption, svg=svg, png=png)
+
+
+def _keep_every_vertex(lines: Sequence[Line2D]) -> None:
+    """Switch off matplotlib's path simplification for these lines.
+
+    A line is already decimated to ``max_points`` vertices; simplification would further
+    drop vertices it finds collinear, so a 1.5 Hz AMCL path of 129 poses showed 108.
+    """
+    for line in lines:
+        line.get_path().should_simplify = False
 
 
 def _new_figure(height_in: float) -> Figure:

@@ -21,6 +21,7 @@ from exporters.plots.figure import (
     Plot,
     _breaks,
     _dense,
+    _keep_every_vertex,
     _legend_above,
     _new_figure,
     _path_jumps,
@@ -87,7 +88,7 @@ def _draw_reference_xy(
     )
     # Under an error-coloured path the truth is a wide band; over noisy estimates it is
     # drawn last and thinner, so it stays visible.
-    ax.plot(
+    lines = ax.plot(
         a,
         b,
         color=REFERENCE_COLOUR,
@@ -95,6 +96,7 @@ def _draw_reference_xy(
         zorder=4 if on_top else 2,
         label=_reference_label(result),
     )
+    _keep_every_vertex(lines)
 
 
 def _reference_label(result: EvaluationResult) -> str:
@@ -117,7 +119,7 @@ def _draw_estimate(
         _path_jumps(result, aligned.stamps_ns),
         kept,
     )
-    ax.plot(
+    lines = ax.plot(
         a,
         b,
         color=estimate_colour(k),
@@ -125,6 +127,7 @@ def _draw_estimate(
         alpha=0.85,
         label=e.name or f"estimate {k + 1}",
     )
+    _keep_every_vertex(lines)
 
 
 def _mark_start(ax: Axes, result: EvaluationResult) -> None:

@@ -19,6 +19,7 @@ from exporters.plots.figure import (
     TOLERANCE_COLOUR,
     ImageFormat,
     Plot,
+    _keep_every_vertex,
     _legend_above,
     _new_figure,
     _path_jumps,
@@ -137,7 +138,7 @@ def _draw_series(
             _path_jumps(result, series.stamps_ns),
             np.arange(len(series), dtype=np.intp),
         )
-        ax.plot(t, v, color=colour, linewidth=0.8, label=name)
+        _keep_every_vertex(ax.plot(t, v, color=colour, linewidth=0.8, label=name))
         return
     # Too many samples to draw one by one: a light band between each bucket's smallest and
     # largest error (every peak survives) under a line of the bucket means. At print

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import io
 import json
-import subprocess
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -16,52 +14,16 @@ from exporters.options import ExportOptions, Units
 from exporters.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
 from loceval.evaluation import EvaluationResult, evaluate
 from loceval.polyline import polyline_distances
-from tests.conftest import require_tool
+from tests.exporters.conftest import Validator
 
 pygltflib = pytest.importorskip("pygltflib")
 trimesh = pytest.importorskip("trimesh")
 from exporters import gltf  # noqa: E402  (after the importorskip of its libraries)
 
-VALIDATOR_DIR = Path(__file__).resolve().parent / "gltf_validator"
 FAR_SITE = "512340.25 5403210.5 112.3 37.5"
 NEAR_SITE = "20.5 -15.25 0.5 30"
 NAMES = ["OptiTrack", "RTAB-Map", "ISAAC"]
 R = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # Z up -> Y up
-
-Validator = Callable[[bytes], dict]
-
-
-@pytest.fixture(scope="session")
-def validate(tmp_path_factory: pytest.TempPathFactory) -> Validator:
-    """Return a function running the pinned Khronos glTF Validator on GLB bytes."""
-    node = require_tool("node")
-    npm = require_tool("npm")
-    if not (VALIDATOR_DIR / "node_modules" / "gltf-validator").is_dir():
-        install = subprocess.run(
-            [npm, "ci", "--prefix", str(VALIDATOR_DIR), "--no-audit", "--no-fund"],
-            capture_output=True,
-            text=True,
-            check=False,
-            timeout=600,
-        )
-        assert install.returncode == 0, install.stdout + install.stderr
-    folder = tmp_path_factory.mktemp("gltf-validator")
-
-    def run(data: bytes) -> dict:
-        path = folder / "model.glb"
-        path.write_bytes(data)
-        done = subprocess.run(
-            [node, str(VALIDATOR_DIR / "validate.js"), str(path)],
-            capture_output=True,
-            text=True,
-            check=False,
-            timeout=300,
-        )
-        assert done.returncode == 0, done.stderr
-        report: dict = json.loads(done.stdout)
-        return report
-
-    return run
 
 
 def load(data: bytes) -> pygltflib.GLTF2:
