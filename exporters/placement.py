@@ -429,19 +429,25 @@ def ate_edges_m(result: EvaluationResult) -> tuple[float, ...]:
     """Return the ATE colour edges of an evaluation: its thresholds, extended upwards.
 
     The thresholds (0.05, 0.1, 0.15 m by default) tell a good system's errors apart, but a
-    car's SLAM with 10 m errors would be one red line. So when the largest 99.5th
-    percentile of the estimates' ATE exceeds twice the last threshold, up to four 1-2-5
-    edges (0.2, 0.5, 1, 2, 5 m, ...) are added above it, the last one below that percentile.
+    car's SLAM with 10 m errors would be one red line, and a motion-capture-grade system
+    with 6 mm errors one green line. So when the largest 99.5th percentile of the
+    estimates' ATE exceeds twice the last threshold, up to four 1-2-5 edges (0.2, 0.5, 1,
+    2, 5 m, ...) are added above it, the last one below that percentile; when it is below
+    half the first threshold, up to four 1-2-5 edges from a tenth of it up to it are added
+    below the thresholds (fr2_desk: 0.002, 0.005, 0.01 m).
     """
     edges = sorted({float(t) for t in result.config.thresholds_m})
     values = [e.ate_translation.values for e in result.estimates if len(e.ate_translation)]
     if not edges or not values:
         return tuple(edges)
     top = max(float(np.percentile(v, 99.5)) for v in values)
-    last = edges[-1]
+    nice = [m * 10.0**e for e in range(-4, 7) for m in (1.0, 2.0, 5.0)]
+    first, last = edges[0], edges[-1]
+    if top < 0.5 * first:  # a sub-centimetre system: 1-2-5 edges below the thresholds
+        below = [v for v in nice if top / 10.0 <= v < min(top, first / 1.5)]
+        return (*below[-_MAX_EXTRA_EDGES:], *edges)
     if top <= 2.0 * last:
         return tuple(edges)
-    nice = [m * 10.0**e for e in range(-3, 7) for m in (1.0, 2.0, 5.0)]
     extra = [v for v in nice if last * 1.5 <= v < top]
     if len(extra) > _MAX_EXTRA_EDGES:  # keep the largest, spread over the range
         pick = np.linspace(0, len(extra) - 1, _MAX_EXTRA_EDGES).round().astype(int)

@@ -29,6 +29,7 @@ from exporters.plots import (
 )
 from loceval.alignment import AlignWindow
 from loceval.evaluation import EstimateResult, EvaluationResult
+from loceval.gaps import GAP_RATE_FACTOR
 from loceval.metrics import ErrorSeries, ErrorStats
 
 __all__ = ["BEST_MARK", "ReportView", "build_report_view"]
@@ -448,14 +449,14 @@ def _trajectories(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
 
 def _options(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
     cfg = result.config
+    gaps = (
+        f"tracking loss: an interval longer than {cfg.max_gap_s:g} s and than "
+        f"{GAP_RATE_FACTOR} of the source's median intervals"
+    )
     association = (
-        f"interpolate the reference at the estimate's stamps (gaps over {cfg.max_gap_s:g} s "
-        "are tracking loss and not bridged)"
+        f"interpolate the reference at the estimate's stamps ({gaps}, never bridged)"
         if cfg.association.value == "interpolate"
-        else (
-            f"nearest reference pose within {cfg.max_dt_s:g} s (gaps over "
-            f"{cfg.max_gap_s:g} s are tracking loss)"
-        )
+        else f"nearest reference pose within {cfg.max_dt_s:g} s ({gaps})"
     )
     rows = [
         ("Association", association),
