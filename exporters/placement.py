@@ -88,7 +88,7 @@ _WORST_SEPARATION_S: Final = 2.0  # greatest errors closer in time than this sha
 _INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f]+')
 _BIN_COLORS: Final[tuple[RGB, ...]] = ((0, 170, 0), (230, 200, 0), (255, 120, 0), (220, 0, 0))
 _MAX_EXTRA_EDGES: Final = 4  # at most this many 1-2-5 edges above the last threshold
-_MARKER_MERGE_SHARE: Final = 0.03  # losses closer than 3 % of the drawing share a marker
+_MARKER_MERGE_SHARE: Final = 0.05  # losses closer than 5 % of the drawing share a marker
 
 
 class PathKind(StrEnum):
@@ -589,7 +589,7 @@ class Placement:
 
         A tracking loss of the reference is marked once (at its last pose before the
         loss), not once per trajectory; an estimate's own loss is marked where the
-        reference kept tracking. Losses whose markers lie within 3 % of the drawing's size
+        reference kept tracking. Losses whose markers lie within 5 % of the drawing's size
         of each other share one, labelled by the longest; greatest errors closer than 2 s
         to a greater one are left out (one excursion). Their labels would only pile up.
         """
@@ -646,13 +646,11 @@ class Placement:
                 k = max(group, key=lambda i: losses[i][1] - losses[i][0])
                 start, end = losses[k]
                 from_s = (start - t0) / _NS_PER_S
-                label = (
-                    f"{path.name}: no pose for {(end - start) / _NS_PER_S:.1f} s "
-                    f"from t={from_s:.1f} s"
-                )
+                # the reference's losses are everyone's: only an estimate's own is named
+                who = "" if est is None else f"{path.name}: "
+                label = f"{who}no pose for {(end - start) / _NS_PER_S:.1f} s from t={from_s:.1f} s"
                 if len(group) > 1:
-                    total_s = sum(losses[i][1] - losses[i][0] for i in group) / _NS_PER_S
-                    label += f" (+{len(group) - 1} shorter nearby, {total_s:.1f} s in all)"
+                    label += f" (+{len(group) - 1} nearby)"
                 out.append(
                     Marker(
                         path=path.name,

@@ -194,7 +194,7 @@ def test_markers_at_worst_errors_and_gaps(two_estimates: EvaluationResult):
     # one marker for the one loss, on its own layer, not repeated per estimate
     loss_labels = [t.dxf.text for t in msp.query('TEXT[layer=="tracking loss"]')]
     assert len(loss_labels) == 1
-    assert loss_labels[0].startswith("OptiTrack: no pose for 3.0 s")
+    assert loss_labels[0].startswith("no pose for 3.0 s")
     gap_points = msp.query('POINT[layer=="tracking loss"]')
     assert len(gap_points) == 1
     gap_point = np.array(gap_points[0].dxf.location.xyz)

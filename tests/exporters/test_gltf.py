@@ -264,7 +264,7 @@ def test_tracking_loss_breaks_and_marker_nodes(
         assert len(model.meshes[k].primitives) == 2
     group = next(n for n in model.nodes if n.name == "tracking loss")
     (child,) = (model.nodes[c] for c in group.children)
-    assert child.name.startswith("OptiTrack: no pose for 3.0 s")
+    assert child.name.startswith("no pose for 3.0 s")
     matrix = np.array(group.matrix, dtype=np.float64).reshape(4, 4).T
     at = matrix[:3, :3] @ np.array(child.translation) + matrix[:3, 3]
     last = options.site.apply_positions(ref.positions_xyz[times < 20.0][-1:])[0]

@@ -143,7 +143,7 @@ def test_pieces_at_a_tracking_loss(two_estimates: EvaluationResult):
         assert np.linalg.norm(second[0] - first[-1]) > 1000.0  # mm: 3 s of walking apart
     (loss,) = [m for m in document["markers"] if m["kind"] == "gap"]
     assert loss["layer"] == "loceval::Gap run::tracking loss"
-    assert loss["label"].startswith("OptiTrack: no pose for 3.0 s")
+    assert loss["label"].startswith("no pose for 3.0 s")
 
 
 def test_units_scale(two_estimates: EvaluationResult):

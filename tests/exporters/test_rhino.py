@@ -184,7 +184,7 @@ def test_tracking_loss_breaks_curves_once_marked(two_estimates: EvaluationResult
     for name in NAMES:
         assert len(by_layer[f"loceval::Gap run::{name}"]) == 2
     (dot,) = by_layer["loceval::Gap run::tracking loss"]
-    assert dot.Geometry.Text.startswith("OptiTrack: no pose for 3.0 s")
+    assert dot.Geometry.Text.startswith("no pose for 3.0 s")
 
 
 def test_bad_options(two_estimates: EvaluationResult):
