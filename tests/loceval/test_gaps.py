@@ -9,7 +9,13 @@ import pytest
 
 from loceval.association import associate
 from loceval.evaluation import evaluate
-from loceval.gaps import GAP_RATE_FACTOR, gap_threshold_ns, loss_indices, tracking_losses
+from loceval.gaps import (
+    GAP_RATE_FACTOR,
+    gap_threshold_ns,
+    loss_indices,
+    path_breaks,
+    tracking_losses,
+)
 from loceval.readers import read_trajectory
 from loceval.trajectory import Trajectory
 
@@ -95,3 +101,13 @@ def test_ros_example_gaps_follow_each_topic_rate(public_data: Path) -> None:
     truth = read_trajectory(f"{bag}@groundtruth")
     # 12765 poses at 60 ms median; 87 intervals of 0.36 s or more are recording dropouts.
     assert len(truth.tracking_losses(NS // 10)) == 87
+
+
+def test_path_breaks_at_own_and_reference_losses() -> None:
+    """A path breaks after its own long interval and across each reference loss it spans."""
+    stamps = _stamps([0.1] * 5 + [2.0] + [0.1] * 5)  # own loss after pose 5
+    # a reference loss from 0.15 s to 0.25 s overlaps the intervals 0.1-0.2 s and 0.2-0.3 s
+    reference_losses = [(T0_NS + NS * 15 // 100, T0_NS + NS * 25 // 100)]
+    breaks = path_breaks(stamps, min_gap_ns=NS // 10, losses=reference_losses)
+    np.testing.assert_array_equal(np.flatnonzero(breaks), [1, 2, 5])
+    assert path_breaks(stamps[:1], min_gap_ns=NS // 10).shape == (0,)
