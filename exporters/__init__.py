@@ -25,10 +25,12 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ARTIFACTS",
+    "ARTIFACT_ALIASES",
     "CAD_ARTIFACTS",
     "ArtifactSpec",
     "ExportOptions",
     "Units",
+    "artifact_name",
     "export_result_json",
     "render_artifact",
     "write_artifacts",
@@ -106,6 +108,42 @@ CAD_ARTIFACTS: Final = frozenset(
     {"paths.dxf", "paths.3dm", "paths.3dm.json", "paths.glb", "paths.ifc"}
 )
 """The artifacts that place the paths on the building model."""
+
+ARTIFACT_ALIASES: Final[Mapping[str, str]] = {
+    "json": "result.json",
+    "csv": "errors.csv",
+    "html": "report.html",
+    "pdf": "report.pdf",
+    "dxf": "paths.dxf",
+    "3dm": "paths.3dm",
+    "3dm.json": "paths.3dm.json",
+    "grasshopper": "paths.3dm.json",
+    "glb": "paths.glb",
+    "gltf": "paths.glb",
+}
+"""Format names a user may give instead of file names (``dxf`` for ``paths.dxf``)."""
+
+
+def artifact_name(text: str) -> str:
+    """Return the artifact file name that ``text`` names: a file name or a format alias.
+
+    Case and surrounding spaces do not matter, and a leading dot is allowed (``.DXF``).
+
+    Raises:
+        ExportOptionsError: neither an artifact nor an alias; the message lists both.
+    """
+    key = text.strip().lower()
+    if key in ARTIFACTS:
+        return key
+    alias = ARTIFACT_ALIASES.get(key.removeprefix("."))
+    if alias is not None:
+        return alias
+    aliases = ", ".join(f"{a} ({n})" for a, n in ARTIFACT_ALIASES.items())
+    msg = (
+        f"No output format named {text!r}; choose file names from {', '.join(ARTIFACTS)} "
+        f"or formats from {aliases}."
+    )
+    raise ExportOptionsError(msg, option="formats")
 
 
 def export_result_json(

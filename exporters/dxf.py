@@ -3,12 +3,16 @@
 Layers, per trajectory ``<name>`` (named after the trajectory, coloured from the palette
 with both an ACI and a true colour):
 
-- ``<name>``: the path as one 3D ``POLYLINE`` (never ``LWPOLYLINE``, which has no per-vertex
-  Z and would silently flatten the path), with ``LOCEVAL`` XDATA naming its source;
-- ``<name> markers``: a ``POINT`` and a label at each tracking loss (the last pose before
-  it) and, for estimates, at the greatest errors with a ``LINE`` to the reference pose;
-- ``<name> ATE`` (estimates, switched off by default): the path cut into pieces coloured by
-  ATE bin (the evaluation's thresholds), with a text legend.
+- ``<name>``: the path as 3D ``POLYLINE`` s (never ``LWPOLYLINE``, which has no per-vertex
+  Z and would silently flatten the path), one per continuous piece: a path breaks at
+  tracking loss instead of crossing it with a straight chord; ``LOCEVAL`` XDATA names its
+  source;
+- ``<name> markers`` (estimates): a ``POINT`` and a label at the greatest errors with a
+  ``LINE`` to the reference pose;
+- ``<name> ATE`` (estimates, on): the path cut into pieces coloured by ATE bin, in the
+  report's colours (:meth:`~exporters.placement.Placement.ate_bins`), with a text legend;
+- ``tracking loss``: one ``POINT`` and label per tracking loss (at the last pose before
+  it), of the reference once, and of an estimate where the reference kept tracking.
 
 DXF stores doubles, so vertices are absolute model coordinates; the base point and the
 rest of the metadata (evaluation id, units, frame, site matrix, tolerance, deviation) are
@@ -33,17 +37,9 @@ from ezdxf.lldxf.const import DXFError
 from exporters._dxf_bulk import BulkPolylines
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
-from exporters.placement import (
-    RGB,
-    Marker,
-    PlacedPath,
-    Placement,
-    ate_bins,
-    place_evaluation,
-)
+from exporters.placement import RGB, Marker, PlacedPath, Placement, place_evaluation
 from loceval._typing import FloatArray
 from loceval.evaluation import EstimateResult, EvaluationResult
-from loceval.polyline import simplify_rdp
 
 __all__ = ["export_dxf"]
 
@@ -51,6 +47,8 @@ APPID: Final = "LOCEVAL"
 _INSUNITS: Final = {Units.MM: dxf_units.MM, Units.CM: dxf_units.CM, Units.M: dxf_units.M}
 _PDMODE_CIRCLE_CROSS: Final = 35  # a point drawn as a circle with an X, visible in any viewer
 _INFO_LAYER: Final = "loceval"
+_LOSS_LAYER: Final = "tracking loss"
+_LOSS_RGB: Final = (158, 158, 158)  # the report's grey tracking-loss bands
 
 
 def export_dxf(
@@ -110,12 +108,35 @@ def _drawing(placement: Placement) -> tuple[Drawing, BulkPolylines]:
     legend_y = float(lo[1]) - 2 * text_h  # legends stack below the drawing
     for path in placement.paths:
         _add_path(doc, msp, bulk, path)
-        _add_markers(doc, msp, path, [m for m in markers if m.path == path.name], text_h)
+        worst = [m for m in markers if m.path == path.name and m.kind == "worst"]
+        layer = f"{path.layer} markers"
+        description = f"loceval: greatest errors of {path.name}"
+        _add_markers(
+            doc,
+            msp,
+            layer,
+            rgb=path.color_rgb,
+            description=description,
+            markers=worst,
+            text_h=text_h,
+        )
         if path.estimate is not None:
             corner = (float(lo[0]), legend_y, float(lo[2]))
             legend_y = _add_ate_layer(
                 doc, msp, bulk, placement, path, est=path.estimate, corner=corner, text_h=text_h
             )
+
+    losses = [m for m in markers if m.kind == "gap"]
+    description = "loceval: tracking loss (no pose), one marker per loss"
+    _add_markers(
+        doc,
+        msp,
+        _LOSS_LAYER,
+        rgb=_LOSS_RGB,
+        description=description,
+        markers=losses,
+        text_h=text_h,
+    )
 
     center = (lo[:2] + hi[:2]) / 2.0
     height = max(float(hi[1] - lo[1]), float(hi[0] - lo[0]) * 0.6, per_metre) * 1.3
@@ -153,18 +174,14 @@ def _nearest_aci(rgb: RGB) -> int:
     return int(np.argmin(((table - target) ** 2).sum(axis=1))) + 1
 
 
-def _layer(doc: Drawing, name: str, rgb: RGB, description: str, *, on: bool = True) -> None:
+def _layer(doc: Drawing, name: str, rgb: RGB, description: str) -> None:
     layer = doc.layers.add(name, color=_nearest_aci(rgb))
     layer.rgb = rgb
     layer.description = description
-    if not on:
-        layer.off()
-        layer.freeze()
 
 
 def _add_path(doc: Drawing, msp: Modelspace, bulk: BulkPolylines, path: PlacedPath) -> None:
     _layer(doc, path.layer, path.color_rgb, f"loceval {path.kind.value}: {path.name}")
-    polyline = bulk.add(msp, path.vertices, {"layer": path.layer})
     meta = path.metadata()
     ate = meta["ate_translation_m"]
     tags = [
@@ -176,17 +193,27 @@ def _add_path(doc: Drawing, msp: Modelspace, bulk: BulkPolylines, path: PlacedPa
     ]
     if isinstance(ate, dict):
         tags += [(1000, f"ate_{k}_m={v!r}") for k, v in ate.items() if k != "n"]
-    polyline.set_xdata(APPID, [(code, value[:255]) for code, value in tags])
+    xdata = [(code, value[:255]) for code, value in tags]
+    for start, stop in path.pieces():  # one polyline per continuous piece
+        if stop - start < 2:
+            continue
+        polyline = bulk.add(msp, path.vertices[start:stop], {"layer": path.layer})
+        polyline.set_xdata(APPID, xdata)
 
 
 def _add_markers(
-    doc: Drawing, msp: Modelspace, path: PlacedPath, markers: list[Marker], text_h: float
+    doc: Drawing,
+    msp: Modelspace,
+    name: str,
+    *,
+    rgb: RGB,
+    description: str,
+    markers: list[Marker],
+    text_h: float,
 ) -> None:
     if not markers:
         return
-    name = f"{path.layer} markers"
-    description = f"loceval: greatest errors and tracking losses of {path.name}"
-    _layer(doc, name, path.color_rgb, description)
+    _layer(doc, name, rgb, description)
     attribs = {"layer": name}
     for marker in markers:
         msp.add_point(marker.position, dxfattribs=attribs)
@@ -212,24 +239,15 @@ def _add_ate_layer(
     text_h: float,
 ) -> float:
     """Draw the estimate cut into ATE-coloured pieces and its legend; return the next legend y."""
+    del est  # the runs come from the placement
     name = f"{path.layer} ATE"
-    _layer(doc, name, path.color_rgb, f"loceval: {path.name} coloured by ATE", on=False)
-    bins = ate_bins(placement.result.config.thresholds_m)
-    edges = np.array([b.high_m for b in bins[:-1]])
-    which = np.searchsorted(edges, est.ate_translation.values, side="left")
-    model = placement.to_model(est.aligned.positions_xyz)
-    starts = np.concatenate([[0], np.flatnonzero(np.diff(which)) + 1])
-    ends = np.concatenate([starts[1:], [len(which) - 1]])  # inclusive: joins the next piece
-    tolerance = placement.simplify_m * placement.units.per_metre
-    for start, end in zip(starts, ends, strict=True):  # one iteration per piece
-        if end <= start:
-            continue
-        piece = model[start : end + 1]
-        kept, _ = simplify_rdp(piece, tolerance)
-        rgb = bins[which[start]].color_rgb
+    _layer(doc, name, path.color_rgb, f"loceval: {path.name} coloured by ATE")
+    bins = placement.ate_bins()
+    for run in placement.ate_runs(path):  # one iteration per run of one colour
+        rgb = bins[run.bin_index].color_rgb
         bulk.add(
             msp,
-            piece[kept],
+            run.vertices,
             {"layer": name, "color": _nearest_aci(rgb), "true_color": _int_rgb(rgb)},
         )
     x, y, z = corner

@@ -1,4 +1,14 @@
-"""glTF 2.0 binary (GLB) export: one node, mesh and material per trajectory, LINE_STRIP.
+"""glTF 2.0 binary (GLB) export: a node per trajectory, its ATE colours, markers; LINE_STRIP.
+
+Nodes, named from the trajectories (the scene from the evaluation's title):
+
+- ``<name>``: the path in its palette colour, one ``LINE_STRIP`` primitive per continuous
+  piece (a path breaks at tracking loss instead of crossing it with a chord);
+- ``<name> ATE`` (estimates): the path in the report's ATE colours as vertex colours
+  (``COLOR_0``, linear RGB; colour runs of one piece share a duplicated joint vertex, so
+  the colour changes sharply, not in a blend);
+- ``<name> markers`` (estimates) and ``tracking loss``: empty nodes whose children sit at the
+  greatest errors and at each tracking loss, named by their labels.
 
 Conventions (glTF 2.0 §3.4): distances are metres and +Y is up, whatever the CAD units say
 (the DXF and 3DM files follow the units; glTF importers such as Rhino's and Blender's
@@ -23,6 +33,7 @@ Either way it gets the same base point and Z-up -> Y-up matrix.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
@@ -34,7 +45,7 @@ from numpy.typing import NDArray
 from exporters.building import read_building
 from exporters.errors import ExportError
 from exporters.options import ExportOptions
-from exporters.placement import Placement, place_evaluation
+from exporters.placement import ATERun, Marker, Placement, place_evaluation
 from loceval._typing import FloatArray
 from loceval.evaluation import EvaluationResult
 
@@ -79,10 +90,34 @@ def export_glb(
     placement = placement or place_evaluation(result, options)
     scene = _SceneBuilder(node_matrix(placement.base_point_m))
     per_metre = placement.units.per_metre
+    ate_nodes = []
+    bins = placement.ate_bins()
+    bin_rgb = np.array([_linear_rgba(b.color_rgb)[:3] for b in bins], dtype=np.float32)
     for path in placement.paths:
-        local_m = (path.local_vertices / per_metre).astype(np.float32)
+        pieces = [
+            (path.local_vertices[a:b] / per_metre).astype(np.float32)
+            for a, b in path.pieces()
+            if b - a >= 2
+        ]
         extras = {**path.metadata(), "units": "m", "output_units": placement.units.value}
-        scene.add_lines(path.name, local_m, _linear_rgba(path.color_rgb), extras)
+        scene.add_lines(path.name, pieces, _linear_rgba(path.color_rgb), extras)
+        runs = placement.ate_runs(path)
+        if runs:
+            ate_nodes.append((path, runs))
+    for path, runs in ate_nodes:
+        strips, colours = _ate_strips(runs, bin_rgb, per_metre)
+        extras = {
+            "kind": "ate",
+            "path": path.name,
+            "ate_bins": [{"label": b.label, "color": list(b.color_rgb)} for b in bins],
+        }
+        scene.add_lines(f"{path.name} ATE", strips, [1.0, 1.0, 1.0, 1.0], extras, colours)
+    markers = placement.markers()
+    for path in placement.paths:
+        worst = [m for m in markers if m.kind == "worst" and m.path == path.name]
+        scene.add_markers(f"{path.name} markers", worst, placement.base_point, per_metre)
+    losses = [m for m in markers if m.kind == "gap"]
+    scene.add_markers("tracking loss", losses, placement.base_point, per_metre)
     if options.building is not None:
         building = read_building(options.building, units=placement.units, up=options.building_up)
         local_m = (building.vertices_m - placement.base_point_m).astype(np.float32)
@@ -101,6 +136,26 @@ def export_glb(
         raise ExportError(msg) from err
 
 
+def _ate_strips(
+    runs: list[ATERun], bin_rgb: NDArray[np.float32], per_metre: float
+) -> tuple[list[NDArray[np.float32]], list[NDArray[np.float32]]]:
+    """Join an estimate's ATE runs into one strip per piece, with a colour per vertex."""
+    strips: list[NDArray[np.float32]] = []
+    colours: list[NDArray[np.float32]] = []
+    for piece, group in itertools.groupby(runs, key=lambda run: run.piece):  # per piece
+        del piece
+        members = list(group)
+        strips.append(
+            (np.concatenate([r.local_vertices for r in members]) / per_metre).astype(np.float32)
+        )
+        colours.append(
+            np.concatenate(
+                [np.repeat(bin_rgb[r.bin_index][None, :], len(r.vertices), 0) for r in members]
+            )
+        )
+    return strips, colours
+
+
 def _linear_rgba(rgb: tuple[int, int, int]) -> list[float]:
     """Convert 0-255 sRGB to linear RGBA (glTF's baseColorFactor is linear)."""
     c = np.asarray(rgb, dtype=np.float64) / 255.0
@@ -115,6 +170,7 @@ class _SceneBuilder:
     matrix: list[float]
     gltf: pygltflib.GLTF2 = field(default_factory=pygltflib.GLTF2)
     blob: bytearray = field(default_factory=bytearray)
+    roots: list[int] = field(default_factory=list)
 
     def _view(self, data: bytes, target: int) -> int:
         self.blob.extend(b"\0" * (-len(self.blob) % 4))  # 4-byte alignment of every view
@@ -138,6 +194,14 @@ class _SceneBuilder:
         self.gltf.accessors.append(accessor)
         return len(self.gltf.accessors) - 1
 
+    def _colours(self, colours: NDArray[np.float32]) -> int:
+        view = self._view(colours.tobytes(), pygltflib.ARRAY_BUFFER)
+        accessor = pygltflib.Accessor(
+            bufferView=view, componentType=pygltflib.FLOAT, count=len(colours), type=pygltflib.VEC3
+        )
+        self.gltf.accessors.append(accessor)
+        return len(self.gltf.accessors) - 1
+
     def _node(self, name: str, mesh: pygltflib.Mesh, extras: dict[str, object]) -> None:
         self.gltf.meshes.append(mesh)
         self.gltf.nodes.append(
@@ -145,15 +209,17 @@ class _SceneBuilder:
                 name=name, mesh=len(self.gltf.meshes) - 1, matrix=self.matrix, extras=extras
             )
         )
+        self.roots.append(len(self.gltf.nodes) - 1)
 
     def add_lines(
         self,
         name: str,
-        positions: NDArray[np.float32],
+        pieces: list[NDArray[np.float32]],
         rgba: list[float],
         extras: dict[str, object],
+        colours: list[NDArray[np.float32]] | None = None,
     ) -> None:
-        """Add a trajectory: LINE_STRIP mesh, its unlit material and its node."""
+        """Add a path: a LINE_STRIP per piece (vertex colours if given), material, node."""
         self.gltf.materials.append(
             pygltflib.Material(
                 name=name,
@@ -163,12 +229,43 @@ class _SceneBuilder:
                 extensions={_UNLIT: {}},
             )
         )
-        primitive = pygltflib.Primitive(
-            attributes=pygltflib.Attributes(POSITION=self._positions(positions)),
-            material=len(self.gltf.materials) - 1,
-            mode=pygltflib.LINE_STRIP,
+        primitives = []
+        for k, positions in enumerate(pieces):  # one primitive per continuous piece
+            attributes = pygltflib.Attributes(POSITION=self._positions(positions))
+            if colours is not None:
+                attributes.COLOR_0 = self._colours(colours[k])
+            primitives.append(
+                pygltflib.Primitive(
+                    attributes=attributes,
+                    material=len(self.gltf.materials) - 1,
+                    mode=pygltflib.LINE_STRIP,
+                )
+            )
+        self._node(name, pygltflib.Mesh(name=name, primitives=primitives), extras)
+
+    def add_markers(
+        self, name: str, markers: list[Marker], base_point: FloatArray, per_metre: float
+    ) -> None:
+        """Add an empty node ``name`` whose children stand at the markers, named by labels."""
+        if not markers:
+            return
+        children = []
+        for marker in markers:  # a few dozen at most
+            local_m = (np.asarray(marker.position) - base_point) / per_metre
+            self.gltf.nodes.append(
+                pygltflib.Node(
+                    name=marker.label,
+                    translation=[float(v) for v in local_m],
+                    extras={"kind": marker.kind, "path": marker.path, "label": marker.label},
+                )
+            )
+            children.append(len(self.gltf.nodes) - 1)
+        self.gltf.nodes.append(
+            pygltflib.Node(
+                name=name, matrix=self.matrix, children=children, extras={"kind": "markers"}
+            )
         )
-        self._node(name, pygltflib.Mesh(name=name, primitives=[primitive]), extras)
+        self.roots.append(len(self.gltf.nodes) - 1)
 
     def add_building(
         self, source: Path, positions: NDArray[np.float32], faces: NDArray[np.uint32]
@@ -211,7 +308,7 @@ class _SceneBuilder:
         gltf.scenes = [
             pygltflib.Scene(
                 name=str(metadata["title"]),
-                nodes=list(range(len(gltf.nodes))),
+                nodes=list(self.roots),
                 extras=metadata,
             )
         ]

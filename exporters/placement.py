@@ -1,9 +1,13 @@
 """Model placement shared by the CAD exporters: site transform, units, simplification.
 
-Every CAD file shows the same thing: the reference and each aligned estimate as one
-polyline, mapped from the evaluation frame (the reference's frame, REP 103, Z up, metres)
-into the building model's coordinates by the site transform, scaled to the output units and
-thinned by Ramer-Douglas-Peucker within a tolerance. :func:`place_evaluation` computes that
+Every CAD file shows the same thing: the reference and each aligned estimate as polylines,
+one per continuous piece (a path breaks at the reference's tracking loss and at its own,
+:func:`loceval.gaps.path_breaks`, so no straight chord is drawn across a stretch nobody
+measured), each estimate also cut into runs coloured by its ATE (:meth:`Placement.ate_runs`
+in the report's colours, :func:`ate_bins`), and one marker per tracking loss. Paths are
+mapped from the evaluation frame (the reference's frame, REP 103, Z up, metres) into the
+building model's coordinates by the site transform, scaled to the output units and thinned
+by Ramer-Douglas-Peucker within a tolerance. :func:`place_evaluation` computes that
 view once; ``dxf``, ``rhino`` and ``gltf`` only encode it.
 
 Large site coordinates (a national grid easting of 500 km) stay exact: the geometry is also
@@ -16,6 +20,7 @@ doubles and get absolute model coordinates, so they drop onto the building model
 from __future__ import annotations
 
 import colorsys
+import itertools
 import json
 import math
 import re
@@ -32,9 +37,10 @@ from exporters.building import georeferenced_options
 from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval import __version__
-from loceval._typing import FloatArray, StampsNs
+from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import InputError
 from loceval.evaluation import EstimateResult, EvaluationResult
+from loceval.gaps import path_breaks
 from loceval.geometry import SimilarityTransform
 from loceval.polyline import simplify_rdp
 
@@ -42,11 +48,13 @@ __all__ = [
     "BUILDING_SUFFIXES",
     "PALETTE",
     "ATEBin",
+    "ATERun",
     "Marker",
     "PathKind",
     "PlacedPath",
     "Placement",
     "ate_bins",
+    "ate_edges_m",
     "check_options",
     "layer_name",
     "palette_color",
@@ -80,6 +88,8 @@ _NS_PER_S: Final = 1_000_000_000
 _WORST_SEPARATION_S: Final = 2.0  # greatest errors closer in time than this share a marker
 _INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f]+')
 _BIN_COLORS: Final[tuple[RGB, ...]] = ((0, 170, 0), (230, 200, 0), (255, 120, 0), (220, 0, 0))
+_MAX_EXTRA_EDGES: Final = 4  # at most this many 1-2-5 edges above the last threshold
+_MARKER_MERGE_SHARE: Final = 0.05  # losses closer than 5 % of the drawing share a marker
 
 
 class PathKind(StrEnum):
@@ -293,12 +303,15 @@ class PlacedPath:
         layer: ``name`` made valid as a layer name in every format.
         color_rgb: 0-255 sRGB colour from the palette.
         stamps_ns: (M,) stamps of the kept vertices.
-        vertices: (M, 3) float64 model coordinates in the output units.
+        vertices: (M, 3) float64 model coordinates in the output units, the pieces one
+            after the other.
         local_vertices: (M, 3) float64 ``vertices`` minus the placement's base point.
         errors_m: (M,) ATE translation at the kept vertices (None for the reference).
         poses: vertex count before simplification.
         max_deviation_m: largest deviation the simplification introduced, metres.
         estimate: the estimate's result (None for the reference).
+        piece_starts: (P,) index into ``vertices`` where each continuous piece starts
+            (the first is 0); a path breaks at tracking loss, its own or the reference's.
     """
 
     name: str
@@ -313,6 +326,12 @@ class PlacedPath:
     poses: int
     max_deviation_m: float
     estimate: EstimateResult | None
+    piece_starts: IntArray
+
+    def pieces(self) -> list[tuple[int, int]]:
+        """Return ``(start, stop)`` of every continuous piece in ``vertices`` (stop exclusive)."""
+        stops = [*self.piece_starts[1:].tolist(), len(self.vertices)]
+        return list(zip(self.piece_starts.tolist(), stops, strict=True))
 
     @property
     def color_hex(self) -> str:
@@ -332,6 +351,7 @@ class PlacedPath:
             "color_hex": self.color_hex,
             "poses": self.poses,
             "vertices": len(self.vertices),
+            "pieces": len(self.piece_starts),
             "max_deviation_m": self.max_deviation_m,
             "ate_translation_m": ate,
         }
@@ -344,7 +364,8 @@ class Marker:
     Attributes:
         path: name of the path it belongs to.
         kind: ``"worst"`` (a greatest ATE, at the estimate pose) or ``"gap"`` (the last
-            pose before a tracking loss).
+            pose before a tracking loss: of the reference, or of an estimate where the
+            reference kept tracking).
         position: (x, y, z) model coordinates in the output units.
         target: for ``"worst"``, the reference position the error is measured to.
         label: the text to show.
@@ -375,15 +396,18 @@ class ATEBin:
 
 
 def ate_bins(thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
-    """Return the error bins of the evaluation's thresholds, green (small) to red (large)."""
+    """Return the error bins of these edges, green (small) to red (large).
+
+    The one colour scale of ATE in every output: the report's error-coloured paths, the
+    DXF's ATE layers, the .3dm's coloured segments and the GLB's vertex colours.
+    """
     edges = sorted({float(t) for t in thresholds_m})
     bounds = [0.0, *edges, math.inf]
     count = len(bounds) - 1
     bins = []
     for k in range(count):
-        # spread the bins over the green -> red ramp, first and last fixed
-        pos = 0.0 if count == 1 else k * (len(_BIN_COLORS) - 1) / (count - 1)
-        color = _BIN_COLORS[round(pos)]
+        # spread the bins evenly over the green -> yellow -> orange -> red ramp
+        color = _ramp(0.0 if count == 1 else k / (count - 1))
         low, high = bounds[k], bounds[k + 1]
         if k == 0:
             label = f"<= {high:g} m"
@@ -393,6 +417,66 @@ def ate_bins(thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
             label = f"{low:g}-{high:g} m"
         bins.append(ATEBin(low, high, color, label))
     return tuple(bins)
+
+
+def _ramp(fraction: float) -> RGB:
+    """Return the colour at ``fraction`` (0 to 1) of the green -> red ramp."""
+    pos = fraction * (len(_BIN_COLORS) - 1)
+    k = min(int(pos), len(_BIN_COLORS) - 2)
+    w = pos - k
+    a, b = _BIN_COLORS[k], _BIN_COLORS[k + 1]
+    r, g, bl = (round((1 - w) * x + w * y) for x, y in zip(a, b, strict=True))
+    return r, g, bl
+
+
+def ate_edges_m(result: EvaluationResult) -> tuple[float, ...]:
+    """Return the ATE colour edges of an evaluation: its thresholds, extended upwards.
+
+    The thresholds (0.05, 0.1, 0.15 m by default) tell a good system's errors apart, but a
+    car's SLAM with 10 m errors would be one red line, and a motion-capture-grade system
+    with 6 mm errors one green line. So when the largest 99.5th percentile of the
+    estimates' ATE exceeds twice the last threshold, up to four 1-2-5 edges (0.2, 0.5, 1,
+    2, 5 m, ...) are added above it, the last one below that percentile; when it is below
+    half the first threshold, up to four 1-2-5 edges from a tenth of it up to it are added
+    below the thresholds (fr2_desk: 0.002, 0.005, 0.01 m).
+    """
+    edges = sorted({float(t) for t in result.config.thresholds_m})
+    values = [e.ate_translation.values for e in result.estimates if len(e.ate_translation)]
+    if not edges or not values:
+        return tuple(edges)
+    top = max(float(np.percentile(v, 99.5)) for v in values)
+    nice = [m * 10.0**e for e in range(-4, 7) for m in (1.0, 2.0, 5.0)]
+    first, last = edges[0], edges[-1]
+    if top < 0.5 * first:  # a sub-centimetre system: 1-2-5 edges below the thresholds
+        below = [v for v in nice if top / 10.0 <= v < min(top, first / 1.5)]
+        return (*below[-_MAX_EXTRA_EDGES:], *edges)
+    if top <= 2.0 * last:
+        return tuple(edges)
+    extra = [v for v in nice if last * 1.5 <= v < top]
+    if len(extra) > _MAX_EXTRA_EDGES:  # keep the largest, spread over the range
+        pick = np.linspace(0, len(extra) - 1, _MAX_EXTRA_EDGES).round().astype(int)
+        extra = [extra[i] for i in pick]
+    return (*edges, *extra)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class ATERun:
+    """A stretch of an estimate's path whose ATE stays in one bin.
+
+    Attributes:
+        path: name of the estimate's path.
+        piece: which continuous piece of the path it lies on.
+        bin_index: index into the placement's :meth:`Placement.ate_bins`.
+        vertices: (K, 3) model coordinates in the output units (K >= 2; consecutive runs
+            of one piece share their joining vertex).
+        local_vertices: (K, 3) ``vertices`` minus the placement's base point.
+    """
+
+    path: str
+    piece: int
+    bin_index: int
+    vertices: FloatArray
+    local_vertices: FloatArray
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -461,32 +545,61 @@ class Placement:
             "paths": [p.name for p in self.paths],
         }
 
-    def markers(self) -> list[Marker]:
-        """Return the greatest-error and tracking-loss markers of every path.
+    def ate_bins(self) -> tuple[ATEBin, ...]:
+        """Return the ATE colour bins every output uses (:func:`ate_edges_m`)."""
+        return ate_bins(ate_edges_m(self.result))
 
-        Greatest errors closer than 2 s to a greater one are left out: they belong to the
-        same excursion, and their labels would only pile up.
+    def ate_runs(self, path: PlacedPath) -> list[ATERun]:
+        """Return an estimate's path cut where its ATE changes bin, each run simplified.
+
+        Runs never cross a break of the path (tracking loss); within one piece they join.
+        The reference (no ATE) has none.
         """
-        out: list[Marker] = []
-        max_gap_ns = round(self.result.config.max_gap_s * _NS_PER_S)
-        t0 = int(self.result.reference.stamps_ns[0])
+        est = path.estimate
+        if est is None or len(est.aligned) == 0:
+            return []
+        bins = self.ate_bins()
+        edges = np.array([b.high_m for b in bins[:-1]])
+        which = np.searchsorted(edges, est.ate_translation.values, side="left")
+        model = self.to_model(est.aligned.positions_xyz)
+        jump = _jumps(self.result, est.aligned.stamps_ns)
+        piece = np.concatenate(([0], np.cumsum(jump)))
+        change = (np.diff(which) != 0) | jump
+        starts = np.concatenate(([0], np.flatnonzero(change) + 1))
+        ends = np.concatenate((starts[1:], [len(which)]))
+        # a run continues to the next run's first vertex unless a break lies between
+        ends = np.where((ends < len(which)) & ~np.append(jump, True)[ends - 1], ends + 1, ends)
+        tolerance = self.simplify_m * self.units.per_metre
+        base = self.base_point
+        runs = []
+        for start, stop in zip(starts.tolist(), ends.tolist(), strict=True):  # per run
+            if stop - start < 2:
+                continue
+            chunk = model[start:stop]
+            kept, _ = simplify_rdp(chunk, tolerance)
+            runs.append(
+                ATERun(
+                    path=path.name,
+                    piece=int(piece[start]),
+                    bin_index=int(which[start]),
+                    vertices=chunk[kept],
+                    local_vertices=chunk[kept] - base,
+                )
+            )
+        return runs
+
+    def markers(self) -> list[Marker]:
+        """Return one marker per tracking loss and the greatest-error markers.
+
+        A tracking loss of the reference is marked once (at its last pose before the
+        loss), not once per trajectory; an estimate's own loss is marked where the
+        reference kept tracking. Losses whose markers lie within 5 % of the drawing's size
+        of each other share one, labelled by the longest; greatest errors closer than 2 s
+        to a greater one are left out (one excursion). Their labels would only pile up.
+        """
+        out = self._gap_markers()
         for path in self.paths:
             est = path.estimate
-            trajectory = self.result.reference if est is None else est.aligned
-            for start, end in trajectory.gaps(max_gap_ns):
-                k = int(np.searchsorted(trajectory.stamps_ns, start))
-                out.append(
-                    Marker(
-                        path=path.name,
-                        kind="gap",
-                        position=_xyz(self.to_model(trajectory.positions_xyz[k : k + 1])[0]),
-                        target=None,
-                        label=(
-                            f"{path.name}: no pose for {(end - start) / _NS_PER_S:.1f} s "
-                            f"from t={(start - t0) / _NS_PER_S:.1f} s"
-                        ),
-                    )
-                )
             if est is None:
                 continue
             labelled: list[float] = []
@@ -509,6 +622,84 @@ class Placement:
                     )
                 )
         return out
+
+    def _gap_markers(self) -> list[Marker]:
+        min_gap_ns = round(self.result.config.max_gap_s * _NS_PER_S)
+        reference = self.result.reference
+        ref_losses = reference.tracking_losses(min_gap_ns)
+        t0 = int(reference.stamps_ns[0])
+        out: list[Marker] = []
+        for path in self.paths:
+            est = path.estimate
+            trajectory = reference if est is None else est.aligned
+            if est is None:
+                losses = ref_losses
+            else:  # its own losses where the reference kept tracking
+                own = path_breaks(trajectory.stamps_ns, min_gap_ns=min_gap_ns)
+                seen = path_breaks(trajectory.stamps_ns, min_gap_ns=10**18, losses=ref_losses)
+                idx = np.flatnonzero(own & ~seen)
+                losses = [
+                    (int(trajectory.stamps_ns[i]), int(trajectory.stamps_ns[i + 1])) for i in idx
+                ]
+            if not losses:
+                continue
+            where = np.searchsorted(trajectory.stamps_ns, [a for a, _ in losses])
+            positions = self.to_model(trajectory.positions_xyz[where])
+            for group in _group_losses(losses, positions, self._marker_radius()):
+                # labelled by its longest loss, placed at that loss's last pose before it
+                k = max(group, key=lambda i: losses[i][1] - losses[i][0])
+                start, end = losses[k]
+                from_s = (start - t0) / _NS_PER_S
+                # the reference's losses are everyone's: only an estimate's own is named
+                who = "" if est is None else f"{path.name}: "
+                label = f"{who}no pose for {(end - start) / _NS_PER_S:.1f} s from t={from_s:.1f} s"
+                if len(group) > 1:
+                    label += f" (+{len(group) - 1} nearby)"
+                out.append(
+                    Marker(
+                        path=path.name,
+                        kind="gap",
+                        position=_xyz(positions[k]),
+                        target=None,
+                        label=label,
+                    )
+                )
+        return out
+
+    def _marker_radius(self) -> float:
+        """Return the distance, in output units, within which loss markers share one."""
+        vertices = np.concatenate([p.vertices for p in self.paths])
+        diagonal = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
+        return _MARKER_MERGE_SHARE * diagonal
+
+
+def _group_losses(
+    losses: Sequence[tuple[int, int]], positions: FloatArray, radius: float
+) -> list[list[int]]:
+    """Group losses whose markers would lie within ``radius`` of a longer loss's marker.
+
+    Losses at one spot (a body that keeps leaving the cameras' view at the same corner)
+    would draw their labels on top of each other; they share one marker instead.
+    """
+    groups: list[list[int]] = []
+    longest_first = sorted(range(len(losses)), key=lambda i: losses[i][0] - losses[i][1])
+    for i in longest_first:  # one iteration per tracking loss, not per pose
+        near = next(
+            (g for g in groups if np.linalg.norm(positions[i] - positions[g[0]]) <= radius),
+            None,
+        )
+        if near is None:
+            groups.append([i])
+        else:
+            near.append(i)
+    return sorted(groups, key=lambda g: losses[g[0]][0])  # in time order of their anchors
+
+
+def _jumps(result: EvaluationResult, stamps_ns: StampsNs) -> BoolArray:
+    """Return (N - 1,) where a path through these stamps breaks (:func:`path_breaks`)."""
+    min_gap_ns = round(result.config.max_gap_s * _NS_PER_S)
+    losses = result.reference.tracking_losses(min_gap_ns)
+    return path_breaks(stamps_ns, min_gap_ns=min_gap_ns, losses=losses)
 
 
 def _xyz(row: FloatArray) -> tuple[float, float, float]:
@@ -549,7 +740,9 @@ def place_evaluation(result: EvaluationResult, options: ExportOptions) -> Placem
     paths = []
     for k, ((trajectory, est), layer) in enumerate(zip(sources, layers, strict=True)):
         model_m = site.apply_positions(trajectory.positions_xyz)
-        kept, deviation = simplify_rdp(model_m, options.simplify_m)
+        kept, piece_starts, deviation = _simplify_pieces(
+            model_m, _jumps(result, trajectory.stamps_ns), options.simplify_m
+        )
         vertices = model_m[kept] * units.per_metre
         local = (model_m[kept] - base_m) * units.per_metre
         name = names[k] if layer == layer_name(names[k]) else layer
@@ -567,6 +760,7 @@ def place_evaluation(result: EvaluationResult, options: ExportOptions) -> Placem
                 poses=len(trajectory),
                 max_deviation_m=deviation,
                 estimate=est,
+                piece_starts=piece_starts,
             )
         )
     return Placement(
@@ -579,3 +773,35 @@ def place_evaluation(result: EvaluationResult, options: ExportOptions) -> Placem
         title=options.title,
         paths=tuple(paths),
     )
+
+
+def _simplify_pieces(
+    model_m: FloatArray, jump: BoolArray, tolerance_m: float
+) -> tuple[IntArray, IntArray, float]:
+    """Simplify each continuous piece on its own; return kept indices, piece starts, deviation.
+
+    Args:
+        model_m: (N, 3) model coordinates, metres.
+        jump: (N - 1,) True after each pose that ends a piece.
+        tolerance_m: the simplification tolerance, metres.
+
+    Returns:
+        The (M,) kept indices into ``model_m``, the (P,) indices into the kept vertices
+        where each piece starts, and the largest deviation introduced.
+    """
+    n = int(model_m.shape[0])
+    bounds = [0, *(np.flatnonzero(jump) + 1).tolist(), n]
+    kept_parts: list[IntArray] = []
+    starts: list[int] = []
+    deviation = 0.0
+    count = 0
+    for a, b in itertools.pairwise(bounds):  # one iteration per piece (tracking losses + 1)
+        if b <= a:
+            continue
+        kept, dev = simplify_rdp(model_m[a:b], tolerance_m)
+        kept_parts.append(kept + a)
+        starts.append(count)
+        count += int(kept.shape[0])
+        deviation = max(deviation, dev)
+    kept_all = np.concatenate(kept_parts) if kept_parts else np.zeros(0, dtype=np.intp)
+    return kept_all.astype(np.intp), np.asarray(starts, dtype=np.intp), deviation

@@ -5,7 +5,9 @@ Two methods, both ``O((n + m) log m)`` with :func:`numpy.searchsorted`:
 - ``interpolate`` (default): the reference is interpolated at the estimate's stamps
   (linear position, SLERP orientation), as the reference-system paper's Algorithm 2 does
   (``p' = p_n + δ (p_{n+1} - p_n)`` with ``δ = (t - t_n) / (t_{n+1} - t_n)``), but never
-  across a reference gap longer than ``max_gap_ns`` (tracking loss).
+  across the reference's tracking loss: an interval longer than ``max_gap_ns`` and than
+  five of the reference's median intervals (:mod:`loceval.gaps`), so a 1.5 Hz AMCL
+  reference is interpolated, and a motion-capture outage is not.
 - ``nearest``: each estimate pose is matched to its nearest reference pose within
   ``max_dt_ns``, one-to-one (where two estimate poses pick the same reference pose, the
   closer in time keeps it), for parity with the TUM tools and evo.
@@ -19,6 +21,7 @@ import numpy as np
 
 from loceval._typing import FloatArray, IntArray, StampsNs
 from loceval.errors import AssociationError
+from loceval.gaps import gap_threshold_ns
 from loceval.geometry import slerp_pairs
 from loceval.options import AssociationMethod, number_default
 from loceval.trajectory import Trajectory
@@ -49,9 +52,10 @@ class Association:
         method: the association method.
         offset_ns: time offset added to the estimate's stamps.
         max_dt_ns: nearest matching's tolerance.
-        max_gap_ns: interpolation's longest bridged reference interval.
+        max_gap_ns: interpolation's longest bridged reference interval: the caller's
+            floor, raised to five of the reference's median intervals (:mod:`loceval.gaps`).
         dropped_outside: estimate poses before or after the reference's coverage.
-        dropped_gap: estimate poses inside a reference gap longer than ``max_gap_ns``.
+        dropped_gap: estimate poses inside a reference interval longer than ``max_gap_ns``.
         dropped_unmatched: estimate poses with no reference pose within ``max_dt_ns``
             (nearest), or that lost a shared reference pose to a closer estimate pose.
     """
@@ -94,7 +98,9 @@ def associate(
         estimate: the system under evaluation.
         method: ``interpolate`` or ``nearest``.
         max_dt_ns: largest stamp difference for ``nearest``, in nanoseconds.
-        max_gap_ns: longest reference interval ``interpolate`` bridges, in nanoseconds.
+        max_gap_ns: shortest reference interval that ``interpolate`` may treat as
+            tracking loss, in nanoseconds; a longer one is a gap only when it is also
+            longer than five of the reference's median intervals (:mod:`loceval.gaps`).
         offset_ns: added to the estimate's stamps (the framework paper's static delay).
         min_matches: fewest pairs the caller needs (alignment and RPE need three).
 
@@ -114,6 +120,7 @@ def associate(
     shifted = estimate.shifted(offset_ns) if offset_ns else estimate
     t_ref = reference.stamps_ns
     t_est = shifted.stamps_ns
+    max_gap_ns = gap_threshold_ns(t_ref, min_gap_ns=max_gap_ns)
     if method is AssociationMethod.NEAREST:
         est_idx, ref_pose, counts = _match_nearest(reference, t_est, max_dt_ns=max_dt_ns)
     else:

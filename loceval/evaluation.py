@@ -14,6 +14,7 @@ from loceval._version import __version__
 from loceval.alignment import Alignment, AlignMethod, AlignWindow, align
 from loceval.association import Association, AssociationMethod, associate
 from loceval.errors import InputError
+from loceval.gaps import gap_threshold_ns
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import (
     ErrorSeries,
@@ -315,7 +316,7 @@ class EvaluationResult:
                         "start_s": (a - int(ref.stamps_ns[0])) / _NS_PER_S,
                         "duration_s": (b - a) / _NS_PER_S,
                     }
-                    for a, b in ref.gaps(round(self.config.max_gap_s * _NS_PER_S))
+                    for a, b in ref.tracking_losses(round(self.config.max_gap_s * _NS_PER_S))
                 ],
                 "warnings": list(self.reference_warnings),
             },
@@ -382,11 +383,14 @@ def evaluate(
     if config.reference_offset is not None:
         reference = reference.with_body_offset(config.reference_offset)
         ref_notes.append("Device offset applied to the reference (rigid body -> sensor).")
-    gaps = reference.gaps(round(config.max_gap_s * _NS_PER_S))
+    min_gap_ns = round(config.max_gap_s * _NS_PER_S)
+    gaps = reference.tracking_losses(min_gap_ns)
     if gaps:
         longest = max(b - a for a, b in gaps) / _NS_PER_S
+        ref_gap_s = gap_threshold_ns(reference.stamps_ns, min_gap_ns=min_gap_ns) / _NS_PER_S
         ref_notes.append(
-            f"The reference has {len(gaps)} gaps longer than {config.max_gap_s:g} s "
+            f"The reference has {len(gaps)} {'gap' if len(gaps) == 1 else 'gaps'} longer than "
+            f"{ref_gap_s:g} s "
             f"(tracking loss; longest {longest:.3f} s); estimate poses in them are not "
             "evaluated."
         )
@@ -418,14 +422,18 @@ def _evaluate_one(
         offset_ns=round(config.time_offset_s * _NS_PER_S),
     )
     notes.extend(_association_notes(matched, len(estimate)))
-    own_gaps = estimate.gaps(round(config.max_gap_s * _NS_PER_S))
+    min_gap_ns = round(config.max_gap_s * _NS_PER_S)
+    own_gaps = estimate.tracking_losses(min_gap_ns)
     if own_gaps:
         start, end = max(own_gaps, key=lambda gap: gap[1] - gap[0])
-        t0_ns = int(reference.stamps_ns[0])
+        after_s = (start - int(reference.stamps_ns[0])) / _NS_PER_S
+        own_gap_s = gap_threshold_ns(estimate.stamps_ns, min_gap_ns=min_gap_ns) / _NS_PER_S
         notes.append(
-            f"The estimate itself has {len(own_gaps)} gaps longer than {config.max_gap_s:g} s "
+            f"The estimate itself has {len(own_gaps)} {'gap' if len(own_gaps) == 1 else 'gaps'} "
+            f"longer than {own_gap_s:g} s "
             f"(its own tracking loss; the longest, {(end - start) / _NS_PER_S:.2f} s, starts "
-            f"{(start - t0_ns) / _NS_PER_S:.2f} s after the reference's first pose)."
+            f"{abs(after_s):.2f} s {'after' if after_s >= 0 else 'before'} the reference's "
+            "first pose)."
         )
     alignment = align(
         matched.reference,

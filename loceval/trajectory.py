@@ -9,6 +9,7 @@ import numpy as np
 
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import TrajectoryError
+from loceval.gaps import tracking_losses
 from loceval.geometry import SimilarityTransform
 from loceval.rotation import Rotation
 
@@ -202,6 +203,17 @@ class Trajectory:
         dt = np.diff(self.stamps_ns)
         idx = np.flatnonzero(dt > max_gap_ns)
         return [(int(self.stamps_ns[i]), int(self.stamps_ns[i + 1])) for i in idx]
+
+    def tracking_losses(self, min_gap_ns: int) -> list[tuple[int, int]]:
+        """Return the ``(start_ns, end_ns)`` of every tracking loss, judged by this rate.
+
+        An interval is a loss when longer than ``min_gap_ns`` and than five median
+        intervals (:func:`loceval.gaps.gap_threshold_ns`).
+
+        Args:
+            min_gap_ns: the floor, in nanoseconds (the evaluation's maximum gap).
+        """
+        return tracking_losses(self.stamps_ns, min_gap_ns=min_gap_ns)
 
     def select(self, index: IntArray | BoolArray) -> Trajectory:
         """Return the poses at ``index`` (an increasing integer index or a boolean mask)."""

@@ -1,25 +1,33 @@
-# ruff: noqa: INP001  (a Grasshopper script pasted into Rhino, not a module of the package)
-"""loceval paths: the trajectories of a loceval evaluation as Grasshopper polylines.
+# ruff: noqa: INP001, UP020, UP031, ANN001, ANN201
+# (a Grasshopper script, not a module; it runs under Python 3 AND IronPython 2.7)
+"""loceval paths: the trajectories of a loceval evaluation as Grasshopper geometry.
 
-Rhino 8 Script component (Python 3). Reads paths.3dm.json, written by
-`loceval evaluate --out DIR`, from a file path or an http(s) URL.
+Runs as it is in Rhino 8's Script component (Python 3) and in Rhino 7's GhPython
+component (IronPython 2.7): no f-strings, no annotations, no pathlib. Reads
+paths.3dm.json (format_version 2), written by `loceval evaluate --out DIR`, from a file
+path or an http(s) URL.
 
 Inputs:
     source: str - path or URL of paths.3dm.json
+    bake: bool - True adds everything to the Rhino document on the named layers
 Outputs:
-    curves: polyline curves, reference first, scaled to the document's units
-    names: trajectory names
-    colours: display colours (ground truth cyan, then magenta, green, ...)
-    layers: Rhino layer paths, loceval::<evaluation>::<trajectory>
-    info: evaluation id, units, simplification tolerance and deviation
+    curves: polyline curves, one per continuous piece, reference first, document units
+    names, colours, layers: per curve
+    ate_curves, ate_colours, ate_layers: the estimates cut into ATE-coloured runs
+    dots, dot_layers: text dots at the greatest errors and at each tracking loss
+    info: evaluation, units, simplification tolerance and deviation, ATE legend
 """
 
+import io
 import json
-import urllib.request
-from pathlib import Path
 
 import Rhino
 import System.Drawing
+
+try:  # Python 3 (Rhino 8)
+    from urllib.request import urlopen
+except ImportError:  # IronPython 2.7 (Rhino 7)
+    from urllib2 import urlopen
 
 UNIT_SYSTEMS = {
     "mm": Rhino.UnitSystem.Millimeters,
@@ -28,42 +36,94 @@ UNIT_SYSTEMS = {
 }
 
 
-def load(source: str) -> dict:
+def load(source):
     """Return the JSON document at a path or URL."""
     if source.startswith(("http://", "https://")):
-        with urllib.request.urlopen(source, timeout=60) as response:  # noqa: S310
-            return json.loads(response.read().decode("utf-8"))
-    with Path(source).open(encoding="utf-8") as stream:
+        return json.loads(urlopen(source, timeout=60).read().decode("utf-8"))
+    with io.open(source, encoding="utf-8") as stream:
         return json.load(stream)
 
 
-def document_scale(units: str) -> float:
-    """Return the factor from the file's units to the active document's units."""
-    doc = Rhino.RhinoDoc.ActiveDoc
-    if doc is None:
-        return 1.0
-    return Rhino.RhinoMath.UnitScale(UNIT_SYSTEMS[units], doc.ModelUnitSystem)
+def colour(rgb):
+    """Return a System.Drawing colour of [r, g, b]."""
+    return System.Drawing.Color.FromArgb(rgb[0], rgb[1], rgb[2])
 
 
-source = globals().get("source")  # the component's input
+def decode(encoded, scale):
+    """Return the curve of a CommonObject.Encode() dict, scaled to the document's units."""
+    curve = Rhino.Runtime.CommonObject.FromJSON(json.dumps(encoded))
+    curve.Transform(scale)
+    return curve
+
+
+def layer_index(doc, full_path, rgb):
+    """Return the index of a layer path such as loceval::Lab run::OptiTrack, making it."""
+    index = doc.Layers.FindByFullPath(full_path, -1)
+    if index >= 0:
+        return index
+    parent, _, name = full_path.rpartition("::")
+    layer = Rhino.DocObjects.Layer()
+    layer.Name = name
+    layer.Color = colour(rgb)
+    if parent:
+        layer.ParentLayerId = doc.Layers[layer_index(doc, parent, [255, 255, 255])].Id
+    return doc.Layers.Add(layer)
+
+
+def bake_all(doc, items):
+    """Add (geometry, name, layer path, rgb) items to the document on their layers."""
+    for geometry, name, layer, rgb in items:
+        attributes = Rhino.DocObjects.ObjectAttributes()
+        attributes.Name = name
+        attributes.LayerIndex = layer_index(doc, layer, rgb)
+        attributes.ObjectColor = colour(rgb)
+        attributes.ColorSource = Rhino.DocObjects.ObjectColorSource.ColorFromObject
+        doc.Objects.Add(geometry, attributes)
+    doc.Views.Redraw()
+
+
+source = globals().get("source")  # the component's inputs
+bake = globals().get("bake")
 curves, names, colours, layers, info = [], [], [], [], ""
+ate_curves, ate_colours, ate_layers, dots, dot_layers = [], [], [], [], []
 if source:
     document = load(str(source).strip())
-    if document.get("format") != "loceval.paths.3dm.json":
-        message = f"{source} is not a loceval paths.3dm.json document"
-        raise ValueError(message)
-    scale = Rhino.Geometry.Transform.Scale(
-        Rhino.Geometry.Point3d.Origin, document_scale(document["units"])
+    if document.get("format") != "loceval.paths.3dm.json" or document["format_version"] != 2:
+        raise ValueError("%s is not a loceval paths.3dm.json document, version 2" % source)
+    doc = Rhino.RhinoDoc.ActiveDoc
+    factor = (
+        1.0
+        if doc is None
+        else Rhino.RhinoMath.UnitScale(UNIT_SYSTEMS[document["units"]], doc.ModelUnitSystem)
     )
+    scale = Rhino.Geometry.Transform.Scale(Rhino.Geometry.Point3d.Origin, factor)
+    items = []
+    path_colours = {path["name"]: path["color"] for path in document["paths"]}
     for path in document["paths"]:
-        curve = Rhino.Runtime.CommonObject.FromJSON(json.dumps(path["curve"]))
-        curve.Transform(scale)
-        curves.append(curve)
-        names.append(path["name"])
-        colours.append(System.Drawing.Color.FromArgb(*path["color"]))
-        layers.append(path["layer"])
+        for encoded in path["curves"]:
+            curves.append(decode(encoded, scale))
+            names.append(path["name"])
+            colours.append(colour(path["color"]))
+            layers.append(path["layer"])
+            items.append((curves[-1], path["name"], path["layer"], path["color"]))
+        for run in path["ate"]:
+            ate_curves.append(decode(run["curve"], scale))
+            ate_colours.append(colour(run["color"]))
+            ate_layers.append(path["ate_layer"])
+            items.append((ate_curves[-1], path["name"] + " ATE", path["ate_layer"], run["color"]))
+    for marker in document["markers"]:
+        x, y, z = (factor * v for v in marker["position"])
+        dots.append(Rhino.Geometry.TextDot(marker["label"], Rhino.Geometry.Point3d(x, y, z)))
+        dot_layers.append(marker["layer"])
+        rgb = path_colours[marker["path"]] if marker["kind"] == "worst" else [158, 158, 158]
+        items.append((dots[-1], marker["label"], marker["layer"], rgb))
+    if bake and doc is not None:
+        bake_all(doc, items)
     meta = document["metadata"]
-    info = (
-        f"evaluation {meta['evaluation_id']} | file units {meta['units']} | simplified "
-        f"within {meta['simplify_tolerance_m']} m (max deviation {meta['max_deviation_m']:.6f} m)"
+    info = "%s | file units %s | simplified within %s m (max deviation %.6f m) | ATE: %s" % (
+        meta["title"],
+        meta["units"],
+        meta["simplify_tolerance_m"],
+        meta["max_deviation_m"],
+        ", ".join(b["label"] for b in document["ate_bins"]),
     )

@@ -7,10 +7,10 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
-from matplotlib.colors import Normalize
+from matplotlib.colors import BoundaryNorm, ListedColormap
 
+from exporters.placement import ate_bins, ate_edges_m
 from exporters.plots.figure import (
-    _ERROR_CMAP,
     _WIDTH_IN,
     DEFAULT_MAX_POINTS,
     MAX_SPAN_MARKERS,
@@ -21,9 +21,10 @@ from exporters.plots.figure import (
     Plot,
     _breaks,
     _dense,
+    _keep_every_vertex,
     _legend_above,
-    _max_gap_ns,
     _new_figure,
+    _path_jumps,
     _plot,
     _style,
     _with_nan_breaks,
@@ -82,13 +83,12 @@ def _draw_reference_xy(
     kept = decimate_uniform(len(ref), max_points)
     a, b = _with_nan_breaks(
         [ref.positions_xyz[:, axes_ij[0]], ref.positions_xyz[:, axes_ij[1]]],
-        ref.stamps_ns,
+        _path_jumps(result, ref.stamps_ns),
         kept,
-        _max_gap_ns(result),
     )
     # Under an error-coloured path the truth is a wide band; over noisy estimates it is
     # drawn last and thinner, so it stays visible.
-    ax.plot(
+    lines = ax.plot(
         a,
         b,
         color=REFERENCE_COLOUR,
@@ -96,6 +96,7 @@ def _draw_reference_xy(
         zorder=4 if on_top else 2,
         label=_reference_label(result),
     )
+    _keep_every_vertex(lines)
 
 
 def _reference_label(result: EvaluationResult) -> str:
@@ -115,11 +116,10 @@ def _draw_estimate(
     kept = decimate_uniform(len(aligned), max_points)
     a, b = _with_nan_breaks(
         [aligned.positions_xyz[:, axes_ij[0]], aligned.positions_xyz[:, axes_ij[1]]],
-        aligned.stamps_ns,
+        _path_jumps(result, aligned.stamps_ns),
         kept,
-        _max_gap_ns(result),
     )
-    ax.plot(
+    lines = ax.plot(
         a,
         b,
         color=estimate_colour(k),
@@ -127,6 +127,7 @@ def _draw_estimate(
         alpha=0.85,
         label=e.name or f"estimate {k + 1}",
     )
+    _keep_every_vertex(lines)
 
 
 def _mark_start(ax: Axes, result: EvaluationResult) -> None:
@@ -189,21 +190,25 @@ def plot_ate_path(
     kept = decimate_minmax(ate, max_points)
     xy = e.aligned.positions_xyz[kept, :2]
     segments = np.stack([xy[:-1], xy[1:]], axis=1)
-    keep_segment = ~_breaks(e.aligned.stamps_ns, kept, _max_gap_ns(result))
+    keep_segment = ~_breaks(_path_jumps(result, e.aligned.stamps_ns), kept)
     # Each drawn segment takes the larger error of its two ends, so a peak shows.
     seg_err = np.maximum(ate[kept][:-1], ate[kept][1:])
-    vmax = float(np.percentile(ate, 99.5)) if ate.size else 1.0
+    # The one ATE colour scale of every output (DXF, .3dm, GLB): the evaluation's bins.
+    bins = ate_bins(ate_edges_m(result))
+    inner = [b.high_m for b in bins[:-1]]
+    top = max([1.5 * inner[-1]] if inner else [1.0])
+    top = max(top, float(ate.max()) if ate.size else 0.0)
+    bounds = [0.0, *inner, top]
+    cmap = ListedColormap([tuple(c / 255.0 for c in b.color_rgb) for b in bins])
+    norm = BoundaryNorm(bounds, cmap.N)
     tolerance = e.verdict.tolerance.distance_m if e.verdict is not None else None
-    if tolerance is not None:
-        vmax = max(vmax, tolerance * 1.25)
-    vmax = max(vmax, 1e-6)
     fig = _new_figure(_xy_figure_height(result, plot_width_in=_WIDTH_IN - 1.8))
     ax = fig.add_subplot()
     _draw_reference_xy(ax, result, max_points)
     collection = LineCollection(
         list(segments[keep_segment]),
-        cmap=_ERROR_CMAP,
-        norm=Normalize(0.0, vmax),
+        cmap=cmap,
+        norm=norm,
         linewidths=1.8,
         capstyle="round",
         zorder=3,
@@ -213,10 +218,9 @@ def plot_ate_path(
     ax.add_collection(collection)
     ax.update_datalim(xy)
     ax.autoscale_view()
-    colorbar = fig.colorbar(
-        collection, ax=ax, extend="max" if float(ate.max()) > vmax else "neither", shrink=0.85
-    )
-    colorbar.set_label("ATE [m]")
+    colorbar = fig.colorbar(collection, ax=ax, shrink=0.85, ticks=bounds[:-1])
+    colorbar.ax.set_yticklabels([f"{b:g}" for b in bounds[:-1]])
+    colorbar.set_label("ATE [m] (bins as in the CAD files)")
     if tolerance is not None:
         colorbar.ax.axhline(tolerance, color="black", linewidth=1.2)
         colorbar.ax.text(

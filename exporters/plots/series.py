@@ -19,17 +19,19 @@ from exporters.plots.figure import (
     TOLERANCE_COLOUR,
     ImageFormat,
     Plot,
+    _keep_every_vertex,
     _legend_above,
-    _max_gap_ns,
     _new_figure,
+    _path_jumps,
     _plot,
+    _reference_losses,
     _seconds,
     _style,
     _with_nan_breaks,
     decimate_uniform,
     estimate_colour,
 )
-from loceval._typing import FloatArray, StampsNs
+from loceval._typing import BoolArray, FloatArray
 from loceval.evaluation import EvaluationConfig, EvaluationResult
 from loceval.metrics import ErrorSeries
 
@@ -43,7 +45,7 @@ __all__ = [
 
 
 def _shade_gaps(ax: Axes, result: EvaluationResult, t0_ns: int) -> None:
-    gaps = result.reference.gaps(_max_gap_ns(result))
+    gaps = _reference_losses(result)
     if not gaps:
         return
     spans = np.asarray(gaps, dtype=np.int64)
@@ -80,20 +82,19 @@ def _shade_gaps(ax: Axes, result: EvaluationResult, t0_ns: int) -> None:
 
 
 def envelope(
-    times_s: FloatArray, values: FloatArray, stamps_ns: StampsNs, *, buckets: int, max_gap_ns: int
+    times_s: FloatArray, values: FloatArray, jump: BoolArray, *, buckets: int
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Per-bucket minimum, maximum and mean of a long series, for drawing it as a band.
 
     Consecutive samples fall into about ``buckets`` equal buckets; a bucket never spans a
-    time gap longer than ``max_gap_ns`` (tracking loss), and a NaN row separates the
-    stretches on either side of a gap, so the band breaks there.
+    break (tracking loss, :func:`loceval.gaps.path_breaks`), and a NaN row separates the
+    stretches on either side of a break, so the band breaks there.
 
     Args:
         times_s: (N,) sample times, seconds.
         values: (N,) the series.
-        stamps_ns: (N,) the sample stamps (to find the gaps).
+        jump: (N - 1,) True after each sample that ends a stretch.
         buckets: about how many buckets to make.
-        max_gap_ns: a longer interval between samples is a gap.
 
     Returns:
         ``(t, lo, hi, mean)``: bucket centre times, minima, maxima and means, (B,) each
@@ -101,7 +102,6 @@ def envelope(
     """
     n = int(values.shape[0])
     size = max(1, -(-n // max(buckets, 1)))
-    jump = np.diff(stamps_ns) > max_gap_ns
     stretch = np.concatenate(([0], np.cumsum(jump, dtype=np.int64)))
     stretch_start = np.concatenate(([0], np.flatnonzero(jump) + 1))
     local = np.arange(n, dtype=np.int64) - stretch_start[stretch]
@@ -135,11 +135,10 @@ def _draw_series(
     if len(series) <= max_points:
         t, v = _with_nan_breaks(
             [times, series.values],
-            series.stamps_ns,
+            _path_jumps(result, series.stamps_ns),
             np.arange(len(series), dtype=np.intp),
-            _max_gap_ns(result),
         )
-        ax.plot(t, v, color=colour, linewidth=0.8, label=name)
+        _keep_every_vertex(ax.plot(t, v, color=colour, linewidth=0.8, label=name))
         return
     # Too many samples to draw one by one: a light band between each bucket's smallest and
     # largest error (every peak survives) under a line of the bucket means. At print
@@ -148,9 +147,8 @@ def _draw_series(
     t, lo, hi, mean = envelope(
         times,
         series.values,
-        series.stamps_ns,
+        _path_jumps(result, series.stamps_ns),
         buckets=max_points // ENVELOPE_DIVISOR,
-        max_gap_ns=_max_gap_ns(result),
     )
     ax.fill_between(t, lo, hi, color=colour, alpha=0.3, linewidth=0.0)
     ax.plot(t, mean, color=colour, linewidth=0.9, label=name)
@@ -197,9 +195,8 @@ def _time_plot_notes(
     max_points: int,
 ) -> str:
     """The caption's explanation of what is drawn, only for what is in the figure."""
-    max_gap_ns = _max_gap_ns(result)
     notes = ""
-    gaps = result.reference.gaps(max_gap_ns)
+    gaps = _reference_losses(result)
     if gaps:
         notes += " Grey bands are tracking loss of the reference (not evaluated)"
         min_width_ns = MIN_GAP_WIDTH_SHARE * result.reference.duration_s * _NS_PER_S
@@ -209,10 +206,11 @@ def _time_plot_notes(
             else "."
         )
     series = [s for _, row in rows for s in row if s is not None]
-    if any(bool((np.diff(s.stamps_ns) > max_gap_ns).any()) for s in series):
+    if any(bool(_path_jumps(result, s.stamps_ns).any()) for s in series):
         notes += (
-            f" A break in a line is a stretch of more than {result.config.max_gap_s:g} s "
-            "without evaluated poses."
+            " A break in a line is a stretch without evaluated poses (tracking loss of the "
+            "reference, or of the estimate: longer than five of its own median intervals "
+            f"and than {result.config.max_gap_s:g} s)."
         )
     if any(len(s) > max_points for s in series):
         notes += (
@@ -305,16 +303,6 @@ def plot_error_cdf(
         )
     for t in thresholds:
         ax.axvline(t, color="#616161", linestyle=":", linewidth=1.0)
-        ax.text(
-            t,
-            1.01,
-            f"{t:g} m",
-            transform=ax.get_xaxis_transform(),
-            ha="center",
-            va="bottom",
-            fontsize=7,
-            color="#424242",
-        )
     tol = result.config.tolerance
     if tol is not None:
         ax.plot(
@@ -329,6 +317,7 @@ def plot_error_cdf(
         )
     ax.set_xlim(left=0.0)
     ax.set_ylim(0.0, 101.0)
+    _label_thresholds(ax, thresholds)
     ax.set_xlabel("ATE [m]")
     ax.set_ylabel("poses with error ≤ x [%]")
     _style(ax)
@@ -346,6 +335,39 @@ def plot_error_cdf(
         title="Error distribution (CDF)",
         caption=caption,
     )
+
+
+_LABEL_GAP_AXES = 0.08  # threshold labels closer than this share of the axis stack up
+_LABEL_ROWS = 3
+
+
+def _label_thresholds(ax: Axes, thresholds: Sequence[float]) -> None:
+    """Label the threshold lines above the axes, stacking labels that would overlap.
+
+    Each label goes on the lowest of three rows where it keeps 8 % of the axis width from
+    the previous label on that row; a label with no room (or outside the axis) is left out,
+    its dotted line stays.
+    """
+    lo, hi = ax.get_xlim()
+    last = [-1.0] * _LABEL_ROWS
+    for t in sorted(thresholds):  # a handful of thresholds
+        frac = (t - lo) / (hi - lo) if hi > lo else 0.0
+        if not 0.0 <= frac <= 1.0:
+            continue
+        row = next((r for r in range(_LABEL_ROWS) if frac - last[r] >= _LABEL_GAP_AXES), None)
+        if row is None:
+            continue
+        last[row] = frac
+        ax.text(
+            t,
+            1.01 + 0.055 * row,
+            f"{t:g} m",
+            transform=ax.get_xaxis_transform(),
+            ha="center",
+            va="bottom",
+            fontsize=7,
+            color="#424242",
+        )
 
 
 def describe_rpe_step(config: EvaluationConfig) -> str:

@@ -27,7 +27,9 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
+from loceval.alignment import AlignWindow
 from loceval.evaluation import EstimateResult, EvaluationResult
+from loceval.gaps import GAP_RATE_FACTOR
 from loceval.metrics import ErrorSeries, ErrorStats
 
 __all__ = ["BEST_MARK", "ReportView", "build_report_view"]
@@ -115,7 +117,8 @@ class WorstRow:
     x: str
     y: str
     z: str
-    error_m: str
+    error: str
+    """The error in the table's unit (:attr:`WorstTable.error_unit`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,6 +127,7 @@ class WorstTable:
 
     name: str
     rows: tuple[WorstRow, ...]
+    error_unit: str = "m"
 
 
 @dataclass(frozen=True, slots=True)
@@ -187,17 +191,51 @@ def _fmt(value: float, decimals: int = 3) -> str:
     return f"{value:.{decimals}f}"
 
 
+MM_BELOW_M: Final = 0.1
+"""A table of lengths reads in millimetres when all its values are below this many metres."""
+
+
+@dataclass(frozen=True, slots=True)
+class LengthUnit:
+    """How one table prints lengths: ``m`` with 3 decimals, or ``mm`` with 1.
+
+    Chosen per table from its magnitudes (:func:`length_unit`): a sub-centimetre system's
+    RMSE reads ``6.2 mm``, not ``0.006 m``, and a car's ``12.345 m``, not ``12345.0 mm``.
+    """
+
+    symbol: str
+    per_metre: float
+    decimals: int
+
+    def format(self, value_m: float) -> str:
+        """Return ``value_m`` in this unit, without the symbol."""
+        return _fmt(value_m * self.per_metre, self.decimals)
+
+
+def length_unit(values_m: Iterable[float]) -> LengthUnit:
+    """Return millimetres when every finite value is below 0.1 m, else metres."""
+    finite = [abs(v) for v in values_m if math.isfinite(v)]
+    if finite and max(finite) < MM_BELOW_M:
+        return LengthUnit("mm", 1000.0, 1)
+    return LengthUnit("m", 1.0, 3)
+
+
 def _name(e: EstimateResult, k: int) -> str:
     return e.name or f"estimate {k + 1}"
 
 
 def _stats_rows(
-    series: Sequence[ErrorSeries | None], unit: str, *, mark: bool
+    series: Sequence[ErrorSeries | None], unit: str, *, mark: bool, scale: LengthUnit | None = None
 ) -> tuple[StatsRow, ...]:
     stats: list[ErrorStats | None] = [None if s is None else s.stats for s in series]
     rows = []
     for label, attr in _STAT_ROWS:
-        printed = [None if st is None else _fmt(float(getattr(st, attr))) for st in stats]
+        printed = [
+            None
+            if st is None
+            else (_fmt if scale is None else scale.format)(float(getattr(st, attr)))
+            for st in stats
+        ]
         # Best is decided on the printed values, so equal-looking numbers are marked alike.
         numbers = [float(t) for t in printed if t is not None]
         best = min(numbers) if numbers else None
@@ -223,15 +261,21 @@ def _stats_table(
         f"{_name(e, k)} (n = {len(t):,})"
         for k, (e, t) in enumerate(zip(result.estimates, translation, strict=True))
     )
+    unit = length_unit(float(getattr(t.stats, attr)) for t in translation for _, attr in _STAT_ROWS)
     groups: list[tuple[str, tuple[StatsRow, ...]]] = [
-        ("translation", _stats_rows(translation, " m", mark=mark))
+        ("translation", _stats_rows(translation, f" {unit.symbol}", mark=mark, scale=unit))
     ]
     if any(r is not None for r in rotation):
         groups.append(("rotation", _stats_rows(rotation, "°", mark=mark)))
+    in_unit = (
+        f" Translation in millimetres: every value of this table is below {MM_BELOW_M:g} m."
+        if unit.symbol == "mm"
+        else ""
+    )
     return StatsTable(
         number=number,
         title=title,
-        note=note,
+        note=note + in_unit,
         columns=columns,
         groups=tuple(groups),
         marks_best=mark,
@@ -405,19 +449,19 @@ def _trajectories(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
 
 def _options(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
     cfg = result.config
+    gaps = (
+        f"tracking loss: an interval longer than {cfg.max_gap_s:g} s and than "
+        f"{GAP_RATE_FACTOR} of the source's median intervals"
+    )
     association = (
-        f"interpolate the reference at the estimate's stamps (gaps over {cfg.max_gap_s:g} s "
-        "are tracking loss and not bridged)"
+        f"interpolate the reference at the estimate's stamps ({gaps}, never bridged)"
         if cfg.association.value == "interpolate"
-        else (
-            f"nearest reference pose within {cfg.max_dt_s:g} s (gaps over "
-            f"{cfg.max_gap_s:g} s are tracking loss)"
-        )
+        else f"nearest reference pose within {cfg.max_dt_s:g} s ({gaps})"
     )
     rows = [
         ("Association", association),
         ("Time offset", f"{cfg.time_offset_s:+g} s added to the estimates' stamps"),
-        ("Alignment", f"{cfg.align.value} (estimated on {cfg.align_first} poses)"),
+        ("Alignment", f"{cfg.align.value} (estimated on {_window(cfg.align_first)})"),
         (
             "RPE step",
             describe_rpe_step(result.config)
@@ -433,6 +477,15 @@ def _options(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
         t = cfg.reference_offset.translation
         rows.append(("Device offset", f"{_xyz(t)} m (rigid body → sensor)"))
     return tuple(rows)
+
+
+def _window(window: AlignWindow) -> str:
+    """Return the alignment window in words: ``all poses``, ``the first 5 s``."""
+    if window.poses is not None:
+        return "the first pose" if window.poses == 1 else f"the first {window.poses:,} poses"
+    if window.seconds is not None:
+        return f"the first {window.seconds:g} s"
+    return "all poses"
 
 
 def _alignment_rows(result: EvaluationResult) -> tuple[tuple[str, tuple[str, ...]], ...]:
@@ -467,6 +520,7 @@ def _alignment_rows(result: EvaluationResult) -> tuple[tuple[str, tuple[str, ...
 def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
     tables = []
     for k, e in enumerate(result.estimates):
+        unit = length_unit(w.error for w in e.worst)
         rows = tuple(
             WorstRow(
                 rank=r,
@@ -475,11 +529,11 @@ def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
                 x=f"{w.position_xyz[0]:.3f}",
                 y=f"{w.position_xyz[1]:.3f}",
                 z=f"{w.position_xyz[2]:.3f}",
-                error_m=_fmt(w.error),
+                error=unit.format(w.error),
             )
             for r, w in enumerate(e.worst, start=1)
         )
-        tables.append(WorstTable(name=_name(e, k), rows=rows))
+        tables.append(WorstTable(name=_name(e, k), rows=rows, error_unit=unit.symbol))
     return tuple(tables)
 
 

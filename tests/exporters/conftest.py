@@ -2,12 +2,21 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
 from loceval.trajectory import Trajectory
+from tests.conftest import require_tool
+
+VALIDATOR_DIR = Path(__file__).resolve().parent / "gltf_validator"
+Validator = Callable[[bytes], dict]
 
 
 def walk(rng: np.random.Generator, *, n: int = 6000, rate_hz: float = 100.0) -> Trajectory:
@@ -56,3 +65,36 @@ def two_estimates(rng: np.random.Generator) -> EvaluationResult:
     a = noisy(rng, truth, every=3, sigma=0.02, drift=0.25, name="RTAB-Map")
     b = noisy(rng, truth, every=4, sigma=0.05, drift=0.05, name="ISAAC")
     return evaluate(truth, [a, b], EvaluationConfig(tolerance=Tolerance(0.10, 0.95)))
+
+
+@pytest.fixture(scope="session")
+def validate(tmp_path_factory: pytest.TempPathFactory) -> Validator:
+    """Return a function running the pinned Khronos glTF Validator on GLB bytes."""
+    node = require_tool("node")
+    npm = require_tool("npm")
+    if not (VALIDATOR_DIR / "node_modules" / "gltf-validator").is_dir():
+        install = subprocess.run(
+            [npm, "ci", "--prefix", str(VALIDATOR_DIR), "--no-audit", "--no-fund"],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=600,
+        )
+        assert install.returncode == 0, install.stdout + install.stderr
+    folder = tmp_path_factory.mktemp("gltf-validator")
+
+    def run(data: bytes) -> dict:
+        path = folder / "model.glb"
+        path.write_bytes(data)
+        done = subprocess.run(
+            [node, str(VALIDATOR_DIR / "validate.js"), str(path)],
+            capture_output=True,
+            text=True,
+            check=False,
+            timeout=300,
+        )
+        assert done.returncode == 0, done.stderr
+        report: dict = json.loads(done.stdout)
+        return report
+
+    return run

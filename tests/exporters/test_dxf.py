@@ -16,7 +16,7 @@ import pytest
 
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import ate_bins, parse_site
+from exporters.placement import ate_bins, ate_edges_m, parse_site
 from loceval.evaluation import EvaluationResult, evaluate
 from loceval.polyline import polyline_distances
 from tests.conftest import require_tool
@@ -144,12 +144,13 @@ def test_audit_clean(tmp_path: Path, two_estimates: EvaluationResult, options: E
 
 
 def test_ate_layer(drawing: ezdxf.document.Drawing, two_estimates: EvaluationResult):
-    """The optional ATE layer (off) covers the estimate with bin colours and has a legend."""
-    bins = ate_bins(two_estimates.config.thresholds_m)
+    """The ATE layer (on, not frozen) covers the estimate in the report's colours, with legend."""
+    bins = ate_bins(ate_edges_m(two_estimates))
     bin_colours = {b.color_rgb for b in bins}
     for est in two_estimates.estimates:
         layer = drawing.layers.get(f"{est.name} ATE")
-        assert not layer.is_on()
+        assert layer.is_on()
+        assert not layer.is_frozen()
         pieces = drawing.modelspace().query(f'POLYLINE[layer=="{est.name} ATE"]')
         assert len(pieces) > 1
         assert all(p.is_3d_polyline for p in pieces)
@@ -190,10 +191,20 @@ def test_markers_at_worst_errors_and_gaps(two_estimates: EvaluationResult):
     )
     doc = read(dxf.export_dxf(gapped, ExportOptions(units=Units.M)))
     msp = doc.modelspace()
-    ref_labels = [t.dxf.text for t in msp.query('TEXT[layer=="OptiTrack markers"]')]
-    assert any("OptiTrack: no pose for 3.0 s" in label for label in ref_labels)
-    gap_point = np.array(msp.query('POINT[layer=="OptiTrack markers"]')[0].dxf.location.xyz)
+    # one marker for the one loss, on its own layer, not repeated per estimate
+    loss_labels = [t.dxf.text for t in msp.query('TEXT[layer=="tracking loss"]')]
+    assert len(loss_labels) == 1
+    assert loss_labels[0].startswith("no pose for 3.0 s")
+    gap_points = msp.query('POINT[layer=="tracking loss"]')
+    assert len(gap_points) == 1
+    gap_point = np.array(gap_points[0].dxf.location.xyz)
     np.testing.assert_allclose(gap_point, ref.positions_xyz[times < 20.0][-1], atol=1e-9)
+    # every path breaks there: two polylines each, none bridging the 3 s
+    for name in ("OptiTrack", *(e.name for e in gapped.estimates)):
+        pieces = msp.query(f'POLYLINE[layer=="{name}"]')
+        assert len(pieces) == 2
+        ends = [np.array([v.dxf.location.xyz for v in p.vertices]) for p in pieces]
+        assert np.linalg.norm(ends[1][0] - ends[0][-1]) > 1.0  # 3 s apart at about 0.6 m/s
     for est in gapped.estimates:
         labels = [t.dxf.text for t in msp.query(f'TEXT[layer=="{est.name} markers"]')]
         assert any(

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import io
 import json
-import subprocess
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -13,55 +11,19 @@ import pytest
 
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import parse_site, place_evaluation
-from loceval.evaluation import EvaluationResult
+from exporters.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
+from loceval.evaluation import EvaluationResult, evaluate
 from loceval.polyline import polyline_distances
-from tests.conftest import require_tool
+from tests.exporters.conftest import Validator
 
 pygltflib = pytest.importorskip("pygltflib")
 trimesh = pytest.importorskip("trimesh")
 from exporters import gltf  # noqa: E402  (after the importorskip of its libraries)
 
-VALIDATOR_DIR = Path(__file__).resolve().parent / "gltf_validator"
 FAR_SITE = "512340.25 5403210.5 112.3 37.5"
 NEAR_SITE = "20.5 -15.25 0.5 30"
 NAMES = ["OptiTrack", "RTAB-Map", "ISAAC"]
 R = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # Z up -> Y up
-
-Validator = Callable[[bytes], dict]
-
-
-@pytest.fixture(scope="session")
-def validate(tmp_path_factory: pytest.TempPathFactory) -> Validator:
-    """Return a function running the pinned Khronos glTF Validator on GLB bytes."""
-    node = require_tool("node")
-    npm = require_tool("npm")
-    if not (VALIDATOR_DIR / "node_modules" / "gltf-validator").is_dir():
-        install = subprocess.run(
-            [npm, "ci", "--prefix", str(VALIDATOR_DIR), "--no-audit", "--no-fund"],
-            capture_output=True,
-            text=True,
-            check=False,
-            timeout=600,
-        )
-        assert install.returncode == 0, install.stdout + install.stderr
-    folder = tmp_path_factory.mktemp("gltf-validator")
-
-    def run(data: bytes) -> dict:
-        path = folder / "model.glb"
-        path.write_bytes(data)
-        done = subprocess.run(
-            [node, str(VALIDATOR_DIR / "validate.js"), str(path)],
-            capture_output=True,
-            text=True,
-            check=False,
-            timeout=300,
-        )
-        assert done.returncode == 0, done.stderr
-        report: dict = json.loads(done.stdout)
-        return report
-
-    return run
 
 
 def load(data: bytes) -> pygltflib.GLTF2:
@@ -97,19 +59,21 @@ def expected_y_up_m(result: EvaluationResult, options: ExportOptions) -> list[np
 
 
 def test_nodes_meshes_materials(two_estimates: EvaluationResult):
-    """One node, mesh and material per trajectory, named, LINE_STRIP, palette colour."""
+    """A node, mesh and material per trajectory first, named, LINE_STRIP, palette colour."""
     model = load(gltf.export_glb(two_estimates, ExportOptions(evaluation_id="ev-42")))
-    assert [n.name for n in model.nodes] == NAMES
-    assert [m.name for m in model.meshes] == NAMES
-    assert [m.name for m in model.materials] == NAMES
-    assert model.scenes[model.scene].nodes == [0, 1, 2]
+    names = [n.name for n in model.nodes]
+    assert names[:5] == [*NAMES, "RTAB-Map ATE", "ISAAC ATE"]
+    assert [m.name for m in model.meshes] == names[:5]
+    assert [m.name for m in model.materials] == names[:5]
+    roots = model.scenes[model.scene].nodes
+    assert [names[k] for k in roots] == [*names[:5], "RTAB-Map markers", "ISAAC markers"]
     colours = [m.pbrMetallicRoughness.baseColorFactor for m in model.materials]
     np.testing.assert_allclose(colours[0], [0, 1, 1, 1])
     np.testing.assert_allclose(colours[1], [1, 0, 1, 1])
     np.testing.assert_allclose(
         colours[2], [0, (200 / 255 + 0.055) ** 2.4 / 1.055**2.4, 0, 1], atol=1e-5
     )
-    for node, mesh in zip(model.nodes, model.meshes, strict=True):
+    for node, mesh in zip(model.nodes[:3], model.meshes[:3], strict=True):
         (primitive,) = mesh.primitives
         assert primitive.mode == pygltflib.LINE_STRIP
         acc = model.accessors[primitive.attributes.POSITION]
@@ -203,12 +167,15 @@ def test_building_in_the_same_scene(
     building.export(path)
     data = gltf.export_glb(two_estimates, ExportOptions(site=site, building=path))
     model = load(data)
-    assert [n.name for n in model.nodes] == [*NAMES, "building"]
-    (primitive,) = model.meshes[3].primitives
+    names = [n.name for n in model.nodes]
+    building_node = names.index("building")
+    assert names[:3] == NAMES
+    assert model.nodes[building_node].mesh == len(model.meshes) - 1
+    (primitive,) = model.meshes[-1].primitives
     assert primitive.mode == pygltflib.TRIANGLES
     faces = accessor(model, primitive.indices)
     assert len(faces) == 36
-    positions = world(model, 3)
+    positions = world(model, building_node)
     expected = np.asarray(box_m.vertices) @ R.T
     assert positions.min(axis=0) == pytest.approx(expected.min(axis=0), abs=1e-4)
     assert positions.max(axis=0) == pytest.approx(expected.max(axis=0), abs=1e-4)
@@ -258,4 +225,49 @@ def test_khronos_validator(two_estimates: EvaluationResult, validate: Validator,
     issues = report["issues"]
     assert issues["numErrors"] == 0, json.dumps(issues, indent=1)
     assert issues["numWarnings"] == 0, json.dumps(issues, indent=1)
-    assert report["info"]["drawCallCount"] == 3
+    assert report["info"]["drawCallCount"] == 5  # 3 paths and 2 ATE-coloured paths
+
+
+def test_ate_vertex_colours(two_estimates: EvaluationResult):
+    """Each estimate's ATE node carries COLOR_0 in the linear bin colours, one per vertex."""
+    model = load(gltf.export_glb(two_estimates, ExportOptions()))
+    bins = ate_bins(ate_edges_m(two_estimates))
+    linear = {tuple(np.round(gltf._linear_rgba(b.color_rgb)[:3], 5)) for b in bins}
+    edges = np.array([b.high_m for b in bins[:-1]])
+    for k, est in enumerate(two_estimates.estimates):
+        node = next(n for n in model.nodes if n.name == f"{est.name} ATE")
+        (primitive,) = model.meshes[node.mesh].primitives  # no tracking loss: one piece
+        assert primitive.attributes.COLOR_0 is not None
+        colours = accessor(model, primitive.attributes.COLOR_0)
+        positions = accessor(model, primitive.attributes.POSITION)
+        assert len(colours) == len(positions) > 2
+        assert {tuple(np.round(c, 5)) for c in colours.astype(np.float64)} <= linear
+        first = bins[int(np.searchsorted(edges, est.ate_translation.values[0], side="left"))]
+        np.testing.assert_allclose(colours[0], gltf._linear_rgba(first.color_rgb)[:3], atol=1e-6)
+        assert model.nodes[k + 1].name == est.name
+
+
+def test_tracking_loss_breaks_and_marker_nodes(
+    two_estimates: EvaluationResult, validate: Validator
+):
+    """A 3 s reference loss: two strips per path, one loss node at the last pose before it."""
+    ref = two_estimates.reference
+    times = ref.times_s()
+    gapped = evaluate(
+        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
+        [e.estimate for e in two_estimates.estimates],
+        two_estimates.config,
+    )
+    options = ExportOptions(site=parse_site(NEAR_SITE))
+    data = gltf.export_glb(gapped, options)
+    model = load(data)
+    for k in range(3):
+        assert len(model.meshes[k].primitives) == 2
+    group = next(n for n in model.nodes if n.name == "tracking loss")
+    (child,) = (model.nodes[c] for c in group.children)
+    assert child.name.startswith("no pose for 3.0 s")
+    matrix = np.array(group.matrix, dtype=np.float64).reshape(4, 4).T
+    at = matrix[:3, :3] @ np.array(child.translation) + matrix[:3, 3]
+    last = options.site.apply_positions(ref.positions_xyz[times < 20.0][-1:])[0]
+    np.testing.assert_allclose(at, last @ R.T, atol=1e-6)
+    assert validate(data)["issues"]["numErrors"] == 0

@@ -11,7 +11,7 @@ import pytest
 
 from exporters.options import ExportOptions, Units
 from exporters.placement import parse_site
-from loceval.evaluation import EvaluationResult
+from loceval.evaluation import EvaluationResult, evaluate
 from loceval.polyline import polyline_distances
 
 rhino3dm = pytest.importorskip("rhino3dm")
@@ -31,8 +31,13 @@ def expected_paths(result: EvaluationResult, options: ExportOptions) -> list[np.
 
 
 def decode(entry: dict) -> np.ndarray:
-    """Decode a path's curve with CommonObject.Decode and return its vertices."""
-    curve = rhino3dm.CommonObject.Decode(entry["curve"])
+    """Decode a path's curves with CommonObject.Decode and return their vertices, joined."""
+    return np.concatenate([decode_curve(c) for c in entry["curves"]])
+
+
+def decode_curve(encoded: dict) -> np.ndarray:
+    """Decode one encoded PolylineCurve and return its vertices."""
+    curve = rhino3dm.CommonObject.Decode(encoded)
     assert isinstance(curve, rhino3dm.PolylineCurve)
     points = [curve.Point(k) for k in range(curve.PointCount)]
     return np.array([[p.X, p.Y, p.Z] for p in points])
@@ -53,7 +58,7 @@ def document(two_estimates: EvaluationResult, options: ExportOptions) -> dict:
 def test_document_metadata(document: dict):
     """The document names its format, units, evaluation, frame and deviation."""
     assert document["format"] == "loceval.paths.3dm.json"
-    assert document["format_version"] == 1
+    assert document["format_version"] == 2
     assert document["units"] == "mm"
     assert document["rhino_unit_system"] == "Millimeters"
     base = np.array(document["base_point"])
@@ -72,13 +77,24 @@ def test_paths_names_colours_layers(document: dict):
     assert [p["name"] for p in paths] == ["OptiTrack", "RTAB-Map", "ISAAC"]
     assert [p["color"] for p in paths] == [[0, 255, 255], [255, 0, 255], [0, 200, 0]]
     assert [p["layer"] for p in paths] == [
-        "loceval::ev-42::OptiTrack",
-        "loceval::ev-42::RTAB-Map",
-        "loceval::ev-42::ISAAC",
+        "loceval::Lab run::OptiTrack",
+        "loceval::Lab run::RTAB-Map",
+        "loceval::Lab run::ISAAC",
     ]
     for path in paths:
-        assert set(path["curve"]) == {"version", "archive3dm", "opennurbs", "data"}
-        assert path["curve"]["archive3dm"] <= 70  # decodable by Rhino 7
+        assert len(path["curves"]) == path["pieces"] == 1  # no tracking loss in this walk
+        for curve in path["curves"] + [run["curve"] for run in path["ate"]]:
+            assert set(curve) == {"version", "archive3dm", "opennurbs", "data"}
+            assert curve["archive3dm"] <= 70  # decodable by Rhino 7
+    assert [p["ate"] == [] for p in paths] == [True, False, False]
+    bin_colours = [b["color"] for b in document["ate_bins"]]
+    assert all(run["color"] in bin_colours for p in paths for run in p["ate"])
+    assert all(p["ate_layer"] == p["layer"] + "::ATE" for p in paths)
+    worst = [m for m in document["markers"] if m["kind"] == "worst"]
+    assert {m["layer"] for m in worst} == {
+        "loceval::Lab run::RTAB-Map::markers",
+        "loceval::Lab run::ISAAC::markers",
+    }
 
 
 def test_every_curve_decodes_to_the_trajectory(
@@ -112,6 +128,24 @@ def test_same_curves_as_the_3dm(
         np.testing.assert_array_equal(decode(entry), [[p.X, p.Y, p.Z] for p in points])
 
 
+def test_pieces_at_a_tracking_loss(two_estimates: EvaluationResult):
+    """A 3 s reference loss splits every path into two curves and gives one loss marker."""
+    ref = two_estimates.reference
+    times = ref.times_s()
+    gapped = evaluate(
+        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
+        [e.estimate for e in two_estimates.estimates],
+        two_estimates.config,
+    )
+    document = json.loads(rhino.export_3dm_json(gapped, ExportOptions(title="Gap run")))
+    for entry in document["paths"]:
+        first, second = (decode_curve(c) for c in entry["curves"])
+        assert np.linalg.norm(second[0] - first[-1]) > 1000.0  # mm: 3 s of walking apart
+    (loss,) = [m for m in document["markers"] if m["kind"] == "gap"]
+    assert loss["layer"] == "loceval::Gap run::tracking loss"
+    assert loss["label"].startswith("no pose for 3.0 s")
+
+
 def test_units_scale(two_estimates: EvaluationResult):
     """Metre output is the millimetre output divided by 1000."""
     mm = json.loads(rhino.export_3dm_json(two_estimates, ExportOptions(units=Units.MM)))
@@ -131,7 +165,9 @@ def test_script_reads_only_fields_the_document_has(document: dict):
         and isinstance(node.slice, ast.Constant)
         and isinstance(node.slice.value, str)
     }
-    available = set(document) | set(document["metadata"]) | set(document["paths"][0])
+    available = set(document) | set(document["metadata"]) | set(document["paths"][1])
+    available |= set(document["markers"][0]) | set(document["paths"][1]["ate"][0])
+    available |= set(document["ate_bins"][0])
     assert keys
     assert keys <= available, keys - available
     assert document["units"] in {"mm", "cm", "m"}  # the script's UNIT_SYSTEMS
@@ -141,5 +177,23 @@ def test_script_is_short_and_compiles():
     """The script is valid Python 3 and short enough to review by eye."""
     source = SCRIPT.read_text(encoding="utf-8")
     compile(source, str(SCRIPT), "exec")
-    assert len(source.splitlines()) <= 90
+    assert len(source.splitlines()) <= 140
     assert "CommonObject.FromJSON" in source
+
+
+def test_script_uses_only_python_2_7_syntax():
+    """Rhino 7's GhPython is IronPython 2.7: no f-strings, annotations, pathlib or walrus."""
+    source = SCRIPT.read_text(encoding="utf-8")
+    tree = ast.parse(source)
+    python3_only = (ast.JoinedStr, ast.AnnAssign, ast.NamedExpr, ast.Nonlocal, ast.YieldFrom)
+    assert not [type(n).__name__ for n in ast.walk(tree) if isinstance(n, python3_only)]
+    functions = [n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)]
+    assert functions
+    for function in functions:
+        assert function.returns is None
+        assert function.args.kwonlyargs == []
+        assert all(a.annotation is None for a in function.args.args)
+    imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert imported <= {"io", "json", "Rhino", "System.Drawing", "urllib.request", "urllib2"}
+    assert "io.open(" in source  # the builtin open of Python 2 has no encoding argument

@@ -15,6 +15,7 @@ from exporters.placement import (
     PALETTE,
     PathKind,
     ate_bins,
+    ate_edges_m,
     check_options,
     layer_name,
     palette_color,
@@ -275,3 +276,33 @@ class TestPlaceEvaluation:
         np.testing.assert_array_equal(site.as_matrix(), np.eye(4))
         placement = place_evaluation(two_estimates, ExportOptions())
         np.testing.assert_array_equal(placement.base_point_m, [0.0, 0.0, 1.0])
+
+
+class TestATEEdges:
+    """The one ATE colour scale: the thresholds, extended to the errors' magnitude."""
+
+    def test_thresholds_that_fit_stay(self, two_estimates: EvaluationResult):
+        """Errors of a few centimetres keep the default 0.05/0.1/0.15 m bins."""
+        top = max(np.percentile(e.ate_translation.values, 99.5) for e in two_estimates.estimates)
+        assert 0.025 < top <= 0.30  # noisy walk: 2 and 5 cm noise plus drift
+        assert ate_edges_m(two_estimates) == (0.05, 0.1, 0.15)
+
+    def test_large_errors_add_edges_above(self, two_estimates: EvaluationResult):
+        """Thresholds far below the errors get at most four 1-2-5 edges above them."""
+        config = replace(two_estimates.config, thresholds_m=(0.001, 0.002))
+        edges = ate_edges_m(replace(two_estimates, config=config))
+        assert edges[:2] == (0.001, 0.002)
+        assert 1 <= len(edges) - 2 <= 4
+        assert all(round(v / 10 ** np.floor(np.log10(v)), 6) in {1, 2, 5} for v in edges[2:])
+        assert list(edges) == sorted(edges)
+
+    def test_small_errors_add_edges_below(self, two_estimates: EvaluationResult):
+        """Thresholds far above the errors get 1-2-5 edges below them (fr2_desk: 2, 5, 10 mm)."""
+        config = replace(two_estimates.config, thresholds_m=(5.0, 10.0))
+        edges = ate_edges_m(replace(two_estimates, config=config))
+        top = max(np.percentile(e.ate_translation.values, 99.5) for e in two_estimates.estimates)
+        assert edges[-2:] == (5.0, 10.0)
+        assert 1 <= len(edges) - 2 <= 4
+        assert top / 10 <= edges[0]
+        assert edges[-3] < top
+        assert list(edges) == sorted(edges)

@@ -36,6 +36,7 @@ from exporters.report import (
     render_view_html,
 )
 from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
+from loceval.gaps import path_breaks
 from loceval.trajectory import Trajectory
 from tests.exporters.conftest import noisy, walk
 
@@ -325,7 +326,8 @@ def test_envelope_breaks_at_gaps_and_bounds_values() -> None:
     """The band holds every value between its bucket bounds and breaks at time gaps."""
     stamps = np.concatenate([np.arange(1000), np.arange(2000, 3000)]).astype(np.int64) * 10**7
     values = np.sin(np.arange(2000) / 30.0)
-    t, lo, hi, mean = envelope(stamps / 1e9, values, stamps, buckets=100, max_gap_ns=100_000_000)
+    jump = path_breaks(stamps, min_gap_ns=100_000_000)
+    t, lo, hi, mean = envelope(stamps / 1e9, values, jump, buckets=100)
     gap = np.flatnonzero(np.isnan(t))
     assert gap.size == 1
     assert t[gap[0] - 1] < 10.0

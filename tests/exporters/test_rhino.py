@@ -9,8 +9,8 @@ import pytest
 
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import ate_bins, parse_site, place_evaluation
-from loceval.evaluation import EvaluationResult
+from exporters.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
+from loceval.evaluation import EvaluationResult, evaluate
 from loceval.polyline import polyline_distances
 
 rhino3dm = pytest.importorskip("rhino3dm")
@@ -71,7 +71,7 @@ def test_curves_round_trip(
     model = rhino3dm.File3dm.Read(str(model_file))
     by_layer = objects_by_layer(model)
     for name, expected in zip(NAMES, expected_paths(two_estimates, options), strict=True):
-        (obj,) = by_layer[f"loceval::ev-42::{name}"]
+        (obj,) = by_layer[f"loceval::Lab run::{name}"]
         curve = obj.Geometry
         assert isinstance(curve, rhino3dm.PolylineCurve)
         assert obj.Attributes.Name == name
@@ -84,9 +84,9 @@ def test_layers_nested_with_colours(model_file: Path):
     """Layers nest as loceval::<evaluation>::<trajectory> with the palette colours."""
     model = rhino3dm.File3dm.Read(str(model_file))
     layers = {layer.FullPath: layer for layer in model.Layers}
-    assert {"loceval", "loceval::ev-42"} <= set(layers)
+    assert {"loceval", "loceval::Lab run"} <= set(layers)
     for name, rgb in zip(NAMES, COLOURS, strict=True):
-        layer = layers[f"loceval::ev-42::{name}"]
+        layer = layers[f"loceval::Lab run::{name}"]
         assert layer.Name == name
         assert tuple(layer.Color)[:3] == rgb
         assert layer.Visible
@@ -96,12 +96,12 @@ def test_user_strings(model_file: Path, two_estimates: EvaluationResult):
     """Curves carry source and ATE statistics as attribute user text."""
     model = rhino3dm.File3dm.Read(str(model_file))
     by_layer = objects_by_layer(model)
-    (ref,) = by_layer["loceval::ev-42::OptiTrack"]
+    (ref,) = by_layer["loceval::Lab run::OptiTrack"]
     assert ref.Attributes.GetUserString("loceval.source") == "gt.tum"
     assert ref.Attributes.GetUserString("loceval.kind") == "reference"
     assert ref.Attributes.GetUserString("loceval.poses") == "6000"
     for est in two_estimates.estimates:
-        (obj,) = by_layer[f"loceval::ev-42::{est.name}"]
+        (obj,) = by_layer[f"loceval::Lab run::{est.name}"]
         stats = est.ate_translation.stats
         assert obj.Attributes.GetUserString("loceval.source") == est.estimate.source
         assert float(obj.Attributes.GetUserString("loceval.ate_rmse_m")) == stats.rmse
@@ -135,33 +135,56 @@ def test_model_units(two_estimates: EvaluationResult, units: Units, system: str)
         rhino.export_3dm(two_estimates, ExportOptions(units=units))
     )
     assert model.Settings.ModelUnitSystem == getattr(rhino3dm.UnitSystem, system)
-    (ref,) = objects_by_layer(model)["loceval::local::OptiTrack"]
+    (ref,) = objects_by_layer(model)["loceval::loceval evaluation::OptiTrack"]
     first = curve_vertices(ref.Geometry)[0]
     expected = two_estimates.reference.positions_xyz[0] * units.per_metre
     np.testing.assert_allclose(first, expected, rtol=1e-12)
 
 
-def test_error_coloured_point_cloud(model_file: Path, two_estimates: EvaluationResult):
-    """Each estimate has a point cloud on a hidden ATE sub-layer, coloured by ATE bin."""
+def test_ate_coloured_curves_and_dots(model_file: Path, two_estimates: EvaluationResult):
+    """Each estimate has curves in the ATE bin colours on a visible ATE layer, and dots."""
     model = rhino3dm.File3dm.Read(str(model_file))
     layers = {layer.FullPath: layer for layer in model.Layers}
     by_layer = objects_by_layer(model)
-    bins = ate_bins(two_estimates.config.thresholds_m)
+    bins = ate_bins(ate_edges_m(two_estimates))
     edges = np.array([b.high_m for b in bins[:-1]])
+    assert model.Strings["loceval.ate_bins"].startswith(f"{bins[0].label}: #")
     for est in two_estimates.estimates:
-        path = f"loceval::ev-42::{est.name}"
-        assert not layers[f"{path}::ATE"].Visible
-        (cloud_obj,) = by_layer[f"{path}::ATE"]
-        cloud = cloud_obj.Geometry
-        (curve_obj,) = by_layer[path]
-        assert isinstance(cloud, rhino3dm.PointCloud)
-        assert cloud.Count == curve_obj.Geometry.PointCount
-        assert cloud.ContainsColors
-        colours = [tuple(c)[:3] for c in cloud.GetColors()]
+        path = f"loceval::Lab run::{est.name}"
+        assert layers[f"{path}::ATE"].Visible
+        runs = by_layer[f"{path}::ATE"]
+        assert len(runs) > 1
+        assert all(isinstance(o.Geometry, rhino3dm.PolylineCurve) for o in runs)
+        assert all(
+            o.Attributes.ColorSource == rhino3dm.ObjectColorSource.ColorFromObject for o in runs
+        )
+        colours = [tuple(o.Attributes.ObjectColor)[:3] for o in runs]
         assert set(colours) <= {b.color_rgb for b in bins}
-        # the first vertex is the first pose: its colour is the bin of its error
+        # the first run starts at the first pose: its colour is the bin of that pose's error
         first_bin = int(np.searchsorted(edges, est.ate_translation.values[0], side="left"))
         assert colours[0] == bins[first_bin].color_rgb
+        dots = by_layer[f"{path}::markers"]
+        assert all(isinstance(o.Geometry, rhino3dm.TextDot) for o in dots)
+        assert dots[0].Geometry.Text.startswith(f"{est.name} #1: ATE {est.worst[0].error:.3f} m")
+
+
+def test_tracking_loss_breaks_curves_once_marked(two_estimates: EvaluationResult):
+    """A 3 s reference loss: two curves per trajectory and one dot on the loss layer."""
+    ref = two_estimates.reference
+    times = ref.times_s()
+    gapped = evaluate(
+        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
+        [e.estimate for e in two_estimates.estimates],
+        two_estimates.config,
+    )
+    model = rhino3dm.File3dm.FromByteArray(
+        rhino.export_3dm(gapped, ExportOptions(units=Units.M, title="Gap run"))
+    )
+    by_layer = objects_by_layer(model)
+    for name in NAMES:
+        assert len(by_layer[f"loceval::Gap run::{name}"]) == 2
+    (dot,) = by_layer["loceval::Gap run::tracking loss"]
+    assert dot.Geometry.Text.startswith("no pose for 3.0 s")
 
 
 def test_bad_options(two_estimates: EvaluationResult):
