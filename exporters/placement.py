@@ -19,26 +19,36 @@ doubles and get absolute model coordinates, so they drop onto the building model
 
 from __future__ import annotations
 
-import colorsys
 import itertools
-import json
-import math
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
-from pathlib import Path
-from typing import Final, TypeAlias
+from typing import Final
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from exporters.building import georeferenced_options
-from exporters.errors import ExportOptionsError
+from exporters.colours import (
+    PALETTE,
+    RGB,
+    ATEBin,
+    ate_bins,
+    ate_edges_m,
+    layer_name,
+    palette_color,
+    unique_layer_names,
+)
 from exporters.options import ExportOptions, Units
+from exporters.site import (
+    BUILDING_SUFFIXES,
+    check_options,
+    parse_site,
+    parse_units,
+    read_site_matrix,
+    site_from_values,
+)
 from loceval import __version__
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
-from loceval.errors import InputError
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.gaps import path_breaks
 from loceval.geometry import SimilarityTransform
@@ -47,6 +57,7 @@ from loceval.polyline import simplify_rdp
 __all__ = [
     "BUILDING_SUFFIXES",
     "PALETTE",
+    "RGB",
     "ATEBin",
     "ATERun",
     "Marker",
@@ -65,30 +76,8 @@ __all__ = [
     "site_from_values",
 ]
 
-RGB: TypeAlias = tuple[int, int, int]
-
-PALETTE: Final[tuple[RGB, ...]] = (
-    (0, 255, 255),  # ground truth: cyan, as in the framework paper's Fig. 5
-    (255, 0, 255),  # first estimate: magenta (RTAB-Map in Fig. 5)
-    (0, 200, 0),  # second estimate: green (ISAAC in Fig. 5)
-    (255, 140, 0),  # orange
-    (0, 90, 255),  # blue
-    (220, 20, 60),  # crimson
-    (150, 90, 40),  # brown
-    (140, 60, 255),  # violet
-    (200, 180, 0),  # olive yellow
-    (110, 110, 110),  # grey
-)
-"""Trajectory colours in order: the reference first, then the estimates."""
-
-SITE_FORMAT: Final = '"tx ty tz yaw_deg"'
-BUILDING_SUFFIXES: Final = (".obj", ".ply", ".stl", ".glb", ".ifc")
-"""Building model formats accepted (read by :mod:`exporters.building`)."""
 _NS_PER_S: Final = 1_000_000_000
 _WORST_SEPARATION_S: Final = 2.0  # greatest errors closer in time than this share a marker
-_INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f]+')
-_BIN_COLORS: Final[tuple[RGB, ...]] = ((0, 170, 0), (230, 200, 0), (255, 120, 0), (220, 0, 0))
-_MAX_EXTRA_EDGES: Final = 4  # at most this many 1-2-5 edges above the last threshold
 _MARKER_MERGE_SHARE: Final = 0.05  # losses closer than 5 % of the drawing share a marker
 
 
@@ -97,196 +86,6 @@ class PathKind(StrEnum):
 
     REFERENCE = "reference"
     ESTIMATE = "estimate"
-
-
-# --- options -------------------------------------------------------------------------------
-
-
-def parse_units(text: str) -> Units:
-    """Parse the CAD units (``mm``, ``cm`` or ``m``).
-
-    Raises:
-        ExportOptionsError: another unit.
-    """
-    try:
-        return Units(text.strip().lower())
-    except ValueError:
-        choices = ", ".join(u.value for u in Units)
-        msg = f"The CAD units must be one of {choices}, got {text!r}."
-        raise ExportOptionsError(msg, option="units") from None
-
-
-def parse_site(text: str) -> SimilarityTransform:
-    """Parse a site ``"tx ty tz yaw_deg"`` into the evaluation-frame -> model transform.
-
-    The translation is in metres (model coordinates of the evaluation frame's origin) and
-    the yaw is a rotation about Z in degrees, counter-clockwise seen from above. ``"tx ty
-    tz"`` alone means no rotation. Commas may separate the numbers.
-
-    Raises:
-        ExportOptionsError: not three or four finite numbers.
-    """
-    try:
-        values = [float(v) for v in text.replace(",", " ").split()]
-    except ValueError:
-        values = []
-    if len(values) not in (3, 4) or not all(math.isfinite(v) for v in values):
-        msg = (
-            f"The site transform takes {SITE_FORMAT} (metres, degrees about Z), for example "
-            f'"512340.0 5403210.5 112.3 37.5", got {text!r}.'
-        )
-        raise ExportOptionsError(msg, option="site")
-    yaw_deg = values[3] if len(values) == 4 else 0.0
-    rotation = Rotation.from_euler("z", yaw_deg, degrees=True).as_matrix()
-    return SimilarityTransform(rotation, np.array(values[:3]), 1.0)
-
-
-def read_site_matrix(path: Path) -> SimilarityTransform:
-    """Read a 4x4 evaluation-frame -> model matrix from a text or JSON file.
-
-    Accepted forms, all row-major ``[[sR, t], [0, 0, 0, 1]]`` with ``t`` in metres: 16
-    numbers in a text file (whitespace, comma or semicolon separated, ``#`` comments), or a
-    JSON array of 4 rows, a flat JSON array of 16, or a JSON object with either under
-    ``"matrix"``. A uniform scale is allowed; shear, reflection and singular matrices are not.
-
-    Raises:
-        ExportOptionsError: the file is unreadable or the matrix is not a similarity transform.
-    """
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        msg = f"Cannot read the site matrix file {str(path)!r} ({err}); check the path."
-        raise ExportOptionsError(msg, option="site_matrix") from err
-    return site_from_values(_matrix_numbers(text), where=f"the site matrix file {str(path)!r}")
-
-
-def site_from_values(values: Sequence[float] | None, *, where: str) -> SimilarityTransform:
-    """Return the site transform of 16 row-major numbers (see :func:`read_site_matrix`).
-
-    Args:
-        values: the numbers, or None when they could not be read.
-        where: names the matrix in messages (``"the site matrix file 'site.txt'"``).
-
-    Raises:
-        ExportOptionsError: not 16 finite numbers, or not a similarity transform.
-    """
-    if values is None or len(values) != 16 or not all(math.isfinite(v) for v in values):
-        msg = (
-            f"{where[0].upper()}{where[1:]} must hold 16 numbers (a 4x4 row-major "
-            "matrix, or JSON [[...], [...], [...], [...]]); check its contents."
-        )
-        raise ExportOptionsError(msg, option="site_matrix")
-    matrix = np.array(values, dtype=np.float64).reshape(4, 4)
-    if not np.allclose(matrix[3], [0.0, 0.0, 0.0, 1.0]) and np.allclose(
-        matrix[:, 3], [0.0, 0.0, 0.0, 1.0]
-    ):
-        msg = (
-            f"The matrix of {where} looks column-major (glTF/three.js order); "
-            "write it row by row with the translation in the last column."
-        )
-        raise ExportOptionsError(msg, option="site_matrix")
-    det = float(np.linalg.det(matrix[:3, :3]))
-    if abs(det) < 1e-12:
-        msg = f"The matrix of {where} is singular (det={det:.3g}); check its values."
-        raise ExportOptionsError(msg, option="site_matrix")
-    try:
-        return SimilarityTransform.from_matrix(matrix)
-    except InputError as err:
-        msg = (
-            f"The matrix of {where} is not a rotation with uniform scale and a "
-            f"translation ({err}); check its values."
-        )
-        raise ExportOptionsError(msg, option="site_matrix") from err
-
-
-def _matrix_numbers(text: str) -> list[float] | None:
-    stripped = text.strip()
-    if stripped.startswith(("[", "{")):
-        try:
-            document = json.loads(stripped)
-        except json.JSONDecodeError:
-            return None
-        if isinstance(document, dict):
-            document = document.get("matrix")
-        flat = np.asarray(document, dtype=object).reshape(-1).tolist() if document else []
-        try:
-            return [float(v) for v in flat]
-        except (TypeError, ValueError):
-            return None
-    lines = (line.split("#", 1)[0] for line in text.splitlines())
-    tokens = re.split(r"[\s,;]+", " ".join(lines).strip())
-    try:
-        return [float(t) for t in tokens if t]
-    except ValueError:
-        return None
-
-
-def check_options(options: ExportOptions) -> None:
-    """Check the placement options a user can get wrong (cheap: reads no file).
-
-    Raises:
-        ExportOptionsError: unknown units, a negative or non-finite simplification, or a
-            building file that is missing or not an OBJ, PLY, STL or GLB.
-    """
-    parse_units(str(options.units))  # a plain string passed for Units must still be valid
-    if not (math.isfinite(options.simplify_m) and options.simplify_m >= 0.0):
-        msg = (
-            f"The simplification tolerance must be zero or a positive number of metres, got "
-            f"{options.simplify_m!r}; use 0 to keep every pose."
-        )
-        raise ExportOptionsError(msg, option="simplify_m")
-    building = options.building
-    if building is not None:
-        if building.suffix.lower() not in BUILDING_SUFFIXES:
-            kinds = ", ".join(s.lstrip(".").upper() for s in BUILDING_SUFFIXES)
-            msg = (
-                f"The building model {str(building)!r} is not a supported mesh; export it "
-                f"as {kinds}."
-            )
-            raise ExportOptionsError(msg, option="building")
-        if not building.is_file():
-            msg = f"The building model {str(building)!r} does not exist; check the path."
-            raise ExportOptionsError(msg, option="building")
-
-
-# --- names and colours -----------------------------------------------------------------
-
-
-def palette_color(index: int) -> RGB:
-    """Return colour ``index`` of the palette (0: the reference), inventing distinct ones after.
-
-    Colours past the fixed palette step around the hue circle by the golden angle.
-    """
-    if index < len(PALETTE):
-        return PALETTE[index]
-    hue = (index * 0.618033988749895) % 1.0
-    r, g, b = colorsys.hsv_to_rgb(hue, 0.85, 0.85)
-    return round(r * 255), round(g * 255), round(b * 255)
-
-
-def layer_name(name: str) -> str:
-    r"""Return ``name`` made valid as a DXF, Rhino and glTF layer/node name.
-
-    Characters that DXF forbids in table names (``<>/\\":;?*|=,```) or that Rhino uses in
-    layer paths (``::``, brackets, braces) become ``_``; the result is at most 200
-    characters and never empty.
-    """
-    cleaned = _INVALID_LAYER_CHARS.sub("_", name).strip()[:200].strip()
-    return cleaned or "unnamed"
-
-
-def _unique_names(names: Sequence[str]) -> list[str]:
-    """Make layer names unique, ignoring case (DXF layer names are case-insensitive)."""
-    seen: set[str] = set()
-    out = []
-    for name in names:
-        candidate, k = name, 2
-        while candidate.casefold() in seen:
-            candidate = f"{name} ({k})"
-            k += 1
-        seen.add(candidate.casefold())
-        out.append(candidate)
-    return out
 
 
 # --- the placed view -------------------------------------------------------------------
@@ -376,87 +175,6 @@ class Marker:
     position: tuple[float, float, float]
     target: tuple[float, float, float] | None
     label: str
-
-
-@dataclass(frozen=True, slots=True)
-class ATEBin:
-    """A range of ATE translation errors drawn in one colour.
-
-    Attributes:
-        low_m: lower bound (exclusive, except 0), metres.
-        high_m: upper bound (inclusive), metres; ``inf`` for the last bin.
-        color_rgb: its colour.
-        label: legend text (``"0.05-0.10 m"``).
-    """
-
-    low_m: float
-    high_m: float
-    color_rgb: RGB
-    label: str
-
-
-def ate_bins(thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
-    """Return the error bins of these edges, green (small) to red (large).
-
-    The one colour scale of ATE in every output: the report's error-coloured paths, the
-    DXF's ATE layers, the .3dm's coloured segments and the GLB's vertex colours.
-    """
-    edges = sorted({float(t) for t in thresholds_m})
-    bounds = [0.0, *edges, math.inf]
-    count = len(bounds) - 1
-    bins = []
-    for k in range(count):
-        # spread the bins evenly over the green -> yellow -> orange -> red ramp
-        color = _ramp(0.0 if count == 1 else k / (count - 1))
-        low, high = bounds[k], bounds[k + 1]
-        if k == 0:
-            label = f"<= {high:g} m"
-        elif math.isinf(high):
-            label = f"> {low:g} m"
-        else:
-            label = f"{low:g}-{high:g} m"
-        bins.append(ATEBin(low, high, color, label))
-    return tuple(bins)
-
-
-def _ramp(fraction: float) -> RGB:
-    """Return the colour at ``fraction`` (0 to 1) of the green -> red ramp."""
-    pos = fraction * (len(_BIN_COLORS) - 1)
-    k = min(int(pos), len(_BIN_COLORS) - 2)
-    w = pos - k
-    a, b = _BIN_COLORS[k], _BIN_COLORS[k + 1]
-    r, g, bl = (round((1 - w) * x + w * y) for x, y in zip(a, b, strict=True))
-    return r, g, bl
-
-
-def ate_edges_m(result: EvaluationResult) -> tuple[float, ...]:
-    """Return the ATE colour edges of an evaluation: its thresholds, extended upwards.
-
-    The thresholds (0.05, 0.1, 0.15 m by default) tell a good system's errors apart, but a
-    car's SLAM with 10 m errors would be one red line, and a motion-capture-grade system
-    with 6 mm errors one green line. So when the largest 99.5th percentile of the
-    estimates' ATE exceeds twice the last threshold, up to four 1-2-5 edges (0.2, 0.5, 1,
-    2, 5 m, ...) are added above it, the last one below that percentile; when it is below
-    half the first threshold, up to four 1-2-5 edges from a tenth of it up to it are added
-    below the thresholds (fr2_desk: 0.002, 0.005, 0.01 m).
-    """
-    edges = sorted({float(t) for t in result.config.thresholds_m})
-    values = [e.ate_translation.values for e in result.estimates if len(e.ate_translation)]
-    if not edges or not values:
-        return tuple(edges)
-    top = max(float(np.percentile(v, 99.5)) for v in values)
-    nice = [m * 10.0**e for e in range(-4, 7) for m in (1.0, 2.0, 5.0)]
-    first, last = edges[0], edges[-1]
-    if top < 0.5 * first:  # a sub-centimetre system: 1-2-5 edges below the thresholds
-        below = [v for v in nice if top / 10.0 <= v < min(top, first / 1.5)]
-        return (*below[-_MAX_EXTRA_EDGES:], *edges)
-    if top <= 2.0 * last:
-        return tuple(edges)
-    extra = [v for v in nice if last * 1.5 <= v < top]
-    if len(extra) > _MAX_EXTRA_EDGES:  # keep the largest, spread over the range
-        pick = np.linspace(0, len(extra) - 1, _MAX_EXTRA_EDGES).round().astype(int)
-        extra = [extra[i] for i in pick]
-    return (*edges, *extra)
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -736,7 +454,7 @@ def place_evaluation(result: EvaluationResult, options: ExportOptions) -> Placem
     sources = [(reference, None), *((e.aligned, e) for e in result.estimates)]
     names = [reference.name or "reference"]
     names += [e.name or f"estimate {k}" for k, e in enumerate(result.estimates, start=1)]
-    layers = _unique_names([layer_name(n) for n in names])
+    layers = unique_layer_names([layer_name(n) for n in names])
     paths = []
     for k, ((trajectory, est), layer) in enumerate(zip(sources, layers, strict=True)):
         model_m = site.apply_positions(trajectory.positions_xyz)

@@ -329,7 +329,10 @@ def _solve_paths(
     for k, path in enumerate(paths):
         branch = f"{{{k}}}"
         estimate = estimates.get(path["name"])
-        trees["Paths"][branch] = [_item("Rhino.Geometry.PolylineCurve", path["curve"])]
+        # One polyline per continuous piece: a path breaks at tracking loss (paths.3dm.json v2).
+        trees["Paths"][branch] = [
+            _item("Rhino.Geometry.PolylineCurve", curve) for curve in path["curves"]
+        ]
         trees["Names"][branch] = [_item("System.String", path["name"])]
         trees["Colours"][branch] = [_item("System.String", ",".join(map(str, path["color"])))]
         ate = path.get("ate_translation_m")

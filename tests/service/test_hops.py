@@ -116,16 +116,18 @@ def test_solve_returns_the_dxf_polylines(api: Api, evaluation: dict[str, Any], r
     url = f"/api/v1/evaluations/{evaluation['id']}/artifacts/paths.dxf"
     dxf = ezdxf.read(io.StringIO(api.client.get(url, headers=api.headers).text))
     for branch, items in output(document, "Paths").items():
-        (item,) = items
-        assert item["type"] == "Rhino.Geometry.PolylineCurve"
-        curve = rhino3dm.CommonObject.Decode(json.loads(item["data"]))
-        points = np.array(
-            [[p.X, p.Y, p.Z] for p in (curve.Point(i) for i in range(curve.PointCount))]
-        )
-        (polyline,) = dxf.modelspace().query(f'POLYLINE[layer=="{names[branch]}"]')
-        expected = np.array([v.dxf.location.xyz for v in polyline.vertices])
-        assert points.shape == expected.shape
-        assert np.abs(points - expected).max() <= 1.0  # millimetres
+        # one curve per continuous piece, as the DXF has one POLYLINE per piece
+        polylines = dxf.modelspace().query(f'POLYLINE[layer=="{names[branch]}"]')
+        assert len(items) == len(polylines) >= 1
+        for item, polyline in zip(items, polylines, strict=True):
+            assert item["type"] == "Rhino.Geometry.PolylineCurve"
+            curve = rhino3dm.CommonObject.Decode(json.loads(item["data"]))
+            points = np.array(
+                [[p.X, p.Y, p.Z] for p in (curve.Point(i) for i in range(curve.PointCount))]
+            )
+            expected = np.array([v.dxf.location.xyz for v in polyline.vertices])
+            assert points.shape == expected.shape
+            assert np.abs(points - expected).max() <= 1.0  # millimetres
     colours = {k: json.loads(v[0]["data"]) for k, v in output(document, "Colours").items()}
     assert colours == {"{0}": "0,255,255", "{1}": "255,0,255"}  # the palette: cyan, magenta
     ate = output(document, "ATE")

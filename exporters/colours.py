@@ -1,0 +1,160 @@
+"""The colours and names every output shares: the trajectory palette, layer names, ATE bins.
+
+The report, the DXF, the .3dm and the GLB colour a path's ATE with the same bins
+(:func:`ate_bins`, :func:`ate_edges_m`), so a site engineer reads one legend everywhere.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Final, TypeAlias
+
+import numpy as np
+
+from loceval.evaluation import EvaluationResult
+
+RGB: TypeAlias = tuple[int, int, int]
+
+
+PALETTE: Final[tuple[RGB, ...]] = (
+    (0, 255, 255),  # ground truth: cyan, as in the framework paper's Fig. 5
+    (255, 0, 255),  # first estimate: magenta (RTAB-Map in Fig. 5)
+    (0, 200, 0),  # second estimate: green (ISAAC in Fig. 5)
+    (255, 140, 0),  # orange
+    (0, 90, 255),  # blue
+    (220, 20, 60),  # crimson
+    (150, 90, 40),  # brown
+    (140, 60, 255),  # violet
+    (200, 180, 0),  # olive yellow
+    (110, 110, 110),  # grey
+)
+"""Trajectory colours in order: the reference first, then the estimates."""
+
+_INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f]+')
+_BIN_COLORS: Final[tuple[RGB, ...]] = ((0, 170, 0), (230, 200, 0), (255, 120, 0), (220, 0, 0))
+_MAX_EXTRA_EDGES: Final = 4  # at most this many 1-2-5 edges above the last threshold
+
+
+# --- names and colours -----------------------------------------------------------------
+
+
+def palette_color(index: int) -> RGB:
+    """Return colour ``index`` of the palette (0: the reference), inventing distinct ones after.
+
+    Colours past the fixed palette step around the hue circle by the golden angle.
+    """
+    if index < len(PALETTE):
+        return PALETTE[index]
+    hue = (index * 0.618033988749895) % 1.0
+    r, g, b = colorsys.hsv_to_rgb(hue, 0.85, 0.85)
+    return round(r * 255), round(g * 255), round(b * 255)
+
+
+def layer_name(name: str) -> str:
+    r"""Return ``name`` made valid as a DXF, Rhino and glTF layer/node name.
+
+    Characters that DXF forbids in table names (``<>/\\":;?*|=,```) or that Rhino uses in
+    layer paths (``::``, brackets, braces) become ``_``; the result is at most 200
+    characters and never empty.
+    """
+    cleaned = _INVALID_LAYER_CHARS.sub("_", name).strip()[:200].strip()
+    return cleaned or "unnamed"
+
+
+def unique_layer_names(names: Sequence[str]) -> list[str]:
+    """Make layer names unique, ignoring case (DXF layer names are case-insensitive)."""
+    seen: set[str] = set()
+    out = []
+    for name in names:
+        candidate, k = name, 2
+        while candidate.casefold() in seen:
+            candidate = f"{name} ({k})"
+            k += 1
+        seen.add(candidate.casefold())
+        out.append(candidate)
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class ATEBin:
+    """A range of ATE translation errors drawn in one colour.
+
+    Attributes:
+        low_m: lower bound (exclusive, except 0), metres.
+        high_m: upper bound (inclusive), metres; ``inf`` for the last bin.
+        color_rgb: its colour.
+        label: legend text (``"0.05-0.10 m"``).
+    """
+
+    low_m: float
+    high_m: float
+    color_rgb: RGB
+    label: str
+
+
+def ate_bins(thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
+    """Return the error bins of these edges, green (small) to red (large).
+
+    The one colour scale of ATE in every output: the report's error-coloured paths, the
+    DXF's ATE layers, the .3dm's coloured segments and the GLB's vertex colours.
+    """
+    edges = sorted({float(t) for t in thresholds_m})
+    bounds = [0.0, *edges, math.inf]
+    count = len(bounds) - 1
+    bins = []
+    for k in range(count):
+        # spread the bins evenly over the green -> yellow -> orange -> red ramp
+        color = _ramp(0.0 if count == 1 else k / (count - 1))
+        low, high = bounds[k], bounds[k + 1]
+        if k == 0:
+            label = f"<= {high:g} m"
+        elif math.isinf(high):
+            label = f"> {low:g} m"
+        else:
+            label = f"{low:g}-{high:g} m"
+        bins.append(ATEBin(low, high, color, label))
+    return tuple(bins)
+
+
+def _ramp(fraction: float) -> RGB:
+    """Return the colour at ``fraction`` (0 to 1) of the green -> red ramp."""
+    pos = fraction * (len(_BIN_COLORS) - 1)
+    k = min(int(pos), len(_BIN_COLORS) - 2)
+    w = pos - k
+    a, b = _BIN_COLORS[k], _BIN_COLORS[k + 1]
+    r, g, bl = (round((1 - w) * x + w * y) for x, y in zip(a, b, strict=True))
+    return r, g, bl
+
+
+def ate_edges_m(result: EvaluationResult) -> tuple[float, ...]:
+    """Return the ATE colour edges of an evaluation: its thresholds, extended upwards.
+
+    The thresholds (0.05, 0.1, 0.15 m by default) tell a good system's errors apart, but a
+    car's SLAM with 10 m errors would be one red line, and a motion-capture-grade system
+    with 6 mm errors one green line. So when the largest 99.5th percentile of the
+    estimates' ATE exceeds twice the last threshold, up to four 1-2-5 edges (0.2, 0.5, 1,
+    2, 5 m, ...) are added above it, the last one below that percentile; when it is below
+    half the first threshold, up to four 1-2-5 edges from a tenth of it up to it are added
+    below the thresholds (fr2_desk: 0.002, 0.005, 0.01 m).
+    """
+    edges = sorted({float(t) for t in result.config.thresholds_m})
+    values = [e.ate_translation.values for e in result.estimates if len(e.ate_translation)]
+    if not edges or not values:
+        return tuple(edges)
+    top = max(float(np.percentile(v, 99.5)) for v in values)
+    nice = [m * 10.0**e for e in range(-4, 7) for m in (1.0, 2.0, 5.0)]
+    first, last = edges[0], edges[-1]
+    if top < 0.5 * first:  # a sub-centimetre system: 1-2-5 edges below the thresholds
+        below = [v for v in nice if top / 10.0 <= v < min(top, first / 1.5)]
+        return (*below[-_MAX_EXTRA_EDGES:], *edges)
+    if top <= 2.0 * last:
+        return tuple(edges)
+    extra = [v for v in nice if last * 1.5 <= v < top]
+    if len(extra) > _MAX_EXTRA_EDGES:  # keep the largest, spread over the range
+        pick = np.linspace(0, len(extra) - 1, _MAX_EXTRA_EDGES).round().astype(int)
+        extra = [extra[i] for i in pick]
+    return (*edges, *extra)
