@@ -47,7 +47,7 @@ def test_nav2_sources_evaluate(public_data: Path, capsys: pytest.CaptureFixture[
     sparse = _json(capsys, "evaluate", *sources, "--json")
     # AMCL publishes about once a second: interpolation refuses to bridge that and says why.
     warnings = sparse["estimates"][0]["warnings"]  # type: ignore[index]
-    assert any("--associate nearest" in w for w in warnings)
+    assert any("match nearest poses within a maximum time difference" in w for w in warnings)
     doc = _json(
         capsys, "evaluate", *sources, "--associate", "nearest", "--max-dt", "0.05", "--json"
     )
