@@ -32,6 +32,7 @@ def build_trajectory(
     frame_id: str = "",
     child_frame_id: str = "",
     warnings: tuple[str, ...] = (),
+    cov6: FloatArray | None = None,
 ) -> Trajectory:
     """Turn raw reader arrays into a :class:`Trajectory`.
 
@@ -50,6 +51,8 @@ def build_trajectory(
         frame_id: frame of the poses.
         child_frame_id: frame whose poses these are.
         warnings: warnings the reader already collected.
+        cov6: (N, 6, 6) per-pose covariances, or None; sorted and deduplicated with the
+            poses.
 
     Returns:
         The validated trajectory.
@@ -87,6 +90,8 @@ def build_trajectory(
         stamps_ns, positions_xyz, lines = stamps_ns[order], positions_xyz[order], lines[order]
         if quat_xyzw is not None:
             quat_xyzw = quat_xyzw[order]
+        if cov6 is not None:
+            cov6 = cov6[order]
         notes.append(f"{where}: stamps were not in order; {n} poses sorted by time.")
     if n > 1:
         keep = np.concatenate(([True], np.diff(stamps_ns) != 0))
@@ -95,6 +100,8 @@ def build_trajectory(
             stamps_ns, positions_xyz = stamps_ns[keep], positions_xyz[keep]
             if quat_xyzw is not None:
                 quat_xyzw = quat_xyzw[keep]
+            if cov6 is not None:
+                cov6 = cov6[keep]
             notes.append(
                 f"{where}: {dropped} poses with a duplicate stamp dropped (first one kept)."
             )
@@ -113,6 +120,7 @@ def build_trajectory(
         frame_id=frame_id,
         child_frame_id=child_frame_id,
         warnings=tuple(notes),
+        cov6=cov6,
     )
 
 
