@@ -153,6 +153,8 @@ class EvaluationOptions(_Strict):
     site_matrix: _Matrix4 | None = _field("site_matrix")
     simplify_m: float = _field("simplify_m")
     formats: list[_Artifact] | None = _field("formats")
+    no_ci: bool = _field("no_ci")
+    reference_sigma_m: float | None = _field("reference_sigma_m")
 
     @field_validator("formats")
     @classmethod
