@@ -17,6 +17,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from exporters.options import ExportOptions
+from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
 from exporters.plots import (
     DEFAULT_MAX_POINTS,
     MAX_SPAN_MARKERS,
@@ -94,7 +95,7 @@ class VerdictView:
 
     name: str
     colour: str
-    status: str  # "pass", "fail" or "none"
+    status: str  # "pass", "fail", "undecided" or "none"
     badge: str
     headline: str
     details: tuple[str, ...]
@@ -181,6 +182,7 @@ class ReportView:
     worst: tuple[WorstTable, ...]
     warnings: tuple[tuple[str, str], ...]
     best_mark: str = BEST_MARK
+    confidence: ConfidenceView = ConfidenceView()
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -283,6 +285,8 @@ def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> V
             f"{name} meets the tolerance: {share_pct:.1f} % of its poses are within "
             f"{tol.distance_m:g} m of the ground truth ({tol.share * 100:g} % required)."
         )
+    elif verdict.result == "undecided":
+        headline = undecided_headline(name, verdict)
     else:
         headline = (
             f"{name} does not meet the tolerance: only {share_pct:.1f} % of its poses are "
@@ -322,8 +326,8 @@ def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> V
     return VerdictView(
         name=name,
         colour=colour,
-        status="pass" if verdict.passed else "fail",
-        badge="PASS" if verdict.passed else "FAIL",
+        status=verdict.result,
+        badge=verdict.result.upper(),
         headline=headline,
         details=tuple(details),
         spans=span_views,
@@ -589,4 +593,5 @@ def build_report_view(
         figures=figures,
         worst=_worst(result),
         warnings=_warnings(result),
+        confidence=build_confidence_view(result),
     )
