@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
 
@@ -17,7 +17,6 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from exporters.options import ExportOptions
-from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
 from exporters.plots import (
     DEFAULT_MAX_POINTS,
     MAX_SPAN_MARKERS,
@@ -28,6 +27,7 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
+from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.metrics import ErrorSeries, ErrorStats
 
@@ -182,7 +182,7 @@ class ReportView:
     worst: tuple[WorstTable, ...]
     warnings: tuple[tuple[str, str], ...]
     best_mark: str = BEST_MARK
-    confidence: ConfidenceView = ConfidenceView()
+    confidence: ConfidenceView = field(default_factory=ConfidenceView)
 
 
 def _fmt(value: float, decimals: int = 3) -> str:

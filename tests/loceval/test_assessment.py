@@ -50,7 +50,7 @@ def _noisy(
     )
 
 
-def _doc(result: Any) -> dict[str, Any]:  # noqa: ANN401  (an EvaluationResult)
+def _doc(result: Any) -> dict[str, Any]:
     out: dict[str, Any] = json.loads(json.dumps(result.to_dict(), allow_nan=False))
     return out
 
@@ -199,7 +199,7 @@ def test_reference_sigma_is_taken_out_and_judged(rng: np.random.Generator) -> No
 @pytest.mark.public_data
 def test_nav2_amcl_consistency_matches_an_independent_computation(public_data: Path) -> None:
     """AMCL's /amcl_pose against tf map->base_link: planar NEES (dof 2) as computed by hand."""
-    from loceval.readers import read_trajectory  # noqa: PLC0415
+    from loceval.readers import read_trajectory
 
     bag = public_data / "nav2_turtlebot.mcap"
     reference = read_trajectory(f"{bag}@tf:map:base_link")
@@ -218,6 +218,7 @@ def test_nav2_amcl_consistency_matches_an_independent_computation(public_data: P
     assert cov is not None
     cov_aligned = rot @ cov[:, :3, :3] @ rot.T
     err = (e.aligned.positions_xyz - e.reference.positions_xyz)[:, :2]
-    nees = np.einsum("ni,ni->n", err, np.linalg.solve(cov_aligned[:, :2, :2], err[..., None])[..., 0])
+    solved = np.linalg.solve(cov_aligned[:, :2, :2], err[..., None])[..., 0]
+    nees = np.einsum("ni,ni->n", err, solved)
     assert block["nees_position"]["mean"] == pytest.approx(float(nees.mean()), rel=1e-9)
     assert block["verdict"] in {"consistent", "conservative", "overconfident"}
