@@ -211,7 +211,7 @@ class SummaryRow(BaseModel):
     ate_rmse_m: float | None
     rpe_rmse_m: float | None
     matched: int | None
-    verdict: Literal["pass", "fail"] | None
+    verdict: Literal["pass", "fail", "undecided"] | None
 
 
 class ArtifactPublic(BaseModel):

@@ -86,10 +86,10 @@ def build_confidence_view(result: EvaluationResult) -> ConfidenceView:
         )
     rows = []
     for k, e in enumerate(result.estimates):
-        found = None if e.assessment is None else e.assessment.consistency
-        if found is None:
+        nees_of = None if e.assessment is None else e.assessment.consistency
+        if nees_of is None:
             continue
-        blocks = (("position", found.nees_position), ("rotation", found.nees_rotation))
+        blocks = (("position", nees_of.nees_position), ("rotation", nees_of.nees_rotation))
         for block, nees in blocks:
             if nees is None:
                 continue
