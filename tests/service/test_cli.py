@@ -77,6 +77,10 @@ def test_table_layout(demo: dict[str, Path], capsys: pytest.CaptureFixture[str])
     assert header.split()[-2:] == ["RTAB-Map", "ISAAC"]
     for label in ("RMSE", "MEAN", "MEDIAN", "STD", "MIN", "MAX"):
         assert any(line.startswith(label) for line in out.splitlines())
+    assert "Comparisons (95 % intervals)" in out
+    # The demo mirrors the framework paper: ISAAC has the lower ATE, RTAB-Map the lower RPE.
+    assert "  ISAAC's ATE is lower than RTAB-Map's: difference" in out
+    assert "  RTAB-Map's RPE is lower than ISAAC's: difference" in out
 
 
 def test_options_reach_the_result(
