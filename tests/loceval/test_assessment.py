@@ -222,3 +222,16 @@ def test_nav2_amcl_consistency_matches_an_independent_computation(public_data: P
     nees = np.einsum("ni,ni->n", err, solved)
     assert block["nees_position"]["mean"] == pytest.approx(float(nees.mean()), rel=1e-9)
     assert block["verdict"] in {"consistent", "conservative", "overconfident"}
+
+
+def test_long_runs_get_the_same_intervals_in_threads(rng: np.random.Generator) -> None:
+    """Series of 20,000+ errors are bootstrapped in threads, with the sequential result."""
+    from loceval.uncertainty import interval_stats
+
+    truth = smooth_trajectory(rng, n=20_000)
+    result = evaluate(truth, [_noisy(rng, truth, "A", 0.02)])
+    e = result.estimates[0]
+    assert e.assessment is not None
+    for name in ("ate_rotation", "rpe_translation"):
+        series = getattr(e, name)
+        assert e.assessment.intervals[name].ci95 == interval_stats(series.values).ci95
