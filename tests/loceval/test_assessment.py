@@ -235,3 +235,15 @@ def test_long_runs_get_the_same_intervals_in_threads(rng: np.random.Generator) -
     for name in ("ate_rotation", "rpe_translation"):
         series = getattr(e, name)
         assert e.assessment.intervals[name].ci95 == interval_stats(series.values).ci95
+
+
+def test_reference_covariance_gives_its_error(rng: np.random.Generator) -> None:
+    """A reference that reports covariances has its error taken out without a sigma."""
+    truth = smooth_trajectory(rng, n=1000)
+    cov = np.zeros((len(truth), 6, 6))
+    cov[:, :3, :3] = 0.001**2 * np.eye(3)  # 1 mm per axis
+    reference = Trajectory(truth.stamps_ns, truth.positions_xyz, truth.quat_xyzw, cov6=cov)
+    doc = _doc(evaluate(reference, [_noisy(rng, truth, "A", 0.02)], EvaluationConfig(no_ci=True)))
+    check = doc["estimates"][0]["reference_error"]["ate"]
+    assert check["reference_rms"] == pytest.approx(np.sqrt(3) * 0.001)  # sqrt(trace) of 3 axes
+    assert check["corrected_rmse"] < check["rmse"]
