@@ -2,14 +2,14 @@
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from loceval._typing import BoolArray, IntArray
+from loceval._typing import IntArray
 from loceval._version import __version__
 from loceval.alignment import Alignment, AlignMethod, AlignWindow, align
 from loceval.association import Association, AssociationMethod, associate
@@ -34,6 +34,12 @@ from loceval.options import (
     number_default,
 )
 from loceval.trajectory import Trajectory
+from loceval.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
+
+if TYPE_CHECKING:
+    from loceval.assessment import Assessment
+    from loceval.comparison import Comparison
+    from loceval.uncertainty import IntervalStats
 
 __all__ = [
     "EstimateResult",
@@ -59,105 +65,6 @@ ProgressCallback = Callable[[str, float], None]
 
 
 @dataclass(frozen=True, slots=True)
-class Tolerance:
-    """An application tolerance: ``share`` of the poses within ``distance_m``.
-
-    ``Tolerance(0.10, 0.95)`` reads "95 % of poses within 0.10 m" (CLI ``0.10@95``).
-    """
-
-    distance_m: float
-    share: float
-
-    def __post_init__(self) -> None:
-        """Check the values."""
-        if not (np.isfinite(self.distance_m) and self.distance_m > 0):
-            msg = f"The tolerance distance must be positive metres, got {self.distance_m!r}."
-            raise InputError(msg, option="tolerance")
-        if not (0.0 < self.share <= 1.0):
-            msg = f"The tolerance share must be in (0, 100] percent, got {self.share * 100!r}."
-            raise InputError(msg, option="tolerance")
-
-    @classmethod
-    def parse(cls, text: str) -> Tolerance:
-        """Parse ``"0.10@95"`` (metres @ percent); a bare ``"0.10"`` means 95 %.
-
-        Raises:
-            InputError: the text has another form.
-        """
-        match = re.fullmatch(r"\s*([0-9.eE+-]+)\s*(?:m)?\s*(?:@\s*([0-9.eE+-]+)\s*%?)?\s*", text)
-        try:
-            if match is None:
-                raise ValueError(text)  # noqa: TRY301  (one message for every bad form)
-            distance = float(match.group(1))
-            share = float(match.group(2)) / 100.0 if match.group(2) else 0.95
-        except ValueError:
-            msg = (
-                f"The tolerance takes METRES@PERCENT like 0.10@95 (95 % of poses within "
-                f"0.10 m), got {text!r}."
-            )
-            raise InputError(msg, option="tolerance") from None
-        return cls(distance, share)
-
-    def __str__(self) -> str:
-        """Return the words a non-expert reads."""
-        return f"{self.share * 100:g} % of poses within {self.distance_m:g} m"
-
-
-@dataclass(frozen=True, slots=True)
-class FailingSpan:
-    """A stretch of consecutive matched poses whose error exceeds the tolerance.
-
-    Times are seconds since the reference's first pose.
-    """
-
-    start_s: float
-    end_s: float
-    poses: int
-    max_error_m: float
-    max_error_position_xyz: tuple[float, float, float]
-
-    def to_dict(self) -> dict[str, object]:
-        """Return the JSON form."""
-        return {
-            "start_s": self.start_s,
-            "end_s": self.end_s,
-            "poses": self.poses,
-            "max_error_m": self.max_error_m,
-            "max_error_position": list(self.max_error_position_xyz),
-        }
-
-
-@dataclass(frozen=True, slots=True)
-class Verdict:
-    """Pass or fail against a tolerance, and where on the path it fails."""
-
-    tolerance: Tolerance
-    share_within: float
-    passed: bool
-    failing_spans: tuple[FailingSpan, ...]
-
-    @property
-    def summary(self) -> str:
-        """One sentence for a non-expert."""
-        verb = "PASS" if self.passed else "FAIL"
-        return (
-            f"{verb}: {self.share_within * 100:.1f} % of poses are within "
-            f"{self.tolerance.distance_m:g} m (required: {self.tolerance.share * 100:g} %)."
-        )
-
-    def to_dict(self) -> dict[str, object]:
-        """Return the JSON form."""
-        return {
-            "tolerance_m": self.tolerance.distance_m,
-            "required_share": self.tolerance.share,
-            "share_within": self.share_within,
-            "passed": self.passed,
-            "summary": self.summary,
-            "failing_spans": [s.to_dict() for s in self.failing_spans],
-        }
-
-
-@dataclass(frozen=True, slots=True)
 class EvaluationConfig:
     """Every option of an evaluation (the CLI's and the service's options).
 
@@ -176,6 +83,8 @@ class EvaluationConfig:
         thresholds_m: distances for the "share within" figures.
         tolerance: the application tolerance for the verdict, if any.
         worst_count: how many greatest errors to list.
+        no_ci: skip the confidence intervals and comparisons (their ``ci95`` is null).
+        reference_sigma_m: the reference's own per-axis standard deviation, metres.
     """
 
     association: AssociationMethod = _DEFAULT_ASSOCIATION
@@ -192,6 +101,8 @@ class EvaluationConfig:
     thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
     tolerance: Tolerance | None = None
     worst_count: int = round(number_default("worst"))
+    no_ci: bool = False
+    reference_sigma_m: float | None = None
 
     def __post_init__(self) -> None:
         """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
@@ -208,6 +119,8 @@ class EvaluationConfig:
         for threshold in self.thresholds_m:
             check_option("thresholds_m", threshold, unit="metres")
         check_option("worst", self.worst_count)
+        if self.reference_sigma_m is not None:
+            check_option("reference_sigma_m", self.reference_sigma_m, unit="metres")
         if self.max_gap_s < 1e-9:
             msg = f"The maximum gap must be at least 1 ns, got {self.max_gap_s!r} s."
             raise InputError(msg, option="max_gap_s")
@@ -232,6 +145,8 @@ class EvaluationConfig:
             "tolerance": None
             if self.tolerance is None
             else {"distance_m": self.tolerance.distance_m, "share": self.tolerance.share},
+            "no_ci": self.no_ci,
+            "reference_sigma_m": self.reference_sigma_m,
         }
 
 
@@ -255,6 +170,7 @@ class EstimateResult:
         worst: the greatest ATE translation errors, largest first.
         verdict: pass/fail against the tolerance, if one was given.
         warnings: what the user should know (dropped poses, gaps, reader notes).
+        assessment: intervals, consistency and reference error (None: nothing to assess).
     """
 
     estimate: Trajectory
@@ -271,6 +187,7 @@ class EstimateResult:
     worst: tuple[WorstPose, ...]
     verdict: Verdict | None
     warnings: tuple[str, ...]
+    assessment: Assessment | None = None
 
     @property
     def name(self) -> str:
@@ -294,6 +211,8 @@ class EvaluationResult:
     created_at: str
     loceval_version: str = __version__
     inputs: tuple[Mapping[str, object], ...] = ()
+    comparisons: tuple[Comparison, ...] | None = None
+    """Every two estimates' ATE and RPE RMSE compared; None when intervals are off."""
 
     def to_dict(self) -> dict[str, object]:
         """Return the CLI's ``--json`` document (also the service's result schema)."""
@@ -321,6 +240,9 @@ class EvaluationResult:
                 "warnings": list(self.reference_warnings),
             },
             "estimates": [_estimate_dict(e, self.config) for e in self.estimates],
+            "comparisons": None
+            if self.comparisons is None
+            else [c.to_dict() for c in self.comparisons],
         }
 
 
@@ -398,6 +320,18 @@ def evaluate(
     for k, estimate in enumerate(estimates):
         report(f"evaluating {estimate.name or k}", k / len(estimates))
         results.append(_evaluate_one(reference, estimate, config))
+    comparisons = None
+    if not config.no_ci:
+        from loceval.assessment import compare_estimates  # noqa: PLC0415  (scipy)
+
+        found, notes = compare_estimates(
+            [
+                (e.name or f"estimate {k + 1}", e.ate_translation, e.rpe_translation)
+                for k, e in enumerate(results)
+            ]
+        )
+        comparisons = tuple(found)
+        ref_notes.extend(notes)
     report("done", 1.0)
     return EvaluationResult(
         reference=reference,
@@ -406,6 +340,7 @@ def evaluate(
         reference_warnings=tuple(ref_notes),
         created_at=datetime.now(UTC).isoformat(timespec="seconds"),
         inputs=tuple(inputs),
+        comparisons=comparisons,
     )
 
 
@@ -457,7 +392,12 @@ def _evaluate_one(
     )
     drift = compute_drift(ref, aligned)
     t0_ns = int(reference.stamps_ns[0])  # every time in the result counts from here
-    verdict = None if config.tolerance is None else _verdict(ate_t, ref, config.tolerance, t0_ns)
+    assessment = _assess(reference, ref, aligned, (ate_t, ate_r, rpe_t, rpe_r), config)
+    notes.extend(() if assessment is None else assessment.warnings)
+    verdict = None
+    if config.tolerance is not None:
+        judged = None if assessment is None else assessment.tolerance
+        verdict = tolerance_verdict_of(ate_t, ref, config.tolerance, t0_ns, judged)
     return EstimateResult(
         estimate=estimate,
         association=matched,
@@ -473,6 +413,33 @@ def _evaluate_one(
         worst=greatest_errors(ate_t, ref, count=config.worst_count, t0_ns=t0_ns),
         verdict=verdict,
         warnings=tuple(notes),
+        assessment=assessment,
+    )
+
+
+def _assess(
+    reference: Trajectory,
+    ref: Trajectory,
+    aligned: Trajectory,
+    series: tuple[ErrorSeries, ErrorSeries | None, ErrorSeries, ErrorSeries | None],
+    config: EvaluationConfig,
+) -> Assessment | None:
+    """Return the intervals, NEES and reference-error check, or None when none applies."""
+    sigma = config.reference_sigma_m
+    if config.no_ci and aligned.cov6 is None and sigma is None and reference.cov6 is None:
+        return None  # nothing to assess: no scipy loaded
+    from loceval.assessment import SERIES, assess  # noqa: PLC0415  (scipy)
+
+    tolerance = config.tolerance
+    return assess(
+        reference=ref,
+        aligned=aligned,
+        series=dict(zip(SERIES, series, strict=True)),
+        thresholds_m=config.thresholds_m,
+        tolerance=None if tolerance is None else (tolerance.distance_m, tolerance.share),
+        confidence=not config.no_ci,
+        reference_sigma_m=sigma,
+        full_reference=reference,
     )
 
 
@@ -503,37 +470,27 @@ def _association_notes(matched: Association, total: int) -> list[str]:
     return notes
 
 
-def _verdict(ate: ErrorSeries, reference: Trajectory, tolerance: Tolerance, t0_ns: int) -> Verdict:
-    share = share_within(ate, [tolerance.distance_m])[tolerance.distance_m]
-    over: BoolArray = ate.values > tolerance.distance_m
-    spans = []
-    if over.any():
-        edges = np.diff(np.concatenate(([0], over.astype(np.int8), [0])))
-        starts = np.flatnonzero(edges == 1)
-        ends = np.flatnonzero(edges == -1)  # exclusive
-        for a, b in zip(starts, ends, strict=True):  # one iteration per failing stretch
-            k = a + int(np.argmax(ate.values[a:b]))
-            pos = reference.positions_xyz[k]
-            spans.append(
-                FailingSpan(
-                    start_s=(int(ate.stamps_ns[a]) - t0_ns) / _NS_PER_S,
-                    end_s=(int(ate.stamps_ns[b - 1]) - t0_ns) / _NS_PER_S,
-                    poses=int(b - a),
-                    max_error_m=float(ate.values[k]),
-                    max_error_position_xyz=(float(pos[0]), float(pos[1]), float(pos[2])),
-                )
-            )
-    spans.sort(key=lambda s: s.max_error_m, reverse=True)
-    return Verdict(
-        tolerance=tolerance,
-        share_within=share,
-        passed=share >= tolerance.share,
-        failing_spans=tuple(spans),
-    )
-
-
 def _stats_or_none(series: ErrorSeries | None) -> dict[str, float | int] | None:
     return None if series is None else series.stats.to_dict()
+
+
+def _stats(e: EstimateResult, name: str) -> dict[str, object] | None:
+    """Return a STATS block with its 95 % intervals (``ci95`` null when not computed)."""
+    series = getattr(e, name)
+    if series is None:
+        return None
+    out: dict[str, object] = dict(series.stats.to_dict())
+    found: IntervalStats | None = None if e.assessment is None else e.assessment.intervals.get(name)
+    out["ci95"] = None if found is None else {k: list(v) for k, v in found.ci95.items()}
+    out["n_effective"] = None if found is None else found.n_effective
+    return out
+
+
+def _within_ci95(e: EstimateResult) -> dict[str, list[float]] | None:
+    found = None if e.assessment is None else e.assessment.intervals.get("ate_translation")
+    if found is None:
+        return None
+    return {f"{t:g}": list(found.within_ci95[t]) for t in e.within}
 
 
 def _estimate_dict(e: EstimateResult, config: EvaluationConfig) -> dict[str, object]:
@@ -554,20 +511,34 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig) -> dict[str, obj
         "time_offset_s": matched.offset_ns / _NS_PER_S,
         "alignment": e.alignment.to_dict(),
         "ate": {
-            "translation_m": e.ate_translation.stats.to_dict(),
-            "rotation_deg": _stats_or_none(e.ate_rotation),
+            "translation_m": _stats(e, "ate_translation"),
+            "rotation_deg": _stats(e, "ate_rotation"),
         },
         "rpe": {
             "delta": config.rpe_delta,
             "unit": config.rpe_unit.value,
             "all_pairs": config.rpe_all_pairs,
             "pairs": len(e.rpe_translation),
-            "translation_m": e.rpe_translation.stats.to_dict(),
-            "rotation_deg": _stats_or_none(e.rpe_rotation),
+            "translation_m": _stats(e, "rpe_translation"),
+            "rotation_deg": _stats(e, "rpe_rotation"),
         },
         "within": {f"{t:g}": share for t, share in e.within.items()},
+        "within_ci95": _within_ci95(e),
         "worst": [w.to_dict() for w in e.worst],
         "drift_pct": _stats_or_none(e.drift),
         "verdict": None if e.verdict is None else e.verdict.to_dict(),
+        "consistency": _assessed(e, "consistency"),
+        "reference_error": _assessed(e, "reference_error"),
         "warnings": list(e.warnings),
     }
+
+
+def _assessed(e: EstimateResult, what: str) -> dict[str, object] | None:
+    """Return the consistency (NEES) or reference-error block, or None."""
+    if e.assessment is None:
+        return None
+    if what == "consistency":
+        found = e.assessment.consistency
+        return None if found is None else found.to_dict()
+    checks = e.assessment.reference_error
+    return {k: c.to_dict() for k, c in checks.items()} or None

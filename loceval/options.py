@@ -459,6 +459,26 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         group="export",
         api=False,
     ),
+    OptionSpec(
+        "no_ci",
+        OptionKind.SWITCH,
+        False,  # noqa: FBT003  (a default, not a flag argument)
+        "skip the confidence intervals and the comparisons of estimates (ci95 null)",
+        "the switch that turns confidence intervals off",
+        "no-ci",
+    ),
+    OptionSpec(
+        "reference_sigma_m",
+        OptionKind.NUMBER,
+        None,
+        "the ground truth's own error, per-axis standard deviation in metres (0.0002)",
+        "the reference's standard deviation",
+        "reference-sigma",
+        "M",
+        minimum=0.0,
+        maximum=10.0,
+        example="0.0002",
+    ),
 )
 """Every option, in the order ``--help`` and the API schema list them."""
 

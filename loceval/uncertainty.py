@@ -95,15 +95,22 @@ def _autocorrelation(x: FloatArray) -> FloatArray:
 
     A constant series has no correlation to speak of: ρ = [1, 0, 0, ...].
     """
-    n = x.size
-    centred = x - x.mean()
+    out: FloatArray = _autocorrelations(x[None, :])[0]
+    return out
+
+
+def _autocorrelations(rows: FloatArray) -> FloatArray:
+    """Return the (m, n) autocorrelations of (m, n) series, all in one 2-D FFT."""
+    n = rows.shape[1]
+    centred = rows - rows.mean(axis=1, keepdims=True)
     size = sp_fft.next_fast_len(2 * n - 1, real=True)
-    spectrum = sp_fft.rfft(centred, size)
-    acov = sp_fft.irfft(spectrum.real**2 + spectrum.imag**2, size)[:n] / n
-    out = np.zeros(n)
-    out[0] = 1.0
-    if acov[0] > 1e-300 * max(1.0, float(np.abs(x).max())):
-        out[1:] = acov[1:] / acov[0]
+    spectrum = sp_fft.rfft(centred, size, axis=1)
+    acov = sp_fft.irfft(spectrum.real**2 + spectrum.imag**2, size, axis=1)[:, :n] / n
+    out = np.zeros(rows.shape)
+    out[:, 0] = 1.0
+    scale = np.maximum(1.0, np.abs(rows).max(axis=1))
+    live = acov[:, 0] > 1e-300 * scale
+    out[live, 1:] = acov[live, 1:] / acov[live, :1]
     return out
 
 
@@ -399,11 +406,9 @@ def interval_stats(
     indicators = (x[None, :] <= np.asarray(thresholds)[:, None]).astype(np.float64)
     squared = x * x
     median_indicator = (x <= np.median(x)).astype(np.float64)
-    rhos = {
-        "rmse": _autocorrelation(squared),
-        "mean": _autocorrelation(x),
-        "median": _autocorrelation(median_indicator),
-    } | {f"{t:g}": _autocorrelation(ind) for t, ind in zip(thresholds, indicators, strict=True)}
+    keys = ["rmse", "mean", "median", *(f"{t:g}" for t in thresholds)]
+    rows = np.vstack([squared, x, median_indicator, indicators])
+    rhos = dict(zip(keys, _autocorrelations(rows), strict=True))
     automatic = block is None
     if block is None:
         block = max(_block_of(rhos[k]) for k in rhos if k != "median")

@@ -88,6 +88,14 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
         )
 
 
+def _outcome(verdict: dict[str, Any]) -> str:
+    """Return pass, fail or undecided (documents before intervals carry only ``passed``)."""
+    outcome = verdict.get("outcome")
+    if outcome in {"pass", "fail", "undecided"}:
+        return str(outcome)
+    return "pass" if verdict.get("passed") else "fail"
+
+
 def evaluation_summary(document: dict[str, Any]) -> list[dict[str, Any]]:
     """Return the headline figures per estimate from a result document."""
     rows = []
@@ -99,7 +107,7 @@ def evaluation_summary(document: dict[str, Any]) -> list[dict[str, Any]]:
                 "ate_rmse_m": (estimate.get("ate") or {}).get("translation_m", {}).get("rmse"),
                 "rpe_rmse_m": (estimate.get("rpe") or {}).get("translation_m", {}).get("rmse"),
                 "matched": estimate.get("matched"),
-                "verdict": None if not verdict else ("pass" if verdict.get("passed") else "fail"),
+                "verdict": None if not verdict else _outcome(verdict),
             }
         )
     return rows

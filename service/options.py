@@ -89,6 +89,14 @@ class EvaluationValues(Protocol):
     def worst(self) -> int:
         """How many greatest errors to list."""
 
+    @property
+    def no_ci(self) -> bool:
+        """Skip the confidence intervals and comparisons."""
+
+    @property
+    def reference_sigma_m(self) -> float | None:
+        """The reference's per-axis standard deviation, metres."""
+
 
 class ExportValues(Protocol):
     """The artifact options as a front door holds them (keys of ``OPTIONS``)."""
@@ -145,6 +153,8 @@ def config_from_options(
         thresholds_m=tuple(options.thresholds_m),
         tolerance=Tolerance.parse(options.tolerance) if options.tolerance else None,
         worst_count=options.worst,
+        no_ci=options.no_ci,
+        reference_sigma_m=options.reference_sigma_m,
     )
 
 

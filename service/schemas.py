@@ -155,6 +155,8 @@ class EvaluationOptions(_Strict):
     crs: str | None = _field("crs")
     building_up: Annotated[str, _Choices("building_up")] = _field("building_up")
     formats: list[_Artifact] | None = _field("formats")
+    no_ci: bool = _field("no_ci")
+    reference_sigma_m: float | None = _field("reference_sigma_m")
 
     @field_validator("formats")
     @classmethod
@@ -211,7 +213,7 @@ class SummaryRow(BaseModel):
     ate_rmse_m: float | None
     rpe_rmse_m: float | None
     matched: int | None
-    verdict: Literal["pass", "fail"] | None
+    verdict: Literal["pass", "fail", "undecided"] | None
 
 
 class ArtifactPublic(BaseModel):

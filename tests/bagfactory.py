@@ -166,9 +166,9 @@ def build_message(fmt: str, record: Record) -> object:  # noqa: C901, PLR0911
         return types["geometry_msgs/msg/Pose"](position=point(xyz), orientation=quaternion(q))
 
     def with_cov(xyz: Sequence[float], q: Sequence[float]) -> object:
-        return types["geometry_msgs/msg/PoseWithCovariance"](
-            pose=pose(xyz, q), covariance=np.zeros(36)
-        )
+        cov = record.extra.get("covariance")
+        values = np.zeros(36) if cov is None else np.asarray(cov, dtype=np.float64).ravel()
+        return types["geometry_msgs/msg/PoseWithCovariance"](pose=pose(xyz, q), covariance=values)
 
     def transform_stamped(t: Tf) -> object:
         return types["geometry_msgs/msg/TransformStamped"](

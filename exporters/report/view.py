@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
 
@@ -27,6 +27,7 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
+from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
 from loceval.alignment import AlignWindow
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.gaps import GAP_RATE_FACTOR
@@ -96,7 +97,7 @@ class VerdictView:
 
     name: str
     colour: str
-    status: str  # "pass", "fail" or "none"
+    status: str  # "pass", "fail", "undecided" or "none"
     badge: str
     headline: str
     details: tuple[str, ...]
@@ -185,6 +186,7 @@ class ReportView:
     worst: tuple[WorstTable, ...]
     warnings: tuple[tuple[str, str], ...]
     best_mark: str = BEST_MARK
+    confidence: ConfidenceView = field(default_factory=ConfidenceView)
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -327,6 +329,8 @@ def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> V
             f"{name} meets the tolerance: {share_pct:.1f} % of its poses are within "
             f"{tol.distance_m:g} m of the ground truth ({tol.share * 100:g} % required)."
         )
+    elif verdict.result == "undecided":
+        headline = undecided_headline(name, verdict)
     else:
         headline = (
             f"{name} does not meet the tolerance: only {share_pct:.1f} % of its poses are "
@@ -366,8 +370,8 @@ def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> V
     return VerdictView(
         name=name,
         colour=colour,
-        status="pass" if verdict.passed else "fail",
-        badge="PASS" if verdict.passed else "FAIL",
+        status=verdict.result,
+        badge=verdict.result.upper(),
         headline=headline,
         details=tuple(details),
         spans=span_views,
@@ -643,4 +647,5 @@ def build_report_view(
         figures=figures,
         worst=_worst(result),
         warnings=_warnings(result),
+        confidence=build_confidence_view(result),
     )

@@ -14,6 +14,7 @@ from typing import Final, Literal
 
 from exporters.plots import ImageFormat, Plot, estimate_colour
 from exporters.report import BEST_MARK
+from exporters.summary.comparisons import across_runs
 from exporters.summary.model import (
     UTC,
     RepeatabilityRow,
@@ -292,6 +293,7 @@ def _stats_notes(stats: Sequence[SystemStats], succeeded: int) -> tuple[str, ...
         )
     if 0 < succeeded < 3:
         notes.append(f"Only {_plural(succeeded, 'run')} evaluated: too few to judge the spread.")
+    notes.extend(across_runs(stats))
     return tuple(notes)
 
 

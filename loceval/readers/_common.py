@@ -32,6 +32,7 @@ def build_trajectory(
     frame_id: str = "",
     child_frame_id: str = "",
     warnings: tuple[str, ...] = (),
+    cov6: FloatArray | None = None,
 ) -> Trajectory:
     """Turn raw reader arrays into a :class:`Trajectory`.
 
@@ -50,6 +51,8 @@ def build_trajectory(
         frame_id: frame of the poses.
         child_frame_id: frame whose poses these are.
         warnings: warnings the reader already collected.
+        cov6: (N, 6, 6) per-pose covariances, or None; sorted and deduplicated with the
+            poses.
 
     Returns:
         The validated trajectory.
@@ -82,22 +85,9 @@ def build_trajectory(
             )
             raise ReaderError(msg)
         quat_xyzw = quat_xyzw / norms[:, None]
-    if n > 1 and not (np.diff(stamps_ns) >= 0).all():
-        order = np.argsort(stamps_ns, kind="stable")
-        stamps_ns, positions_xyz, lines = stamps_ns[order], positions_xyz[order], lines[order]
-        if quat_xyzw is not None:
-            quat_xyzw = quat_xyzw[order]
-        notes.append(f"{where}: stamps were not in order; {n} poses sorted by time.")
-    if n > 1:
-        keep = np.concatenate(([True], np.diff(stamps_ns) != 0))
-        dropped = int(n - keep.sum())
-        if dropped:
-            stamps_ns, positions_xyz = stamps_ns[keep], positions_xyz[keep]
-            if quat_xyzw is not None:
-                quat_xyzw = quat_xyzw[keep]
-            notes.append(
-                f"{where}: {dropped} poses with a duplicate stamp dropped (first one kept)."
-            )
+    stamps_ns, positions_xyz, quat_xyzw, cov6 = _sorted_unique(
+        stamps_ns, positions_xyz, quat_xyzw, cov6, where=where, notes=notes
+    )
     if stamps_ns.shape[0] < MIN_POSES:
         msg = (
             f"{where}: {stamps_ns.shape[0]} poses, but at least {MIN_POSES} are needed; "
@@ -113,7 +103,38 @@ def build_trajectory(
         frame_id=frame_id,
         child_frame_id=child_frame_id,
         warnings=tuple(notes),
+        cov6=cov6,
     )
+
+
+def _sorted_unique(
+    stamps_ns: StampsNs,
+    positions_xyz: FloatArray,
+    quat_xyzw: FloatArray | None,
+    cov6: FloatArray | None,
+    *,
+    where: str,
+    notes: list[str],
+) -> tuple[StampsNs, FloatArray, FloatArray | None, FloatArray | None]:
+    """Sort the poses by stamp and drop repeated stamps (first kept), noting both."""
+    n = int(stamps_ns.shape[0])
+    if n > 1 and not (np.diff(stamps_ns) >= 0).all():
+        order = np.argsort(stamps_ns, kind="stable")
+        stamps_ns, positions_xyz = stamps_ns[order], positions_xyz[order]
+        quat_xyzw = None if quat_xyzw is None else quat_xyzw[order]
+        cov6 = None if cov6 is None else cov6[order]
+        notes.append(f"{where}: stamps were not in order; {n} poses sorted by time.")
+    if n > 1:
+        keep = np.concatenate(([True], np.diff(stamps_ns) != 0))
+        dropped = int(n - keep.sum())
+        if dropped:
+            stamps_ns, positions_xyz = stamps_ns[keep], positions_xyz[keep]
+            quat_xyzw = None if quat_xyzw is None else quat_xyzw[keep]
+            cov6 = None if cov6 is None else cov6[keep]
+            notes.append(
+                f"{where}: {dropped} poses with a duplicate stamp dropped (first one kept)."
+            )
+    return stamps_ns, positions_xyz, quat_xyzw, cov6
 
 
 def _reject_nonfinite(values: FloatArray, lines: IntArray, *, where: str, what: str) -> None:

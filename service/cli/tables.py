@@ -39,6 +39,12 @@ def format_tables(result: EvaluationResult) -> str:
         cells = ["-" if d is None else f"{d.mean:.2f} %" for d in drifts]
         lines.append(_row("drift (mean)", cells))
     lines += [f"\n{e.name}: {e.verdict.summary}" for e in result.estimates if e.verdict]
+    if result.comparisons:
+        lines += [
+            "",
+            "Comparisons (95 % intervals)",
+            *(f"  {c.summary}" for c in result.comparisons),
+        ]
     warnings = [("reference", w) for w in result.reference_warnings] + [
         (e.name, w) for e in result.estimates for w in e.warnings
     ]

@@ -16,7 +16,9 @@ from loceval.trajectory import Trajectory
 
 from .conftest import smooth_trajectory
 
-STATS_KEYS = {"rmse", "mean", "median", "std", "var", "min", "max", "sse", "n"}
+STATS_KEYS = {
+    "rmse", "mean", "median", "std", "var", "min", "max", "sse", "n", "ci95", "n_effective"
+}  # fmt: skip
 
 
 def _estimate(rng: np.random.Generator, truth: Trajectory, name: str, sigma: float) -> Trajectory:
@@ -115,6 +117,8 @@ def test_bad_tolerances_are_rejected(text: str) -> None:
         ({"max_gap_s": 1e-300}, "maximum gap must be at least 1 ns", "max_gap_s"),
         ({"thresholds_m": (0.1, -1.0)}, "thresholds", "thresholds_m"),
         ({"worst_count": -1}, "number of worst poses", "worst"),
+        ({"reference_sigma_m": -0.001}, "reference's standard deviation", "reference_sigma_m"),
+        ({"reference_sigma_m": float("inf")}, "finite number of metres", "reference_sigma_m"),
     ],
 )
 def test_bad_config_values_are_rejected(kwargs: dict[str, object], match: str, key: str) -> None:

@@ -323,6 +323,31 @@ def test_create_evaluation(api: Api, datasets: tuple[str, str]) -> None:
     }
 
 
+def test_intervals_options(api: Api, datasets: tuple[str, str]) -> None:
+    """no_ci nulls the intervals; reference_sigma_m adds the reference-error block."""
+    reference, estimate = datasets
+    runs = {}
+    for key, extra in (
+        ("plain", {"reference_sigma_m": 0.0002}),
+        ("no_ci", {"no_ci": True}),
+    ):
+        evaluation = api.evaluate(
+            evaluation_body(reference, estimate, options={**CHEAP, **extra})
+        ).json()
+        assert evaluation["status"] == "succeeded", evaluation["error"]
+        assert evaluation["options"] | extra == evaluation["options"]
+        url = f"/api/v1/evaluations/{evaluation['id']}"
+        runs[key] = api.client.get(url, headers=api.headers).json()["result"]
+    plain = runs["plain"]["estimates"][0]
+    lo, hi = plain["ate"]["translation_m"]["ci95"]["rmse"]
+    assert lo <= plain["ate"]["translation_m"]["rmse"] <= hi
+    assert plain["reference_error"]["ate"]["adequate"] is True
+    off = runs["no_ci"]["estimates"][0]
+    assert off["ate"]["translation_m"]["ci95"] is None
+    assert off["within_ci95"] is None
+    assert off["reference_error"] is None
+
+
 def test_list_evaluations(api: Api, datasets: tuple[str, str]) -> None:
     """Evaluations are listed newest first, without results, filtered by status, paged."""
     ids = [api.evaluate(evaluation_body(*datasets)).json()["id"] for _ in range(3)]

@@ -414,6 +414,22 @@ BAD_BODIES: list[tuple[Any, set[tuple[Any, ...]]]] = [
             ("body", "options", "stamp"),
         },
     ),
+    (
+        {
+            "reference": {"dataset_id": "R"},
+            "estimates": [{"dataset_id": "E"}],
+            "options": {"no_ci": "maybe", "reference_sigma_m": -0.0002},
+        },
+        {("body", "options", "no_ci"), ("body", "options", "reference_sigma_m")},
+    ),
+    (
+        {
+            "reference": {"dataset_id": "R"},
+            "estimates": [{"dataset_id": "E"}],
+            "options": {"reference_sigma_m": 11.0},
+        },
+        {("body", "options", "reference_sigma_m")},
+    ),
 ]
 
 

@@ -43,6 +43,27 @@ def test_json_contract(demo: dict[str, Path], capsys: pytest.CaptureFixture[str]
     assert doc["options"]["association"] == "interpolate"
 
 
+def test_no_ci_and_reference_sigma(
+    demo: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--no-ci nulls every interval and the comparisons; --reference-sigma judges the reference."""
+    files = (str(demo["reference"]), str(demo["RTAB-Map"]), str(demo["ISAAC"]))
+    code, out, _ = _run(capsys, "evaluate", *files, "--json", "--reference-sigma", "0.0002")
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["options"]["reference_sigma_m"] == pytest.approx(0.0002)
+    assert {c["metric"] for c in doc["comparisons"]} == {"ate_rmse", "rpe_rmse"}
+    for est in doc["estimates"]:
+        lo, hi = est["rpe"]["translation_m"]["ci95"]["median"]
+        assert lo <= est["rpe"]["translation_m"]["median"] <= hi
+        assert est["reference_error"]["rpe"]["reference_rms"] == pytest.approx(0.0002 * 6**0.5)
+    code, out, _ = _run(capsys, "evaluate", *files, "--json", "--no-ci")
+    assert code == 0
+    off = json.loads(out)
+    assert off["comparisons"] is None
+    assert all(e["ate"]["translation_m"]["ci95"] is None for e in off["estimates"])
+
+
 def test_table_layout(demo: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
     """Without --json the framework paper's tables come out, one column per estimate."""
     code, out, _ = _run(
@@ -56,6 +77,10 @@ def test_table_layout(demo: dict[str, Path], capsys: pytest.CaptureFixture[str])
     assert header.split()[-2:] == ["RTAB-Map", "ISAAC"]
     for label in ("RMSE", "MEAN", "MEDIAN", "STD", "MIN", "MAX"):
         assert any(line.startswith(label) for line in out.splitlines())
+    assert "Comparisons (95 % intervals)" in out
+    # The demo mirrors the framework paper: ISAAC has the lower ATE, RTAB-Map the lower RPE.
+    assert "  ISAAC's ATE is lower than RTAB-Map's: difference" in out
+    assert "  RTAB-Map's RPE is lower than ISAAC's: difference" in out
 
 
 def test_options_reach_the_result(
@@ -93,6 +118,7 @@ def test_options_reach_the_result(
         (["evaluate", "REF", "EST", "--rpe-delta", "1e12", "--rpe-unit", "s"], "--rpe-delta"),
         (["evaluate", "REF", "EST", "--calibrate-at", "1e12"], "--calibrate-at"),
         (["evaluate", "REF", "EST", "--align-first", "1e12s"], "--align-first"),
+        (["evaluate", "REF", "EST", "--reference-sigma", "-0.1"], "--reference-sigma: "),
         (["evaluate", "REF", "EST", "--out", "/dev/null"], "not a folder"),
         (["evaluate", "REF", "EST", "--out", "/proc/loceval/out"], "Cannot create"),
     ],

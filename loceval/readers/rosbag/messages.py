@@ -129,6 +129,8 @@ class _Pose(Protocol):
 
 class _PoseWithCovariance(Protocol):
     pose: _Pose
+    covariance: Sequence[float]
+    """36 floats, row-major 6x6, ``x y z rx ry rz`` in the header's frame."""
 
 
 class _Transform(Protocol):

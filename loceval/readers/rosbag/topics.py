@@ -92,9 +92,16 @@ def read_topic_trajectory(bag: Bag, selector: str, *, stamp: StampSource, name: 
     frame_ids: set[str] = set()
     child_ids: set[str] = set()
     with_orientation = kind is not PoseKind.POINT
+    covariances: list[Sequence[float]] | None = (
+        [] if kind in {PoseKind.POSE_WITH_COVARIANCE, PoseKind.ODOMETRY} else None
+    )
     for conn, receive_ns, raw in raw_messages(bag, conns):
         msg_obj = deserialize(bag, raw, conn.msgtype)
         header, child, position, orientation = _pose_fields(kind, msg_obj)
+        if covariances is not None:
+            covariances.append(
+                cast("PoseWithCovarianceStampedLike | OdometryLike", msg_obj).pose.covariance
+            )
         stamps.append(
             receive_ns
             if stamp is StampSource.RECEIVE
@@ -118,6 +125,7 @@ def read_topic_trajectory(bag: Bag, selector: str, *, stamp: StampSource, name: 
             )
     width = 7 if with_orientation else 3
     array = np.array(values, dtype=np.float64).reshape(-1, width)
+    cov6, cov_notes = _covariances(covariances, where=where)
     return _finish(
         np.array(stamps, dtype=np.int64),
         array[:, :3],
@@ -126,7 +134,34 @@ def read_topic_trajectory(bag: Bag, selector: str, *, stamp: StampSource, name: 
         name=name or selector,
         frame_ids=frame_ids,
         child_ids=child_ids,
+        warnings=cov_notes,
+        cov6=cov6,
     )
+
+
+def _covariances(
+    covariances: list[Sequence[float]] | None, *, where: str
+) -> tuple[FloatArray | None, tuple[str, ...]]:
+    """Return the (N, 6, 6) pose covariances of the messages, or None when none is reported.
+
+    A message reports no covariance when all 36 values are zero or the first is -1 (the ROS
+    convention for "unknown"); then, or when a covariance is not finite and symmetric, the
+    trajectory carries none (the evaluation's consistency check is skipped).
+    """
+    if not covariances:
+        return None, ()
+    cov = np.asarray(covariances, dtype=np.float64).reshape(-1, 6, 6)
+    if not cov.any() or (cov[:, 0, 0] == -1.0).any():
+        return None, ()
+    finite = bool(np.isfinite(cov).all())
+    scale = max(float(np.abs(cov[np.isfinite(cov)]).max(initial=0.0)), 1.0)
+    if not finite or not np.allclose(cov, cov.transpose(0, 2, 1), rtol=0.0, atol=1e-9 * scale):
+        note = (
+            f"{where}: the pose covariances are not finite and symmetric, so they are not "
+            "used (no consistency check)."
+        )
+        return None, (note,)
+    return cov, ()
 
 
 def _pose_fields(
@@ -204,6 +239,7 @@ def _finish(
     frame_ids: set[str],
     child_ids: set[str],
     warnings: tuple[str, ...] = (),
+    cov6: FloatArray | None = None,
 ) -> Trajectory:
     notes = list(warnings)
     if stamps.size >= MIN_POSES and np.unique(stamps).size < MIN_POSES:
@@ -227,6 +263,7 @@ def _finish(
         frame_id=frame_id.lstrip("/"),
         child_frame_id=child_id.lstrip("/"),
         warnings=tuple(notes),
+        cov6=cov6,
     )
 
 

@@ -107,6 +107,65 @@ class TestPoseTopics:
         assert traj.child_frame_id == ("base_link" if has_child else "")
 
     @pytest.mark.parametrize("fmt", bf.FORMATS)
+    @pytest.mark.parametrize("msgtype", [bf.POSE_COV, bf.ODOMETRY])
+    def test_covariance_follows_the_sorted_poses(self, tmp_path, rng, fmt, msgtype):
+        """The 6x6 covariances are read row-major and sorted and deduplicated with the poses."""
+        poses = bf.random_poses(rng, 12, dt_ns=20_000_000)
+        order = np.array([0, 2, 1, 3, 4, 5, 6, 7, 8, 9, 10, 11, 11])  # one swap, one repeat
+        base = rng.normal(size=(12, 6, 6))
+        covs = base @ base.transpose(0, 2, 1)  # symmetric positive definite, all distinct
+        records = [
+            bf.Record(
+                "/pose",
+                msgtype,
+                T0 + k * 20_000_000,
+                (int(poses.stamps_ns[i]), poses.positions[i], poses.quats[i]),
+                extra={"covariance": covs[i] + (k == 12)},  # the repeat differs: dropped
+            )
+            for k, i in enumerate(order)
+        ]
+        traj = read_bag_trajectory(write(tmp_path, records, fmt=fmt), "/pose")
+        assert_poses(traj, poses)
+        assert traj.cov6 is not None
+        np.testing.assert_allclose(traj.cov6, covs, rtol=0, atol=0)
+        assert any("sorted by time" in w for w in traj.warnings)
+        assert any("duplicate stamp" in w for w in traj.warnings)
+
+    @pytest.mark.parametrize(
+        ("first", "note"),
+        [(0.0, None), (-1.0, None), (float("nan"), "not finite and symmetric")],
+    )
+    def test_unreported_covariance_is_none(self, tmp_path, poses, first, note):
+        """All-zero, -1 ("unknown") or broken covariances leave cov6 None."""
+        cov = np.zeros((6, 6))
+        cov[0, 0] = first
+        records = [
+            dataclasses.replace(r, extra={"covariance": cov})
+            for r in bf.pose_records("/pose", bf.POSE_COV, poses)
+        ]
+        traj = read_bag_trajectory(write(tmp_path, records, fmt="mcap"), "/pose")
+        assert traj.cov6 is None
+        assert any(note in w for w in traj.warnings) if note else not traj.warnings
+
+    @pytest.mark.public_data
+    def test_nav2_amcl_covariance(self, public_data):
+        """AMCL's /amcl_pose carries its planar covariance; /odom reports none (all zero)."""
+        bag = public_data / "nav2_turtlebot.mcap"
+        amcl = read_bag_trajectory(bag, "/amcl_pose")
+        assert amcl.cov6 is not None
+        assert amcl.cov6.shape == (135, 6, 6)
+        assert (amcl.cov6[:, 2, 2] == 0).all()  # z not estimated by a planar filter
+        assert (amcl.cov6[:, 0, 0] > 0).all()
+        assert (amcl.cov6[:, 5, 5] > 0).all()  # yaw
+        # The first message read directly with rosbags, without loceval's reader.
+        with AnyReader([bag]) as reader:
+            conn = next(c for c in reader.connections if c.topic == "/amcl_pose")
+            first = next(reader.messages([conn]))
+            msg = reader.deserialize(first[2], conn.msgtype)
+        np.testing.assert_array_equal(amcl.cov6[0].ravel(), msg.pose.covariance)
+        assert read_bag_trajectory(bag, "/odom").cov6 is None
+
+    @pytest.mark.parametrize("fmt", bf.FORMATS)
     def test_point_stamped_has_no_orientation(self, tmp_path, poses, fmt):
         """PointStamped gives positions only."""
         bag = write(tmp_path, bf.pose_records("/uwb", bf.POINT, poses), fmt=fmt)
