@@ -26,6 +26,7 @@ from loceval.metrics import (
     rpe_pairs,
     share_within,
 )
+from loceval.offsets import DeviceSource, OffsetCheck, check_offsets
 from loceval.options import (
     DEFAULT_THRESHOLDS_M,
     check_option,
@@ -175,6 +176,12 @@ class EvaluationConfig:
         thresholds_m: distances for the "share within" figures.
         tolerance: the application tolerance for the verdict, if any.
         worst_count: how many greatest errors to list.
+        auto_time_offset: estimate the time offset from the motion and apply it (instead
+            of ``time_offset_s``, which is still the candidate the estimate starts nearest).
+        auto_device: estimate the device offset from the motion and apply it to the
+            reference (instead of ``reference_offset``).
+        reference_offset_source: where ``reference_offset`` comes from (``urdf``: a URDF
+            or a bag's ``/tf_static``; ``given``: numbers).
     """
 
     association: AssociationMethod = _DEFAULT_ASSOCIATION
@@ -191,6 +198,9 @@ class EvaluationConfig:
     thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
     tolerance: Tolerance | None = None
     worst_count: int = round(number_default("worst"))
+    auto_time_offset: bool = False
+    auto_device: bool = False
+    reference_offset_source: DeviceSource = "given"
 
     def __post_init__(self) -> None:
         """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
@@ -207,6 +217,9 @@ class EvaluationConfig:
         for threshold in self.thresholds_m:
             check_option("thresholds_m", threshold, unit="metres")
         check_option("worst", self.worst_count)
+        if self.auto_device and self.reference_offset is not None:
+            msg = "Give the device offset or have it estimated from the motion, not both."
+            raise InputError(msg, option="device")
         if self.max_gap_s < 1e-9:
             msg = f"The maximum gap must be at least 1 ns, got {self.max_gap_s!r} s."
             raise InputError(msg, option="max_gap_s")
@@ -231,6 +244,8 @@ class EvaluationConfig:
             "tolerance": None
             if self.tolerance is None
             else {"distance_m": self.tolerance.distance_m, "share": self.tolerance.share},
+            "auto_time_offset": self.auto_time_offset,
+            "auto_device": self.auto_device,
         }
 
 
@@ -254,6 +269,7 @@ class EstimateResult:
         worst: the greatest ATE translation errors, largest first.
         verdict: pass/fail against the tolerance, if one was given.
         warnings: what the user should know (dropped poses, gaps, reader notes).
+        offsets: the time and device offsets given, estimated and applied.
     """
 
     estimate: Trajectory
@@ -270,6 +286,7 @@ class EstimateResult:
     worst: tuple[WorstPose, ...]
     verdict: Verdict | None
     warnings: tuple[str, ...]
+    offsets: OffsetCheck | None = None
 
     @property
     def name(self) -> str:
@@ -379,6 +396,7 @@ def evaluate(
         raise InputError(msg)
     report = progress or (lambda _stage, _fraction: None)
     ref_notes = list(reference.warnings)
+    recorded = reference
     if config.reference_offset is not None:
         reference = reference.with_body_offset(config.reference_offset)
         ref_notes.append("Device offset applied to the reference (rigid body -> sensor).")
@@ -393,7 +411,7 @@ def evaluate(
     results = []
     for k, estimate in enumerate(estimates):
         report(f"evaluating {estimate.name or k}", k / len(estimates))
-        results.append(_evaluate_one(reference, estimate, config))
+        results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
     report("done", 1.0)
     return EvaluationResult(
         reference=reference,
@@ -406,16 +424,29 @@ def evaluate(
 
 
 def _evaluate_one(
-    reference: Trajectory, estimate: Trajectory, config: EvaluationConfig
+    reference: Trajectory, estimate: Trajectory, config: EvaluationConfig, *, recorded: Trajectory
 ) -> EstimateResult:
     notes = list(estimate.warnings)
+    offsets = check_offsets(
+        recorded,
+        estimate,
+        time_offset_s=None if config.auto_time_offset else config.time_offset_s,
+        device=config.reference_offset,
+        device_source=config.reference_offset_source,
+        auto_device=config.auto_device,
+        max_gap_s=config.max_gap_s,
+        with_scale=config.align is AlignMethod.SIM3,
+    )
+    notes.extend(offsets.warnings)
+    if offsets.device_applied and offsets.device is not None:
+        reference = recorded.with_body_offset(offsets.device.transform)
     matched = associate(
         reference,
         estimate,
         method=config.association,
         max_dt_ns=round(config.max_dt_s * _NS_PER_S),
         max_gap_ns=round(config.max_gap_s * _NS_PER_S),
-        offset_ns=round(config.time_offset_s * _NS_PER_S),
+        offset_ns=round(offsets.time_offset_s * _NS_PER_S),
     )
     notes.extend(_association_notes(matched, len(estimate)))
     own_gaps = estimate.gaps(round(config.max_gap_s * _NS_PER_S))
@@ -465,6 +496,7 @@ def _evaluate_one(
         worst=greatest_errors(ate_t, ref, count=config.worst_count, t0_ns=t0_ns),
         verdict=verdict,
         warnings=tuple(notes),
+        offsets=offsets,
     )
 
 
@@ -544,6 +576,8 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig) -> dict[str, obj
             "unmatched": matched.dropped_unmatched,
         },
         "time_offset_s": matched.offset_ns / _NS_PER_S,
+        "time_offset": None if e.offsets is None else e.offsets.time_offset_dict(),
+        "device_offset": None if e.offsets is None else e.offsets.device_offset_dict(),
         "alignment": e.alignment.to_dict(),
         "ate": {
             "translation_m": e.ate_translation.stats.to_dict(),
