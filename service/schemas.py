@@ -101,10 +101,10 @@ def _field(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any b
     """Return the field of an option: default, description, bounds, lengths and example."""
     spec = option(key)
     extra: dict[str, Any] = {}
-    if spec.kind in {OptionKind.NUMBER, OptionKind.INTEGER}:
+    if spec.kind in {OptionKind.NUMBER, OptionKind.INTEGER} and not spec.auto:
         extra["le"] = spec.maximum
         extra["gt" if spec.exclusive_minimum else "ge"] = spec.minimum
-    if spec.kind is OptionKind.NUMBER:
+    if spec.kind is OptionKind.NUMBER and not spec.auto:
         extra["allow_inf_nan"] = False
     if spec.kind in {OptionKind.TEXT, OptionKind.NUMBERS, OptionKind.NAMES}:
         extra["max_length"] = spec.max_length
@@ -117,6 +117,10 @@ def _field(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any b
     default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
     return Field(default=default, description=spec.help, **extra)  # pydantic copies a list
 
+
+_Auto = Literal["auto"]
+"""An option's ``auto``: the value is estimated from the data."""
+_TimeOffset = Annotated[float, _bounds("time_offset_s")] | _Auto
 
 _Matrix4 = Annotated[
     list[Annotated[list[_Finite], Field(min_length=4, max_length=4)]],
@@ -135,13 +139,13 @@ class EvaluationOptions(_Strict):
     association: Annotated[str, _Choices("association")] = _field("association")
     max_dt_s: float = _field("max_dt_s")
     max_gap_s: float = _field("max_gap_s")
-    time_offset_s: float = _field("time_offset_s")
+    time_offset_s: _TimeOffset = _field("time_offset_s")
     stamp: Annotated[str, _Choices("stamp")] = _field("stamp")
     align: Annotated[str, _Choices("align")] = _field("align")
     align_first: str | None = _field("align_first")
     calibrate_at_s: float | None = _field("calibrate_at_s")
     offset: str | None = _field("offset")
-    device: DeviceOffset | None = _field("device")
+    device: DeviceOffset | _Auto | None = _field("device")
     rpe_delta: float = _field("rpe_delta")
     rpe_unit: Annotated[str, _Choices("rpe_unit")] = _field("rpe_unit")
     rpe_all_pairs: bool = _field("rpe_all_pairs")
