@@ -27,6 +27,7 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
+from exporters.report.clocks import ClockSection, build_clock_section, time_offset_text
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.metrics import ErrorSeries, ErrorStats
 
@@ -159,6 +160,7 @@ class ReportView:
         figures: the plots.
         worst: the greatest errors per estimate.
         warnings: (source, message) pairs.
+        clocks: the "Clocks and device offset" section.
     """
 
     title: str
@@ -180,6 +182,7 @@ class ReportView:
     figures: tuple[FigureView, ...]
     worst: tuple[WorstTable, ...]
     warnings: tuple[tuple[str, str], ...]
+    clocks: ClockSection
     best_mark: str = BEST_MARK
 
 
@@ -416,7 +419,7 @@ def _options(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
     )
     rows = [
         ("Association", association),
-        ("Time offset", f"{cfg.time_offset_s:+g} s added to the estimates' stamps"),
+        ("Time offset", time_offset_text(cfg)),
         ("Alignment", f"{cfg.align.value} (estimated on {cfg.align_first} poses)"),
         (
             "RPE step",
@@ -589,4 +592,7 @@ def build_report_view(
         figures=figures,
         worst=_worst(result),
         warnings=_warnings(result),
+        clocks=build_clock_section(
+            result, number=len(figures) + 1, image_format=image_format, max_points=max_points
+        ),
     )
