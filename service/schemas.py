@@ -5,11 +5,18 @@ from __future__ import annotations
 import datetime as dt
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, GetCoreSchemaHandler, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    GetCoreSchemaHandler,
+    ValidationError,
+    field_validator,
+)
 from pydantic_core import core_schema
 
 from exporters import ARTIFACTS
-from loceval.options import OptionKind, option
+from loceval.options import AUTO, OptionKind, option
 
 __all__ = [
     "ArtifactPublic",
@@ -118,9 +125,51 @@ def _field(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any b
     return Field(default=default, description=spec.help, **extra)  # pydantic copies a list
 
 
-_Auto = Literal["auto"]
-"""An option's ``auto``: the value is estimated from the data."""
-_TimeOffset = Annotated[float, _bounds("time_offset_s")] | _Auto
+class _OrAuto:
+    """``Annotated`` metadata: the value is ``inner``'s, or ``"auto"`` (estimated from the data).
+
+    Validation runs ``inner`` as it is (its errors name the field, not a union branch); the
+    JSON schema is ``anyOf [inner, {"const": "auto"}]``.
+    """
+
+    def __init__(self, inner: Any, words: str) -> None:  # noqa: ANN401  (a type expression)
+        self.inner = inner
+        self.words = words
+
+    def __get_pydantic_core_schema__(
+        self, _source: type[Any], handler: GetCoreSchemaHandler
+    ) -> core_schema.CoreSchema:
+        words = self.words
+
+        def validate(value: object, inner: core_schema.ValidatorFunctionWrapHandler) -> object:
+            if value == AUTO:
+                return AUTO
+            try:
+                return inner(value)
+            except ValidationError:
+                if isinstance(value, str):
+                    msg = f"takes {words} or {AUTO!r}, got {value!r}"
+                    raise ValueError(msg) from None  # noqa: TRY004  (pydantic wants ValueError)
+                raise
+
+        inner_schema = handler.generate_schema(self.inner)
+        return core_schema.no_info_wrap_validator_function(
+            validate,
+            inner_schema,
+            json_schema_input_schema=core_schema.union_schema(
+                [inner_schema, core_schema.literal_schema([AUTO])]
+            ),
+        )
+
+
+_TimeOffset = Annotated[
+    float | Literal["auto"],
+    _OrAuto(Annotated[float, _bounds("time_offset_s")], "a number of seconds"),
+]
+_Device = Annotated[
+    DeviceOffset | Literal["auto"] | None,
+    _OrAuto(DeviceOffset | None, "a device file's dataset and links"),
+]
 
 _Matrix4 = Annotated[
     list[Annotated[list[_Finite], Field(min_length=4, max_length=4)]],
@@ -145,7 +194,7 @@ class EvaluationOptions(_Strict):
     align_first: str | None = _field("align_first")
     calibrate_at_s: float | None = _field("calibrate_at_s")
     offset: str | None = _field("offset")
-    device: DeviceOffset | _Auto | None = _field("device")
+    device: _Device = _field("device")
     rpe_delta: float = _field("rpe_delta")
     rpe_unit: Annotated[str, _Choices("rpe_unit")] = _field("rpe_unit")
     rpe_all_pairs: bool = _field("rpe_all_pairs")
