@@ -152,12 +152,18 @@ class _OrAuto:
                     raise ValueError(msg) from None  # noqa: TRY004  (pydantic wants ValueError)
                 raise
 
+        def serialize(value: object, inner: core_schema.SerializerFunctionWrapHandler) -> object:
+            return AUTO if value == AUTO else inner(value)
+
         inner_schema = handler.generate_schema(self.inner)
         return core_schema.no_info_wrap_validator_function(
             validate,
             inner_schema,
             json_schema_input_schema=core_schema.union_schema(
                 [inner_schema, core_schema.literal_schema([AUTO])]
+            ),
+            serialization=core_schema.wrap_serializer_function_ser_schema(
+                serialize, schema=inner_schema
             ),
         )
 

@@ -1,0 +1,158 @@
+"""``auto`` time and device offsets on the CLI and the API: options, JSON, report section."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from loceval.errors import InputError
+from service.cli import main
+from service.evaluations import check_options
+from service.schemas import EvaluationOptions
+from tests.calibration_factory import Recording, make_recording
+from tests.factories import write_tum
+from tests.service._api_fixtures import assert_problem, open_api
+
+CHEAP = {"formats": ["result.json"]}
+
+
+@pytest.fixture(scope="module")
+def recording() -> Recording:
+    """A 60 s handheld recording: 45 ms delay, a camera 11 cm from the rigid body."""
+    return make_recording(np.random.default_rng(20240601), duration_s=60.0)
+
+
+@pytest.fixture(scope="module")
+def files(recording: Recording, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The recording as TUM files (reference, estimate)."""
+    folder = tmp_path_factory.mktemp("offsets")
+    return (
+        write_tum(folder / "truth.txt", recording.reference),
+        write_tum(folder / "camera.txt", recording.estimate),
+    )
+
+
+def _json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict[str, object]:
+    assert main(list(argv)) == 0
+    doc: dict[str, object] = json.loads(capsys.readouterr().out)
+    estimates = doc["estimates"]
+    assert isinstance(estimates, list)
+    first: dict[str, object] = estimates[0]
+    return first
+
+
+def test_cli_auto_offsets_and_report(
+    files: tuple[Path, Path],
+    recording: Recording,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """--time-offset auto --device auto: both applied, in the JSON and the report's section."""
+    ref, est = files
+    out = tmp_path / "out"
+    doc = _json(
+        capsys, "evaluate", str(ref), str(est), "--time-offset", "auto", "--device", "auto",
+        "--json", "--out", str(out), "--formats", "report.html",
+    )  # fmt: skip
+    clock, device = doc["time_offset"], doc["device_offset"]
+    assert isinstance(clock, dict)
+    assert isinstance(device, dict)
+    assert clock["source"] == "estimated"
+    assert doc["time_offset_s"] == pytest.approx(recording.time_offset_s, abs=0.001)
+    assert device["source"] == "estimated"
+    np.testing.assert_allclose(device["translation_m"], recording.device.translation, atol=0.002)
+    assert all(s is not None and s < 0.002 for s in device["sigma_translation_m"])
+    html = (out / "report.html").read_text()
+    section = re.search(r'<section id="clocks".*?</section>', html, re.DOTALL)
+    assert section is not None
+    assert "<h2>Clocks and device offset</h2>" in section.group(0)
+    assert 'data-plot="clock_correlation"' in section.group(0)
+    assert 'src="data:image/svg+xml;base64,' in section.group(0)
+    assert "Time offset estimated (1 sigma)" in section.group(0)
+
+
+def test_cli_default_clock_is_checked(
+    files: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without --time-offset, 0 is applied and the 45 ms the data show is a warning."""
+    ref, est = files
+    doc = _json(capsys, "evaluate", str(ref), str(est), "--json")
+    assert doc["time_offset_s"] == 0.0
+    clock = doc["time_offset"]
+    assert isinstance(clock, dict)
+    assert clock["source"] == "given"
+    assert clock["estimated_s"] == pytest.approx(-0.045, abs=0.001)
+    assert doc["device_offset"] is None
+    notes = doc["warnings"]
+    assert isinstance(notes, list)
+    assert any(
+        re.search(r"lags the ground truth by 4\d\.\d \+/- 0\.\d ms .*you gave 0\.0 ms", w)
+        for w in notes
+    )
+
+
+def test_cli_bad_values_exit_1(
+    files: tuple[Path, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--time-offset soon is a usage error; --device auto with --offset is refused."""
+    ref, est = files
+    with pytest.raises(SystemExit) as stop:
+        main(["evaluate", str(ref), str(est), "--time-offset", "soon"])
+    assert stop.value.code == 1
+    assert "--time-offset: takes a number or auto, got 'soon'" in capsys.readouterr().err
+    code = main(["evaluate", str(ref), str(est), "--device", "auto", "--offset", "0 0 0.1"])
+    assert code == 1
+    assert "either with --offset or as --device auto, not both" in capsys.readouterr().err
+
+
+def test_api_auto_offsets(files: tuple[Path, Path], recording: Recording, tmp_path: Path) -> None:
+    """Over HTTP ``time_offset_s: "auto"`` and ``device: "auto"`` reach the result."""
+    ref, est = files
+    with open_api(tmp_path) as api:
+        ref_id = api.dataset("truth.txt", ref.read_bytes())["id"]
+        est_id = api.dataset("camera.txt", est.read_bytes())["id"]
+        body = {
+            "reference": {"dataset_id": ref_id},
+            "estimates": [{"dataset_id": est_id}],
+            "options": {**CHEAP, "time_offset_s": "auto", "device": "auto"},
+        }
+        evaluation = api.evaluate(body).json()
+        assert evaluation["status"] == "succeeded", evaluation
+        url = f"/api/v1/evaluations/{evaluation['id']}/artifacts/result.json"
+        result = api.client.get(url, headers=api.headers).json()
+        estimate = result["estimates"][0]
+        assert estimate["time_offset"]["source"] == "estimated"
+        assert estimate["time_offset_s"] == pytest.approx(recording.time_offset_s, abs=0.001)
+        assert estimate["device_offset"]["source"] == "estimated"
+        assert result["options"]["auto_device"] is True
+
+
+@pytest.mark.parametrize(
+    ("options", "detail"),
+    [
+        ({"time_offset_s": "soon"}, r"options\.time_offset_s: .*or 'auto', got 'soon'"),
+        ({"device": "soon"}, r"options\.device: .*or 'auto', got 'soon'"),
+        ({"time_offset_s": 2e9}, r"options\.time_offset_s: .*less than or equal to 1000000000"),
+    ],
+)
+def test_api_bad_values_are_422(tmp_path: Path, options: dict[str, object], detail: str) -> None:
+    """A time offset or device that is neither a value nor ``auto`` is refused with 422."""
+    with open_api(tmp_path) as api:
+        body = {
+            "reference": {"dataset_id": "R"},
+            "estimates": [{"dataset_id": "E"}],
+            "options": {**CHEAP, **options},
+        }
+        assert_problem(api.evaluate(body), 422, detail=detail)
+
+
+def test_api_device_auto_and_offset_is_refused() -> None:
+    """``device: "auto"`` beside an ``offset`` fails before anything is queued."""
+    options = EvaluationOptions(device="auto", offset="0 0 0.1")
+    with pytest.raises(InputError, match=r"either as offset or as device, not both"):
+        check_options(options)
+    assert EvaluationOptions.model_validate(options.model_dump(mode="json")) == options
