@@ -156,3 +156,38 @@ def test_api_device_auto_and_offset_is_refused() -> None:
     with pytest.raises(InputError, match=r"either as offset or as device, not both"):
         check_options(options)
     assert EvaluationOptions.model_validate(options.model_dump(mode="json")) == options
+
+
+PUBLIC = {
+    # key: (reference, estimate, extra flags, measured offset s, measured sigma s). Measured
+    # with this code through the CLI (loceval evaluate REF EST --time-offset auto --json),
+    # 2026-11-23; evo's users take 0 for all three (TUM and EuRoC are synchronised).
+    "fr2_desk": (
+        "fr2_desk_groundtruth.txt", "fr2_desk_ORB.txt", ["--align", "sim3"], -0.009365, 0.000242,
+    ),
+    "fr1_xyz": (
+        "freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-rgbdslam.txt", [], -0.015711, 0.001982,
+    ),
+    "v102": ("euroc:V102_groundtruth.csv", "V102.txt", [], 0.000966, 0.000827),
+}  # fmt: skip
+
+
+@pytest.mark.public_data
+@pytest.mark.parametrize("key", sorted(PUBLIC))
+def test_public_recordings_auto_clock(
+    key: str, public_data: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """On TUM's and EuRoC's recordings the CLI finds a few ms, with a sigma of at most 2 ms."""
+    ref_name, est_name, flags, offset_s, sigma_s = PUBLIC[key]
+    prefix, sep, rest = ref_name.partition(":")
+    ref = f"{prefix}:{public_data / rest}" if sep else str(public_data / ref_name)
+    doc = _json(
+        capsys, "evaluate", ref, str(public_data / est_name), *flags, "--time-offset", "auto",
+        "--json",
+    )  # fmt: skip
+    clock = doc["time_offset"]
+    assert isinstance(clock, dict)
+    assert clock["source"] == "estimated"
+    assert clock["value_s"] == pytest.approx(offset_s, abs=2e-6)
+    assert clock["sigma_s"] == pytest.approx(sigma_s, abs=2e-6)
+    assert doc["time_offset_s"] == pytest.approx(offset_s, abs=2e-6)
