@@ -185,7 +185,7 @@ def check_offsets(
         from loceval.handeye import compare_device_offset  # noqa: PLC0415
 
         assert device is not None  # noqa: S101  (auto_device or device, checked above)
-        given = "URDF" if device_source == "urdf" else "given device offset"
+        given = "URDF or /tf_static link" if device_source == "urdf" else "given device offset"
         comparison = compare_device_offset(found, device, given_source=given)
         notes.append(comparison.message)
         return dataclasses.replace(

@@ -8,12 +8,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from loceval.errors import InputError
 from service.cli import main
 from service.evaluations import check_options
 from service.schemas import EvaluationOptions
-from tests.calibration_factory import Recording, make_recording
+from tests import bagfactory as bf
+from tests.calibration_factory import TRUE_DEVICE, Recording, make_recording
 from tests.factories import write_tum
 from tests.service._api_fixtures import assert_problem, open_api
 
@@ -191,3 +193,49 @@ def test_public_recordings_auto_clock(
     assert clock["value_s"] == pytest.approx(offset_s, abs=2e-6)
     assert clock["sigma_s"] == pytest.approx(sigma_s, abs=2e-6)
     assert doc["time_offset_s"] == pytest.approx(offset_s, abs=2e-6)
+
+
+def test_cli_bag_device_link_is_compared(
+    recording: Recording, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A bag's /tf_static device link is applied as given and agrees with the motion."""
+    ref, est = recording.reference, recording.estimate
+    assert ref.quat_xyzw is not None
+    assert est.quat_xyzw is not None
+    link = TRUE_DEVICE.inverse()  # the robot's tree mounts the rig on base_link
+    static = bf.Tf(
+        int(est.stamps_ns[0]),
+        "base_link",
+        "rig",
+        link.translation,
+        Rotation.from_matrix(np.array(link.rotation)).as_quat(),
+    )
+    records = [
+        *bf.pose_records(
+            "/mocap/rig",
+            bf.POSE,
+            bf.Poses(ref.stamps_ns, ref.positions_xyz, ref.quat_xyzw),
+            frame_id="mocap",
+            child_frame_id="rig",
+        ),
+        *bf.tf_records(
+            bf.link_transforms(
+                "odom", "base_link", bf.Poses(est.stamps_ns, est.positions_xyz, est.quat_xyzw)
+            )
+        ),
+        *bf.tf_records([static], topic="/tf_static"),
+    ]
+    bag = bf.write_bag(bf.bag_path(tmp_path, "sqlite3"), records, fmt="sqlite3")
+    doc = _json(
+        capsys, "evaluate", f"{bag}@/mocap/rig", f"{bag}@tf:odom:base_link",
+        "--device", str(bag), "--device-from", "rig", "--device-to", "base_link",
+        "--time-offset", "auto", "--json",
+    )  # fmt: skip
+    device = doc["device_offset"]
+    assert isinstance(device, dict)
+    assert device["source"] == "urdf"
+    np.testing.assert_allclose(device["translation_m"], TRUE_DEVICE.translation, atol=1e-9)
+    notes = doc["warnings"]
+    assert isinstance(notes, list)
+    message = next(w for w in notes if "differs from the URDF" in w)
+    assert "within 3 sigma, so the two agree" in message
