@@ -496,6 +496,7 @@ def test_html_has_every_plot_inline(rendered: tuple[str, bytes]) -> None:
         "rpe_time",
         "error_cdf",
         "side_views",
+        "clock_correlation",  # in the "Clocks and device offset" section, after the plots
     ]
     for number, (n, _, data) in enumerate(figures, start=1):
         assert int(n) == number
