@@ -42,6 +42,8 @@ DeviceSource = Literal["given", "urdf"]
 """Where a given device offset comes from: typed numbers, or a URDF / a bag's ``/tf_static``."""
 
 _APPLIED_NOTE = "Time offset estimated and applied:"
+_CHECK_ERRORS = (LocevalError, ValueError, ArithmeticError)
+"""What a mere check turns into a warning (numerical trouble included: never fail for it)."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -146,7 +148,7 @@ def check_offsets(
             with_scale=with_scale,
             max_pairs=ESTIMATE_MAX_PAIRS if auto_time else CHECK_MAX_PAIRS,
         )
-    except LocevalError as err:
+    except _CHECK_ERRORS as err:
         if auto_time:
             raise
         notes.append(f"The time offset could not be checked against the motion: {err}")
@@ -239,7 +241,7 @@ def _device(
             max_gap_s=max_gap_s,
             max_pairs=ESTIMATE_MAX_PAIRS if auto_device else CHECK_MAX_PAIRS,
         )
-    except LocevalError as err:
+    except _CHECK_ERRORS as err:
         if auto_device:
             raise
         notes.append(f"The device offset could not be checked against the motion: {err}")
