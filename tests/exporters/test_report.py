@@ -573,7 +573,7 @@ def test_pdf_pages_and_text(rendered: tuple[str, bytes], result: EvaluationResul
 
 
 def test_pdf_embeds_every_plot(rendered: tuple[str, bytes]) -> None:
-    """Each of the seven figures is an image in the PDF."""
+    """Each of the eight figures (seven plots and the clock check's) is an image in the PDF."""
     pypdf = pytest.importorskip("pypdf")
     _, pdf = rendered
     reader = pypdf.PdfReader(io.BytesIO(pdf))
@@ -584,7 +584,7 @@ def test_pdf_embeds_every_plot(rendered: tuple[str, bytes]) -> None:
         for ref in page["/Resources"]["/XObject"].values():
             if ref.get_object()["/Subtype"] == "/Image":
                 distinct.add(ref.idnum)
-    assert len(distinct) == 7
+    assert len(distinct) == 8
 
 
 def test_pdf_tables_are_not_split(rendered: tuple[str, bytes]) -> None:
