@@ -118,7 +118,7 @@ def test_given_urdf_is_compared_with_the_motion(rng: np.random.Generator) -> Non
     assert offsets is not None
     assert offsets.comparison is not None
     assert offsets.comparison.consistent
-    assert any("differs from the URDF by" in w for w in _notes(doc))
+    assert any("differs from the URDF or /tf_static link by" in w for w in _notes(doc))
 
 
 def test_a_wrong_urdf_is_flagged(rng: np.random.Generator) -> None:
