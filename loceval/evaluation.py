@@ -176,12 +176,9 @@ class EvaluationConfig:
         thresholds_m: distances for the "share within" figures.
         tolerance: the application tolerance for the verdict, if any.
         worst_count: how many greatest errors to list.
-        auto_time_offset: estimate the time offset from the motion and apply it (instead
-            of ``time_offset_s``, which is still the candidate the estimate starts nearest).
-        auto_device: estimate the device offset from the motion and apply it to the
-            reference (instead of ``reference_offset``).
-        reference_offset_source: where ``reference_offset`` comes from (``urdf``: a URDF
-            or a bag's ``/tf_static``; ``given``: numbers).
+        auto_time_offset: apply the time offset estimated from the motion.
+        auto_device: apply the device offset estimated from the motion to the reference.
+        reference_offset_source: ``urdf`` (a URDF or ``/tf_static``) or ``given``.
     """
 
     association: AssociationMethod = _DEFAULT_ASSOCIATION
