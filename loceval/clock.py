@@ -21,6 +21,9 @@ Three stages:
    asked). The 1-sigma is the sandwich covariance over the residuals' time correlation
    (see :func:`loceval._calibration.hac_covariance`) times a safety factor measured by
    Monte Carlo on synthetic recordings (``SIGMA_SAFETY``, 1.5).
+
+Only the position-only refinement imports scipy (on first use), so checking the clock of an
+evaluation with orientations costs no scipy start-up.
 """
 
 from __future__ import annotations
@@ -29,7 +32,6 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from loceval._calibration import (
     NS_PER_S,
@@ -514,6 +516,8 @@ def _refine_positions(
     step_s: float,
 ) -> tuple[float, float]:
     """Least squares of the positions with the alignment profiled out; (offset, sigma)."""
+    from scipy.optimize import minimize_scalar  # noqa: PLC0415  (scipy loads only when needed)
+
     sampler = PoseSampler(reference, origin_ns=int(reference.stamps_ns[0]), max_gap_ns=max_gap_ns)
     offset_ns = round(start_s * NS_PER_S)
     t_s = (estimate.stamps_ns - sampler.origin_ns + offset_ns).astype(np.float64) / NS_PER_S

@@ -27,6 +27,7 @@ from loceval.metrics import (
     rpe_pairs,
     share_within,
 )
+from loceval.offsets import DeviceSource, OffsetCheck, check_offsets
 from loceval.options import (
     DEFAULT_THRESHOLDS_M,
     check_option,
@@ -85,6 +86,9 @@ class EvaluationConfig:
         worst_count: how many greatest errors to list.
         no_ci: skip the confidence intervals and comparisons (their ``ci95`` is null).
         reference_sigma_m: the reference's own per-axis standard deviation, metres.
+        auto_time_offset: apply the time offset estimated from the motion.
+        auto_device: apply the device offset estimated from the motion to the reference.
+        reference_offset_source: ``urdf`` (a URDF or ``/tf_static``) or ``given``.
     """
 
     association: AssociationMethod = _DEFAULT_ASSOCIATION
@@ -103,6 +107,9 @@ class EvaluationConfig:
     worst_count: int = round(number_default("worst"))
     no_ci: bool = False
     reference_sigma_m: float | None = None
+    auto_time_offset: bool = False
+    auto_device: bool = False
+    reference_offset_source: DeviceSource = "given"
 
     def __post_init__(self) -> None:
         """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
@@ -121,6 +128,9 @@ class EvaluationConfig:
         check_option("worst", self.worst_count)
         if self.reference_sigma_m is not None:
             check_option("reference_sigma_m", self.reference_sigma_m, unit="metres")
+        if self.auto_device and self.reference_offset is not None:
+            msg = "Give the device offset or have it estimated from the motion, not both."
+            raise InputError(msg, option="device")
         if self.max_gap_s < 1e-9:
             msg = f"The maximum gap must be at least 1 ns, got {self.max_gap_s!r} s."
             raise InputError(msg, option="max_gap_s")
@@ -147,6 +157,8 @@ class EvaluationConfig:
             else {"distance_m": self.tolerance.distance_m, "share": self.tolerance.share},
             "no_ci": self.no_ci,
             "reference_sigma_m": self.reference_sigma_m,
+            "auto_time_offset": self.auto_time_offset,
+            "auto_device": self.auto_device,
         }
 
 
@@ -171,6 +183,7 @@ class EstimateResult:
         verdict: pass/fail against the tolerance, if one was given.
         warnings: what the user should know (dropped poses, gaps, reader notes).
         assessment: intervals, consistency and reference error (None: nothing to assess).
+        offsets: the time and device offsets given, estimated and applied.
     """
 
     estimate: Trajectory
@@ -188,6 +201,7 @@ class EstimateResult:
     verdict: Verdict | None
     warnings: tuple[str, ...]
     assessment: Assessment | None = None
+    offsets: OffsetCheck | None = None
 
     @property
     def name(self) -> str:
@@ -302,6 +316,7 @@ def evaluate(
         raise InputError(msg)
     report = progress or (lambda _stage, _fraction: None)
     ref_notes = list(reference.warnings)
+    recorded = reference
     if config.reference_offset is not None:
         reference = reference.with_body_offset(config.reference_offset)
         ref_notes.append("Device offset applied to the reference (rigid body -> sensor).")
@@ -319,7 +334,7 @@ def evaluate(
     results = []
     for k, estimate in enumerate(estimates):
         report(f"evaluating {estimate.name or k}", k / len(estimates))
-        results.append(_evaluate_one(reference, estimate, config))
+        results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
     comparisons = None
     if not config.no_ci:
         from loceval.assessment import compare_estimates  # noqa: PLC0415  (scipy)
@@ -345,16 +360,29 @@ def evaluate(
 
 
 def _evaluate_one(
-    reference: Trajectory, estimate: Trajectory, config: EvaluationConfig
+    reference: Trajectory, estimate: Trajectory, config: EvaluationConfig, *, recorded: Trajectory
 ) -> EstimateResult:
     notes = list(estimate.warnings)
+    offsets = check_offsets(
+        recorded,
+        estimate,
+        time_offset_s=None if config.auto_time_offset else config.time_offset_s,
+        device=config.reference_offset,
+        device_source=config.reference_offset_source,
+        auto_device=config.auto_device,
+        max_gap_s=config.max_gap_s,
+        with_scale=config.align is AlignMethod.SIM3,
+    )
+    notes.extend(offsets.warnings)
+    if offsets.device_applied and offsets.device is not None:
+        reference = recorded.with_body_offset(offsets.device.transform)
     matched = associate(
         reference,
         estimate,
         method=config.association,
         max_dt_ns=round(config.max_dt_s * _NS_PER_S),
         max_gap_ns=round(config.max_gap_s * _NS_PER_S),
-        offset_ns=round(config.time_offset_s * _NS_PER_S),
+        offset_ns=round(offsets.time_offset_s * _NS_PER_S),
     )
     notes.extend(_association_notes(matched, len(estimate)))
     min_gap_ns = round(config.max_gap_s * _NS_PER_S)
@@ -413,6 +441,7 @@ def _evaluate_one(
         worst=greatest_errors(ate_t, ref, count=config.worst_count, t0_ns=t0_ns),
         verdict=verdict,
         warnings=tuple(notes),
+        offsets=offsets,
         assessment=assessment,
     )
 
@@ -509,6 +538,8 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig) -> dict[str, obj
             "unmatched": matched.dropped_unmatched,
         },
         "time_offset_s": matched.offset_ns / _NS_PER_S,
+        "time_offset": None if e.offsets is None else e.offsets.time_offset_dict(),
+        "device_offset": None if e.offsets is None else e.offsets.device_offset_dict(),
         "alignment": e.alignment.to_dict(),
         "ate": {
             "translation_m": _stats(e, "ate_translation"),

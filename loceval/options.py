@@ -22,6 +22,7 @@ from typing import Final
 from loceval.errors import InputError
 
 __all__ = [
+    "AUTO",
     "DEFAULT_THRESHOLDS_M",
     "OPTIONS",
     "AlignMethod",
@@ -144,6 +145,7 @@ class OptionSpec:
         group: ``evaluation`` (the core's), ``reading`` or ``export``.
         api: the HTTP API takes it.
         cli: the CLI takes it.
+        auto: the value may also be ``auto`` (estimated from the data; :data:`AUTO`).
     """
 
     key: str
@@ -164,6 +166,7 @@ class OptionSpec:
     group: str = "evaluation"
     api: bool = True
     cli: bool = True
+    auto: bool = False
 
     @property
     def flag(self) -> str:
@@ -194,6 +197,9 @@ class OptionSpec:
 
 DEFAULT_THRESHOLDS_M: Final[tuple[float, ...]] = (0.05, 0.10, 0.15)
 """The reference-system paper's Fig. 7 thresholds, metres."""
+
+AUTO: Final = "auto"
+"""The value of an ``auto`` option that has the data decide."""
 
 _MAX_S: Final = 1e9
 """Largest span of seconds an option takes (about 31 years; more is a mistake)."""
@@ -236,12 +242,13 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "time_offset_s",
         OptionKind.NUMBER,
         0.0,
-        "added to every estimate stamp, seconds",
+        "added to every estimate stamp, seconds; auto: estimated from the motion",
         "the time offset",
         "time-offset",
-        "S",
+        "S|auto",
         minimum=-_MAX_S,
         maximum=_MAX_S,
+        auto=True,
     ),
     OptionSpec(
         "stamp",
@@ -298,10 +305,12 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "device",
         OptionKind.DEVICE,
         None,
-        "URDF (or a bag with /tf_static) giving the device offset between two links",
+        "URDF (or a bag with /tf_static) giving the device offset between two links; "
+        "auto: estimated from the motion",
         "the device file",
         "device",
-        "FILE",
+        "FILE|auto",
+        auto=True,
     ),
     OptionSpec(
         "rpe_delta",

@@ -31,6 +31,7 @@ from service.options import config_from_options, export_from_options, offset_or_
 from service.runtime import Runtime
 from service.schemas import (
     ArtifactPublic,
+    DeviceOffset,
     EvaluationCreate,
     EvaluationOptions,
     EvaluationPublic,
@@ -71,7 +72,7 @@ def create_evaluation(
     with runtime.sessions() as session:
         refs = [body.reference, *body.estimates]
         wanted = {r.dataset_id for r in refs}
-        if options.device is not None:
+        if isinstance(options.device, DeviceOffset):
             wanted.add(options.device.dataset_id)
         datasets = {
             d.id: d

@@ -42,7 +42,7 @@ from service.runner import Job, JobSource, file_provenance, run_job
 from service.runtime import JobKind, Runtime, create_huey
 from service.schedule_runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run
 from service.schedules import RUN, tick
-from service.schemas import EvaluationCreate, SourceRef
+from service.schemas import DeviceOffset, EvaluationCreate, SourceRef
 from service.settings import Settings
 from service.storage import EVALUATIONS, RUNS, BlobStore
 from service.tracking import recover, release, tracked_job
@@ -120,7 +120,7 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     reference = _source(session, runtime, project_id, request.reference, "reference")
     estimates = [_source(session, runtime, project_id, e, "estimate") for e in request.estimates]
     offset = offset_or_none(options.offset)
-    if options.device is not None:
+    if isinstance(options.device, DeviceOffset):
         dataset = _dataset(session, project_id, options.device.dataset_id)
         offset = device_offset(
             runtime.store.path(dataset.storage_path),
@@ -131,7 +131,11 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     return Job(
         reference=reference,
         estimates=estimates,
-        config=config_from_options(options, reference_offset=offset),
+        config=config_from_options(
+            options,
+            reference_offset=offset,
+            reference_offset_source="urdf" if isinstance(options.device, DeviceOffset) else "given",
+        ),
         stamp=options.stamp,
         export=export_from_options(options, evaluation_id=evaluation.id),
         formats=options.formats,

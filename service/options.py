@@ -19,7 +19,8 @@ from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, Tolerance, parse_offset
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import RPEUnit
-from loceval.options import check_option
+from loceval.offsets import DeviceSource
+from loceval.options import AUTO, check_option
 
 if TYPE_CHECKING:
     from exporters.options import ExportOptions
@@ -30,6 +31,7 @@ __all__ = [
     "config_from_options",
     "device_offset",
     "export_from_options",
+    "is_auto",
     "offset_or_none",
 ]
 
@@ -50,8 +52,12 @@ class EvaluationValues(Protocol):
         """The longest reference gap bridged, seconds."""
 
     @property
-    def time_offset_s(self) -> float:
-        """Added to the estimate's stamps, seconds."""
+    def time_offset_s(self) -> float | str:
+        """Added to the estimate's stamps, seconds; ``auto``: estimated from the motion."""
+
+    @property
+    def device(self) -> object:
+        """The device offset's source; ``auto``: estimated from the motion."""
 
     @property
     def align(self) -> str:
@@ -127,22 +133,27 @@ class ExportValues(Protocol):
 
 
 def config_from_options(
-    options: EvaluationValues, *, reference_offset: SimilarityTransform | None = None
+    options: EvaluationValues,
+    *,
+    reference_offset: SimilarityTransform | None = None,
+    reference_offset_source: DeviceSource = "given",
 ) -> EvaluationConfig:
     """Return the core's options.
 
     Args:
         options: the front door's options.
         reference_offset: the device offset, already read (see :func:`device_offset`).
+        reference_offset_source: ``urdf`` when it was read from a URDF or a bag.
 
     Raises:
         InputError: a value cannot be used (the error carries the option's key).
     """
+    auto_time = is_auto(options.time_offset_s)
     return EvaluationConfig(
         association=AssociationMethod(options.association),
         max_dt_s=options.max_dt_s,
         max_gap_s=options.max_gap_s,
-        time_offset_s=options.time_offset_s,
+        time_offset_s=0.0 if auto_time else float(options.time_offset_s),
         align=AlignMethod(options.align),
         align_first=AlignWindow.parse(options.align_first),
         calibrate_at_s=options.calibrate_at_s,
@@ -155,7 +166,15 @@ def config_from_options(
         worst_count=options.worst,
         no_ci=options.no_ci,
         reference_sigma_m=options.reference_sigma_m,
+        auto_time_offset=auto_time,
+        auto_device=is_auto(options.device),
+        reference_offset_source=reference_offset_source,
     )
+
+
+def is_auto(value: object) -> bool:
+    """Return whether an option's value is ``auto`` (estimated from the data)."""
+    return isinstance(value, str) and value == AUTO
 
 
 def export_from_options(

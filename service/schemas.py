@@ -5,11 +5,18 @@ from __future__ import annotations
 import datetime as dt
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, GetCoreSchemaHandler, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    GetCoreSchemaHandler,
+    ValidationError,
+    field_validator,
+)
 from pydantic_core import core_schema
 
 from exporters import ARTIFACTS
-from loceval.options import OptionKind, option
+from loceval.options import AUTO, OptionKind, option
 
 __all__ = [
     "ArtifactPublic",
@@ -101,10 +108,10 @@ def _field(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any b
     """Return the field of an option: default, description, bounds, lengths and example."""
     spec = option(key)
     extra: dict[str, Any] = {}
-    if spec.kind in {OptionKind.NUMBER, OptionKind.INTEGER}:
+    if spec.kind in {OptionKind.NUMBER, OptionKind.INTEGER} and not spec.auto:
         extra["le"] = spec.maximum
         extra["gt" if spec.exclusive_minimum else "ge"] = spec.minimum
-    if spec.kind is OptionKind.NUMBER:
+    if spec.kind is OptionKind.NUMBER and not spec.auto:
         extra["allow_inf_nan"] = False
     if spec.kind in {OptionKind.TEXT, OptionKind.NUMBERS, OptionKind.NAMES}:
         extra["max_length"] = spec.max_length
@@ -117,6 +124,58 @@ def _field(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any b
     default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
     return Field(default=default, description=spec.help, **extra)  # pydantic copies a list
 
+
+class _OrAuto:
+    """``Annotated`` metadata: the value is ``inner``'s, or ``"auto"`` (estimated from the data).
+
+    Validation runs ``inner`` as it is (its errors name the field, not a union branch); the
+    JSON schema is ``anyOf [inner, {"const": "auto"}]``.
+    """
+
+    def __init__(self, inner: Any, words: str) -> None:  # noqa: ANN401  (a type expression)
+        self.inner = inner
+        self.words = words
+
+    def __get_pydantic_core_schema__(
+        self, _source: type[Any], handler: GetCoreSchemaHandler
+    ) -> core_schema.CoreSchema:
+        words = self.words
+
+        def validate(value: object, inner: core_schema.ValidatorFunctionWrapHandler) -> object:
+            if value == AUTO:
+                return AUTO
+            try:
+                return inner(value)
+            except ValidationError:
+                if isinstance(value, str):
+                    msg = f"takes {words} or {AUTO!r}, got {value!r}"
+                    raise ValueError(msg) from None  # noqa: TRY004  (pydantic wants ValueError)
+                raise
+
+        def serialize(value: object, inner: core_schema.SerializerFunctionWrapHandler) -> object:
+            return AUTO if value == AUTO else inner(value)
+
+        inner_schema = handler.generate_schema(self.inner)
+        return core_schema.no_info_wrap_validator_function(
+            validate,
+            inner_schema,
+            json_schema_input_schema=core_schema.union_schema(
+                [inner_schema, core_schema.literal_schema([AUTO])]
+            ),
+            serialization=core_schema.wrap_serializer_function_ser_schema(
+                serialize, schema=inner_schema
+            ),
+        )
+
+
+_TimeOffset = Annotated[
+    float | Literal["auto"],
+    _OrAuto(Annotated[float, _bounds("time_offset_s")], "a number of seconds"),
+]
+_Device = Annotated[
+    DeviceOffset | Literal["auto"] | None,
+    _OrAuto(DeviceOffset | None, "a device file's dataset and links"),
+]
 
 _Matrix4 = Annotated[
     list[Annotated[list[_Finite], Field(min_length=4, max_length=4)]],
@@ -135,13 +194,13 @@ class EvaluationOptions(_Strict):
     association: Annotated[str, _Choices("association")] = _field("association")
     max_dt_s: float = _field("max_dt_s")
     max_gap_s: float = _field("max_gap_s")
-    time_offset_s: float = _field("time_offset_s")
+    time_offset_s: _TimeOffset = _field("time_offset_s")
     stamp: Annotated[str, _Choices("stamp")] = _field("stamp")
     align: Annotated[str, _Choices("align")] = _field("align")
     align_first: str | None = _field("align_first")
     calibrate_at_s: float | None = _field("calibrate_at_s")
     offset: str | None = _field("offset")
-    device: DeviceOffset | None = _field("device")
+    device: _Device = _field("device")
     rpe_delta: float = _field("rpe_delta")
     rpe_unit: Annotated[str, _Choices("rpe_unit")] = _field("rpe_unit")
     rpe_all_pairs: bool = _field("rpe_all_pairs")

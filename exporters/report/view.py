@@ -27,6 +27,7 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
+from exporters.report.clocks import ClockSection, build_clock_section, time_offset_text
 from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
 from loceval.alignment import AlignWindow
 from loceval.evaluation import EstimateResult, EvaluationResult
@@ -164,6 +165,7 @@ class ReportView:
         figures: the plots.
         worst: the greatest errors per estimate.
         warnings: (source, message) pairs.
+        clocks: the "Clocks and device offset" section.
     """
 
     title: str
@@ -185,6 +187,7 @@ class ReportView:
     figures: tuple[FigureView, ...]
     worst: tuple[WorstTable, ...]
     warnings: tuple[tuple[str, str], ...]
+    clocks: ClockSection
     best_mark: str = BEST_MARK
     confidence: ConfidenceView = field(default_factory=ConfidenceView)
 
@@ -464,7 +467,7 @@ def _options(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
     )
     rows = [
         ("Association", association),
-        ("Time offset", f"{cfg.time_offset_s:+g} s added to the estimates' stamps"),
+        ("Time offset", time_offset_text(cfg)),
         ("Alignment", f"{cfg.align.value} (estimated on {_window(cfg.align_first)})"),
         (
             "RPE step",
@@ -648,4 +651,7 @@ def build_report_view(
         worst=_worst(result),
         warnings=_warnings(result),
         confidence=build_confidence_view(result),
+        clocks=build_clock_section(
+            result, number=len(figures) + 1, image_format=image_format, max_points=max_points
+        ),
     )

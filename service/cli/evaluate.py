@@ -17,6 +17,7 @@ from service.options import (
     config_from_options,
     device_offset,
     export_from_options,
+    is_auto,
     offset_or_none,
 )
 from service.runner import Job, JobSource, default_name, file_provenance, run_job, unique_names
@@ -32,7 +33,9 @@ __all__ = ["run_demo", "run_evaluate"]
 def run_evaluate(args: argparse.Namespace) -> int:
     """Evaluate the estimates against the reference; print tables or JSON; write artifacts."""
     config = config_from_options(
-        cast("EvaluationValues", args), reference_offset=_device_offset(args)
+        cast("EvaluationValues", args),
+        reference_offset=_device_offset(args),
+        reference_offset_source="given" if args.device is None else "urdf",
     )
     default_format = TrajectoryFormat(args.format) if args.format else None
     if args.name and len(args.name) != len(args.estimates):
@@ -79,6 +82,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
 
 def _device_offset(args: argparse.Namespace) -> SimilarityTransform | None:
+    if is_auto(args.device):
+        if args.offset:
+            msg = "Give the device offset either with --offset or as --device auto, not both."
+            raise InputError(msg)
+        if args.device_from or args.device_to:
+            msg = "--device auto estimates the offset; --device-from and --device-to need a file."
+            raise InputError(msg)
+        return None
     if args.device is None:
         if args.device_from or args.device_to:
             msg = "--device-from and --device-to need --device FILE (a URDF or a bag)."

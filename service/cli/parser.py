@@ -18,7 +18,7 @@ from typing import Any, NoReturn
 
 from loceval import __version__
 from loceval.errors import InputError
-from loceval.options import OPTIONS, OptionKind, OptionSpec
+from loceval.options import AUTO, OPTIONS, OptionKind, OptionSpec
 
 __all__ = ["EXIT_BUG", "EXIT_INPUT", "build_parser", "names", "numbers"]
 
@@ -76,6 +76,22 @@ def names(text: str) -> list[str] | None:
     return parsed or None
 
 
+def _number_or_auto(text: str) -> float | str:
+    """Parse a number of seconds, or ``auto`` (estimated from the data)."""
+    if text.strip().lower() == AUTO:
+        return AUTO
+    try:
+        return float(text)
+    except ValueError:
+        msg = f"takes a number or {AUTO}, got {text!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+
+
+def _path_or_auto(text: str) -> Path | str:
+    """Return a file's path, or ``auto`` (estimated from the data)."""
+    return AUTO if text.strip().lower() == AUTO else Path(text)
+
+
 def _folder(text: str) -> Path:
     """Return the --out folder; an empty name is a usage error."""
     if not text.strip():
@@ -105,7 +121,7 @@ def add_option(parser: argparse.ArgumentParser, spec: OptionSpec) -> None:
     if kind is OptionKind.CHOICE:
         common.update(choices=[str(c) for c in spec.choices], metavar=None)
     elif kind is OptionKind.NUMBER:
-        common["type"] = float
+        common["type"] = _number_or_auto if spec.auto else float
     elif kind is OptionKind.INTEGER:
         common["type"] = int
     elif kind is OptionKind.NUMBERS:
@@ -113,7 +129,7 @@ def add_option(parser: argparse.ArgumentParser, spec: OptionSpec) -> None:
     elif kind is OptionKind.NAMES:
         common["type"] = names
     elif kind in {OptionKind.FILE, OptionKind.MATRIX, OptionKind.DEVICE}:
-        common["type"] = Path
+        common["type"] = _path_or_auto if spec.auto else Path
     parser.add_argument(spec.flag, **common)
     if kind is OptionKind.DEVICE:
         parser.add_argument(

@@ -498,6 +498,7 @@ def test_html_has_every_plot_inline(rendered: tuple[str, bytes]) -> None:
         "rpe_time",
         "error_cdf",
         "side_views",
+        "clock_correlation",  # in the "Clocks and device offset" section, after the plots
     ]
     for number, (n, _, data) in enumerate(figures, start=1):
         assert int(n) == number
@@ -574,7 +575,7 @@ def test_pdf_pages_and_text(rendered: tuple[str, bytes], result: EvaluationResul
 
 
 def test_pdf_embeds_every_plot(rendered: tuple[str, bytes]) -> None:
-    """Each of the seven figures is an image in the PDF."""
+    """Each of the eight figures (seven plots and the clock check's) is an image in the PDF."""
     pypdf = pytest.importorskip("pypdf")
     _, pdf = rendered
     reader = pypdf.PdfReader(io.BytesIO(pdf))
@@ -585,7 +586,7 @@ def test_pdf_embeds_every_plot(rendered: tuple[str, bytes]) -> None:
         for ref in page["/Resources"]["/XObject"].values():
             if ref.get_object()["/Subtype"] == "/Image":
                 distinct.add(ref.idnum)
-    assert len(distinct) == 7
+    assert len(distinct) == 8
 
 
 def test_pdf_tables_are_not_split(rendered: tuple[str, bytes]) -> None:

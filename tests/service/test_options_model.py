@@ -39,8 +39,12 @@ def _api_properties() -> dict[str, Any]:
 
 
 def _scalar(schema: dict[str, Any]) -> dict[str, Any]:
-    """Return the non-null branch of a nullable property (``anyOf [X, null]``)."""
-    branches = [s for s in schema.get("anyOf", [schema]) if s.get("type") != "null"]
+    """Return the non-null, non-``auto`` branch of a property (``anyOf [X, "auto", null]``)."""
+    branches = [
+        s
+        for s in schema.get("anyOf", [schema])
+        if s.get("type") != "null" and s.get("const") != "auto"
+    ]
     assert len(branches) == 1, schema
     return dict(branches[0])
 
@@ -74,6 +78,8 @@ def test_api_schema_is_the_table() -> None:
         prop = properties[spec.key]
         assert prop.get("default") == _json_default(spec), spec.key
         assert prop["description"] == spec.help, spec.key
+        auto_branch = {"const": "auto", "type": "string"} in prop.get("anyOf", [])
+        assert auto_branch == spec.auto, spec.key
         value = _scalar(prop)
         if spec.kind is OptionKind.NUMBERS:
             value = value["items"]
