@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import re
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -33,6 +34,9 @@ from loceval.options import (
     number_default,
 )
 from loceval.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from loceval.ranging import RangingResult
 
 __all__ = [
     "EstimateResult",
@@ -175,6 +179,8 @@ class EvaluationConfig:
         thresholds_m: distances for the "share within" figures.
         tolerance: the application tolerance for the verdict, if any.
         worst_count: how many greatest errors to list.
+        planar: measure position errors in x-y only (each matched estimate pose takes
+            the reference's height after alignment), for 2D systems.
     """
 
     association: AssociationMethod = _DEFAULT_ASSOCIATION
@@ -191,6 +197,7 @@ class EvaluationConfig:
     thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
     tolerance: Tolerance | None = None
     worst_count: int = round(number_default("worst"))
+    planar: bool = False
 
     def __post_init__(self) -> None:
         """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
@@ -231,6 +238,7 @@ class EvaluationConfig:
             "tolerance": None
             if self.tolerance is None
             else {"distance_m": self.tolerance.distance_m, "share": self.tolerance.share},
+            "planar": self.planar,
         }
 
 
@@ -284,7 +292,11 @@ class EstimateResult:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class EvaluationResult:
-    """A whole evaluation: one reference, one or more estimates, and how it was made."""
+    """A whole evaluation: one reference, one or more estimates, and how it was made.
+
+    ``ranging`` holds the ranging evaluation when the estimates were positioned from radio
+    ranges (:mod:`loceval.radio`); its figures are the document's ``ranging`` object.
+    """
 
     reference: Trajectory
     estimates: tuple[EstimateResult, ...]
@@ -293,10 +305,19 @@ class EvaluationResult:
     created_at: str
     loceval_version: str = __version__
     inputs: tuple[Mapping[str, object], ...] = ()
+    ranging: RangingResult | None = None
 
     def to_dict(self) -> dict[str, object]:
         """Return the CLI's ``--json`` document (also the service's result schema)."""
         ref = self.reference
+        ranging = {}
+        if self.ranging is not None:
+            dropped = {"outside": self.ranging.dropped_outside, "gap": self.ranging.dropped_gap}
+            ranging["ranging"] = {
+                **self.ranging.to_dict(),
+                "dropped": dropped,
+                "warnings": list(self.ranging.warnings),
+            }
         return {
             "loceval_version": self.loceval_version,
             "created_at": self.created_at,
@@ -319,6 +340,7 @@ class EvaluationResult:
                 ],
                 "warnings": list(self.reference_warnings),
             },
+            **ranging,
             "estimates": [_estimate_dict(e, self.config) for e in self.estimates],
         }
 
@@ -437,6 +459,10 @@ def _evaluate_one(
     notes.extend(alignment.warnings)
     aligned = matched.estimate.transformed(alignment.transform)
     ref = matched.reference
+    if config.planar:  # x-y only: the estimate takes the reference's heights
+        planar_xyz = aligned.positions_xyz.copy()
+        planar_xyz[:, 2] = ref.positions_xyz[:, 2]
+        aligned = replace(aligned, positions_xyz=planar_xyz)
     ate_t, ate_r = compute_ate(ref, aligned)
     if ate_r is None:
         side = "reference" if ref.quat_xyzw is None else "estimate"

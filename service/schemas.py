@@ -153,6 +153,7 @@ class EvaluationOptions(_Strict):
     site_matrix: _Matrix4 | None = _field("site_matrix")
     simplify_m: float = _field("simplify_m")
     formats: list[_Artifact] | None = _field("formats")
+    planar: bool = _field("planar")
 
     @field_validator("formats")
     @classmethod
