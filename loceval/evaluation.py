@@ -295,7 +295,8 @@ class EvaluationResult:
     """A whole evaluation: one reference, one or more estimates, and how it was made.
 
     ``ranging`` holds the ranging evaluation when the estimates were positioned from radio
-    ranges (:mod:`loceval.radio`); its figures are the document's ``ranging`` object.
+    ranges (:mod:`loceval.radio`); its figures, with ``ranging_options``, are the
+    document's ``ranging`` object.
     """
 
     reference: Trajectory
@@ -306,6 +307,7 @@ class EvaluationResult:
     loceval_version: str = __version__
     inputs: tuple[Mapping[str, object], ...] = ()
     ranging: RangingResult | None = None
+    ranging_options: Mapping[str, object] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, object]:
         """Return the CLI's ``--json`` document (also the service's result schema)."""
@@ -315,6 +317,7 @@ class EvaluationResult:
             dropped = {"outside": self.ranging.dropped_outside, "gap": self.ranging.dropped_gap}
             ranging["ranging"] = {
                 **self.ranging.to_dict(),
+                "options": dict(self.ranging_options),
                 "dropped": dropped,
                 "warnings": list(self.ranging.warnings),
             }

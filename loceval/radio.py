@@ -185,4 +185,12 @@ def evaluate_radio(
         report(stage, 0.5 + 0.5 * fraction)
 
     result = evaluate(reference, estimates, config, inputs=inputs, progress=evaluating)
-    return replace(result, ranging=ranging_result)
+    options = {**ranging.to_dict(), "tag_height_m": _tag_height_m(estimates, ranging)}
+    return replace(result, ranging=ranging_result, ranging_options=options)
+
+
+def _tag_height_m(estimates: Sequence[Trajectory], ranging: RangingConfig) -> float | None:
+    """Return the 2D tag height used (the estimates' z), None in 3D."""
+    if ranging.dims == 3 or not estimates:
+        return None
+    return float(estimates[0].positions_xyz[0, 2])
