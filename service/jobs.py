@@ -36,8 +36,8 @@ from service.options import (
     config_from_options,
     device_offset,
     export_from_options,
-    ranging_from_options,
     offset_or_none,
+    ranging_from_options,
 )
 from service.runner import Job, JobSource, RangingSources, file_provenance, run_job
 from service.runtime import JobKind, Runtime, create_huey

@@ -3,9 +3,9 @@
 :func:`inspect` describes every input kind loceval reads with one typed result,
 :class:`Inspection`: trajectory files (TUM, EuRoC, KITTI, CSV), OptiTrack Motive takes (a
 source per rigid body), ROS 1 bags, ROS 2 bags (sqlite3 or MCAP, folder or file, or zipped),
-URDF files (links and joints) and the anchors and ranges tables of radio systems. The command line prints it
-(:func:`render_inspection_text`, or ``to_dict()`` as JSON) and the service stores it with an
-upload, so both describe a file the same way.
+URDF files (links and joints) and the anchors and ranges tables of radio systems. The command
+line prints it (:func:`render_inspection_text`, or ``to_dict()`` as JSON) and the service
+stores it with an upload, so both describe a file the same way.
 
 Each input kind has an entry in :data:`INSPECTORS` whose module is imported on first use,
 so importing this package loads neither rosbags nor the readers of other kinds.

@@ -38,8 +38,8 @@ from loceval.trajectory import MAX_COORDINATE_M
 __all__ = [
     "MIN_ANCHORS",
     "Anchors",
-    "RangesOverview",
     "Ranges",
+    "RangesOverview",
     "read_anchors",
     "read_ranges",
     "read_ranges_overview",

@@ -13,8 +13,8 @@ from tests import bagfactory as bf
 from tests.factories import write_tum
 from tests.radio_factory import (
     make_anchors,
-    make_reference,
     make_ranges,
+    make_reference,
     write_anchors_csv,
     write_ranges_csv,
 )

@@ -13,6 +13,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -22,8 +23,8 @@ from service.cli import main
 from tests.factories import write_tum
 from tests.radio_factory import (
     make_anchors,
-    make_reference,
     make_ranges,
+    make_reference,
     write_anchors_csv,
     write_ranges_csv,
 )
@@ -42,12 +43,12 @@ def _inputs(
     return reference, anchors, ranges
 
 
-def _run_json(capsys: pytest.CaptureFixture[str], *argv: str | Path) -> dict[str, object]:
+def _run_json(capsys: pytest.CaptureFixture[str], *argv: str | Path) -> dict[str, Any]:
     """Run ``loceval ranging ARGV --json``; assert exit 0 and return the document."""
     code = main(["ranging", *map(str, argv), "--json"])
     out, err = capsys.readouterr()
     assert code == 0, err
-    document: dict[str, object] = json.loads(out)
+    document: dict[str, Any] = json.loads(out)
     return document
 
 
@@ -70,7 +71,6 @@ def test_json_ranging_and_estimates(
     ranges = write_ranges_csv(tmp_path / "ranges.csv", recording.ranges)
     doc = _run_json(capsys, reference, "--anchors", anchors, "--ranges", ranges)
     ranging = doc["ranging"]
-    assert isinstance(ranging, dict)
     assert ranging["outlier_threshold_m"] == 1.0
     assert ranging["unused_anchors"] == ["FAR"]
     assert [a["id"] for a in ranging["anchors"]] == [f"A{k:02d}" for k in range(1, 13)]
@@ -86,11 +86,10 @@ def test_json_ranging_and_estimates(
     assert ranging["options"]["dims"] == 2
     assert ranging["options"]["tag_height_m"] == pytest.approx(1.2)  # the walk's height
     estimates = doc["estimates"]
-    assert isinstance(estimates, list)
     assert [e["name"] for e in estimates] == ["nlls", "minmax"]
-    assert doc["options"]["align"] == "none"  # type: ignore[index]
-    assert doc["options"]["planar"] is True  # type: ignore[index]
-    roles = [i["role"] for i in doc["inputs"]]  # type: ignore[union-attr]
+    assert doc["options"]["align"] == "none"
+    assert doc["options"]["planar"] is True
+    roles = [i["role"] for i in doc["inputs"]]
     assert roles == ["reference", "anchors", "ranges"]
 
 
@@ -106,7 +105,7 @@ def test_clean_ranges_position_the_walk(
             capsys, reference, "--anchors", anchors, "--ranges", ranges, "--dims", dims,
             "--solve", "nlls",
         )  # fmt: skip
-        (nlls,) = doc["estimates"]  # type: ignore[misc]
+        (nlls,) = doc["estimates"]
         assert nlls["name"] == "nlls"
         assert nlls["ate"]["translation_m"]["max"] < 0.01, dims
         assert nlls["dropped"] == {"outside": 0, "gap": 0, "unmatched": 0}
@@ -148,8 +147,8 @@ def test_tag_offset_moves_the_true_distances(
     argv = (reference, "--anchors", anchors, "--ranges", ranges)
     shifted = _run_json(capsys, *argv, "--tag-offset", "0.5 0 0.3")
     plain = _run_json(capsys, *argv)
-    assert shifted["ranging"]["overall"]["bias_m"] == pytest.approx(0.1, abs=0.005)  # type: ignore[index]
-    assert plain["ranging"]["overall"]["std_m"] > 0.1  # type: ignore[index]
+    assert shifted["ranging"]["overall"]["bias_m"] == pytest.approx(0.1, abs=0.005)
+    assert plain["ranging"]["overall"]["std_m"] > 0.1
 
 
 def test_bad_rows_are_dropped_and_counted(
@@ -162,7 +161,7 @@ def test_bad_rows_are_dropped_and_counted(
     bad = [f"{stamp},ZZ9,3.0", f"{stamp},A01,-1.0", f"{stamp},A02,nan"]
     ranges.write_text("\n".join([*lines, *bad]) + "\n")
     doc = _run_json(capsys, reference, "--anchors", anchors, "--ranges", ranges)
-    warnings = " ".join(doc["ranging"]["warnings"])  # type: ignore[index]
+    warnings = " ".join(doc["ranging"]["warnings"])
     assert "3 of " in warnings
     assert "1 whose range is NaN" in warnings
     assert "1 with a negative range" in warnings
@@ -175,7 +174,7 @@ def test_too_few_anchors_skip_epochs(
     """With anchors heard only within 6 m, epochs with fewer than 4 anchors are skipped (3D)."""
     reference, anchors, ranges = _inputs(tmp_path, rng, max_range_m=6.0)
     doc = _run_json(capsys, reference, "--anchors", anchors, "--ranges", ranges, "--dims", "3")
-    for estimate in doc["estimates"]:  # type: ignore[attr-defined]
+    for estimate in doc["estimates"]:
         skipped = [w for w in estimate["warnings"] if "skipped" in w]
         assert len(skipped) == 1, estimate["warnings"]
         assert "fewer than 4 anchors heard (3D positioning needs 4)" in skipped[0]
@@ -242,4 +241,3 @@ def test_bad_input_contract_as_a_subprocess(tmp_path: Path, rng: np.random.Gener
     lines = [line for line in proc.stderr.splitlines() if "error:" in line]
     assert len(lines) == 1, proc.stderr
     assert "missing.csv" in lines[0]
-

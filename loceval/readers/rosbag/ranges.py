@@ -55,10 +55,18 @@ def read_range_topic(
     """
     with open_bag(path) as bag:
         topics = bag.reader.topics
-        names = [t for t in topics if t == topic or t.lstrip("/") == topic.lstrip("/")]
+        names = (
+            [topic]
+            if topic in topics
+            else [t for t in topics if t.lstrip("/") == topic.lstrip("/")]
+        )
         where = f"{bag.label}@{topic}"
         if len(names) != 1:
-            ranged = [t for t, info in topics.items() if normalize_msgtype(info.msgtype) == RANGE_MSGTYPE]
+            ranged = [
+                t
+                for t, info in topics.items()
+                if normalize_msgtype(info.msgtype or "") == RANGE_MSGTYPE
+            ]
             msg = (
                 f"Topic {topic!r} is not in bag {bag.label!r}; its {RANGE_MSGTYPE} topics: "
                 f"{listing(sorted(ranged)) or 'none'}; name one of them."

@@ -16,9 +16,9 @@ from tests import bagfactory as bf
 from tests.radio_factory import make_anchors, make_ranges, write_anchors_csv, write_ranges_csv
 
 
-def _range_records(rng: np.random.Generator, *, extra: list[bf.Record] | None = None) -> tuple[
-    list[bf.Record], np.ndarray, np.ndarray, np.ndarray
-]:
+def _range_records(
+    rng: np.random.Generator, *, extra: list[bf.Record] | None = None
+) -> tuple[list[bf.Record], np.ndarray, np.ndarray, np.ndarray]:
     """Return Range messages of the generated ranges (received 1 ms after their stamp)."""
     ranges = make_ranges(rng, end_s=5.0).ranges
     ids = np.array(ranges.anchors.ids)[ranges.anchor_index]
@@ -76,7 +76,9 @@ def test_wrong_topic_and_type_are_errors(tmp_path: Path, rng: np.random.Generato
 def test_no_usable_message_is_an_error(tmp_path: Path) -> None:
     """Only messages of unknown anchors: an error naming the frame ids."""
     t = 1_700_000_001_000_000_000
-    records = [bf.Record("/uwb/range", bf.RANGE, t + k, (t + k, 2.0), frame_id="tag") for k in range(3)]
+    records = [
+        bf.Record("/uwb/range", bf.RANGE, t + k, (t + k, 2.0), frame_id="tag") for k in range(3)
+    ]
     path = bf.write_bag(bf.bag_path(tmp_path, "rosbag1"), records, fmt="rosbag1")
     with pytest.raises(ReaderError, match=r"none of the 3 range messages is usable .*'tag'"):
         read_range_topic(path, "/uwb/range", make_anchors())
