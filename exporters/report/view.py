@@ -27,6 +27,7 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
+from exporters.report.ranging import RangingView, build_ranging_view
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.metrics import ErrorSeries, ErrorStats
 
@@ -181,6 +182,7 @@ class ReportView:
     worst: tuple[WorstTable, ...]
     warnings: tuple[tuple[str, str], ...]
     best_mark: str = BEST_MARK
+    ranging: RangingView | None = None  # the ranging section (exporters.report.ranging)
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -589,4 +591,5 @@ def build_report_view(
         figures=figures,
         worst=_worst(result),
         warnings=_warnings(result),
+        ranging=build_ranging_view(result),
     )
