@@ -21,6 +21,7 @@ from typing import Final
 
 import numpy as np
 
+from loceval.alignment import AlignMethod
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, ProgressCallback, evaluate
 from loceval.geometry import SimilarityTransform
@@ -139,7 +140,8 @@ def evaluate_radio(
         ranges: the measurements and their anchors.
         ranging: the ranging and positioning options.
         config: the evaluation options of the solvers' estimates (``planar`` is set in 2D;
-            the tag offset becomes the reference offset).
+            the tag offset becomes the reference offset); None: the defaults with alignment
+            ``none``, since the anchors are in building coordinates already.
         inputs: provenance of the input files for the result.
         progress: called with (stage, fraction done).
 
@@ -151,7 +153,7 @@ def evaluate_radio(
             or for a reference without orientations, or no epoch has enough anchors.
         AssociationError: no range, or no epoch, falls within the reference's coverage.
     """
-    config = config or EvaluationConfig()
+    config = config or EvaluationConfig(align=AlignMethod.NONE)
     report = progress or (lambda _stage, _fraction: None)
     offset = ranging.tag_offset_xyz
     if offset is not None and config.reference_offset is not None:
