@@ -312,15 +312,9 @@ class EvaluationResult:
     def to_dict(self) -> dict[str, object]:
         """Return the CLI's ``--json`` document (also the service's result schema)."""
         ref = self.reference
-        ranging = {}
-        if self.ranging is not None:
-            dropped = {"outside": self.ranging.dropped_outside, "gap": self.ranging.dropped_gap}
-            ranging["ranging"] = {
-                **self.ranging.to_dict(),
-                "options": dict(self.ranging_options),
-                "dropped": dropped,
-                "warnings": list(self.ranging.warnings),
-            }
+        ranging = (
+            {} if self.ranging is None else {"ranging": self.ranging.document(self.ranging_options)}
+        )
         return {
             "loceval_version": self.loceval_version,
             "created_at": self.created_at,
