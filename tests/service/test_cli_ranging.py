@@ -20,6 +20,7 @@ import pytest
 
 import service
 from service.cli import main
+from tests import bagfactory as bf
 from tests.factories import write_tum
 from tests.radio_factory import (
     make_anchors,
@@ -241,3 +242,22 @@ def test_bad_input_contract_as_a_subprocess(tmp_path: Path, rng: np.random.Gener
     lines = [line for line in proc.stderr.splitlines() if "error:" in line]
     assert len(lines) == 1, proc.stderr
     assert "missing.csv" in lines[0]
+
+
+def test_ranges_from_a_bag_topic(
+    tmp_path: Path, rng: np.random.Generator, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--ranges BAG@TOPIC reads sensor_msgs/msg/Range; a bag without a topic is refused."""
+    reference, anchors, _ = _inputs(tmp_path, rng)
+    ranges = make_ranges(rng, end_s=10.0).ranges
+    ids = np.array(ranges.anchors.ids)[ranges.anchor_index]
+    records = [
+        bf.Record("/uwb/range", bf.RANGE, int(t), (int(t), float(r)), frame_id=str(i))
+        for t, r, i in zip(ranges.stamps_ns, ranges.range_m, ids, strict=True)
+    ]
+    bag = bf.write_bag(tmp_path / "uwb.mcap", records, fmt="mcap")
+    doc = _run_json(capsys, reference, "--anchors", anchors, "--ranges", f"{bag}@/uwb/range")
+    assert doc["ranging"]["overall"]["n"] == len(ranges)
+    assert doc["inputs"][2]["selector"] == "/uwb/range"
+    line = _error(capsys, reference, "--anchors", anchors, "--ranges", bag)
+    assert "name the topic of its sensor_msgs/msg/Range messages" in line
