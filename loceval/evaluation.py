@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from typing import TYPE_CHECKING
 
@@ -41,6 +41,9 @@ if TYPE_CHECKING:
     from loceval.assessment import Assessment
     from loceval.comparison import Comparison
     from loceval.uncertainty import IntervalStats
+
+if TYPE_CHECKING:
+    from loceval.ranging import RangingResult
 
 __all__ = [
     "EstimateResult",
@@ -89,6 +92,8 @@ class EvaluationConfig:
         auto_time_offset: apply the time offset estimated from the motion.
         auto_device: apply the device offset estimated from the motion to the reference.
         reference_offset_source: ``urdf`` (a URDF or ``/tf_static``) or ``given``.
+        planar: measure position errors in x-y only (each matched estimate pose takes
+            the reference's height after alignment), for 2D systems.
     """
 
     association: AssociationMethod = _DEFAULT_ASSOCIATION
@@ -110,6 +115,7 @@ class EvaluationConfig:
     auto_time_offset: bool = False
     auto_device: bool = False
     reference_offset_source: DeviceSource = "given"
+    planar: bool = False
 
     def __post_init__(self) -> None:
         """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
@@ -159,6 +165,7 @@ class EvaluationConfig:
             "reference_sigma_m": self.reference_sigma_m,
             "auto_time_offset": self.auto_time_offset,
             "auto_device": self.auto_device,
+            "planar": self.planar,
         }
 
 
@@ -216,7 +223,12 @@ class EstimateResult:
 
 @dataclass(frozen=True, slots=True, eq=False)
 class EvaluationResult:
-    """A whole evaluation: one reference, one or more estimates, and how it was made."""
+    """A whole evaluation: one reference, one or more estimates, and how it was made.
+
+    ``ranging`` holds the ranging evaluation when the estimates were positioned from radio
+    ranges (:mod:`loceval.radio`); its figures, with ``ranging_options``, are the
+    document's ``ranging`` object.
+    """
 
     reference: Trajectory
     estimates: tuple[EstimateResult, ...]
@@ -227,10 +239,15 @@ class EvaluationResult:
     inputs: tuple[Mapping[str, object], ...] = ()
     comparisons: tuple[Comparison, ...] | None = None
     """Every two estimates' ATE and RPE RMSE compared; None when intervals are off."""
+    ranging: RangingResult | None = None
+    ranging_options: Mapping[str, object] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, object]:
         """Return the CLI's ``--json`` document (also the service's result schema)."""
         ref = self.reference
+        ranging = (
+            {} if self.ranging is None else {"ranging": self.ranging.document(self.ranging_options)}
+        )
         return {
             "loceval_version": self.loceval_version,
             "created_at": self.created_at,
@@ -253,6 +270,7 @@ class EvaluationResult:
                 ],
                 "warnings": list(self.reference_warnings),
             },
+            **ranging,
             "estimates": [_estimate_dict(e, self.config) for e in self.estimates],
             "comparisons": None
             if self.comparisons is None
@@ -408,6 +426,10 @@ def _evaluate_one(
     notes.extend(alignment.warnings)
     aligned = matched.estimate.transformed(alignment.transform)
     ref = matched.reference
+    if config.planar:  # x-y only: the estimate takes the reference's heights
+        planar_xyz = aligned.positions_xyz.copy()
+        planar_xyz[:, 2] = ref.positions_xyz[:, 2]
+        aligned = replace(aligned, positions_xyz=planar_xyz)
     ate_t, ate_r = compute_ate(ref, aligned)
     if ate_r is None:
         side = "reference" if ref.quat_xyzw is None else "estimate"

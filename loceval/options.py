@@ -117,7 +117,7 @@ class OptionKind(StrEnum):
     """A local file (CLI only)."""
 
 
-OptionValue = float | int | bool | str | tuple[float, ...] | None
+OptionValue = float | int | bool | str | tuple[float, ...] | tuple[str, ...] | None
 """The type of a default."""
 
 
@@ -142,7 +142,8 @@ class OptionSpec:
         min_length: the fewest items of a list.
         pattern: a regular expression the text must match (the API checks it).
         example: an example value for the API's documentation.
-        group: ``evaluation`` (the core's), ``reading`` or ``export``.
+        group: ``evaluation`` (the core's), ``reading``, ``export`` or ``ranging`` (only
+            ``loceval ranging`` and the ranging request take these).
         api: the HTTP API takes it.
         cli: the CLI takes it.
         auto: the value may also be ``auto`` (estimated from the data; :data:`AUTO`).
@@ -487,6 +488,100 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=0.0,
         maximum=10.0,
         example="0.0002",
+    ),
+    OptionSpec(
+        "planar",
+        OptionKind.SWITCH,
+        False,  # noqa: FBT003  (a default, not a flag argument)
+        "measure position errors in x-y only (height differences count as zero)",
+        "the x-y only measurement",
+        "planar",
+    ),
+    OptionSpec(
+        "solve",
+        OptionKind.NAMES,
+        ("nlls", "minmax"),
+        "ranging: the positioning algorithms run on the ranges (nlls, minmax)",
+        "the positioning algorithms",
+        "solve",
+        "NAME,...",
+        choices=("nlls", "minmax"),
+        min_length=1,
+        max_length=2,
+        group="ranging",
+    ),
+    OptionSpec(
+        "dims",
+        OptionKind.CHOICE,
+        "2",
+        "ranging: position in 2D (tag at a fixed height) or 3D",
+        "the number of dimensions",
+        "dims",
+        choices=("2", "3"),
+        group="ranging",
+    ),
+    OptionSpec(
+        "epoch_s",
+        OptionKind.NUMBER,
+        0.1,
+        "ranging: the length of a positioning epoch, seconds",
+        "the epoch length",
+        "epoch",
+        "S",
+        minimum=0.0,
+        maximum=3600.0,
+        exclusive_minimum=True,
+        group="ranging",
+    ),
+    OptionSpec(
+        "tag_height_m",
+        OptionKind.NUMBER,
+        None,
+        "ranging, 2D: the tag's fixed height, metres (default: the reference's median)",
+        "the tag height",
+        "tag-height",
+        "H",
+        minimum=-1e4,
+        maximum=1e4,
+        group="ranging",
+    ),
+    OptionSpec(
+        "tag_offset_xyz",
+        OptionKind.TEXT,
+        None,
+        'ranging: the tag in the reference body frame "x y z", metres',
+        "the tag offset",
+        "tag-offset",
+        '"x y z"',
+        max_length=100,
+        example="0 0 0.3",
+        group="ranging",
+    ),
+    OptionSpec(
+        "outlier_threshold_m",
+        OptionKind.NUMBER,
+        1.0,
+        "ranging: the |error| beyond which a range is an outlier, metres",
+        "the outlier threshold",
+        "outlier-threshold",
+        "M",
+        minimum=0.0,
+        maximum=1e4,
+        exclusive_minimum=True,
+        group="ranging",
+    ),
+    OptionSpec(
+        "distance_bin_m",
+        OptionKind.NUMBER,
+        2.0,
+        "ranging: the width of the error-versus-distance bins, metres",
+        "the distance bin width",
+        "distance-bin",
+        "M",
+        minimum=0.0,
+        maximum=1e4,
+        exclusive_minimum=True,
+        group="ranging",
     ),
 )
 """Every option, in the order ``--help`` and the API schema list them."""

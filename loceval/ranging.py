@@ -23,6 +23,7 @@ measurements) that a team can use to calibrate. Everything is computed with
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Final
 
@@ -199,6 +200,19 @@ class RangingResult:
             "anchors": [a.to_dict() for a in self.anchors],
             "overall": self.overall.to_dict(),
             "unused_anchors": list(self.unused_anchors),
+        }
+
+    def document(self, options: Mapping[str, object]) -> dict[str, object]:
+        """Return the result document's ``ranging`` object.
+
+        The contract's object, then the ranging ``options`` it ran with, the dropped ranges
+        and the warnings.
+        """
+        return {
+            **self.to_dict(),
+            "options": dict(options),
+            "dropped": {"outside": self.dropped_outside, "gap": self.dropped_gap},
+            "warnings": list(self.warnings),
         }
 
 

@@ -27,7 +27,12 @@ from service.errors import (
     UploadError,
     problem_for,
 )
-from service.options import config_from_options, export_from_options, offset_or_none
+from service.options import (
+    config_from_options,
+    export_from_options,
+    offset_or_none,
+    ranging_from_options,
+)
 from service.runtime import Runtime
 from service.schemas import (
     ArtifactPublic,
@@ -36,6 +41,7 @@ from service.schemas import (
     EvaluationOptions,
     EvaluationPublic,
     ProgressPublic,
+    RangingCreate,
     SourceRef,
 )
 from service.uploads import ReceivedForm
@@ -45,6 +51,7 @@ __all__ = [
     "artifact_path",
     "check_options",
     "create_evaluation",
+    "create_ranging",
     "evaluate_form",
     "evaluation_public",
     "list_evaluations",
@@ -96,6 +103,108 @@ def create_evaluation(
         )
         session.add(evaluation)
         session.commit()
+    return _queued(runtime, project_id, evaluation, enqueue=enqueue)
+
+
+def create_ranging(runtime: Runtime, project_id: str, body: RangingCreate) -> Evaluation:
+    """Check a new ranging evaluation, record it as an evaluation and queue its job.
+
+    The record is an evaluation whose request holds the ranging body and, as its estimates,
+    the solvers' outputs (named ``nlls`` / ``minmax``, from the ranges dataset); the job
+    runs :func:`loceval.radio.evaluate_radio` (see :func:`service.jobs.execute_evaluation`).
+
+    Raises:
+        NotFoundError: a dataset is not in the project.
+        InputError: a dataset is of the wrong kind, a selector or option cannot be used.
+        ServiceUnavailableError: the queue cannot be reached (the evaluation is kept, failed).
+    """
+    options = body.options
+    ranges = body.ranges_ref
+    with runtime.sessions() as session:
+        wanted = {body.reference.dataset_id, body.anchors, ranges.dataset_id}
+        datasets = {
+            d.id: d
+            for d in session.scalars(
+                select(Dataset).where(Dataset.project_id == project_id, Dataset.id.in_(wanted))
+            )
+        }
+        for dataset_id in sorted(wanted - set(datasets)):
+            msg = f"No dataset {dataset_id!r} in this project; upload it first (POST /datasets)."
+            raise NotFoundError(msg)
+        _check_selector(datasets[body.reference.dataset_id], body.reference, "reference")
+        _check_radio(datasets[body.anchors], datasets[ranges.dataset_id], ranges)
+        check_ranging_options(options)
+        request = body.model_dump(mode="json")
+        request["estimates"] = [
+            {"dataset_id": ranges.dataset_id, "selector": ranges.selector, "name": solver}
+            for solver in options.solve
+        ]
+        evaluation = Evaluation(
+            project_id=project_id,
+            request=request,
+            dataset_ids=sorted(wanted),
+            created_at=utcnow(),
+        )
+        session.add(evaluation)
+        session.commit()
+    return _queued(runtime, project_id, evaluation, enqueue=True)
+
+
+def check_ranging_options(options: EvaluationOptions) -> None:
+    """Fail now on ranging option values the job could not use.
+
+    Raises:
+        InputError: a device offset is given, or an option's value cannot be used.
+    """
+    from service.schemas import RangingOptions  # noqa: PLC0415
+
+    if options.offset or options.device is not None:
+        msg = (
+            "A ranging evaluation takes no device offset; give the tag's position in the "
+            "reference body frame as the tag offset."
+        )
+        raise InputError(msg, option="tag_offset_xyz")
+    check_options(options)
+    if isinstance(options, RangingOptions):
+        ranging_from_options(options)
+
+
+def _check_radio(anchors: Dataset, ranges: Dataset, ref: SourceRef) -> None:
+    if anchors.inspection.get("format") != "anchors":
+        msg = (
+            f"The anchors dataset {anchors.name!r} is a {anchors.kind} file, not an anchors "
+            "table; upload a CSV with the header id,x,y,z."
+        )
+        raise InputError(msg)
+    fmt = ranges.inspection.get("format")
+    if fmt == "ranges":
+        if ref.selector is not None:
+            msg = f"The ranges dataset {ranges.name!r} is a table; leave its selector empty."
+            raise InputError(msg)
+        return
+    if fmt != "bag":
+        msg = (
+            f"The ranges dataset {ranges.name!r} is a {ranges.kind} file, not ranges; upload "
+            "a CSV with the header t,anchor_id,range_m or a bag with sensor_msgs/msg/Range."
+        )
+        raise InputError(msg)
+    topics = [
+        t.get("name")
+        for t in ranges.inspection.get("topics", [])
+        if t.get("msgtype") == "sensor_msgs/msg/Range"
+    ]
+    if ref.selector not in topics:
+        listed = ", ".join(str(t) for t in topics) or "none"
+        msg = (
+            f"The ranges dataset {ranges.name!r} is a bag; choose its sensor_msgs/msg/Range "
+            f"topic as selector ({listed})."
+        )
+        raise InputError(msg)
+
+
+def _queued(
+    runtime: Runtime, project_id: str, evaluation: Evaluation, *, enqueue: bool
+) -> Evaluation:
     if not enqueue:
         return evaluation
     try:
@@ -136,6 +245,9 @@ def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:
     label = f"The {role} dataset {dataset.name!r}"
     if fmt == "urdf":
         msg = f"{label} is a URDF, not a trajectory; use it as the device offset."
+        raise InputError(msg)
+    if fmt in {"anchors", "ranges"}:
+        msg = f"{label} is a radio {fmt} table, not a trajectory; use it in POST /ranging."
         raise InputError(msg)
     sources = inspection.get("sources", [])
     selectors = [s.get("selector") for s in sources]

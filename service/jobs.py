@@ -37,12 +37,13 @@ from service.options import (
     device_offset,
     export_from_options,
     offset_or_none,
+    ranging_from_options,
 )
-from service.runner import Job, JobSource, file_provenance, run_job
+from service.runner import Job, JobSource, RangingSources, file_provenance, run_job
 from service.runtime import JobKind, Runtime, create_huey
 from service.schedule_runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run
 from service.schedules import RUN, tick
-from service.schemas import DeviceOffset, EvaluationCreate, SourceRef
+from service.schemas import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
 from service.settings import Settings
 from service.storage import EVALUATIONS, RUNS, BlobStore
 from service.tracking import recover, release, tracked_job
@@ -114,6 +115,8 @@ def evaluation_summary(document: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
+    if "anchors" in evaluation.request:  # a ranging evaluation (POST /ranging)
+        return _ranging_job_for(session, runtime, evaluation)
     request = EvaluationCreate.model_validate(evaluation.request)
     options = request.options
     project_id = evaluation.project_id
@@ -139,6 +142,43 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
         stamp=options.stamp,
         export=export_from_options(options, evaluation_id=evaluation.id),
         formats=options.formats,
+    )
+
+
+def _ranging_job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
+    body = {k: v for k, v in evaluation.request.items() if k != "estimates"}
+    request = RangingCreate.model_validate(body)
+    options = request.options
+    project_id = evaluation.project_id
+    reference = _source(session, runtime, project_id, request.reference, "reference")
+    ranges_ref = request.ranges_ref
+    records = []
+    for role, dataset_id in (("anchors", request.anchors), ("ranges", ranges_ref.dataset_id)):
+        dataset = _dataset(session, project_id, dataset_id)
+        bag = dataset.inspection.get("format") == "bag"
+        spec = SourceSpec(
+            TrajectoryFormat.BAG if bag else None,
+            runtime.store.path(dataset.storage_path),
+            ranges_ref.selector if role == "ranges" else None,
+        )
+        provenance = file_provenance(role, spec, sha256=dataset.sha256)
+        provenance.update(path=dataset.filename, dataset_id=dataset.id)
+        records.append((spec, provenance, dataset.filename))
+    (anchors, anchors_record, anchors_name), (ranges, ranges_record, ranges_name) = records
+    return Job(
+        reference=reference,
+        estimates=[],
+        config=config_from_options(options),
+        stamp=options.stamp,
+        export=export_from_options(options, evaluation_id=evaluation.id),
+        formats=options.formats,
+        ranging=RangingSources(
+            anchors=anchors.path,
+            ranges=ranges,
+            config=ranging_from_options(options),
+            provenance=(anchors_record, ranges_record),
+            display_paths={str(anchors.path): anchors_name, str(ranges.path): ranges_name},
+        ),
     )
 
 

@@ -24,15 +24,18 @@ from loceval.options import AUTO, check_option
 
 if TYPE_CHECKING:
     from exporters.options import ExportOptions
+    from loceval.radio import RangingConfig
 
 __all__ = [
     "EvaluationValues",
     "ExportValues",
+    "RangingValues",
     "config_from_options",
     "device_offset",
     "export_from_options",
     "is_auto",
     "offset_or_none",
+    "ranging_from_options",
 ]
 
 
@@ -103,6 +106,10 @@ class EvaluationValues(Protocol):
     def reference_sigma_m(self) -> float | None:
         """The reference's per-axis standard deviation, metres."""
 
+    @property
+    def planar(self) -> bool:
+        """Measure position errors in x-y only."""
+
 
 class ExportValues(Protocol):
     """The artifact options as a front door holds them (keys of ``OPTIONS``)."""
@@ -130,6 +137,60 @@ class ExportValues(Protocol):
     @property
     def building_up(self) -> str:
         """The up axis of a building mesh file."""
+
+
+class RangingValues(Protocol):
+    """The ranging options as a front door holds them (group ``ranging`` of ``OPTIONS``)."""
+
+    @property
+    def solve(self) -> Sequence[str]:
+        """The positioning algorithms."""
+
+    @property
+    def dims(self) -> str:
+        """``"2"`` or ``"3"``."""
+
+    @property
+    def epoch_s(self) -> float:
+        """The epoch length, seconds."""
+
+    @property
+    def tag_height_m(self) -> float | None:
+        """The tag's height in 2D, metres."""
+
+    @property
+    def tag_offset_xyz(self) -> str | None:
+        """The tag in the reference body frame, ``"x y z"``."""
+
+    @property
+    def outlier_threshold_m(self) -> float:
+        """The outlier threshold, metres."""
+
+    @property
+    def distance_bin_m(self) -> float:
+        """The error-versus-distance bin width, metres."""
+
+
+def ranging_from_options(options: RangingValues) -> RangingConfig:
+    """Return the core's ranging options.
+
+    Raises:
+        InputError: a value cannot be used (the error carries the option's key).
+    """
+    from loceval.radio import RangingConfig, parse_solvers, parse_tag_offset  # noqa: PLC0415
+
+    if str(options.dims) not in {"2", "3"}:
+        msg = f"The number of dimensions must be 2 or 3, got {options.dims!r}."
+        raise InputError(msg, option="dims")
+    return RangingConfig(
+        solvers=parse_solvers(list(options.solve)),
+        dims=int(options.dims),
+        epoch_s=options.epoch_s,
+        tag_height_m=options.tag_height_m,
+        tag_offset_xyz=parse_tag_offset(options.tag_offset_xyz),
+        outlier_threshold_m=options.outlier_threshold_m,
+        distance_bin_m=options.distance_bin_m,
+    )
 
 
 def config_from_options(
@@ -169,6 +230,7 @@ def config_from_options(
         auto_time_offset=auto_time,
         auto_device=is_auto(options.device),
         reference_offset_source=reference_offset_source,
+        planar=options.planar,
     )
 
 

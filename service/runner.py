@@ -19,10 +19,13 @@ from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from exporters.options import ExportOptions
+    from loceval.radio import RangingConfig
+    from loceval.readers.radio import Ranges
 
 __all__ = [
     "Job",
     "JobSource",
+    "RangingSources",
     "default_name",
     "file_provenance",
     "run_job",
@@ -64,6 +67,58 @@ class JobSource:
 
 
 @dataclass(frozen=True, slots=True)
+class RangingSources:
+    """The radio inputs of a ranging job: anchors, ranges and the ranging options.
+
+    Attributes:
+        anchors: the anchors CSV (``id,x,y,z``).
+        ranges: the ranges: a CSV (``t,anchor_id,range_m``) or a bag with the topic of
+            ``sensor_msgs/msg/Range`` as selector.
+        config: the ranging and positioning options.
+        provenance: the input records of the anchors and of the ranges.
+        display_paths: shown instead of the files' paths in warnings (the service's names).
+    """
+
+    anchors: Path
+    ranges: SourceSpec
+    config: RangingConfig
+    provenance: tuple[Mapping[str, object], ...] = ()
+    display_paths: Mapping[str, str] = field(default_factory=dict)
+
+    def read(self, *, stamp: str) -> Ranges:
+        """Read the anchors and the ranges (a CSV, or a bag topic when a selector is given).
+
+        Raises:
+            ReaderError: a file cannot be read or holds no usable range.
+            InputError: a bag is given without the topic of its ranges.
+        """
+        from loceval.errors import InputError  # noqa: PLC0415
+        from loceval.readers.radio import read_anchors, read_ranges  # noqa: PLC0415
+        from loceval.readers.rosbag import is_bag_path  # noqa: PLC0415
+
+        anchors = read_anchors(self.anchors)
+        spec = self.ranges
+        if spec.format is TrajectoryFormat.BAG or is_bag_path(spec.path):
+            if not spec.selector:
+                msg = (
+                    f"The ranges {spec.path.name!r} are a bag; name the topic of its "
+                    "sensor_msgs/msg/Range messages as the selector (run.bag@/uwb/range)."
+                )
+                raise InputError(msg)
+            from loceval.readers.rosbag import StampSource, read_range_topic  # noqa: PLC0415
+
+            ranges = read_range_topic(spec.path, spec.selector, anchors, stamp=StampSource(stamp))
+        else:
+            ranges = read_ranges(spec.path, anchors)
+        if not self.display_paths:
+            return ranges
+        warnings = list(ranges.warnings)
+        for path, shown in self.display_paths.items():
+            warnings = [w.replace(path, shown) for w in warnings]
+        return replace(ranges, warnings=tuple(warnings))
+
+
+@dataclass(frozen=True, slots=True)
 class Job:
     """Everything one evaluation needs.
 
@@ -74,6 +129,8 @@ class Job:
         stamp: bags: ``header`` or ``receive`` stamps.
         export: artifact options; None writes no artifacts.
         formats: the artifacts to write (None: all).
+        ranging: the radio inputs: the estimates are then positioned from the ranges
+            (:func:`loceval.radio.evaluate_radio`) and ``estimates`` is empty.
     """
 
     reference: JobSource
@@ -82,6 +139,7 @@ class Job:
     stamp: str = choice_default("stamp")
     export: ExportOptions | None = None
     formats: Sequence[str] | None = None
+    ranging: RangingSources | None = None
 
 
 def run_job(
@@ -110,13 +168,26 @@ def run_job(
     def evaluating(stage: str, fraction: float) -> None:
         report(stage, _READ + (_EVALUATE - _READ) * fraction)
 
-    result = evaluate(
-        trajectories[0],
-        trajectories[1:],
-        job.config,
-        inputs=[dict(s.provenance) for s in sources],
-        progress=evaluating,
-    )
+    if job.ranging is not None:
+        from loceval.radio import evaluate_radio  # noqa: PLC0415
+
+        report("reading the ranges", _READ / 2)
+        result = evaluate_radio(
+            trajectories[0],
+            job.ranging.read(stamp=job.stamp),
+            job.ranging.config,
+            job.config,
+            inputs=[dict(job.reference.provenance), *map(dict, job.ranging.provenance)],
+            progress=evaluating,
+        )
+    else:
+        result = evaluate(
+            trajectories[0],
+            trajectories[1:],
+            job.config,
+            inputs=[dict(s.provenance) for s in sources],
+            progress=evaluating,
+        )
     if out_dir is not None and job.export is not None:
         from exporters import write_artifacts  # noqa: PLC0415
 

@@ -31,6 +31,8 @@ __all__ = [
     "Problem",
     "Produce",
     "ProgressPublic",
+    "RangingCreate",
+    "RangingOptions",
     "ScheduleCreate",
     "SchedulePatch",
     "SchedulePublic",
@@ -216,6 +218,7 @@ class EvaluationOptions(_Strict):
     formats: list[_Artifact] | None = _field("formats")
     no_ci: bool = _field("no_ci")
     reference_sigma_m: float | None = _field("reference_sigma_m")
+    planar: bool = _field("planar")
 
     @field_validator("formats")
     @classmethod
@@ -233,6 +236,49 @@ class EvaluationCreate(_Strict):
     reference: SourceRef
     estimates: Annotated[list[SourceRef], Field(min_length=1, max_length=20)]
     options: EvaluationOptions = Field(default_factory=EvaluationOptions)
+
+
+_Solver = Literal["nlls", "minmax"]
+
+
+class RangingOptions(EvaluationOptions):
+    """The options of ``POST /ranging``: the evaluation's, then the ranging ones.
+
+    The alignment defaults to ``none``: the anchors are in building coordinates already.
+    A device offset (``offset``, ``device``) is refused: the tag offset says where the tag is.
+    """
+
+    align: Annotated[str, _Choices("align")] = Field(
+        default="none", description=option("align").help
+    )
+    solve: Annotated[list[_Solver], Field(min_length=1, max_length=2)] = _field("solve")
+    dims: Annotated[str, _Choices("dims")] = _field("dims")
+    epoch_s: float = _field("epoch_s")
+    tag_height_m: float | None = _field("tag_height_m")
+    tag_offset_xyz: str | None = _field("tag_offset_xyz")
+    outlier_threshold_m: float = _field("outlier_threshold_m")
+    distance_bin_m: float = _field("distance_bin_m")
+
+
+class RangingCreate(_Strict):
+    """A new ranging evaluation: a reference, the anchors and the ranges (uploaded datasets)."""
+
+    reference: SourceRef
+    anchors: _Id = Field(description="the dataset of the anchors table (id,x,y,z)")
+    ranges: _Id | SourceRef = Field(
+        description=(
+            "the dataset of the ranges table (t,anchor_id,range_m), or {dataset_id, selector} "
+            "for a bag's sensor_msgs/msg/Range topic"
+        )
+    )
+    options: RangingOptions = Field(default_factory=RangingOptions)
+
+    @property
+    def ranges_ref(self) -> SourceRef:
+        """The ranges as a dataset and selector."""
+        if isinstance(self.ranges, SourceRef):
+            return self.ranges
+        return SourceRef(dataset_id=self.ranges)
 
 
 class DatasetPublic(BaseModel):

@@ -32,6 +32,7 @@ PATH = "nav_msgs/msg/Path"
 TF = "tf2_msgs/msg/TFMessage"
 IMAGE = "sensor_msgs/msg/Image"
 IMU = "sensor_msgs/msg/Imu"
+RANGE = "sensor_msgs/msg/Range"
 
 FORMATS = ("rosbag1", "sqlite3", "mcap")
 
@@ -205,6 +206,16 @@ def build_message(fmt: str, record: Record) -> object:  # noqa: C901, PLR0911
             for i in range(cut)
         ]
         return types[PATH](header=header(record.receive_ns, record.frame_id), poses=items)
+    if kind == RANGE:  # payload (header stamp, range); frame_id names the anchor
+        range_stamp_ns, value = record.payload  # type: ignore[misc]
+        return types[RANGE](
+            header=header(range_stamp_ns, record.frame_id),
+            radiation_type=2,
+            field_of_view=0.0,
+            min_range=0.0,
+            max_range=100.0,
+            range=float(value),
+        )
     stamp_ns, xyz, q = record.payload  # type: ignore[misc]
     hdr = header(stamp_ns, record.frame_id)
     if kind == POSE:

@@ -6,6 +6,7 @@ from collections.abc import Sequence
 
 from exporters.plots.figure import DEFAULT_MAX_POINTS, ImageFormat, Plot
 from exporters.plots.maps import is_3d, plot_ate_path, plot_overlay_xy, plot_side_views
+from exporters.plots.ranging import plot_ranging
 from exporters.plots.series import plot_ate_over_time, plot_error_cdf, plot_rpe_over_time
 from loceval.evaluation import EvaluationResult
 
@@ -27,7 +28,7 @@ def render_plots(
 
     Returns:
         The overlay, one error-coloured path per estimate, ATE and RPE over time, the CDF
-        and, for a 3D path, the side views.
+        and, for a 3D path, the side views; then, for ranges, the ranging plots.
     """
     plots = [plot_overlay_xy(result, max_points=max_points, formats=formats)]
     plots.extend(
@@ -39,4 +40,5 @@ def render_plots(
     plots.append(plot_error_cdf(result, max_points=max_points, formats=formats))
     if is_3d(result):
         plots.append(plot_side_views(result, max_points=max_points, formats=formats))
+    plots.extend(plot_ranging(result, max_points=max_points, formats=formats))
     return tuple(plots)

@@ -29,6 +29,7 @@ from exporters.plots import (
 )
 from exporters.report.clocks import ClockSection, build_clock_section, time_offset_text
 from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
+from exporters.report.ranging import RangingView, build_ranging_view
 from loceval.alignment import AlignWindow
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.gaps import GAP_RATE_FACTOR
@@ -190,6 +191,7 @@ class ReportView:
     clocks: ClockSection
     best_mark: str = BEST_MARK
     confidence: ConfidenceView = field(default_factory=ConfidenceView)
+    ranging: RangingView | None = None  # the ranging section (exporters.report.ranging)
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -654,4 +656,5 @@ def build_report_view(
         clocks=build_clock_section(
             result, number=len(figures) + 1, image_format=image_format, max_points=max_points
         ),
+        ranging=build_ranging_view(result),
     )

@@ -2,10 +2,10 @@
 
 :func:`inspect` describes every input kind loceval reads with one typed result,
 :class:`Inspection`: trajectory files (TUM, EuRoC, KITTI, CSV), OptiTrack Motive takes (a
-source per rigid body), ROS 1 bags, ROS 2 bags (sqlite3 or MCAP, folder or file, or zipped)
-and URDF files (links and joints). The command line prints it
-(:func:`render_inspection_text`, or ``to_dict()`` as JSON) and the service stores it with an
-upload, so both describe a file the same way.
+source per rigid body), ROS 1 bags, ROS 2 bags (sqlite3 or MCAP, folder or file, or zipped),
+URDF files (links and joints) and the anchors and ranges tables of radio systems. The command
+line prints it (:func:`render_inspection_text`, or ``to_dict()`` as JSON) and the service
+stores it with an upload, so both describe a file the same way.
 
 Each input kind has an entry in :data:`INSPECTORS` whose module is imported on first use,
 so importing this package loads neither rosbags nor the readers of other kinds.
@@ -101,6 +101,14 @@ INSPECTORS: Final[Mapping[str, InspectorSpec]] = MappingProxyType(
             InspectorSpec(
                 "urdf", "URDF robot description", "loceval.inspection.robot:inspect_urdf"
             ),
+            InspectorSpec(
+                "anchors", "radio anchors (id,x,y,z)", "loceval.inspection.radio:inspect_anchors"
+            ),
+            InspectorSpec(
+                "ranges",
+                "radio ranges (t,anchor_id,range_m)",
+                "loceval.inspection.radio:inspect_ranges",
+            ),
         )
     }
 )
@@ -110,8 +118,9 @@ INSPECTORS: Final[Mapping[str, InspectorSpec]] = MappingProxyType(
 def input_kind(spec: SourceSpec) -> str:
     """Return the :data:`INSPECTORS` key of a source.
 
-    The format prefix wins; else a ``.urdf`` or ``.xml`` name is URDF; else the format is
-    sniffed from the content (:func:`loceval.readers.sniff_format`).
+    The format prefix wins; else a ``.urdf`` or ``.xml`` name is URDF; else a radio table
+    is told by its header (:func:`loceval.readers.radio.sniff_radio_table`); else the format
+    is sniffed from the content (:func:`loceval.readers.sniff_format`).
 
     Raises:
         ReaderError: the path does not exist or its content matches no format.
@@ -120,6 +129,12 @@ def input_kind(spec: SourceSpec) -> str:
         return spec.format.value
     if spec.path.suffix.lower() in URDF_SUFFIXES and not spec.path.is_dir():
         return "urdf"
+    if spec.path.is_file():
+        from loceval.readers.radio import sniff_radio_table  # noqa: PLC0415
+
+        radio = sniff_radio_table(spec.path)
+        if radio is not None:
+            return radio
     return sniff_format(spec.path).value
 
 

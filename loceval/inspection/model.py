@@ -183,7 +183,8 @@ class Inspection:
         kind: the input kind: a trajectory format (``tum``, ``euroc``, ``kitti``, ``csv``,
             ``motive``), a bag's storage format (``rosbag1``, ``rosbag2-sqlite3``,
             ``rosbag2-mcap``) or ``urdf``.
-        format: the reader's format (``bag`` for every bag) or ``urdf``.
+        format: the reader's format (``bag`` for every bag), ``urdf``, or ``anchors`` /
+            ``ranges`` for the tables of a radio system.
         sources: the trajectory sources (for bags: pose topics first, then tf chains).
         warnings: what looked wrong or what the readers did (broken tf tree, sorted
             stamps, axis conversion).
@@ -199,6 +200,8 @@ class Inspection:
         joints: for URDF files, the joints in file order.
         trajectory_source: for files that hold one trajectory, its ``source`` text (the
             path as the reader names it).
+        anchor_ids: for radio tables (format ``anchors`` or ``ranges``), the anchor ids.
+        range_count: for a ranges table, its rows.
     """
 
     path: str
@@ -217,6 +220,8 @@ class Inspection:
     links: tuple[str, ...] = ()
     joints: tuple[JointInspection, ...] = ()
     trajectory_source: str = ""
+    anchor_ids: tuple[str, ...] = ()
+    range_count: int = 0
 
     @property
     def is_bag(self) -> bool:
@@ -268,6 +273,10 @@ class Inspection:
                 "links": list(self.links),
                 "joints": [j.to_dict() for j in self.joints],
             }
+        if self.format == "anchors":
+            out["anchors"] = list(self.anchor_ids)
+        if self.format == "ranges":
+            out |= {"ranges": self.range_count, "anchor_ids": list(self.anchor_ids)}
         single = self.single
         if single is not None and single.first_stamp_ns is not None:
             last = single.last_stamp_ns if single.last_stamp_ns is not None else 0

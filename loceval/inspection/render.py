@@ -29,12 +29,16 @@ def render_inspection_text(insp: Inspection) -> str:
     Bags: the time range, topics, the tf tree with rates and the sources with their
     selectors. Files holding one trajectory: its summary (format, poses, time range,
     duration, length, rate, orientation). Motive takes: a source line per rigid body. URDF:
-    links and joints. Warnings last.
+    links and joints. Radio tables: the anchors (and the ranges' count). Warnings last.
     """
     if insp.is_bag:
         lines = _bag_lines(insp)
     elif insp.is_urdf:
         lines = _urdf_lines(insp)
+    elif insp.format in {"anchors", "ranges"}:
+        count = f"{insp.range_count} ranges to " if insp.format == "ranges" else ""
+        ids = ", ".join(insp.anchor_ids)
+        lines = [f"{insp.path}  ({insp.format})", f"  {count}{len(insp.anchor_ids)} anchors: {ids}"]
     else:
         lines = _file_lines(insp)
     if insp.warnings:

@@ -12,7 +12,9 @@ leading ``#`` on the header is dropped, blank lines and later ``#`` lines are sk
 Rows of the ranges file that cannot be used (a time or range that is not a finite
 number, a negative range, an anchor id not in the anchors file, a wrong number of cells)
 are dropped, counted per reason and named in one warning; a file with no usable row is
-an error. Ranges from ROS bags (``sensor_msgs/msg/Range``) are not read here yet.
+an error. Ranges from ROS bags (``sensor_msgs/msg/Range``) are read by
+:func:`loceval.readers.rosbag.read_range_topic`. :func:`sniff_radio_table` tells the two
+tables apart by their header (uploads are recognised by it).
 """
 
 from __future__ import annotations
@@ -33,7 +35,16 @@ from loceval.readers.csv import TIME_UNITS
 from loceval.readers.text import load_text
 from loceval.trajectory import MAX_COORDINATE_M
 
-__all__ = ["MIN_ANCHORS", "Anchors", "Ranges", "read_anchors", "read_ranges"]
+__all__ = [
+    "MIN_ANCHORS",
+    "Anchors",
+    "Ranges",
+    "RangesOverview",
+    "read_anchors",
+    "read_ranges",
+    "read_ranges_overview",
+    "sniff_radio_table",
+]
 
 MIN_ANCHORS: Final = 3
 """Fewest anchors an anchors file may hold: positioning in 2D needs three."""
@@ -60,6 +71,7 @@ _UNIT_SPELLINGS: Final = {
 }
 _DECIMAL_RE: Final = re.compile(r"(?P<sign>[-+]?)(?P<whole>\d*)(?:\.(?P<frac>\d*))?")
 _NAMED_IDS: Final = 3  # unknown anchor ids quoted in the warning
+_SNIFF_BYTES: Final = 65536
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -173,6 +185,66 @@ class Ranges:
     def __len__(self) -> int:
         """Return the number of measurements."""
         return int(self.stamps_ns.shape[0])
+
+
+@dataclass(frozen=True, slots=True)
+class RangesOverview:
+    """What a ranges file holds, read without its anchors (an upload's inspection).
+
+    Attributes:
+        rows: data rows.
+        anchor_ids: the distinct anchor ids, in order of first appearance.
+    """
+
+    rows: int
+    anchor_ids: tuple[str, ...]
+
+
+def sniff_radio_table(path: Path) -> str | None:
+    """Tell a radio table by its header: ``"anchors"`` (``id,x,y,z``), ``"ranges"``.
+
+    Returns:
+        ``"ranges"`` for a header with a time, an anchor id and a range; ``"anchors"`` for
+        one with an id and x, y, z but no time; None for anything else (or no file).
+    """
+    try:
+        with Path(path).open("rb") as fh:
+            head = fh.read(_SNIFF_BYTES).decode("utf-8", errors="replace")
+    except OSError:
+        return None
+    for raw in head.splitlines():
+        line = raw.strip()
+        if not line or (line.startswith("#") and _is_comment(line)):
+            continue
+        delimiter = max(_DELIMITERS, key=line.count)
+        cells = _split(line.lstrip("#"), delimiter if line.count(delimiter) else None)
+        names = {_normalize(c)[0] for c in cells}
+        names |= {n.rpartition("_")[0] for n in names if n.rpartition("_")[2] in _UNIT_SPELLINGS}
+        if all(names & set(_RANGE_NAMES[k]) for k in ("t", "anchor_id", "range_m")):
+            return "ranges"
+        anchor_cols = all(names & set(_ANCHOR_NAMES[k]) for k in ("id", "x", "y", "z"))
+        if anchor_cols and not names & set(_RANGE_NAMES["t"]):
+            return "anchors"
+        return None
+    return None
+
+
+def read_ranges_overview(path: Path) -> RangesOverview:
+    """Count a ranges file's rows and list its anchor ids, without the anchors file.
+
+    Raises:
+        ReaderError: the file is missing or unreadable, has no header or lacks a column,
+            or the time unit is unknown.
+    """
+    where = str(path)
+    header_line, headers, rows, _ = _read_rows(load_text(Path(path)), where=where, kind="ranges")
+    cols = _choose(
+        headers, _RANGE_NAMES, ("t", "anchor_id", "range_m"), where=where, line=header_line
+    )
+    _time_scale(headers[cols["t"]], where=where)
+    width = len(headers)
+    ids = dict.fromkeys(r[cols["anchor_id"]].strip() for r in rows if len(r) == width)
+    return RangesOverview(rows=len(rows), anchor_ids=tuple(ids))
 
 
 def read_anchors(path: Path) -> Anchors:

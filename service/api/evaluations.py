@@ -1,4 +1,4 @@
-"""``/api/v1/evaluations`` and the one-shot ``/api/v1/evaluate``."""
+"""``/api/v1/evaluations``, the one-shot ``/api/v1/evaluate`` and ``/api/v1/ranging``."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from service import evaluations
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Evaluation, get_owned
-from service.schemas import EvaluationCreate, EvaluationPublic, EvaluationsPublic
+from service.schemas import EvaluationCreate, EvaluationPublic, EvaluationsPublic, RangingCreate
 from service.uploads import receive_multipart
 
 __all__ = ["router"]
@@ -39,6 +39,32 @@ def create_evaluation_job(
 ) -> EvaluationPublic:
     """Queue an evaluation of uploaded datasets; poll ``GET /evaluations/{id}`` for it."""
     evaluation = evaluations.create_evaluation(runtime, project_id, body)
+    response.headers["Location"] = f"{request.base_url}api/v1/evaluations/{evaluation.id}"
+    return evaluations.evaluation_public(
+        evaluation, base_url=str(request.base_url), with_result=False
+    )
+
+
+@router.post(
+    "/ranging",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_model=EvaluationPublic,
+    responses=problems(404, 503),
+)
+def create_ranging_job(
+    body: RangingCreate,
+    request: Request,
+    response: Response,
+    runtime: RuntimeDep,
+    project_id: ProjectDep,
+) -> EvaluationPublic:
+    """Queue a ranging evaluation of uploaded anchors and ranges against a reference.
+
+    The ranges are evaluated per anchor and the tag is positioned from them (NLLS,
+    Min-Max); it runs as an evaluation whose estimates are the solvers: poll
+    ``GET /evaluations/{id}``; its result holds the ``ranging`` object.
+    """
+    evaluation = evaluations.create_ranging(runtime, project_id, body)
     response.headers["Location"] = f"{request.base_url}api/v1/evaluations/{evaluation.id}"
     return evaluations.evaluation_public(
         evaluation, base_url=str(request.base_url), with_result=False

@@ -13,8 +13,9 @@ import argparse
 import re
 import sys
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, Final, NoReturn
 
 from loceval import __version__
 from loceval.errors import InputError
@@ -25,7 +26,9 @@ __all__ = ["EXIT_BUG", "EXIT_INPUT", "build_parser", "names", "numbers"]
 EXIT_INPUT = 1
 EXIT_BUG = 2
 
-_DESCRIPTION = "The loceval command line: evaluate, inspect, demo, report, serve, worker, keys."
+_DESCRIPTION = (
+    "The loceval command line: evaluate, ranging, inspect, demo, report, serve, worker, keys."
+)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -106,7 +109,8 @@ def _shown(spec: OptionSpec) -> str:
     if default is None or spec.kind is OptionKind.SWITCH:
         return spec.help
     if isinstance(default, tuple):
-        return f"{spec.help} (default: {','.join(f'{v:g}' for v in default)})"
+        shown = ",".join(v if isinstance(v, str) else f"{v:g}" for v in default)
+        return f"{spec.help} (default: {shown})"
     return f"{spec.help} (default: {default})"
 
 
@@ -156,6 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR")
     demo.set_defaults(handler="service.cli.evaluate:run_demo")
 
+    _add_ranging(sub)
     _add_report(sub)
     _add_service(sub)
     return parser
@@ -186,11 +191,54 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
         "from content)",
     )
     for spec in OPTIONS:
-        if spec.cli:
+        if spec.cli and spec.group != "ranging":
             add_option(ev, spec)
     ev.add_argument("--json", action="store_true", help="print the result as JSON")
     ev.add_argument("--out", type=_folder, default=None, metavar="DIR", help="write artifacts here")
     ev.set_defaults(handler="service.cli.evaluate:run_evaluate")
+
+
+RANGING_SKIPPED: Final = frozenset({"offset", "device"})
+"""Evaluation options ``loceval ranging`` does not take (the tag offset says where the tag is)."""
+
+
+def _add_ranging(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparsers action)
+    rg = sub.add_parser(
+        "ranging",
+        help="evaluate radio ranges per anchor and the positions solved from them",
+        description=(
+            "Evaluate the range measurements of a radio system (UWB, BLE) per anchor against "
+            "the true distances from the reference, position the tag from the ranges (NLLS, "
+            "Min-Max) and evaluate those positions like any estimate (alignment none by "
+            "default: the anchors are in building coordinates; x-y only in 2D)."
+        ),
+    )
+    rg.add_argument("reference", help="the ground truth source ([FORMAT:]PATH[@SELECTOR])")
+    rg.add_argument(
+        "--anchors", required=True, type=Path, metavar="FILE", help="anchors CSV: id,x,y,z"
+    )
+    rg.add_argument(
+        "--ranges",
+        required=True,
+        metavar="SOURCE",
+        help="ranges CSV t,anchor_id,range_m[,rssi], or BAG@TOPIC of sensor_msgs/msg/Range",
+    )
+    rg.add_argument("--reference-name", default=None, help="name of the reference")
+    rg.add_argument(
+        "--format",
+        choices=_FormatNames(),
+        default=None,
+        metavar="FORMAT",
+        help="format of the reference without a FORMAT: prefix (default: sniffed)",
+    )
+    for spec in OPTIONS:
+        if spec.key == "align":  # the anchors are in building coordinates already
+            spec = replace(spec, default="none")  # noqa: PLW2901
+        if spec.cli and spec.key not in RANGING_SKIPPED:
+            add_option(rg, spec)
+    rg.add_argument("--json", action="store_true", help="print the result as JSON")
+    rg.add_argument("--out", type=_folder, default=None, metavar="DIR", help="write artifacts here")
+    rg.set_defaults(handler="service.cli.ranging:run_ranging")
 
 
 def _add_report(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparsers action)

@@ -221,8 +221,9 @@ def test_reader_errors_pass_through(tmp_path):
 
 
 def test_registry_covers_every_format():
-    """Every trajectory format and URDF has an inspector, and each one loads."""
-    assert set(INSPECTORS) == {f.value for f in TrajectoryFormat} | {"urdf"}
+    """Every trajectory format, URDF and the radio tables have an inspector; each loads."""
+    radio = {"anchors", "ranges"}
+    assert set(INSPECTORS) == {f.value for f in TrajectoryFormat} | {"urdf"} | radio
     for key, spec in INSPECTORS.items():
         assert spec.kind == key
         assert callable(spec.load())

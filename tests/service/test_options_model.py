@@ -15,26 +15,34 @@ from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig
 from loceval.options import OPTIONS, OptionKind, OptionSpec, check_option, option
 from service.cli import describe
-from service.cli.parser import build_parser
+from service.cli.parser import RANGING_SKIPPED, build_parser
 from service.errors import problem_for
-from service.options import EvaluationValues, config_from_options, export_from_options
-from service.schemas import EvaluationOptions
+from service.options import (
+    EvaluationValues,
+    config_from_options,
+    export_from_options,
+    ranging_from_options,
+)
+from service.schemas import EvaluationOptions, RangingOptions
 
 CLI_ONLY = {"help", "name", "reference_name", "format", "json", "out", "device_from", "device_to"}
 """The evaluate command's own arguments: how to run, not how to evaluate."""
 
+RANGING_CLI_ONLY = {"help", "anchors", "ranges", "reference_name", "format", "json", "out"}
+"""The ranging command's own arguments."""
+
 ROOT = Path(__file__).parents[2]
 
 
-def _evaluate_actions() -> dict[str, argparse.Action]:
+def _evaluate_actions(command: str = "evaluate") -> dict[str, argparse.Action]:
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    evaluate = sub.choices["evaluate"]
+    evaluate = sub.choices[command]
     return {a.dest: a for a in evaluate._actions if a.option_strings}
 
 
-def _api_properties() -> dict[str, Any]:
-    properties: dict[str, Any] = EvaluationOptions.model_json_schema()["properties"]
+def _api_properties(model: type[EvaluationOptions] = EvaluationOptions) -> dict[str, Any]:
+    properties: dict[str, Any] = model.model_json_schema()["properties"]
     return properties
 
 
@@ -56,8 +64,14 @@ def _json_default(spec: OptionSpec) -> object:
 def test_cli_flags_are_the_table() -> None:
     """Every evaluate flag but the command's own is an option: flag, key, default, choices."""
     actions = _evaluate_actions()
-    cli_specs = [s for s in OPTIONS if s.cli]
+    cli_specs = [s for s in OPTIONS if s.cli and s.group != "ranging"]
     assert set(actions) - CLI_ONLY == {s.key for s in cli_specs}
+    ranging_actions = _evaluate_actions("ranging")
+    ranging_specs = [s for s in OPTIONS if s.cli and s.key not in RANGING_SKIPPED]
+    assert set(ranging_actions) - RANGING_CLI_ONLY == {s.key for s in ranging_specs}
+    assert ranging_actions["align"].default == "none"  # anchors are in building coordinates
+    for spec in ranging_specs:
+        assert ranging_actions[spec.key].option_strings == [spec.flag], spec.key
     for spec in cli_specs:
         action = actions[spec.key]
         assert action.option_strings == [spec.flag], spec.key
@@ -72,9 +86,13 @@ def test_cli_flags_are_the_table() -> None:
 def test_api_schema_is_the_table() -> None:
     """Every API option is a table option, in order, with its default, bounds and choices."""
     properties = _api_properties()
-    api_specs = [s for s in OPTIONS if s.api]
+    api_specs = [s for s in OPTIONS if s.api and s.group != "ranging"]
     assert list(properties) == [s.key for s in api_specs]
-    for spec in api_specs:
+    ranging_properties = _api_properties(RangingOptions)
+    assert list(ranging_properties) == [s.key for s in OPTIONS if s.api]
+    assert ranging_properties["align"]["default"] == "none"
+    properties |= {k: v for k, v in ranging_properties.items() if k not in properties}
+    for spec in (s for s in OPTIONS if s.api):
         prop = properties[spec.key]
         assert prop.get("default") == _json_default(spec), spec.key
         assert prop["description"] == spec.help, spec.key
@@ -125,15 +143,20 @@ def test_bounds_are_the_same_on_both_front_doors(spec: OptionSpec) -> None:
     assert _beyond(spec), spec.key
     for value in _beyond(spec):
         text = str(int(value)) if spec.kind is OptionKind.INTEGER else repr(value)
-        args = build_parser().parse_args(["evaluate", "r", "e", f"{spec.flag}={text}"])
-        build = export_from_options if spec.group == "export" else config_from_options
+        command = ["evaluate", "r", "e"]
+        build: Any = export_from_options if spec.group == "export" else config_from_options
+        model: type[EvaluationOptions] = EvaluationOptions
+        if spec.group == "ranging":
+            command = ["ranging", "r", "--anchors", "a", "--ranges", "g"]
+            build, model = ranging_from_options, RangingOptions
+        args = build_parser().parse_args([*command, f"{spec.flag}={text}"])
         with pytest.raises(InputError, match=rf"(?i)^{spec.words} must be") as err:
             build(args)
         assert err.value.option == spec.key
         assert describe(err.value).startswith(f"{spec.flag}: ")
         api_value: object = [value] if spec.kind is OptionKind.NUMBERS else value
         with pytest.raises(ValueError, match=spec.key):
-            EvaluationOptions.model_validate({spec.key: api_value})
+            model.model_validate({spec.key: api_value})
 
 
 def test_values_within_bounds_pass() -> None:

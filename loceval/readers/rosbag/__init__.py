@@ -1,7 +1,8 @@
 """Read trajectories, tf trees and fixed offsets from ROS 1 and ROS 2 bags.
 
 This package is the only place that imports rosbags: :mod:`.bagfile` opens bags and reads
-raw messages, :mod:`.topics` reads pose topics, :mod:`.tf` reads the tf tree and chains,
+raw messages, :mod:`.topics` reads pose topics, :mod:`.ranges` reads
+``sensor_msgs/msg/Range`` topics (radio ranges), :mod:`.tf` reads the tf tree and chains,
 and :mod:`.messages` holds the message shapes and results (it imports no rosbags).
 
 It reads ROS 1 bags (one file or a split set), ROS 2 bags (a directory with
@@ -45,12 +46,14 @@ from loceval.readers.rosbag.messages import (
     StampSource,
     TopicOverview,
 )
+from loceval.readers.rosbag.ranges import RANGE_MSGTYPE, read_range_topic
 from loceval.readers.rosbag.tf import parse_tf_selector, read_tf, read_tf_trajectory
 from loceval.readers.rosbag.topics import pose_topic_overview, read_topic_trajectory
 from loceval.tftree import TfBuffer, compose_static_chain
 from loceval.trajectory import Trajectory
 
 __all__ = [
+    "RANGE_MSGTYPE",
     "SUPPORTED_MSGTYPES",
     "TF_MSGTYPE",
     "BagFormat",
@@ -63,6 +66,7 @@ __all__ = [
     "read_bag_static_transform",
     "read_bag_tf_buffer",
     "read_bag_trajectory",
+    "read_range_topic",
 ]
 
 

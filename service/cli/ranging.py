@@ -1,0 +1,100 @@
+"""``loceval ranging``: the ranges per anchor, and the positions solved from them, evaluated.
+
+The parsed arguments hold the options under the table's keys, so they go to the same
+builders as the API's options (:mod:`service.options`); the job is run by
+:func:`service.runner.run_job` like an evaluation, with its radio inputs.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, cast
+
+from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
+from service.options import (
+    EvaluationValues,
+    ExportValues,
+    RangingValues,
+    config_from_options,
+    export_from_options,
+    ranging_from_options,
+)
+from service.runner import Job, JobSource, RangingSources, default_name, file_provenance, run_job
+
+if TYPE_CHECKING:
+    import argparse
+
+    from loceval.ranging import RangingResult
+
+__all__ = ["format_ranging_table", "run_ranging"]
+
+
+def run_ranging(args: argparse.Namespace) -> int:
+    """Evaluate the ranges and the solvers' positions; print tables or JSON; write artifacts."""
+    ranging = ranging_from_options(cast("RangingValues", args))
+    config = config_from_options(cast("EvaluationValues", args))
+    export = None
+    if args.out is not None:
+        export = export_from_options(
+            cast("ExportValues", args),
+            evaluation_id=args.out.resolve().name,
+            building=args.building,
+        )
+    default_format = TrajectoryFormat(args.format) if args.format else None
+    ref_spec = parse_source(args.reference, default_format=default_format)
+    ranges_spec = parse_source(args.ranges)
+    anchors_spec = SourceSpec(None, Path(args.anchors))
+    job = Job(
+        reference=JobSource(
+            ref_spec,
+            args.reference_name or default_name(ref_spec),
+            file_provenance("reference", ref_spec),
+        ),
+        estimates=[],
+        config=config,
+        stamp=args.stamp,
+        export=export,
+        formats=args.formats,
+        ranging=RangingSources(
+            anchors=anchors_spec.path,
+            ranges=ranges_spec,
+            config=ranging,
+            provenance=(
+                file_provenance("anchors", anchors_spec),
+                file_provenance("ranges", ranges_spec),
+            ),
+        ),
+    )
+    result = run_job(job, args.out)
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
+        return 0
+    from service.cli.tables import format_tables  # noqa: PLC0415
+
+    if result.ranging is not None:
+        print(format_ranging_table(result.ranging))  # noqa: T201
+        print()  # noqa: T201
+    print(format_tables(result))  # noqa: T201
+    if args.out is not None:
+        print(f"\nArtifacts written to {args.out}")  # noqa: T201
+    return 0
+
+
+def format_ranging_table(ranging: RangingResult) -> str:
+    """Return the per-anchor table of the ranging errors (measured minus true), metres."""
+    head = (
+        f"{'anchor':<12} {'n':>7} {'bias':>8} {'std':>8} {'RMSE':>8} {'MAE':>8} "
+        f"{'max|e|':>8} {'outl.':>7}"
+    )
+    lines = [f"Ranging errors (outliers: |error| > {ranging.outlier_threshold_m:g} m)", head]
+    rows = [(a.id, a.stats) for a in ranging.anchors] + [("overall", ranging.overall)]
+    lines.extend(
+        f"{name[:12]:<12} {s.n:>7} {s.bias_m:>8.3f} {s.std_m:>8.3f} {s.rmse_m:>8.3f} "
+        f"{s.mae_m:>8.3f} {s.max_abs_m:>8.3f} {s.outlier_share * 100:>6.1f}%"
+        for name, s in rows
+    )
+    if ranging.unused_anchors:
+        lines.append(f"never heard: {', '.join(ranging.unused_anchors)}")
+    lines.extend(f"warning: {w}" for w in ranging.warnings)
+    return "\n".join(lines)
