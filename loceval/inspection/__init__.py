@@ -98,6 +98,7 @@ INSPECTORS: Final[Mapping[str, InspectorSpec]] = MappingProxyType(
                 "ROS 1 bag, ROS 2 bag (sqlite3 or MCAP) or a zip of one",
                 "loceval.inspection.bag:inspect_bag",
             ),
+            InspectorSpec("points", "surveyed control points", f"{_FILES}:inspect_points"),
             InspectorSpec(
                 "urdf", "URDF robot description", "loceval.inspection.robot:inspect_urdf"
             ),

@@ -15,7 +15,7 @@ from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
 from loceval.readers.motive import list_rigid_bodies
 from loceval.trajectory import Trajectory
 
-__all__ = ["inspect_motive", "inspect_trajectory_file", "trajectory_source"]
+__all__ = ["inspect_motive", "inspect_points", "inspect_trajectory_file", "trajectory_source"]
 
 _DESCRIPTIONS: Final = {
     TrajectoryFormat.TUM: "TUM trajectory",
@@ -89,6 +89,27 @@ def inspect_motive(spec: SourceSpec) -> Inspection:
         sources=tuple(sources),
         warnings=tuple(warnings),
         trajectory_source=trajectories[0].source if len(trajectories) == 1 else "",
+    )
+
+
+def inspect_points(spec: SourceSpec) -> Inspection:
+    """Describe a control-point survey: its point ids and their extent (no trajectory).
+
+    Raises:
+        ReaderError: the reader refuses the survey (duplicate ids, too few points, ...).
+    """
+    from loceval.readers.points import read_control_points  # noqa: PLC0415
+
+    points = read_control_points(spec.path)
+    extent = points.positions_xyz.max(axis=0) - points.positions_xyz.min(axis=0)
+    return Inspection(
+        path=str(spec.path),
+        kind=TrajectoryFormat.POINTS.value,
+        format=TrajectoryFormat.POINTS.value,
+        sources=(),
+        warnings=points.warnings,
+        point_ids=points.ids,
+        extent_m=tuple(float(e) for e in extent),
     )
 
 

@@ -10,7 +10,8 @@ the keys that describe it:
   ``message_count``, ``topics``, ``tf_tree``;
 - files that hold one trajectory: ``source``, ``poses``, ``start_s``, ``end_s``,
   ``duration_s``, ``length_m``, ``rate_hz``, ``orientation`` (a summary of that trajectory);
-- URDF files: ``robot``, ``links``, ``joints``.
+- URDF files: ``robot``, ``links``, ``joints``;
+- control-point surveys: ``points``, ``ids``, ``extent_m`` (no sources: not a trajectory).
 """
 
 from __future__ import annotations
@@ -199,6 +200,8 @@ class Inspection:
         joints: for URDF files, the joints in file order.
         trajectory_source: for files that hold one trajectory, its ``source`` text (the
             path as the reader names it).
+        point_ids: for control-point surveys, the ids in file order.
+        extent_m: for control-point surveys, the x, y and z extent of the points, metres.
     """
 
     path: str
@@ -217,6 +220,8 @@ class Inspection:
     links: tuple[str, ...] = ()
     joints: tuple[JointInspection, ...] = ()
     trajectory_source: str = ""
+    point_ids: tuple[str, ...] = ()
+    extent_m: tuple[float, ...] = ()
 
     @property
     def is_bag(self) -> bool:
@@ -261,6 +266,12 @@ class Inspection:
                 "message_count": self.message_count,
                 "topics": [t.to_dict() for t in self.topics],
                 "tf_tree": [f.to_dict() for f in self.frames],
+            }
+        if self.format == "points":
+            out |= {
+                "points": len(self.point_ids),
+                "ids": list(self.point_ids),
+                "extent_m": list(self.extent_m),
             }
         if self.is_urdf:
             out |= {
