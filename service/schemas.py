@@ -153,6 +153,13 @@ class EvaluationOptions(_Strict):
     site_matrix: _Matrix4 | None = _field("site_matrix")
     simplify_m: float = _field("simplify_m")
     formats: list[_Artifact] | None = _field("formats")
+    visits: str = _field("visits")
+    visit_radius_m: float | None = _field("visit_radius_m")
+    align_points: list[Annotated[str, Field(min_length=1, max_length=200)]] | None = _field(
+        "align_points"
+    )
+    stop_speed_mps: float = _field("stop_speed_mps")
+    stop_min_s: float = _field("stop_min_s")
 
     @field_validator("formats")
     @classmethod
