@@ -43,6 +43,7 @@ __all__ = [
     "EVALUATION",
     "artifact_path",
     "check_options",
+    "visits_dataset_id",
     "create_evaluation",
     "evaluate_form",
     "evaluation_public",
@@ -73,6 +74,8 @@ def create_evaluation(
         wanted = {r.dataset_id for r in refs}
         if options.device is not None:
             wanted.add(options.device.dataset_id)
+        if visits_dataset_id(options.visits) is not None:
+            wanted.add(options.visits.strip())
         datasets = {
             d.id: d
             for d in session.scalars(
@@ -86,6 +89,7 @@ def create_evaluation(
             ("estimate", e) for e in body.estimates
         ]:
             _check_selector(datasets[ref.dataset_id], ref, role)
+        _check_visits(datasets, body)
         check_options(options)
         evaluation = Evaluation(
             project_id=project_id,
@@ -127,6 +131,33 @@ def check_options(options: EvaluationOptions) -> None:
         raise InputError(msg)
     config_from_options(options, reference_offset=offset_or_none(options.offset))
     export_from_options(options)
+
+
+def visits_dataset_id(visits: str) -> str | None:
+    """Return the dataset id of the visits option, None for ``auto`` (find the stops)."""
+    text = visits.strip()
+    return None if text.lower() == "auto" else text
+
+
+def _check_visits(datasets: dict[str, Dataset], body: EvaluationCreate) -> None:
+    """A visits dataset must be a visits table, and the reference control points."""
+    dataset_id = visits_dataset_id(body.options.visits)
+    if dataset_id is None:
+        return
+    visits = datasets[dataset_id]
+    if visits.inspection.get("format") != "visits":
+        msg = (
+            f"The visits dataset {visits.name!r} is a {visits.kind} file, not a visits table "
+            "id,t_start,t_end; upload the visits table and give its id."
+        )
+        raise InputError(msg, option="visits")
+    reference = datasets[body.reference.dataset_id]
+    if reference.inspection.get("format") != "points":
+        msg = (
+            f"Visits apply to a control-point reference, and the reference {reference.name!r} "
+            "is a trajectory; leave the visits at auto."
+        )
+        raise InputError(msg, option="visits")
 
 
 def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:

@@ -99,6 +99,7 @@ INSPECTORS: Final[Mapping[str, InspectorSpec]] = MappingProxyType(
                 "loceval.inspection.bag:inspect_bag",
             ),
             InspectorSpec("points", "surveyed control points", f"{_FILES}:inspect_points"),
+            InspectorSpec("visits", "visits of control points", f"{_FILES}:inspect_visits"),
             InspectorSpec(
                 "urdf", "URDF robot description", "loceval.inspection.robot:inspect_urdf"
             ),
@@ -112,7 +113,8 @@ def input_kind(spec: SourceSpec) -> str:
     """Return the :data:`INSPECTORS` key of a source.
 
     The format prefix wins; else a ``.urdf`` or ``.xml`` name is URDF; else the format is
-    sniffed from the content (:func:`loceval.readers.sniff_format`).
+    sniffed from the content (:func:`loceval.readers.sniff_format`), and a CSV whose header
+    is ``id,t_start,t_end`` is a visits table (``visits``).
 
     Raises:
         ReaderError: the path does not exist or its content matches no format.
@@ -121,7 +123,21 @@ def input_kind(spec: SourceSpec) -> str:
         return spec.format.value
     if spec.path.suffix.lower() in URDF_SUFFIXES and not spec.path.is_dir():
         return "urdf"
-    return sniff_format(spec.path).value
+    fmt = sniff_format(spec.path)
+    if fmt is TrajectoryFormat.CSV and _is_visits_table(spec.path):
+        return "visits"
+    return fmt.value
+
+
+def _is_visits_table(path: Path) -> bool:
+    """Whether a CSV's first row is a visits header ``id,t_start,t_end``."""
+    from loceval.readers.points import looks_like_visits  # noqa: PLC0415
+
+    with path.open(encoding="utf-8-sig", errors="replace") as fh:
+        for line in fh:
+            if line.strip() and not line.lstrip().startswith("#"):
+                return looks_like_visits(line)
+    return False
 
 
 def inspect(source: str | Path | SourceSpec, *, kind: str | None = None) -> Inspection:

@@ -15,7 +15,13 @@ from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
 from loceval.readers.motive import list_rigid_bodies
 from loceval.trajectory import Trajectory
 
-__all__ = ["inspect_motive", "inspect_points", "inspect_trajectory_file", "trajectory_source"]
+__all__ = [
+    "inspect_motive",
+    "inspect_points",
+    "inspect_trajectory_file",
+    "inspect_visits",
+    "trajectory_source",
+]
 
 _DESCRIPTIONS: Final = {
     TrajectoryFormat.TUM: "TUM trajectory",
@@ -110,6 +116,27 @@ def inspect_points(spec: SourceSpec) -> Inspection:
         warnings=points.warnings,
         point_ids=points.ids,
         extent_m=tuple(float(e) for e in extent),
+    )
+
+
+def inspect_visits(spec: SourceSpec) -> Inspection:
+    """Describe a visits table: the points visited and the time range (no trajectory).
+
+    Raises:
+        ReaderError: the reader refuses the table (a missing column, a non-number, ...).
+    """
+    from loceval.readers.points import read_visit_table  # noqa: PLC0415
+
+    ids, start_s, end_s = read_visit_table(spec.path)
+    return Inspection(
+        path=str(spec.path),
+        kind="visits",
+        format="visits",
+        sources=(),
+        point_ids=tuple(dict.fromkeys(ids)),
+        visit_count=len(ids),
+        start_ns=round(float(start_s.min()) * 1e9),
+        end_ns=round(float(end_s.max()) * 1e9),
     )
 
 

@@ -11,7 +11,8 @@ the keys that describe it:
 - files that hold one trajectory: ``source``, ``poses``, ``start_s``, ``end_s``,
   ``duration_s``, ``length_m``, ``rate_hz``, ``orientation`` (a summary of that trajectory);
 - URDF files: ``robot``, ``links``, ``joints``;
-- control-point surveys: ``points``, ``ids``, ``extent_m`` (no sources: not a trajectory).
+- control-point surveys: ``points``, ``ids``, ``extent_m`` (no sources: not a trajectory);
+- visits tables: ``visits``, ``ids``, ``start_s``, ``end_s``.
 """
 
 from __future__ import annotations
@@ -202,6 +203,8 @@ class Inspection:
             path as the reader names it).
         point_ids: for control-point surveys, the ids in file order.
         extent_m: for control-point surveys, the x, y and z extent of the points, metres.
+        visit_count: for visits tables, the visits (rows); their points are ``point_ids``
+            and their time range ``start_ns`` to ``end_ns``.
     """
 
     path: str
@@ -222,6 +225,7 @@ class Inspection:
     trajectory_source: str = ""
     point_ids: tuple[str, ...] = ()
     extent_m: tuple[float, ...] = ()
+    visit_count: int = 0
 
     @property
     def is_bag(self) -> bool:
@@ -272,6 +276,13 @@ class Inspection:
                 "points": len(self.point_ids),
                 "ids": list(self.point_ids),
                 "extent_m": list(self.extent_m),
+            }
+        if self.format == "visits":
+            out |= {
+                "visits": self.visit_count,
+                "ids": list(self.point_ids),
+                "start_s": self.start_ns / NS,
+                "end_s": self.end_ns / NS,
             }
         if self.is_urdf:
             out |= {

@@ -10,6 +10,7 @@ import datetime as dt
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec
 from service.options import config_from_options, offset_or_none
@@ -54,7 +55,10 @@ def run_report(args: argparse.Namespace) -> int:
                 result.to_dict(),
                 dataset=path.name,
                 recorded_at=recorded,
-                reference_xyz=result.reference.positions_xyz,
+                # control points have no reference path to compare across runs
+                reference_xyz=None
+                if isinstance(result, CheckpointEvaluation)
+                else result.reference.positions_xyz,
             )
         )
     tolerance = options.tolerance
