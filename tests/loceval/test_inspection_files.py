@@ -221,8 +221,8 @@ def test_reader_errors_pass_through(tmp_path):
 
 
 def test_registry_covers_every_format():
-    """Every trajectory format and URDF has an inspector, and each one loads."""
-    assert set(INSPECTORS) == {f.value for f in TrajectoryFormat} | {"urdf"}
+    """Every trajectory format, URDF and visits tables have an inspector; each loads."""
+    assert set(INSPECTORS) == {f.value for f in TrajectoryFormat} | {"urdf", "visits"}
     for key, spec in INSPECTORS.items():
         assert spec.kind == key
         assert callable(spec.load())
