@@ -1,4 +1,4 @@
-"""The artifacts of an evaluation against control points: ``result.json`` and ``errors.csv``.
+"""The artifacts of an evaluation against control points: result, errors.csv, report.
 
 ``errors.csv`` has one row per visit of every estimate::
 
@@ -31,7 +31,7 @@ __all__ = [
     "write_checkpoint_artifacts",
 ]
 
-CHECKPOINT_ARTIFACTS: Final = ("result.json", "errors.csv")
+CHECKPOINT_ARTIFACTS: Final = ("result.json", "errors.csv", "report.html", "report.pdf")
 """The artifacts an evaluation against control points writes."""
 
 
@@ -51,6 +51,26 @@ def checkpoint_errors_csv(evaluation: CheckpointEvaluation) -> bytes:
         [str(c).lower() if isinstance(c, bool) else c for c in row] for row in rows
     )
     return out.getvalue().encode()
+
+
+def _render(
+    evaluation: CheckpointEvaluation, options: ExportOptions, wanted: list[str]
+) -> dict[str, bytes]:
+    """Render every wanted artifact (the report's HTML and PDF share one pass)."""
+    out: dict[str, bytes] = {}
+    if "result.json" in wanted:
+        out["result.json"] = checkpoint_result_json(evaluation, options)
+    if "errors.csv" in wanted:
+        out["errors.csv"] = checkpoint_errors_csv(evaluation)
+    if "report.html" in wanted or "report.pdf" in wanted:
+        from exporters.report.checkpoints import render_checkpoint_report  # noqa: PLC0415
+
+        html, pdf = render_checkpoint_report(evaluation, options, pdf="report.pdf" in wanted)
+        if "report.html" in wanted:
+            out["report.html"] = html
+        if pdf is not None:
+            out["report.pdf"] = pdf
+    return out
 
 
 def write_checkpoint_artifacts(
@@ -90,12 +110,7 @@ def write_checkpoint_artifacts(
         shutil.rmtree(staging, ignore_errors=True)
         staging.mkdir()
         try:
-            for name in wanted:
-                data = (
-                    checkpoint_result_json(evaluation, options)
-                    if name == "result.json"
-                    else checkpoint_errors_csv(evaluation)
-                )
+            for name, data in _render(evaluation, options, wanted).items():
                 (staging / name).write_bytes(data)
             out_dir.mkdir(exist_ok=True)
             for name in wanted:

@@ -204,7 +204,9 @@ def _run_checkpoints(
         from exporters.checkpoints import write_checkpoint_artifacts  # noqa: PLC0415
 
         report("writing", _EVALUATE)
-        write_checkpoint_artifacts(result, out_dir, job.export, names=job.formats)
+        title = f"{result.reference_name} vs {', '.join(e.name for e in result.estimates)}"
+        export = replace(job.export, title=title)
+        write_checkpoint_artifacts(result, out_dir, export, names=job.formats)
     report("done", 1.0)
     return result
 

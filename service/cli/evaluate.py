@@ -83,8 +83,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
         from service.cli.tables import format_tables  # noqa: PLC0415
 
         print(format_tables(result))  # noqa: T201
-        if args.out is not None:
-            print(f"\nArtifacts written to {args.out}")  # noqa: T201
+    if not args.json and args.out is not None:
+        print(f"\nArtifacts written to {args.out}")  # noqa: T201
     return 0
 
 
