@@ -1,4 +1,9 @@
-"""The artifacts of an evaluation against control points: result, errors.csv, report.
+"""The artifacts of an evaluation against control points: result, errors.csv, report, DXF.
+
+The names are those of :data:`exporters.ARTIFACTS` (so the service lists and serves them):
+``result.json``, ``errors.csv``, ``report.html``, ``report.pdf`` and ``paths.dxf``, which
+here holds the control points, the measured positions and the error lines
+(:mod:`exporters.dxf_points`); the other CAD formats are not written for control points.
 
 ``errors.csv`` has one row per visit of every estimate::
 
@@ -31,7 +36,13 @@ __all__ = [
     "write_checkpoint_artifacts",
 ]
 
-CHECKPOINT_ARTIFACTS: Final = ("result.json", "errors.csv", "report.html", "report.pdf")
+CHECKPOINT_ARTIFACTS: Final = (
+    "result.json",
+    "errors.csv",
+    "report.html",
+    "report.pdf",
+    "paths.dxf",
+)
 """The artifacts an evaluation against control points writes."""
 
 
@@ -47,9 +58,7 @@ def checkpoint_errors_csv(evaluation: CheckpointEvaluation) -> bytes:
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(header)
-    writer.writerows(
-        [str(c).lower() if isinstance(c, bool) else c for c in row] for row in rows
-    )
+    writer.writerows([str(c).lower() if isinstance(c, bool) else c for c in row] for row in rows)
     return out.getvalue().encode()
 
 
@@ -62,6 +71,10 @@ def _render(
         out["result.json"] = checkpoint_result_json(evaluation, options)
     if "errors.csv" in wanted:
         out["errors.csv"] = checkpoint_errors_csv(evaluation)
+    if "paths.dxf" in wanted:
+        from exporters.dxf_points import export_points_dxf  # noqa: PLC0415
+
+        out["paths.dxf"] = export_points_dxf(evaluation, options)
     if "report.html" in wanted or "report.pdf" in wanted:
         from exporters.report.checkpoints import render_checkpoint_report  # noqa: PLC0415
 

@@ -43,11 +43,11 @@ __all__ = [
     "EVALUATION",
     "artifact_path",
     "check_options",
-    "visits_dataset_id",
     "create_evaluation",
     "evaluate_form",
     "evaluation_public",
     "list_evaluations",
+    "visits_dataset_id",
 ]
 
 logger = logging.getLogger(__name__)

@@ -26,9 +26,7 @@ _ARROW_SHARE = 1.0 / 3.0
 
 def error_vector_scale(evaluation: CheckpointEvaluation) -> float:
     """Return the arrow scale: plan metres per error metre (1, 2 or 5 x 10^k, at least 1)."""
-    largest = max(
-        (v.error_h_m for e in evaluation.estimates for v in e.result.visits), default=0.0
-    )
+    largest = max((v.error_h_m for e in evaluation.estimates for v in e.result.visits), default=0.0)
     spacing = evaluation.points.min_spacing_m()
     if largest <= 0.0 or not math.isfinite(spacing):
         return 1.0
@@ -62,7 +60,7 @@ def plot_checkpoint_plan(
     xy = points.positions_xyz[:, :2]
     ax.scatter(xy[:, 0], xy[:, 1], s=14, marker="+", color="#212121", label="control point")
     visited = {v.point_id for v in entry.result.visits}
-    if len(points) <= 60:  # noqa: PLR2004  (labels stay legible up to about 60 points)
+    if len(points) <= 60:
         for pid, (x, y) in zip(points.ids, xy.tolist(), strict=True):
             colour = "#212121" if pid in visited else "#c62828"
             ax.annotate(pid, (x, y), xytext=(3, 3), textcoords="offset points", fontsize=6,

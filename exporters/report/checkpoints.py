@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Final, cast
+from typing import TYPE_CHECKING, Any, Final, cast
 
 import numpy as np
 
@@ -22,6 +22,9 @@ from exporters.report.render import (
     render_template,
 )
 from loceval.checkpoint_evaluation import CheckpointEstimate, CheckpointEvaluation
+
+if TYPE_CHECKING:
+    from exporters.plots.figure import ImageFormat
 
 __all__ = [
     "CHECKPOINT_TEMPLATE",
@@ -117,15 +120,13 @@ def _point_rows(entry: CheckpointEstimate, ids: Sequence[str]) -> tuple[tuple[st
     return tuple(rows)
 
 
-def _section(
-    evaluation: CheckpointEvaluation, index: int, image_format: str
-) -> EstimateSection:
+def _section(evaluation: CheckpointEvaluation, index: int, image_format: str) -> EstimateSection:
     from exporters.plots.checkpoints import plot_checkpoint_plan  # noqa: PLC0415
 
     entry = evaluation.estimates[index]
     result = entry.result
     doc = cast("dict[str, Any]", result.to_dict()["checkpoints"])
-    fmt = "png" if image_format == "png" else "svg"
+    fmt: ImageFormat = "png" if image_format == "png" else "svg"
     plot = plot_checkpoint_plan(evaluation, index, formats=(fmt,))
     stats = result.stats
     scores = [("Hilti 2023 score", f"{doc['score']['hilti']:.1f} %"),
@@ -168,8 +169,12 @@ def build_checkpoint_view(
     sections = tuple(
         _section(evaluation, k, image_format) for k in range(len(evaluation.estimates))
     )
-    scored = "; ".join(f"{s.name}: Hilti {s.scores[0][1]}, LaMAria {s.scores[1][1]}" for s in sections)
-    summary = f"{len(sections)} estimate(s) scored at {len(points)} surveyed control points. {scored}."
+    scored = "; ".join(
+        f"{s.name}: Hilti {s.scores[0][1]}, LaMAria {s.scores[1][1]}" for s in sections
+    )
+    summary = (
+        f"{len(sections)} estimate(s) scored at {len(points)} surveyed control points. {scored}."
+    )
     warnings = [("reference", w) for w in points.warnings]
     warnings += [(e.name, w) for e in evaluation.estimates for w in e.estimate.warnings]
     warnings += [(e.name, w) for e in evaluation.estimates for w in e.result.warnings]

@@ -88,8 +88,10 @@ def _file_lines(insp: Inspection) -> list[str]:
     if insp.format == "visits":
         return [
             *lines,
-            f"  {insp.visit_count} visits of {len(insp.point_ids)} points, "
-            f"{_stamp_text(insp.start_ns)} .. {_stamp_text(insp.end_ns)}",
+            (
+                f"  {insp.visit_count} visits of {len(insp.point_ids)} points, "
+                f"{_stamp_text(insp.start_ns)} .. {_stamp_text(insp.end_ns)}"
+            ),
             "",
             "trajectory sources: none (a visits table goes with a control-point reference)",
         ]
@@ -97,8 +99,7 @@ def _file_lines(insp: Inspection) -> list[str]:
         extent = " x ".join(f"{e:.3f}" for e in insp.extent_m)
         return [
             *lines,
-            f"  {len(insp.point_ids)} control points over {extent} m: "
-            f"{', '.join(insp.point_ids)}",
+            f"  {len(insp.point_ids)} control points over {extent} m: {', '.join(insp.point_ids)}",
             "",
             "trajectory sources: none (control points are a reference: points:FILE)",
         ]

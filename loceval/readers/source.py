@@ -3,8 +3,8 @@ r"""Name a trajectory source: :class:`SourceSpec`, parsed from ``[FORMAT:]PATH[@
 A source is written ``[FORMAT:]PATH[@SELECTOR]``:
 
 - ``FORMAT:`` is optional and only counts when it is one of :class:`TrajectoryFormat`'s
-  values (``tum``, ``euroc``, ``kitti``, ``csv``, ``motive``, ``bag``, ``points``), so ``C:\data`` or
-  ``run:2.txt`` stay paths. Without it the format is sniffed from the content
+  values (``tum``, ``euroc``, ``kitti``, ``csv``, ``motive``, ``bag``, ``points``), so
+  ``C:\data`` or ``run:2.txt`` stay paths. Without it the format is sniffed from the content
   (:func:`loceval.readers.sniff.sniff_format`).
 - ``@SELECTOR`` is optional: comma-separated items, where ``KEY=VALUE`` items are options
   and at most one plain item is the selector. What each format accepts:

@@ -7,9 +7,8 @@ builders as the API's options (:mod:`service.options`).
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING, cast
-
 from pathlib import Path
+from typing import TYPE_CHECKING, cast
 
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError

@@ -74,8 +74,8 @@ def format_checkpoint_tables(result: CheckpointEvaluation) -> str:
         key = f"{t:g}"
         lines.append(_row(f"recall {key} m", [f"{c['recall'][key] * 100:.1f} %" for c in scores]))
     for e in est:
-        lines += ["", f"{e.name}: visits", f"  {'id':<10}{'t_start_s':>14}{'error_m':>10}"
-                  f"{'error_h_m':>10}{'error_v_m':>10}"]  # fmt: skip
+        head = f"  {'id':<10}{'t_start_s':>14}{'error_m':>10}{'error_h_m':>10}{'error_v_m':>10}"
+        lines += ["", f"{e.name}: visits", head]
         lines.extend(
             f"  {v.point_id:<10}{v.start_ns / 1e9:>14.3f}{v.error_m:>10.3f}{v.error_h_m:>10.3f}"
             f"{v.error_v_m:>+10.3f}{'  (alignment)' if v.used_for_alignment else ''}"

@@ -41,7 +41,9 @@ def recording(rng: np.random.Generator, tmp_path: Path) -> StopAndGo:
     write_points(folder / "survey.csv", rec.points)
     rows = [
         f"{t / NS:.9f} {x!r} {y!r} {z!r}"
-        for t, (x, y, z) in zip(rec.estimate.stamps_ns, rec.estimate.positions_xyz.tolist())
+        for t, (x, y, z) in zip(
+            rec.estimate.stamps_ns, rec.estimate.positions_xyz.tolist(), strict=True
+        )
     ]
     (folder / "est.txt").write_text("\n".join(rows) + "\n")
     write_true_visits(folder / "visits.csv", rec)

@@ -32,7 +32,9 @@ def recording(rng: np.random.Generator, tmp_path: Path) -> StopAndGo:
     write_points(tmp_path / "survey.csv", rec.points)
     rows = [
         f"{t / NS:.9f} {x!r} {y!r} {z!r}"
-        for t, (x, y, z) in zip(rec.estimate.stamps_ns, rec.estimate.positions_xyz.tolist())
+        for t, (x, y, z) in zip(
+            rec.estimate.stamps_ns, rec.estimate.positions_xyz.tolist(), strict=True
+        )
     ]
     (tmp_path / "est.txt").write_text("\n".join(rows) + "\n")
     (tmp_path / "est.csv").write_text("t,x,y,z\n" + "\n".join(r.replace(" ", ",") for r in rows))
@@ -163,6 +165,7 @@ def test_text_tables_and_alignment_points(
     recording: StopAndGo, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Without --json: scores, recall and visits; --align-points marks the stationing visits."""
+    del recording  # the survey, estimate and visits files are written by the fixture
     code, out, err = _run(
         capsys, "evaluate", f"points:{tmp_path / 'survey.csv'}", tmp_path / "est.txt",
         "--align", "se3", "--visits", tmp_path / "visits.csv",
