@@ -262,6 +262,11 @@ class EvaluationsPublic(BaseModel):
 class TemplateSource(_Strict):
     """A trajectory in each selected recording: the selector and the name in the report."""
 
+    dataset_id: _Id | None = Field(
+        default=None,
+        description="a fixed dataset used for every recording instead of the recording "
+        "itself, e.g. a control-point survey as the reference",
+    )
     selector: Annotated[str, Field(min_length=1, max_length=500)] | None = Field(
         default=None, examples=["/amcl_pose", "tf:map:base_link"]
     )

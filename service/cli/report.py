@@ -111,6 +111,12 @@ def _read_template(path: Path) -> EvaluationTemplate:
 
 def _template_job(path: Path, template: EvaluationTemplate, config: EvaluationConfig) -> Job:
     def source(entry: TemplateSource, role: str) -> JobSource:
+        if entry.dataset_id is not None:
+            msg = (
+                f"The template's {role} names the dataset {entry.dataset_id!r}, an upload of "
+                "the service; the report command reads the recordings named, so leave it out."
+            )
+            raise InputError(msg)
         spec = SourceSpec(None, path, entry.selector)
         name = entry.name or default_name(spec)
         return JobSource(spec, name, file_provenance(role, spec))

@@ -142,3 +142,48 @@ def test_duplicate_ids_are_refused_at_upload(api: Api, tmp_path: Path) -> None:
     del tmp_path
     response = api.upload("survey.csv", b"id,x,y,z\nA,0,0,0\nB,1,0,0\nA,0,1,0\n")
     assert_problem(response, 422, detail=r"survey\.csv")
+
+
+def test_a_schedule_evaluates_each_recording_against_a_fixed_survey(
+    api: Api, rng: np.random.Generator, tmp_path: Path
+) -> None:
+    """A template whose reference names the survey's dataset scores every selected recording."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    points = grid_points(3, 4)
+    write_points(folder / "survey.csv", points)
+    survey = _upload(api, folder, "survey.csv")["id"]
+    expected = {}
+    for k in range(2):
+        rec = stop_and_go(rng, points, passes=1, bias_xyz=(0.01 * (k + 1), 0.0, 0.0))
+        rows = [
+            f"{t / NS:.9f} {x!r} {y!r} {z!r}"
+            for t, (x, y, z) in zip(
+                rec.estimate.stamps_ns, rec.estimate.positions_xyz.tolist(), strict=True
+            )
+        ]
+        name = f"run{k}.txt"
+        (folder / name).write_text("\n".join(rows) + "\n")
+        api.dataset(name, (folder / name).read_bytes(), tags="floor")
+        expected[name] = evaluate_checkpoints(points, rec.estimate).stats.rmse
+    body = {
+        "name": "Floor grid",
+        "cron": "0 7 * * mon",
+        "timezone": "UTC",
+        "selection": {"tags": ["floor"]},
+        "template": {
+            "reference": {"dataset_id": survey, "name": "survey"},
+            "estimates": [{"name": "slam"}],
+            "options": {"align": "none"},
+        },
+    }
+    created = api.client.post("/api/v1/schedules", json=body, headers=api.headers)
+    assert created.status_code == 201, created.text
+    url = f"/api/v1/schedules/{created.json()['id']}/run"
+    run = api.client.post(url, headers=api.headers).json()
+    assert run["status"] == "succeeded", run
+    rows = {r["dataset"]: r for r in run["rows"]}
+    assert set(rows) == set(expected)
+    for name, rmse in expected.items():
+        assert rows[name]["status"] == "succeeded", rows[name]
+        assert rows[name]["summary"][0]["ate_rmse_m"] == pytest.approx(rmse, abs=1e-6)
