@@ -160,6 +160,16 @@ def _check_visits(datasets: dict[str, Dataset], body: EvaluationCreate) -> None:
         raise InputError(msg, option="visits")
 
 
+def _check_survey(fmt: object, label: str, role: str) -> None:
+    """Control points are a reference only; a visits table is an option, not a source."""
+    if fmt == "visits":
+        msg = f"{label} is a visits table, not a trajectory; give its id as the visits option."
+        raise InputError(msg)
+    if fmt == "points" and role != "reference":
+        msg = f"{label} holds control points, not a trajectory; give it as the reference."
+        raise InputError(msg)
+
+
 def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:
     inspection: dict[str, Any] = dataset.inspection
     fmt = inspection.get("format")
@@ -167,6 +177,7 @@ def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:
     if fmt == "urdf":
         msg = f"{label} is a URDF, not a trajectory; use it as the device offset."
         raise InputError(msg)
+    _check_survey(fmt, label, role)
     sources = inspection.get("sources", [])
     selectors = [s.get("selector") for s in sources]
     if fmt == "bag":

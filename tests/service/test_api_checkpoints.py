@@ -187,3 +187,23 @@ def test_a_schedule_evaluates_each_recording_against_a_fixed_survey(
     for name, rmse in expected.items():
         assert rows[name]["status"] == "succeeded", rows[name]
         assert rows[name]["summary"][0]["ate_rmse_m"] == pytest.approx(rmse, abs=1e-6)
+
+
+def test_surveys_and_visits_are_not_estimates(
+    api: Api, recording: StopAndGo, tmp_path: Path
+) -> None:
+    """A survey as an estimate, or a visits table as a source, is refused before queueing."""
+    del recording
+    folder = tmp_path / "in"
+    survey = _upload(api, folder, "survey.csv")["id"]
+    visits = _upload(api, folder, "visits.csv")["id"]
+    assert_problem(
+        api.evaluate(_body(survey, survey)),
+        422,
+        detail=r"The estimate dataset 'survey.csv' holds control points, not a trajectory",
+    )
+    assert_problem(
+        api.evaluate(_body(visits, survey)),
+        422,
+        detail=r"The reference dataset 'visits.csv' is a visits table",
+    )
