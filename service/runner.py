@@ -17,6 +17,7 @@ from loceval.checkpoint_evaluation import (
     CheckpointEvaluation,
     evaluate_control_points,
 )
+from loceval.controlpoints import ControlPoints, Visits
 from loceval.errors import InputError, LocevalError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, ProgressCallback, evaluate
 from loceval.options import choice_default
@@ -170,7 +171,7 @@ def _run_checkpoints(
     job: Job, out_dir: Path | None, report: ProgressCallback
 ) -> CheckpointEvaluation:
     """Read the survey, the visits and the estimates; score; write the artifacts."""
-    from loceval.readers.points import read_control_points, read_visits  # noqa: PLC0415
+    from loceval.readers.points import read_control_points  # noqa: PLC0415
 
     report(f"reading {job.reference.name}", 0.0)
     points = read_control_points(job.reference.spec.path)
@@ -178,7 +179,7 @@ def _run_checkpoints(
         points = replace(points, source=f"points:{job.reference.display_path}")
     visits = None
     if job.visits is not None:
-        visits = read_visits(job.visits.spec.path, points)
+        visits = _read_visits(job.visits.spec, points, job)
     estimates = []
     for k, source in enumerate(job.estimates):
         report(f"reading {source.name}", _READ * (k + 1) / (len(job.estimates) + 1))
@@ -209,6 +210,34 @@ def _run_checkpoints(
         write_checkpoint_artifacts(result, out_dir, export, names=job.formats)
     report("done", 1.0)
     return result
+
+
+def _read_visits(spec: SourceSpec, points: ControlPoints, job: Job) -> Visits:
+    """Read a visits table, or the arrivals on a bag topic (``run.bag@/arrivals``)."""
+    try:
+        fmt = spec.format or sniff_format(spec.path)
+    except LocevalError:
+        fmt = None  # the visits reader says what is wrong with the file
+    if fmt is not TrajectoryFormat.BAG:
+        from loceval.readers.points import read_visits  # noqa: PLC0415
+
+        return read_visits(spec.path, points)
+    if not spec.selector:
+        msg = (
+            f"{spec.path.name!r} is a bag; name the topic of arrivals after '@', e.g. "
+            f"{spec.path.name}@/arrivals (std_msgs/String or geometry_msgs/PointStamped)."
+        )
+        raise InputError(msg, option="visits")
+    from loceval.readers.rosbag import StampSource  # noqa: PLC0415
+    from loceval.readers.rosbag.arrivals import read_bag_arrivals  # noqa: PLC0415
+
+    return read_bag_arrivals(
+        spec.path,
+        spec.selector,
+        points,
+        hold_s=job.checkpoints.stop_min_s,
+        stamp=StampSource(job.stamp),
+    )
 
 
 def default_name(spec: SourceSpec) -> str:

@@ -7,12 +7,11 @@ builders as the API's options (:mod:`service.options`).
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError
-from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
+from loceval.readers import TrajectoryFormat, parse_source
 from service.options import (
     EvaluationValues,
     ExportValues,
@@ -91,7 +90,7 @@ def _visits_source(visits: str) -> JobSource | None:
     """Return the visits table named by ``--visits`` (None for ``auto``: find the stops)."""
     if visits.strip().lower() == "auto":
         return None
-    spec = SourceSpec(None, Path(visits))
+    spec = parse_source(visits)  # a table, or a bag topic of arrivals: run.bag@/arrivals
     return JobSource(spec, spec.path.stem, file_provenance("visits", spec))
 
 

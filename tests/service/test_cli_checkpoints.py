@@ -19,8 +19,10 @@ import numpy as np
 import pytest
 
 from loceval.checkpoints import evaluate_checkpoints
+from loceval.controlpoints import Visits
 from loceval.readers.points import read_visits
 from service.cli import main
+from tests import bagfactory as bf
 from tests.checkpoint_factory import NS, StopAndGo, grid_points, stop_and_go, write_points
 from tests.checkpoint_factory import write_visits as write_true_visits
 
@@ -286,3 +288,59 @@ def test_control_points_are_no_estimate(
     )
     assert code == 1
     assert "holds control points (id,x,y,z), not a trajectory" in err
+
+
+@pytest.mark.parametrize(
+    ("fmt", "msgtype"), [("mcap", bf.POINT), ("rosbag1", bf.STRING)], ids=["point", "string"]
+)
+def test_visits_from_a_bag_topic_of_arrivals(
+    fmt: str,
+    msgtype: str,
+    recording: StopAndGo,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """--visits run.bag@/arrivals: each message starts a visit of the minimum stop duration."""
+    records = []
+    for pid, start in zip(recording.visit_ids, recording.visit_start_ns.tolist(), strict=True):
+        if msgtype == bf.POINT:
+            records.append(bf.Record("/arrivals", msgtype, start + 7, (start, (0, 0, 0), None),
+                                     frame_id=pid))  # fmt: skip
+        else:
+            records.append(bf.Record("/arrivals", msgtype, start, pid))
+    bag = bf.write_bag(bf.bag_path(tmp_path, fmt, "arrivals"), records, fmt=fmt)
+    code, out, err = _run(
+        capsys, "evaluate", f"points:{tmp_path / 'survey.csv'}", tmp_path / "est.txt",
+        "--align", "none", "--visits", f"{bag}@/arrivals", "--stop-min", "2", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    visits = json.loads(out)["estimates"][0]["checkpoints"]["visits"]
+    index = recording.points.index_of(recording.visit_ids, where="test")
+    start = recording.visit_start_ns
+    expected = evaluate_checkpoints(
+        recording.points,
+        recording.estimate,
+        visits=Visits(index, start, start + 2 * NS, source="bag"),
+    )
+    assert [v["id"] for v in visits] == recording.visit_ids
+    assert [v["t_end_s"] - v["t_start_s"] for v in visits] == pytest.approx([2.0] * 135)
+    np.testing.assert_allclose(
+        [v["error_m"] for v in visits], [v.error_m for v in expected.visits], atol=1e-6
+    )
+
+
+def test_a_bag_topic_that_announces_nothing(
+    recording: StopAndGo, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A pose topic is not a topic of arrivals; the message names the types that are."""
+    del recording
+    poses = bf.random_poses(np.random.default_rng(2), 5, dt_ns=NS)
+    bag = bf.write_bag(
+        tmp_path / "poses.bag", bf.pose_records("/pose", bf.POSE, poses), fmt="rosbag1"
+    )
+    code, _, err = _run(
+        capsys, "evaluate", f"points:{tmp_path / 'survey.csv'}", tmp_path / "est.txt",
+        "--align", "none", "--visits", f"{bag}@/pose",
+    )  # fmt: skip
+    assert code == 1
+    assert "arrivals at control points are read from std_msgs/String" in err
