@@ -432,10 +432,11 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         OptionKind.TEXT,
         "auto",
         "control points: when the device stood on which point; auto finds the stops, or a "
-        "visits table id,t_start,t_end (the API: its dataset id)",
+        "visits table id,t_start,t_end, or a bag topic of arrivals BAG@TOPIC (the API: a "
+        "visits table's dataset id)",
         "the visits",
         "visits",
-        "auto|FILE",
+        "auto|FILE|BAG@TOPIC",
         max_length=500,
         example="auto",
     ),
