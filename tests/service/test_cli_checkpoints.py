@@ -134,6 +134,7 @@ def test_visits_file_and_artifacts(
     code, out, err = _run(
         capsys, "evaluate", tmp_path / "survey.csv", tmp_path / "est.csv", "--align", "none",
         "--visits", tmp_path / "visits.csv", "--json", "--out", out_dir,
+        "--formats", "result.json,errors.csv",
     )  # fmt: skip
     assert code == 0, err
     doc = json.loads(out)
