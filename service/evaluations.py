@@ -55,6 +55,7 @@ __all__ = [
     "evaluate_form",
     "evaluation_public",
     "list_evaluations",
+    "visits_dataset_id",
 ]
 
 logger = logging.getLogger(__name__)
@@ -81,6 +82,8 @@ def create_evaluation(
         wanted = {r.dataset_id for r in refs}
         if isinstance(options.device, DeviceOffset):
             wanted.add(options.device.dataset_id)
+        if visits_dataset_id(options.visits) is not None:
+            wanted.add(options.visits.strip())
         datasets = {
             d.id: d
             for d in session.scalars(
@@ -94,6 +97,7 @@ def create_evaluation(
             ("estimate", e) for e in body.estimates
         ]:
             _check_selector(datasets[ref.dataset_id], ref, role)
+        _check_visits(datasets, body)
         check_options(options)
         evaluation = Evaluation(
             project_id=project_id,
@@ -170,7 +174,7 @@ def check_ranging_options(options: EvaluationOptions) -> None:
 
 
 def _check_radio(anchors: Dataset, ranges: Dataset, ref: SourceRef) -> None:
-    if anchors.inspection.get("format") != "anchors":
+    if anchors.inspection.get("format") not in {"anchors", "points"}:  # a survey id,x,y,z
         msg = (
             f"The anchors dataset {anchors.name!r} is a {anchors.kind} file, not an anchors "
             "table; upload a CSV with the header id,x,y,z."
@@ -239,6 +243,43 @@ def check_options(options: EvaluationOptions) -> None:
     export_from_options(options)
 
 
+def visits_dataset_id(visits: str) -> str | None:
+    """Return the dataset id of the visits option, None for ``auto`` (find the stops)."""
+    text = visits.strip()
+    return None if text.lower() == "auto" else text
+
+
+def _check_visits(datasets: dict[str, Dataset], body: EvaluationCreate) -> None:
+    """A visits dataset must be a visits table, and the reference control points."""
+    dataset_id = visits_dataset_id(body.options.visits)
+    if dataset_id is None:
+        return
+    visits = datasets[dataset_id]
+    if visits.inspection.get("format") != "visits":
+        msg = (
+            f"The visits dataset {visits.name!r} is a {visits.kind} file, not a visits table "
+            "id,t_start,t_end; upload the visits table and give its id."
+        )
+        raise InputError(msg, option="visits")
+    reference = datasets[body.reference.dataset_id]
+    if reference.inspection.get("format") != "points":
+        msg = (
+            f"Visits apply to a control-point reference, and the reference {reference.name!r} "
+            "is a trajectory; leave the visits at auto."
+        )
+        raise InputError(msg, option="visits")
+
+
+def _check_survey(fmt: object, label: str, role: str) -> None:
+    """Control points are a reference only; a visits table is an option, not a source."""
+    if fmt == "visits":
+        msg = f"{label} is a visits table, not a trajectory; give its id as the visits option."
+        raise InputError(msg)
+    if fmt == "points" and role != "reference":
+        msg = f"{label} holds control points, not a trajectory; give it as the reference."
+        raise InputError(msg)
+
+
 def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:
     inspection: dict[str, Any] = dataset.inspection
     fmt = inspection.get("format")
@@ -246,9 +287,10 @@ def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:
     if fmt == "urdf":
         msg = f"{label} is a URDF, not a trajectory; use it as the device offset."
         raise InputError(msg)
-    if fmt in {"anchors", "ranges"}:
-        msg = f"{label} is a radio {fmt} table, not a trajectory; use it in POST /ranging."
+    if fmt == "ranges":
+        msg = f"{label} is a radio ranges table, not a trajectory; use it in POST /ranging."
         raise InputError(msg)
+    _check_survey(fmt, label, role)
     sources = inspection.get("sources", [])
     selectors = [s.get("selector") for s in sources]
     if fmt == "bag":

@@ -31,8 +31,9 @@ from service.db import (
     make_session_factory,
     migrate,
 )
-from service.evaluations import EVALUATION
+from service.evaluations import EVALUATION, visits_dataset_id
 from service.options import (
+    checkpoints_from_options,
     config_from_options,
     device_offset,
     export_from_options,
@@ -131,6 +132,14 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
             to_link=options.device.to_link,
             offset=options.offset,
         )
+    visits = None
+    visits_id = visits_dataset_id(options.visits)
+    if visits_id is not None:
+        table = _dataset(session, project_id, visits_id)
+        spec = SourceSpec(None, runtime.store.path(table.storage_path))
+        provenance = file_provenance("visits", spec, sha256=table.sha256)
+        provenance.update(path=table.filename, dataset_id=table.id)
+        visits = JobSource(spec, Path(table.filename).stem, provenance, table.filename)
     return Job(
         reference=reference,
         estimates=estimates,
@@ -142,6 +151,8 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
         stamp=options.stamp,
         export=export_from_options(options, evaluation_id=evaluation.id),
         formats=options.formats,
+        visits=visits,
+        checkpoints=checkpoints_from_options(options),
     )
 
 

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from loceval.alignment import AlignMethod, AlignWindow
 from loceval.association import AssociationMethod
+from loceval.checkpoint_evaluation import CheckpointConfig
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, Tolerance, parse_offset
 from loceval.geometry import SimilarityTransform
@@ -30,6 +31,7 @@ __all__ = [
     "EvaluationValues",
     "ExportValues",
     "RangingValues",
+    "checkpoints_from_options",
     "config_from_options",
     "device_offset",
     "export_from_options",
@@ -109,6 +111,22 @@ class EvaluationValues(Protocol):
     @property
     def planar(self) -> bool:
         """Measure position errors in x-y only."""
+
+    @property
+    def visit_radius_m(self) -> float | None:
+        """Control points: how near a stop must be to a point, metres."""
+
+    @property
+    def align_points(self) -> Sequence[str] | None:
+        """Control points: the ids that fix the alignment."""
+
+    @property
+    def stop_speed_mps(self) -> float:
+        """Control points: the speed below which the device stands still."""
+
+    @property
+    def stop_min_s(self) -> float:
+        """Control points: how long the device must stand still, seconds."""
 
 
 class ExportValues(Protocol):
@@ -210,6 +228,7 @@ def config_from_options(
         InputError: a value cannot be used (the error carries the option's key).
     """
     auto_time = is_auto(options.time_offset_s)
+    checkpoints_from_options(options)  # control-point options fail as fast as the others
     return EvaluationConfig(
         association=AssociationMethod(options.association),
         max_dt_s=options.max_dt_s,
@@ -237,6 +256,20 @@ def config_from_options(
 def is_auto(value: object) -> bool:
     """Return whether an option's value is ``auto`` (estimated from the data)."""
     return isinstance(value, str) and value == AUTO
+
+
+def checkpoints_from_options(options: EvaluationValues) -> CheckpointConfig:
+    """Return the options of a control-point reference.
+
+    Raises:
+        InputError: a value cannot be used (the error carries the option's key).
+    """
+    return CheckpointConfig(
+        visit_radius_m=options.visit_radius_m,
+        align_points=tuple(options.align_points or ()),
+        stop_speed_mps=options.stop_speed_mps,
+        stop_min_s=options.stop_min_s,
+    )
 
 
 def export_from_options(

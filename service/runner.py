@@ -12,9 +12,16 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from loceval.checkpoint_evaluation import (
+    CheckpointConfig,
+    CheckpointEvaluation,
+    evaluate_control_points,
+)
+from loceval.controlpoints import ControlPoints, Visits
+from loceval.errors import InputError, LocevalError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, ProgressCallback, evaluate
 from loceval.options import choice_default
-from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
+from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory, sniff_format
 from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
@@ -131,6 +138,8 @@ class Job:
         formats: the artifacts to write (None: all).
         ranging: the radio inputs: the estimates are then positioned from the ranges
             (:func:`loceval.radio.evaluate_radio`) and ``estimates`` is empty.
+        visits: a control-point reference: the visits table; None finds the stops.
+        checkpoints: a control-point reference: its options.
     """
 
     reference: JobSource
@@ -140,12 +149,18 @@ class Job:
     export: ExportOptions | None = None
     formats: Sequence[str] | None = None
     ranging: RangingSources | None = None
+    visits: JobSource | None = None
+    checkpoints: CheckpointConfig = field(default_factory=CheckpointConfig)
 
 
 def run_job(
     job: Job, out_dir: Path | None, progress: ProgressCallback | None = None
-) -> EvaluationResult:
+) -> EvaluationResult | CheckpointEvaluation:
     """Read, evaluate and (with ``out_dir`` and ``job.export``) write the artifacts.
+
+    A control-point reference (``points:survey.csv``) is scored visit by visit
+    (:func:`loceval.checkpoint_evaluation.evaluate_control_points`); any other is a
+    trajectory evaluated pose by pose.
 
     Args:
         job: the job.
@@ -159,6 +174,14 @@ def run_job(
         LocevalError: bad input (reader, association, alignment, metric or export errors).
     """
     report = progress or (lambda _stage, _fraction: None)
+    if is_control_points(job.reference.spec):
+        return _run_checkpoints(job, out_dir, report)
+    if job.visits is not None:
+        msg = (
+            "A visits table applies to a control-point reference (points:FILE), and the "
+            "reference is a trajectory; leave the visits out."
+        )
+        raise InputError(msg, option="visits")
     sources = [job.reference, *job.estimates]
     trajectories = []
     for k, source in enumerate(sources):
@@ -203,6 +226,89 @@ def run_job(
         )
     report("done", 1.0)
     return result
+
+
+def is_control_points(spec: SourceSpec) -> bool:
+    """Return whether a source is a control-point survey (named so, or sniffed as one)."""
+    if spec.format is not None:
+        return spec.format is TrajectoryFormat.POINTS
+    try:
+        return sniff_format(spec.path) is TrajectoryFormat.POINTS
+    except LocevalError:
+        return False  # the trajectory reader reports the file with its own message
+
+
+def _run_checkpoints(
+    job: Job, out_dir: Path | None, report: ProgressCallback
+) -> CheckpointEvaluation:
+    """Read the survey, the visits and the estimates; score; write the artifacts."""
+    from loceval.readers.points import read_control_points  # noqa: PLC0415
+
+    report(f"reading {job.reference.name}", 0.0)
+    points = read_control_points(job.reference.spec.path)
+    if job.reference.display_path is not None:
+        points = replace(points, source=f"points:{job.reference.display_path}")
+    visits = None
+    if job.visits is not None:
+        visits = _read_visits(job.visits.spec, points, job)
+    estimates = []
+    for k, source in enumerate(job.estimates):
+        report(f"reading {source.name}", _READ * (k + 1) / (len(job.estimates) + 1))
+        estimates.append(source.read(stamp=job.stamp))
+    inputs = [dict(s.provenance) for s in (job.reference, *job.estimates)]
+    if job.visits is not None:
+        inputs.append(dict(job.visits.provenance))
+
+    def evaluating(stage: str, fraction: float) -> None:
+        report(stage, _READ + (_EVALUATE - _READ) * fraction)
+
+    result = evaluate_control_points(
+        points,
+        estimates,
+        job.config,
+        job.checkpoints,
+        visits=visits,
+        reference_name=job.reference.name,
+        inputs=inputs,
+        progress=evaluating,
+    )
+    if out_dir is not None and job.export is not None:
+        from exporters.checkpoints import write_checkpoint_artifacts  # noqa: PLC0415
+
+        report("writing", _EVALUATE)
+        title = f"{result.reference_name} vs {', '.join(e.name for e in result.estimates)}"
+        export = replace(job.export, title=title)
+        write_checkpoint_artifacts(result, out_dir, export, names=job.formats)
+    report("done", 1.0)
+    return result
+
+
+def _read_visits(spec: SourceSpec, points: ControlPoints, job: Job) -> Visits:
+    """Read a visits table, or the arrivals on a bag topic (``run.bag@/arrivals``)."""
+    try:
+        fmt = spec.format or sniff_format(spec.path)
+    except LocevalError:
+        fmt = None  # the visits reader says what is wrong with the file
+    if fmt is not TrajectoryFormat.BAG:
+        from loceval.readers.points import read_visits  # noqa: PLC0415
+
+        return read_visits(spec.path, points)
+    if not spec.selector:
+        msg = (
+            f"{spec.path.name!r} is a bag; name the topic of arrivals after '@', e.g. "
+            f"{spec.path.name}@/arrivals (std_msgs/String or geometry_msgs/PointStamped)."
+        )
+        raise InputError(msg, option="visits")
+    from loceval.readers.rosbag import StampSource  # noqa: PLC0415
+    from loceval.readers.rosbag.arrivals import read_bag_arrivals  # noqa: PLC0415
+
+    return read_bag_arrivals(
+        spec.path,
+        spec.selector,
+        points,
+        hold_s=job.checkpoints.stop_min_s,
+        stamp=StampSource(job.stamp),
+    )
 
 
 def default_name(spec: SourceSpec) -> str:

@@ -30,7 +30,14 @@ from service.errors import ServiceUnavailableError, problem_for
 from service.evaluations import EVALUATION, create_evaluation
 from service.runtime import Runtime
 from service.schedules import RUN, SUMMARY_ARTIFACTS, describe_selection, select_datasets
-from service.schemas import EvaluationCreate, EvaluationTemplate, Produce, Selection, SourceRef
+from service.schemas import (
+    EvaluationCreate,
+    EvaluationTemplate,
+    Produce,
+    Selection,
+    SourceRef,
+    TemplateSource,
+)
 from service.tracking import ProgressWriter, tracked_job
 
 __all__ = [
@@ -122,10 +129,8 @@ def _evaluate_all(
         if not per_run:
             options = options.model_copy(update={"formats": ["result.json"]})
         body = EvaluationCreate(
-            reference=SourceRef(dataset_id=dataset.id, **template.reference.model_dump()),
-            estimates=[
-                SourceRef(dataset_id=dataset.id, **e.model_dump()) for e in template.estimates
-            ],
+            reference=_source_ref(template.reference, dataset),
+            estimates=[_source_ref(e, dataset) for e in template.estimates],
             options=options,
         )
         try:
@@ -157,6 +162,13 @@ def _evaluate_all(
     return rows, summary_runs
 
 
+def _source_ref(entry: TemplateSource, recording: Dataset) -> SourceRef:
+    """Return the template's source in a recording, or in its fixed dataset (a survey)."""
+    return SourceRef(
+        dataset_id=entry.dataset_id or recording.id, selector=entry.selector, name=entry.name
+    )
+
+
 def _failed_run(dataset: Dataset, reason: str, evaluation_id: str | None = None) -> Any:  # noqa: ANN401
     from exporters.summary import SummaryRun  # noqa: PLC0415  (heavy, see _evaluate_all)
 
@@ -173,6 +185,8 @@ def _reference_xyz(
     runtime: Runtime, dataset: Dataset, template: EvaluationTemplate
 ) -> np.ndarray[Any, np.dtype[np.float64]] | None:
     """Re-read the run's reference path for the repeatability table (None if unreadable)."""
+    if template.reference.dataset_id is not None:
+        return None  # a fixed reference (control points): the same in every run
     fmt = dataset.inspection.get("format")
     try:
         spec = SourceSpec(

@@ -219,6 +219,13 @@ class EvaluationOptions(_Strict):
     no_ci: bool = _field("no_ci")
     reference_sigma_m: float | None = _field("reference_sigma_m")
     planar: bool = _field("planar")
+    visits: str = _field("visits")
+    visit_radius_m: float | None = _field("visit_radius_m")
+    align_points: list[Annotated[str, Field(min_length=1, max_length=200)]] | None = _field(
+        "align_points"
+    )
+    stop_speed_mps: float = _field("stop_speed_mps")
+    stop_min_s: float = _field("stop_min_s")
 
     @field_validator("formats")
     @classmethod
@@ -364,6 +371,11 @@ class EvaluationsPublic(BaseModel):
 class TemplateSource(_Strict):
     """A trajectory in each selected recording: the selector and the name in the report."""
 
+    dataset_id: _Id | None = Field(
+        default=None,
+        description="a fixed dataset used for every recording instead of the recording "
+        "itself, e.g. a control-point survey as the reference",
+    )
     selector: Annotated[str, Field(min_length=1, max_length=500)] | None = Field(
         default=None, examples=["/amcl_pose", "tf:map:base_link"]
     )

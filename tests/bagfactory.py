@@ -33,6 +33,7 @@ TF = "tf2_msgs/msg/TFMessage"
 IMAGE = "sensor_msgs/msg/Image"
 IMU = "sensor_msgs/msg/Imu"
 RANGE = "sensor_msgs/msg/Range"
+STRING = "std_msgs/msg/String"
 
 FORMATS = ("rosbag1", "sqlite3", "mcap")
 
@@ -181,6 +182,8 @@ def build_message(fmt: str, record: Record) -> object:  # noqa: C901, PLR0911
         )
 
     kind = record.msgtype
+    if kind == STRING:
+        return types[STRING](data=str(record.payload))
     if kind == TF:
         assert isinstance(record.payload, list)
         return types[TF](transforms=[transform_stamped(t) for t in record.payload])

@@ -91,7 +91,7 @@ def write_points(path: Path, points: ControlPoints, *, header: str = "id,x,y,z,s
     """Write a survey CSV."""
     rows = [header]
     for pid, (x, y, z), s in zip(points.ids, points.positions_xyz, points.sigma_xyz, strict=True):
-        rows.append(f"{pid},{x!r},{y!r},{z!r},{s[0]!r}")
+        rows.append(f"{pid},{float(x)!r},{float(y)!r},{float(z)!r},{float(s[0])!r}")
     path.write_text("\n".join(rows) + "\n", encoding="utf-8")
     return path
 

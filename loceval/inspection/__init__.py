@@ -98,6 +98,8 @@ INSPECTORS: Final[Mapping[str, InspectorSpec]] = MappingProxyType(
                 "ROS 1 bag, ROS 2 bag (sqlite3 or MCAP) or a zip of one",
                 "loceval.inspection.bag:inspect_bag",
             ),
+            InspectorSpec("points", "surveyed control points", f"{_FILES}:inspect_points"),
+            InspectorSpec("visits", "visits of control points", f"{_FILES}:inspect_visits"),
             InspectorSpec(
                 "urdf", "URDF robot description", "loceval.inspection.robot:inspect_urdf"
             ),
@@ -118,9 +120,11 @@ INSPECTORS: Final[Mapping[str, InspectorSpec]] = MappingProxyType(
 def input_kind(spec: SourceSpec) -> str:
     """Return the :data:`INSPECTORS` key of a source.
 
-    The format prefix wins; else a ``.urdf`` or ``.xml`` name is URDF; else a radio table
+    The format prefix wins; else a ``.urdf`` or ``.xml`` name is URDF; else a ranges table
     is told by its header (:func:`loceval.readers.radio.sniff_radio_table`); else the format
-    is sniffed from the content (:func:`loceval.readers.sniff_format`).
+    is sniffed from the content (:func:`loceval.readers.sniff_format`): a survey ``id,x,y,z``
+    is ``points`` (control points, or a radio system's anchors), and a CSV whose header is
+    ``id,t_start,t_end`` is a visits table (``visits``).
 
     Raises:
         ReaderError: the path does not exist or its content matches no format.
@@ -132,10 +136,23 @@ def input_kind(spec: SourceSpec) -> str:
     if spec.path.is_file():
         from loceval.readers.radio import sniff_radio_table  # noqa: PLC0415
 
-        radio = sniff_radio_table(spec.path)
-        if radio is not None:
-            return radio
-    return sniff_format(spec.path).value
+        if sniff_radio_table(spec.path) == "ranges":
+            return "ranges"
+    fmt = sniff_format(spec.path)
+    if fmt is TrajectoryFormat.CSV and _is_visits_table(spec.path):
+        return "visits"
+    return fmt.value
+
+
+def _is_visits_table(path: Path) -> bool:
+    """Whether a CSV's first row is a visits header ``id,t_start,t_end``."""
+    from loceval.readers.points import looks_like_visits  # noqa: PLC0415
+
+    with path.open(encoding="utf-8-sig", errors="replace") as fh:
+        for line in fh:
+            if line.strip() and not line.lstrip().startswith("#"):
+                return looks_like_visits(line)
+    return False
 
 
 def inspect(source: str | Path | SourceSpec, *, kind: str | None = None) -> Inspection:

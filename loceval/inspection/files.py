@@ -15,7 +15,13 @@ from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
 from loceval.readers.motive import list_rigid_bodies
 from loceval.trajectory import Trajectory
 
-__all__ = ["inspect_motive", "inspect_trajectory_file", "trajectory_source"]
+__all__ = [
+    "inspect_motive",
+    "inspect_points",
+    "inspect_trajectory_file",
+    "inspect_visits",
+    "trajectory_source",
+]
 
 _DESCRIPTIONS: Final = {
     TrajectoryFormat.TUM: "TUM trajectory",
@@ -89,6 +95,48 @@ def inspect_motive(spec: SourceSpec) -> Inspection:
         sources=tuple(sources),
         warnings=tuple(warnings),
         trajectory_source=trajectories[0].source if len(trajectories) == 1 else "",
+    )
+
+
+def inspect_points(spec: SourceSpec) -> Inspection:
+    """Describe a control-point survey: its point ids and their extent (no trajectory).
+
+    Raises:
+        ReaderError: the reader refuses the survey (duplicate ids, too few points, ...).
+    """
+    from loceval.readers.points import read_control_points  # noqa: PLC0415
+
+    points = read_control_points(spec.path)
+    extent = points.positions_xyz.max(axis=0) - points.positions_xyz.min(axis=0)
+    return Inspection(
+        path=str(spec.path),
+        kind=TrajectoryFormat.POINTS.value,
+        format=TrajectoryFormat.POINTS.value,
+        sources=(),
+        warnings=points.warnings,
+        point_ids=points.ids,
+        extent_m=tuple(float(e) for e in extent),
+    )
+
+
+def inspect_visits(spec: SourceSpec) -> Inspection:
+    """Describe a visits table: the points visited and the time range (no trajectory).
+
+    Raises:
+        ReaderError: the reader refuses the table (a missing column, a non-number, ...).
+    """
+    from loceval.readers.points import read_visit_table  # noqa: PLC0415
+
+    ids, start_s, end_s = read_visit_table(spec.path)
+    return Inspection(
+        path=str(spec.path),
+        kind="visits",
+        format="visits",
+        sources=(),
+        point_ids=tuple(dict.fromkeys(ids)),
+        visit_count=len(ids),
+        start_ns=round(float(start_s.min()) * 1e9),
+        end_ns=round(float(end_s.max()) * 1e9),
     )
 
 

@@ -10,7 +10,9 @@ the keys that describe it:
   ``message_count``, ``topics``, ``tf_tree``;
 - files that hold one trajectory: ``source``, ``poses``, ``start_s``, ``end_s``,
   ``duration_s``, ``length_m``, ``rate_hz``, ``orientation`` (a summary of that trajectory);
-- URDF files: ``robot``, ``links``, ``joints``.
+- URDF files: ``robot``, ``links``, ``joints``;
+- control-point surveys: ``points``, ``ids``, ``extent_m`` (no sources: not a trajectory);
+- visits tables: ``visits``, ``ids``, ``start_s``, ``end_s``.
 """
 
 from __future__ import annotations
@@ -202,6 +204,10 @@ class Inspection:
             path as the reader names it).
         anchor_ids: for radio tables (format ``anchors`` or ``ranges``), the anchor ids.
         range_count: for a ranges table, its rows.
+        point_ids: for control-point surveys, the ids in file order.
+        extent_m: for control-point surveys, the x, y and z extent of the points, metres.
+        visit_count: for visits tables, the visits (rows); their points are ``point_ids``
+            and their time range ``start_ns`` to ``end_ns``.
     """
 
     path: str
@@ -222,6 +228,9 @@ class Inspection:
     trajectory_source: str = ""
     anchor_ids: tuple[str, ...] = ()
     range_count: int = 0
+    point_ids: tuple[str, ...] = ()
+    extent_m: tuple[float, ...] = ()
+    visit_count: int = 0
 
     @property
     def is_bag(self) -> bool:
@@ -266,6 +275,19 @@ class Inspection:
                 "message_count": self.message_count,
                 "topics": [t.to_dict() for t in self.topics],
                 "tf_tree": [f.to_dict() for f in self.frames],
+            }
+        if self.format == "points":
+            out |= {
+                "points": len(self.point_ids),
+                "ids": list(self.point_ids),
+                "extent_m": list(self.extent_m),
+            }
+        if self.format == "visits":
+            out |= {
+                "visits": self.visit_count,
+                "ids": list(self.point_ids),
+                "start_s": self.start_ns / NS,
+                "end_s": self.end_ns / NS,
             }
         if self.is_urdf:
             out |= {

@@ -89,6 +89,24 @@ def _bag_lines(insp: Inspection) -> list[str]:
 
 def _file_lines(insp: Inspection) -> list[str]:
     lines = [f"{insp.path}  ({insp.kind})"]
+    if insp.format == "visits":
+        return [
+            *lines,
+            (
+                f"  {insp.visit_count} visits of {len(insp.point_ids)} points, "
+                f"{_stamp_text(insp.start_ns)} .. {_stamp_text(insp.end_ns)}"
+            ),
+            "",
+            "trajectory sources: none (a visits table goes with a control-point reference)",
+        ]
+    if insp.format == "points":
+        extent = " x ".join(f"{e:.3f}" for e in insp.extent_m)
+        return [
+            *lines,
+            f"  {len(insp.point_ids)} control points over {extent} m: {', '.join(insp.point_ids)}",
+            "",
+            "trajectory sources: none (control points are a reference: points:FILE)",
+        ]
     if insp.single is not None:
         summary = insp.to_dict()
         lines.extend(f"{key:>14}: {summary[key]}" for key in _SUMMARY_KEYS if key in summary)

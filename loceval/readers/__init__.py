@@ -44,6 +44,7 @@ _OPTIONS: Final[Mapping[TrajectoryFormat, tuple[str, ...]]] = {
     TrajectoryFormat.CSV: (*CSV_KEYS, "time_unit", "length_unit"),
     TrajectoryFormat.MOTIVE: ("up",),
     TrajectoryFormat.BAG: (),
+    TrajectoryFormat.POINTS: (),
 }
 _NO_SELECTOR_HINT: Final[Mapping[TrajectoryFormat, str]] = {
     TrajectoryFormat.TUM: "remove the '@' part",
@@ -91,6 +92,12 @@ def read_trajectory(
     _check_options(spec, fmt, label=label)
     if not name:
         name = spec.selector or spec.path.stem
+    if fmt is TrajectoryFormat.POINTS:
+        msg = (
+            f"{str(spec.path)!r} holds control points (id,x,y,z), not a trajectory; give it "
+            "as the reference and the trajectories as estimates."
+        )
+        raise ReaderError(msg)
     if fmt is TrajectoryFormat.BAG:
         return _read_bag(spec, name=name, stamp=stamp)
     if fmt is TrajectoryFormat.MOTIVE:

@@ -29,6 +29,7 @@ __all__ = [
     "looks_like_control_points",
     "looks_like_visits",
     "read_control_points",
+    "read_visit_table",
     "read_visits",
 ]
 
@@ -187,6 +188,21 @@ def read_visits(path: Path, points: ControlPoints) -> Visits:
         ReaderError: the file cannot be read, lacks a column, has a non-number, names a
             point that is not surveyed, or a visit ends before it starts.
     """
+    ids, start, end = read_visit_table(path)
+    try:
+        index = points.index_of(list(ids), where=str(path))
+    except InputError as err:
+        raise ReaderError(str(err)) from err
+    return Visits(index, seconds_to_ns(start), seconds_to_ns(end), source="file")
+
+
+def read_visit_table(path: Path) -> tuple[tuple[str, ...], FloatArray, FloatArray]:
+    """Read a visits table's rows without the survey: ids, start and end seconds.
+
+    Raises:
+        ReaderError: the file cannot be read, lacks a column, has a non-number, or a
+            visit ends before it starts.
+    """
     path = Path(path)
     where = str(path)
     keys, rows = _rows(path, _VISIT_KEYS, "visits")
@@ -201,8 +217,4 @@ def read_visits(path: Path, points: ControlPoints) -> Visits:
         line = rows[int(backwards[0])][0]
         msg = f"{where}, line {line}: the visit ends before it starts; give t_start <= t_end."
         raise ReaderError(msg)
-    try:
-        index = points.index_of(ids, where=where)
-    except InputError as err:
-        raise ReaderError(str(err)) from err
-    return Visits(index, seconds_to_ns(start), seconds_to_ns(end), source="file")
+    return tuple(ids), start, end

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Final
 
 from loceval.errors import ReaderError
+from loceval.readers.points import looks_like_control_points
 from loceval.readers.source import TrajectoryFormat, missing_file_error, refuse_special_file
 
 __all__ = ["sniff_format"]
@@ -42,7 +43,8 @@ def sniff_format(path: Path) -> TrajectoryFormat:
     the bag reader); text files by their first lines: a Motive
     ``Format Version`` line, a EuRoC ``#timestamp`` header or comma-separated rows with
     integer nanosecond stamps, rows of 12 numbers (KITTI), rows of 8, 4 or 3 numbers (TUM),
-    or a header row followed by numbers (generic CSV).
+    a control-point header ``id,x,y,z`` without a time column (points), or a header row
+    followed by numbers (generic CSV).
 
     Args:
         path: the file or directory.
@@ -117,6 +119,8 @@ def _sniff_delimited(data: list[str], last_comment: str | None) -> TrajectoryFor
         return TrajectoryFormat.CSV if header_over_numbers else None
     cells = [cell.strip() for cell in row.split(delimiter)]
     if not _all_numbers(cells):
+        if looks_like_control_points(row):
+            return TrajectoryFormat.POINTS
         return TrajectoryFormat.EUROC if _is_euroc_header(row) else TrajectoryFormat.CSV
     if last_comment is not None and delimiter in last_comment:
         return TrajectoryFormat.CSV  # a '#'-prefixed header row

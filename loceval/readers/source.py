@@ -3,8 +3,8 @@ r"""Name a trajectory source: :class:`SourceSpec`, parsed from ``[FORMAT:]PATH[@
 A source is written ``[FORMAT:]PATH[@SELECTOR]``:
 
 - ``FORMAT:`` is optional and only counts when it is one of :class:`TrajectoryFormat`'s
-  values (``tum``, ``euroc``, ``kitti``, ``csv``, ``motive``, ``bag``), so ``C:\data`` or
-  ``run:2.txt`` stay paths. Without it the format is sniffed from the content
+  values (``tum``, ``euroc``, ``kitti``, ``csv``, ``motive``, ``bag``, ``points``), so
+  ``C:\data`` or ``run:2.txt`` stay paths. Without it the format is sniffed from the content
   (:func:`loceval.readers.sniff.sniff_format`).
 - ``@SELECTOR`` is optional: comma-separated items, where ``KEY=VALUE`` items are options
   and at most one plain item is the selector. What each format accepts:
@@ -17,7 +17,8 @@ A source is written ``[FORMAT:]PATH[@SELECTOR]``:
   - ``csv``: column mappings ``KEY=HEADER`` for the keys ``t x y z qx qy qz qw``, plus
     ``time_unit=s|ms|us|ns`` and ``length_unit=m|cm|mm``, e.g.
     ``csv:log.csv@t=time_s,x=px,y=py,z=pz``. Unmapped keys use the recognised names.
-  - ``tum`` and ``euroc`` take nothing after ``@``.
+  - ``tum``, ``euroc`` and ``points`` (control points, a reference only) take nothing
+    after ``@``.
 
 Existing paths win over this syntax: a file literally named ``tum:a@b.txt`` is read as
 that file, and ``data@2024/run.txt@/odom`` splits at the last ``@`` whose left side exists.
@@ -58,6 +59,8 @@ class TrajectoryFormat(StrEnum):
     """An OptiTrack Motive CSV export."""
     BAG = "bag"
     """A ROS 1 bag, ROS 2 bag (directory, .db3, .mcap) or a zip of one."""
+    POINTS = "points"
+    """Surveyed control points ``id,x,y,z`` (a reference, not a trajectory)."""
 
 
 @dataclass(frozen=True, slots=True)

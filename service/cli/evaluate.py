@@ -9,11 +9,13 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, cast
 
+from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError
 from loceval.readers import TrajectoryFormat, parse_source
 from service.options import (
     EvaluationValues,
     ExportValues,
+    checkpoints_from_options,
     config_from_options,
     device_offset,
     export_from_options,
@@ -68,17 +70,31 @@ def run_evaluate(args: argparse.Namespace) -> int:
         stamp=args.stamp,
         export=export,
         formats=args.formats,
+        visits=_visits_source(args.visits),
+        checkpoints=checkpoints_from_options(cast("EvaluationValues", args)),
     )
     result = run_job(job, args.out)
     if args.json:
         print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
+    elif isinstance(result, CheckpointEvaluation):
+        from service.cli.tables import format_checkpoint_tables  # noqa: PLC0415
+
+        print(format_checkpoint_tables(result))  # noqa: T201
     else:
         from service.cli.tables import format_tables  # noqa: PLC0415
 
         print(format_tables(result))  # noqa: T201
-        if args.out is not None:
-            print(f"\nArtifacts written to {args.out}")  # noqa: T201
+    if not args.json and args.out is not None:
+        print(f"\nArtifacts written to {args.out}")  # noqa: T201
     return 0
+
+
+def _visits_source(visits: str) -> JobSource | None:
+    """Return the visits table named by ``--visits`` (None for ``auto``: find the stops)."""
+    if visits.strip().lower() == "auto":
+        return None
+    spec = parse_source(visits)  # a table, or a bag topic of arrivals: run.bag@/arrivals
+    return JobSource(spec, spec.path.stem, file_provenance("visits", spec))
 
 
 def _device_offset(args: argparse.Namespace) -> SimilarityTransform | None:

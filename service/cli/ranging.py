@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
+from loceval.evaluation import EvaluationResult
 from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
 from service.options import (
     EvaluationValues,
@@ -67,6 +68,9 @@ def run_ranging(args: argparse.Namespace) -> int:
         ),
     )
     result = run_job(job, args.out)
+    if not isinstance(result, EvaluationResult):  # a ranging job is never a control-point one
+        msg = "A ranging job produced a control-point evaluation; please report this."
+        raise TypeError(msg)
     if args.json:
         print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
         return 0

@@ -10,6 +10,7 @@ import datetime as dt
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec
 from service.options import config_from_options, offset_or_none
@@ -54,7 +55,10 @@ def run_report(args: argparse.Namespace) -> int:
                 result.to_dict(),
                 dataset=path.name,
                 recorded_at=recorded,
-                reference_xyz=result.reference.positions_xyz,
+                # control points have no reference path to compare across runs
+                reference_xyz=None
+                if isinstance(result, CheckpointEvaluation)
+                else result.reference.positions_xyz,
             )
         )
     tolerance = options.tolerance
@@ -107,6 +111,12 @@ def _read_template(path: Path) -> EvaluationTemplate:
 
 def _template_job(path: Path, template: EvaluationTemplate, config: EvaluationConfig) -> Job:
     def source(entry: TemplateSource, role: str) -> JobSource:
+        if entry.dataset_id is not None:
+            msg = (
+                f"The template's {role} names the dataset {entry.dataset_id!r}, an upload of "
+                "the service; the report command reads the recordings named, so leave it out."
+            )
+            raise InputError(msg)
         spec = SourceSpec(None, path, entry.selector)
         name = entry.name or default_name(spec)
         return JobSource(spec, name, file_provenance(role, spec))

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any, cast
 
+from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.evaluation import EvaluationResult
 from loceval.metrics import ErrorSeries, ErrorStats, RPEUnit
 
-__all__ = ["format_tables"]
+__all__ = ["format_checkpoint_tables", "format_tables"]
 
 _ROWS = (("RMSE", "rmse"), ("MEAN", "mean"), ("MEDIAN", "median"), ("STD", "std"),
          ("MIN", "min"), ("MAX", "max"))  # fmt: skip
@@ -48,6 +50,46 @@ def format_tables(result: EvaluationResult) -> str:
     warnings = [("reference", w) for w in result.reference_warnings] + [
         (e.name, w) for e in result.estimates for w in e.warnings
     ]
+    if warnings:
+        lines += ["", "Warnings", *(f"  {who}: {w}" for who, w in warnings)]
+    return "\n".join(lines)
+
+
+def format_checkpoint_tables(result: CheckpointEvaluation) -> str:
+    """Return the control-point figures: one column per estimate, then the visits."""
+    points = result.points
+    lines = [f"Reference {result.reference_name!r}: {len(points)} control points ({points.source})"]
+    est = result.estimates
+    for e in est:
+        r = e.result
+        lines.append(
+            f"  {e.name}: {len(r.scored)} visits scored, {len(r.visits) - len(r.scored)} "
+            f"fixed the alignment ({r.method.value}), {len(r.unvisited)} points unvisited, "
+            f"{len(r.unmatched_stops)} stops matched no point"
+        )
+    lines += ["", "Error at the control points (3D)", _row("error metric", [e.name for e in est])]
+    stats = [e.result.stats for e in est]
+    for label, key in _ROWS:
+        lines.append(_row(label, [f"{getattr(s, key):.3f} m" for s in stats]))
+    documents = [e.result.to_dict() for e in est]
+    scores = [cast("dict[str, Any]", d["checkpoints"]) for d in documents]
+    lines += ["", "Scores"]
+    lines.append(_row("Hilti", [f"{c['score']['hilti']:.1f}" for c in scores]))
+    lines.append(_row("LaMAria", [f"{c['score']['lamaria']:.1f}" for c in scores]))
+    for t in result.config.thresholds_m:
+        key = f"{t:g}"
+        lines.append(_row(f"recall {key} m", [f"{c['recall'][key] * 100:.1f} %" for c in scores]))
+    for e in est:
+        head = f"  {'id':<10}{'t_start_s':>14}{'error_m':>10}{'error_h_m':>10}{'error_v_m':>10}"
+        lines += ["", f"{e.name}: visits", head]
+        lines.extend(
+            f"  {v.point_id:<10}{v.start_ns / 1e9:>14.3f}{v.error_m:>10.3f}{v.error_h_m:>10.3f}"
+            f"{v.error_v_m:>+10.3f}{'  (alignment)' if v.used_for_alignment else ''}"
+            for v in e.result.visits
+        )
+        if e.result.unvisited:
+            lines.append(f"  unvisited: {', '.join(e.result.unvisited)}")
+    warnings = [(e.name, w) for e in est for w in (*e.estimate.warnings, *e.result.warnings)]
     if warnings:
         lines += ["", "Warnings", *(f"  {who}: {w}" for who, w in warnings)]
     return "\n".join(lines)

@@ -221,9 +221,11 @@ def test_reader_errors_pass_through(tmp_path):
 
 
 def test_registry_covers_every_format():
-    """Every trajectory format, URDF and the radio tables have an inspector; each loads."""
-    radio = {"anchors", "ranges"}
-    assert set(INSPECTORS) == {f.value for f in TrajectoryFormat} | {"urdf"} | radio
+    """Every trajectory format, URDF, visits tables and radio ranges have an inspector."""
+    assert set(INSPECTORS) == {f.value for f in TrajectoryFormat} | {"urdf", "visits"} | {
+        "anchors",
+        "ranges",
+    }
     for key, spec in INSPECTORS.items():
         assert spec.kind == key
         assert callable(spec.load())
