@@ -177,8 +177,11 @@ def _check_tf_chain(tree: list[dict[str, Any]], selector: str, label: str) -> No
         InputError: the selector is malformed, names an unknown frame, or joins two trees.
     """
     parts = selector.split(":")
-    if len(parts) != 3 or not parts[1] or not parts[2]:  # noqa: PLR2004  (tf, parent, child)
-        msg = f"{label}: {selector!r} is not a tf chain; write tf:PARENT:CHILD, e.g. tf:map:base_link."
+    if len(parts) != len(("tf", "parent", "child")) or not parts[1] or not parts[2]:
+        msg = (
+            f"{label}: {selector!r} is not a tf chain; write tf:PARENT:CHILD, "
+            "e.g. tf:map:base_link."
+        )
         raise InputError(msg)
     parents = {str(f.get("frame")): str(f.get("parent") or "") for f in tree}
     frames = _frame_list(tree)

@@ -62,7 +62,9 @@ def inspect_bag(spec: SourceSpec) -> Inspection:
     frames = _frames(overview.tf, warnings)
     depths = {f.frame: f.depth for f in frames}
     tf_sources = _tf_candidates(overview.tf, warnings)
-    sources.extend(sorted(tf_sources, key=lambda x: _usefulness(overview.tf, depths, str(x.selector))))
+    sources.extend(
+        sorted(tf_sources, key=lambda x: _usefulness(overview.tf, depths, str(x.selector)))
+    )
     return Inspection(
         path=str(spec.path),
         kind=str(overview.storage_format),

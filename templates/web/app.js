@@ -1443,7 +1443,7 @@
     $("opt-device-dataset").addEventListener("change", renderDeviceLinks);
     renderFormatBoxes();
     try {
-      $("sched-timezone").value = Intl.DateTimeFormat().resolvedOptions().timeZone || "UTC";
+      $("sched-timezone").defaultValue = Intl.DateTimeFormat().resolvedOptions().timeZone || "UTC";
     } catch {
       // keep UTC
     }

@@ -40,7 +40,11 @@ UPLOADED = dt.datetime(2026, 11, 23, 7, 0, tzinfo=dt.UTC)
         ({"sources": []}, UPLOADED, True),
     ],
 )
-def test_recording_start(inspection: dict[str, Any], expected: dt.datetime, is_upload: bool) -> None:
+def test_recording_start(
+    inspection: dict[str, Any],
+    expected: dt.datetime,
+    is_upload: bool,  # noqa: FBT001  (a parametrized expectation)
+) -> None:
     """The first stamp when it is a date between 2000 and the upload; else the upload time."""
     assert recording_start(inspection, UPLOADED) == (expected, is_upload)
 
@@ -69,7 +73,7 @@ def _bag(tmp_path: Path, rng: np.random.Generator, name: str, start_s: int) -> P
 def test_backlog_keeps_its_recording_dates(
     client: TestClient, tmp_path: Path, rng: np.random.Generator
 ) -> None:
-    """Three runs from March to May 2024, uploaded newest first today: dated and sorted by stamps."""
+    """Runs of March to May 2024 uploaded newest first today: dated and sorted by stamps."""
     starts = {"march": 1_710_000_000, "april": 1_712_600_000, "may": 1_715_200_000}
     for name in ("may", "april", "march"):  # the backlog arrives in the wrong order
         with _bag(tmp_path, rng, name, starts[name]).open("rb") as fh:
@@ -100,7 +104,11 @@ def test_backlog_keeps_its_recording_dates(
         for n in ("march", "april", "may")
     ]
     assert [iso for iso, _ in stamps] == expected
-    assert [text for _, text in stamps] == ["2024-03-09 16:00", "2024-04-08 18:13", "2024-05-08 20:26"]
+    assert [text for _, text in stamps] == [
+        "2024-03-09 16:00",
+        "2024-04-08 18:13",
+        "2024-05-08 20:26",
+    ]
     assert "uploaded</small>" not in runs_table
     datasets = re.findall(r'class="dataset">([^<]+)', runs_table)
     assert datasets == ["march.bag", "april.bag", "may.bag"]

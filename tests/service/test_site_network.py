@@ -41,8 +41,8 @@ def test_docs_page_and_its_assets_come_from_the_service(api: Api) -> None:
         assert answer.status_code == 200, ref
         assert len(answer.content) > 500, ref  # the real file (the icon: 628 bytes)
     assert "SwaggerUIBundle" in api.client.get("/docs/assets/swagger-ui-bundle.js").text
-    assert api.client.get("/docs/assets/swagger-ui.css").headers["content-type"].startswith(
-        "text/css"
+    assert (
+        api.client.get("/docs/assets/swagger-ui.css").headers["content-type"].startswith("text/css")
     )
 
 
@@ -80,9 +80,7 @@ def test_known_route_still_needs_a_key(api: Api) -> None:
 def test_serve_port_and_host_from_the_environment(tmp_path: Path) -> None:
     """Without --port and --host, loceval serve listens where LOCEVAL_PORT/LOCEVAL_HOST say."""
     port = free_port()
-    env = service_env(
-        tmp_path / "data", {"LOCEVAL_PORT": str(port), "LOCEVAL_HOST": "127.0.0.1"}
-    )
+    env = service_env(tmp_path / "data", {"LOCEVAL_PORT": str(port), "LOCEVAL_HOST": "127.0.0.1"})
     service = ServiceProcess.start([sys.executable, "-m", "service.cli", "serve"], env)
     try:
         url = f"http://127.0.0.1:{port}"

@@ -49,7 +49,10 @@ def bag_id(api: Api, rng: np.random.Generator, tmp_path: Path) -> str:
     [
         ("tf:world:base_link", r"'run\.bag' has no tf frame 'world'; its tf frames are: "),
         ("tf:map:camera", r"has no tf frame 'camera'"),
-        ("tf:map:tracker", r"'map' and 'tracker' are in separate trees \(rooted at 'map' and 'rig'\)"),
+        (
+            "tf:map:tracker",
+            r"'map' and 'tracker' are in separate trees \(rooted at 'map' and 'rig'\)",
+        ),
         ("tf:map", r"'tf:map' is not a tf chain; write tf:PARENT:CHILD"),
         ("tf:map:base_link:x", r"is not a tf chain"),
         ("/odom", r"has no topic '/odom'; its trajectory sources are: /pose"),

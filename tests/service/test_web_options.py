@@ -109,7 +109,9 @@ def test_every_api_option_is_sent(
         "data-status", re.compile("succeeded|failed"), timeout=EVALUATION_TIMEOUT_MS
     )
     assert card.get_attribute("data-status") == "succeeded", page.inner_text("#current-error")
-    evaluation = _api(live_server, "GET", f"/evaluations/{card.get_attribute('data-evaluation-id')}")
+    evaluation = _api(
+        live_server, "GET", f"/evaluations/{card.get_attribute('data-evaluation-id')}"
+    )
     options = evaluation["options"]
     assert options["tolerance"] == "0.10@95"
     assert options["thresholds_m"] == [0.05, 0.2]
@@ -128,9 +130,8 @@ def test_every_api_option_is_sent(
     assert len(estimate["worst"]) == 5
 
 
-def test_messages_name_the_pages_fields(
-    page: Any, live_server: Any, uploaded: dict[str, str]
-) -> None:
+@pytest.mark.usefixtures("uploaded")
+def test_messages_name_the_pages_fields(page: Any, live_server: Any) -> None:
     """A refused option is named by its field on the page (never options.KEY) and marked."""
     from playwright.sync_api import expect
 
@@ -174,9 +175,7 @@ def test_messages_name_the_pages_fields(
     assert _api(live_server, "GET", "/evaluations")["count"] == 0
 
 
-def test_schedules_view(
-    page: Any, live_server: Any, public_data: Path, tmp_path: Path
-) -> None:
+def test_schedules_view(page: Any, live_server: Any, public_data: Path, tmp_path: Path) -> None:
     """Create a schedule on the page, pause and resume it, run it now, open its summary."""
     from playwright.sync_api import expect
 
