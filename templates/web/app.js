@@ -991,7 +991,7 @@
 
     if (status === "failed") {
       const problem = evaluation.error || {};
-      showProblem(problem.detail || problem.title || "No reason was given.", "The evaluation failed:");
+      showProblem(nameFields(problem.detail || problem.title || "No reason was given."), "The evaluation failed:");
     } else {
       setHidden($("current-error"), true);
     }
@@ -1237,7 +1237,7 @@
     return el("span", {},
       statusBadge(run.status), " ",
       el("span", { className: "muted small", text: facts.join(" · ") }),
-      run.error && run.error.detail ? el("div", { className: "error-text small", text: run.error.detail }) : null);
+      run.error && run.error.detail ? el("div", { className: "error-text small", text: nameFields(run.error.detail) }) : null);
   }
 
   function renderSchedules() {
