@@ -131,7 +131,7 @@ def test_every_api_option_is_sent(
 
 
 @pytest.mark.usefixtures("uploaded")
-def test_messages_name_the_pages_fields(page: Any, live_server: Any) -> None:
+def test_messages_name_the_pages_fields(page: Any, live_server: Any, tmp_path: Path) -> None:
     """A refused option is named by its field on the page (never options.KEY) and marked."""
     from playwright.sync_api import expect
 
@@ -156,6 +156,7 @@ def test_messages_name_the_pages_fields(page: Any, live_server: Any) -> None:
     expect(error).to_contain_text("percent")
     expect(error).not_to_contain_text("options.")
     expect(page.locator("[data-option='tolerance']")).to_have_class(re.compile("invalid"))
+    page.locator("#evaluate-card").screenshot(path=str(tmp_path / "field_error.png"))
     page.fill("#opt-tolerance", "")
 
     # Two ways of one thing: the site transform and the matrix; the section opens itself.
