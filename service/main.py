@@ -14,7 +14,7 @@ from fastapi import APIRouter, FastAPI
 
 from loceval import __version__
 from service import web
-from service.api import datasets, evaluations, health, hops, schedules
+from service.api import datasets, docs, evaluations, health, hops, schedules
 from service.api.middleware import ApiKeyMiddleware
 from service.errors import install_error_handlers
 from service.jobs import create_runtime
@@ -82,6 +82,8 @@ def create_app(
         version=__version__,
         description=_DESCRIPTION,
         lifespan=lifespan,
+        docs_url=None,  # service.api.docs serves /docs with its files: no CDN, works offline
+        redoc_url=None,  # ReDoc loads from a CDN too; /docs is the one documentation page
     )
     app.state.runtime = runtime
     app.state.settings = settings
@@ -95,5 +97,6 @@ def create_app(
     app.include_router(api)
     app.include_router(health.router)
     app.include_router(hops.router)  # Grasshopper Hops: /hops/ and POST /solve at the root
+    app.include_router(docs.router)
     app.include_router(web.router)
     return app

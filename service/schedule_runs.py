@@ -10,12 +10,13 @@ consumer thread sleeps between attempts. Every attempt is recorded with the run.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import logging
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
 
@@ -46,6 +47,7 @@ __all__ = [
     "WebhookNotDeliveredError",
     "deliver_webhook",
     "execute_schedule_run",
+    "recording_start",
     "webhook_payload",
 ]
 
@@ -56,6 +58,9 @@ WEBHOOK: Final = "webhook"
 WEBHOOK_ATTEMPTS: Final = 3
 """How often a webhook is posted before the run records it as undelivered."""
 _WEBHOOK_TIMEOUT_S: Final = 10.0
+_EARLIEST_RECORDING: Final = dt.datetime(2000, 1, 1, tzinfo=dt.UTC)
+"""Stamps before this are not dates (seconds since a device's start, as TUM and KITTI)."""
+_NS: Final = 1_000_000_000
 
 
 class WebhookNotDeliveredError(Exception):
@@ -150,11 +155,13 @@ def _evaluate_all(
             summary_runs.append(_failed_run(dataset, reason, done.id))
             continue
         rows.append({**row, "status": "succeeded", "error": None, "summary": done.summary})
+        recorded_at, is_upload = recording_start(dataset.inspection, dataset.created_at)
         summary_runs.append(
             SummaryRun.from_result(
                 done.result,
                 dataset=dataset.name,
-                recorded_at=dataset.created_at,
+                recorded_at=recorded_at,
+                recorded_at_is_upload=is_upload,
                 evaluation_id=done.id,
                 reference_xyz=_reference_xyz(runtime, dataset, template),
             )
@@ -169,12 +176,51 @@ def _source_ref(entry: TemplateSource, recording: Dataset) -> SourceRef:
     )
 
 
+def recording_start(
+    inspection: Mapping[str, Any], uploaded_at: dt.datetime
+) -> tuple[dt.datetime, bool]:
+    """Return when a recording started, from its stamps, and whether that is the upload time.
+
+    The start is the inspection's first stamp: a bag's ``start_ns``, a single trajectory's
+    ``start_s``, else the earliest ``first_stamp_ns`` of its sources. Stamps that are not
+    dates (before 2000, as seconds since a device started; or more than a day after the
+    upload) give the upload time instead, so a backlog uploaded in one go keeps its order.
+
+    Args:
+        inspection: the dataset's stored inspection (:meth:`Inspection.to_dict`).
+        uploaded_at: the dataset's upload time, aware.
+
+    Returns:
+        ``(start, is_upload)``: the start in UTC, and True when it is the upload time.
+    """
+    uploaded = uploaded_at if uploaded_at.tzinfo else uploaded_at.replace(tzinfo=dt.UTC)
+    start_ns: float | None = None
+    if isinstance(inspection.get("start_ns"), int):
+        start_ns = float(inspection["start_ns"])
+    elif isinstance(inspection.get("start_s"), int | float):
+        start_ns = float(inspection["start_s"]) * _NS
+    else:
+        firsts = [
+            float(s["first_stamp_ns"])
+            for s in inspection.get("sources", [])
+            if isinstance(s, Mapping) and isinstance(s.get("first_stamp_ns"), int)
+        ]
+        start_ns = min(firsts) if firsts else None
+    if start_ns is not None and np.isfinite(start_ns):
+        start = dt.datetime.fromtimestamp(start_ns / _NS, dt.UTC)
+        if _EARLIEST_RECORDING <= start <= uploaded + dt.timedelta(days=1):
+            return start, False
+    return uploaded.astimezone(dt.UTC), True
+
+
 def _failed_run(dataset: Dataset, reason: str, evaluation_id: str | None = None) -> Any:  # noqa: ANN401
     from exporters.summary import SummaryRun  # noqa: PLC0415  (heavy, see _evaluate_all)
 
+    recorded_at, is_upload = recording_start(dataset.inspection, dataset.created_at)
     return SummaryRun(
         dataset=dataset.name,
-        recorded_at=dataset.created_at,
+        recorded_at=recorded_at,
+        recorded_at_is_upload=is_upload,
         status="failed",
         error=reason,
         evaluation_id=evaluation_id,

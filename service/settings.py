@@ -35,6 +35,8 @@ class Settings(BaseSettings):
         job_lease_s: a running job whose heartbeat is older than this is taken as abandoned.
         templates_dir: Jinja2 templates of the reports and the web page.
         public_url: the service's address as users reach it, for links in webhooks.
+        host: the address ``loceval serve`` listens on when ``--host`` is not given.
+        port: the port ``loceval serve`` listens on when ``--port`` is not given.
     """
 
     model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
@@ -48,6 +50,8 @@ class Settings(BaseSettings):
     job_lease_s: Annotated[float, Field(gt=0)] = 60.0
     templates_dir: Path = _REPO / "templates"
     public_url: str = "http://127.0.0.1:8000"
+    host: Annotated[str, Field(min_length=1)] = "127.0.0.1"
+    port: Annotated[int, Field(ge=1, le=65535)] = 8000
 
     @field_validator("queue_url")
     @classmethod

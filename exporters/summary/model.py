@@ -105,13 +105,15 @@ class SummaryRun:
 
     Attributes:
         dataset: the dataset (recording) name.
-        recorded_at: the run's date (the recording's upload time), aware; kept in UTC.
+        recorded_at: the run's date: when the recording started (from its stamps), or its
+            upload time when its stamps are not dates; aware; kept in UTC.
         status: ``"succeeded"`` or ``"failed"``.
         error: why it failed (a sentence), when it failed.
         evaluation_id: the evaluation's id, if there is one.
         systems: the figures of each estimated system, by estimate name.
         reference_xyz: (N, 3) the run's reference path, metres, for the repeatability test.
         duration_s: the reference's duration, seconds.
+        recorded_at_is_upload: ``recorded_at`` is the upload time (the table marks it).
     """
 
     dataset: str
@@ -122,6 +124,7 @@ class SummaryRun:
     systems: Mapping[str, SystemFigures] = field(default_factory=dict)
     reference_xyz: NDArray[np.float64] | None = None
     duration_s: float | None = None
+    recorded_at_is_upload: bool = False
 
     def __post_init__(self) -> None:
         """Check the status and the path's shape; keep the date in UTC.
@@ -149,6 +152,7 @@ class SummaryRun:
         recorded_at: dt.datetime,
         evaluation_id: str | None = None,
         reference_xyz: NDArray[np.float64] | None = None,
+        recorded_at_is_upload: bool = False,
     ) -> SummaryRun:
         """Build a succeeded run from an evaluation's result document.
 
@@ -160,9 +164,10 @@ class SummaryRun:
         Args:
             document: the result document.
             dataset: the dataset (recording) name.
-            recorded_at: the recording's upload time, aware.
+            recorded_at: when the recording started (or its upload time), aware.
             evaluation_id: the evaluation's id.
             reference_xyz: (N, 3) the reference path, metres, for the repeatability test.
+            recorded_at_is_upload: ``recorded_at`` is the upload time.
 
         Returns:
             The run, status ``"succeeded"``.
@@ -193,6 +198,7 @@ class SummaryRun:
             systems=systems,
             reference_xyz=reference_xyz,
             duration_s=_finite(_dig(document, "reference", "duration_s")),
+            recorded_at_is_upload=recorded_at_is_upload,
         )
 
 

@@ -62,6 +62,7 @@ class RunRowView:
     number: int
     date: str
     date_iso: str
+    uploaded: bool
     dataset: str
     evaluation_id: str
     failed: bool
@@ -208,6 +209,7 @@ def _run_rows(runs: Sequence[SummaryRun], names: Sequence[str]) -> tuple[RunRowV
             number=n,
             date=date_text(run.recorded_at),
             date_iso=run.recorded_at.isoformat(timespec="seconds"),
+            uploaded=run.recorded_at_is_upload,
             dataset=run.dataset,
             evaluation_id=run.evaluation_id or "",
             failed=run.status == "failed",

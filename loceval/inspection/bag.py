@@ -5,6 +5,14 @@ pose topic, never image or point-cloud payloads (:func:`loceval.readers.rosbag.r
 and lists the trajectory sources with the selector to type (``FILE@SELECTOR``): pose topics
 of a supported type, and tf chains (for every dynamic link, its parent -> child, the chain
 from its tree's root, and REP 105 pairs such as ``map -> base_link``).
+
+The tf sources are listed most useful first (:func:`_usefulness`): chains from a fixed frame
+(``earth``, ``world``, ``map``, ``odom``, or a tree's root) to a robot or device frame (a
+``base_link``/``base_footprint``, or a frame hung directly from a fixed frame, as a tracked
+rigid body is), then chains from a fixed frame to a part of the robot (wheels, sensors),
+then between two fixed frames (``map -> odom``), then links inside the robot
+(``base_link -> left_wheel``). Within each group: the fixed frames in the order above,
+``base_link`` before ``base_footprint``, frames nearer the root first, then by name.
 """
 
 from __future__ import annotations
@@ -52,7 +60,11 @@ def inspect_bag(spec: SourceSpec) -> Inspection:
         _topic_source(t) for t in overview.topics if _is_pose_topic(t) and t.message_count > 0
     ]
     frames = _frames(overview.tf, warnings)
-    sources.extend(_tf_candidates(overview.tf, warnings))
+    depths = {f.frame: f.depth for f in frames}
+    tf_sources = _tf_candidates(overview.tf, warnings)
+    sources.extend(
+        sorted(tf_sources, key=lambda x: _usefulness(overview.tf, depths, str(x.selector)))
+    )
     return Inspection(
         path=str(spec.path),
         kind=str(overview.storage_format),
@@ -177,6 +189,48 @@ def _tf_candidates(buffer: TfBuffer, warnings: list[str]) -> list[SourceInspecti
         if candidate is not None:
             out.append(candidate)
     return out
+
+
+def _usefulness(
+    buffer: TfBuffer, depths: dict[str, int], selector: str
+) -> tuple[int, int, int, int, str, str]:
+    """Return the sort key of a ``tf:PARENT:CHILD`` source: smaller is more useful.
+
+    Args:
+        buffer: the bag's tf links.
+        depths: each frame's depth in its tree (0 for a root).
+        selector: the source's ``tf:PARENT:CHILD`` selector.
+
+    Returns:
+        ``(group, fixed-frame rank, body-frame rank, depth, parent, child)``: group 0 is a
+        fixed frame -> a robot or device frame, 1 a fixed frame -> a part of the robot, 2 a
+        fixed frame -> a fixed frame, 3 a chain inside the robot.
+    """
+    _, parent, child = selector.split(":", 2)
+    roots = set(buffer.roots())
+
+    def fixed(frame: str) -> bool:
+        return frame in _WORLD_FRAMES or frame in roots
+
+    def rank(frame: str, names: tuple[str, ...]) -> int:
+        return names.index(frame) if frame in names else len(names)
+
+    if not fixed(parent):
+        group = 3
+    elif fixed(child):
+        group = 2
+    elif child in _BODY_FRAMES or all(fixed(x.parent) for x in buffer.parent_links(child)):
+        group = 0
+    else:
+        group = 1
+    return (
+        group,
+        rank(parent, _WORLD_FRAMES),
+        rank(child, _BODY_FRAMES),
+        depths.get(child, 0),
+        parent,
+        child,
+    )
 
 
 def _tf_candidate(

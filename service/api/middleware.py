@@ -4,6 +4,11 @@ FastAPI decodes a JSON body before it solves dependencies, so without this a req
 no key but a malformed body would get 422 instead of 401 (and an upload would be parsed for
 nobody). This ASGI middleware checks the key first and records the project on the request's
 state; :func:`service.api.deps.current_project` then only reads it.
+
+A path under ``/api/v1`` that matches no route at all (``/api/v1/healthz``) is passed on
+without a key, so the app answers its 404 problem: asking for a key to reach nothing would
+send the user after the wrong fix. A known route with an unknown id, or with a method it
+does not answer to, still needs the key.
 """
 
 from __future__ import annotations
@@ -12,6 +17,7 @@ import json
 from typing import Final
 
 import anyio.to_thread
+from starlette.routing import Match
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.auth import authenticate
@@ -43,6 +49,9 @@ class ApiKeyMiddleware:
         if scope["type"] != "http" or not (path == _PREFIX or path.startswith(_PREFIX + "/")):
             await self.app(scope, receive, send)
             return
+        if not _routed(scope):  # nothing there: the app answers 404, no key needed
+            await self.app(scope, receive, send)
+            return
         key = _bearer(scope)
         runtime: Runtime = scope["app"].state.runtime
         project_id = None
@@ -54,6 +63,12 @@ class ApiKeyMiddleware:
         scope.setdefault("state", {})[PROJECT_STATE_KEY] = project_id
         with log_context(project=project_id):
             await self.app(scope, receive, send)
+
+
+def _routed(scope: Scope) -> bool:
+    """Return whether any route of the app matches the request's path (any method)."""
+    routes = scope["app"].router.routes
+    return any(route.matches(scope)[0] is not Match.NONE for route in routes)
 
 
 def _bearer(scope: Scope) -> str | None:

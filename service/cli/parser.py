@@ -271,8 +271,12 @@ def _add_service(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpars
         "serve",
         help="start the HTTP service with its queue consumer (settings: LOCEVAL_* variables)",
     )
-    serve.add_argument("--host", default="127.0.0.1", help="address to listen on")
-    serve.add_argument("--port", type=int, default=8000, help="port to listen on")
+    serve.add_argument(
+        "--host", default=None, help="address to listen on (default: LOCEVAL_HOST or 127.0.0.1)"
+    )
+    serve.add_argument(
+        "--port", type=int, default=None, help="port to listen on (default: LOCEVAL_PORT or 8000)"
+    )
     serve.add_argument(
         "--no-consumer",
         action="store_true",

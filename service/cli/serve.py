@@ -36,12 +36,14 @@ def run_serve(args: argparse.Namespace) -> int:
     if key is not None:
         print(f"API key for project 'default' (shown once): {key}", flush=True)  # noqa: T201
     app = create_app(settings, runtime=runtime, consumer=not args.no_consumer)
+    host: str = args.host if args.host is not None else settings.host
+    port: int = args.port if args.port is not None else settings.port
     print(  # noqa: T201
-        f"loceval {__version__}: http://{args.host}:{args.port}/ (data in "
+        f"loceval {__version__}: http://{host}:{port}/ (data in "
         f"{settings.data_dir.resolve()}, queue {settings.queue_url})",
         flush=True,
     )
-    uvicorn.run(app, host=args.host, port=args.port, log_level="info", access_log=False)
+    uvicorn.run(app, host=host, port=port, log_level="info", access_log=False)
     return 0
 
 

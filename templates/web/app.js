@@ -30,6 +30,9 @@
     datasetsTimer: null,
     history: null,
     keyVerified: false, // the server has accepted the key at least once
+    schedules: [],
+    scheduleRuns: new Map(), // schedule id -> its newest run (or null)
+    runTimers: new Map(), // schedule id -> timer of a run being watched
   };
 
   // --- small helpers ---------------------------------------------------------------------
@@ -169,6 +172,10 @@
     stopHistoryPolling();
     state.datasets = [];
     state.history = null;
+    stopRunWatching();
+    state.schedules = [];
+    state.scheduleRuns.clear();
+    $("schedules-body").replaceChildren();
     state.sources.clear();
     renderSourceSelects();
     $("datasets-body").replaceChildren();
@@ -184,10 +191,83 @@
   // --- API ---------------------------------------------------------------------------------
 
   class ApiError extends Error {
-    constructor(status, message) {
+    constructor(status, message, fields = []) {
       super(message);
       this.status = status;
+      this.fields = fields; // the option keys the problem is about (max_dt_s, device.to_link)
     }
+  }
+
+  // --- the page's names of the options -------------------------------------------------------
+  // The API names an option options.max_dt_s; the page names its field (“Nearest: max Δt”).
+  // Each field carries data-option (the key) and data-label (its name on the page).
+
+  function optionField(key) {
+    for (const node of document.querySelectorAll("[data-option]")) {
+      if (node.dataset.option === key) return node;
+    }
+    return null;
+  }
+
+  /** The page's field of an option path (``device.to_link``, ``thresholds_m.1``), and the rest. */
+  function fieldOf(path) {
+    const parts = path.split(".");
+    for (let n = parts.length; n > 0; n -= 1) {
+      const node = optionField(parts.slice(0, n).join("."));
+      if (node) return { node, rest: parts.slice(n) };
+    }
+    return { node: null, rest: parts };
+  }
+
+  const OPTION_PATH = /(?:\bbody\.)?(?:\btemplate\.)?\boptions\.([A-Za-z_]+(?:\.[A-Za-z_0-9]+)*)/g;
+
+  /** Replace every ``options.KEY`` in a server message by the name of the page's field. */
+  function nameFields(text) {
+    return String(text).replace(OPTION_PATH, (match, path) => {
+      const { node, rest } = fieldOf(path);
+      if (!node) return match;
+      const index = rest.length && /^\d+$/.test(rest[0]) ? ` (value ${Number(rest[0]) + 1})` : "";
+      return `“${node.dataset.label}”${index}`;
+    });
+  }
+
+  /** The option keys a problem document is about: its ``option`` member and its errors' loc. */
+  function problemFields(bodyText) {
+    let body = null;
+    try {
+      body = bodyText ? JSON.parse(bodyText) : null;
+    } catch {
+      return [];
+    }
+    if (!body || typeof body !== "object") return [];
+    const keys = [];
+    if (typeof body.option === "string") keys.push(body.option.replace(/^options\./, ""));
+    for (const e of Array.isArray(body.errors) ? body.errors : []) {
+      const loc = e && Array.isArray(e.loc) ? e.loc.map(String) : [];
+      const at = loc.indexOf("options");
+      if (at >= 0 && at + 1 < loc.length) keys.push(loc.slice(at + 1).join("."));
+    }
+    return keys;
+  }
+
+  function clearInvalid(form) {
+    for (const node of form.querySelectorAll(".invalid")) node.classList.remove("invalid");
+  }
+
+  /** Mark the fields a problem is about and open the section that holds the first one. */
+  function markInvalid(keys) {
+    let first = null;
+    for (const key of keys) {
+      const { node } = fieldOf(key);
+      if (!node) continue;
+      node.classList.add("invalid");
+      first = first || node;
+    }
+    if (!first) return;
+    const details = first.closest("details");
+    if (details) details.open = true;
+    const input = first.querySelector("input, select, textarea");
+    if (input) input.focus();
   }
 
   /** Plain words for a failed response, from its problem+json body when there is one. */
@@ -200,13 +280,13 @@
     }
     if (body && typeof body === "object") {
       const { detail, title } = body;
-      if (typeof detail === "string" && detail) return detail;
+      if (typeof detail === "string" && detail) return nameFields(detail);
       if (Array.isArray(detail) && detail.length) {
         return detail
           .map((d) => {
             if (!d || typeof d !== "object") return String(d);
             const where = Array.isArray(d.loc) ? d.loc.filter((p) => p !== "body").join(".") : "";
-            return where ? `${where}: ${d.msg}` : String(d.msg);
+            return nameFields(where ? `${where}: ${d.msg}` : String(d.msg));
           })
           .join("; ");
       }
@@ -242,7 +322,8 @@
     state.keyVerified = true; // anything but 401 means the key was accepted
     if (!response.ok) {
       const text = await response.text().catch(() => "");
-      throw new ApiError(response.status, problemText(response.status, response.statusText, text));
+      throw new ApiError(
+        response.status, problemText(response.status, response.statusText, text), problemFields(text));
     }
     return response;
   }
@@ -268,6 +349,7 @@
   async function loadAll() {
     await loadDatasets(); // first, so the history can name the datasets
     await loadHistory();
+    await loadSchedules();
   }
 
   // --- uploads -----------------------------------------------------------------------------
@@ -431,6 +513,7 @@
       state.datasets = Array.isArray(page.items) ? page.items : [];
       renderDatasets(page.count);
       renderSourceSelects();
+      renderDeviceSelect();
       if (state.history) renderHistory(state.history.items, state.history.count);
     } catch (err) {
       reportError(err);
@@ -599,6 +682,19 @@
       estimates.push({ ...parseSource(value), name: name || null });
     }
     if (!estimates.length) throw new Error("Choose at least one estimate trajectory.");
+    return { reference: { ...parseSource(reference), name: null }, estimates, options: readOptions() };
+  }
+
+  /** A form problem found before anything is sent: its text names the page's field. */
+  class FieldError extends Error {
+    constructor(key, message) {
+      super(message);
+      this.fields = [key];
+    }
+  }
+
+  /** The options of the evaluation form, as the API's ``options`` object (defaults left out). */
+  function readOptions() {
     const options = {
       align: $("opt-align").value,
       association: $("opt-association").value,
@@ -641,18 +737,126 @@
       if (!Number.isFinite(number) || number <= 0) throw new Error("The RPE delta must be a positive number.");
       options.rpe_delta = number;
     }
-    return { reference: { ...parseSource(reference), name: null }, estimates, options };
+    Object.assign(options, readVerdictOptions(), readDeviceOptions(), readCadOptions());
+    return options;
+  }
+
+  /** A list of numbers typed with commas or spaces (``0.05, 0.10``); throws naming the field. */
+  function numberList(text, key, label) {
+    const parts = text.split(/[\s,;]+/).filter(Boolean);
+    const values = parts.map(Number);
+    const bad = parts.find((p, i) => !Number.isFinite(values[i]));
+    if (bad !== undefined) throw new FieldError(key, `${label}: “${bad}” is not a number.`);
+    return values;
+  }
+
+  function readVerdictOptions() {
+    const options = {};
+    const thresholds = $("opt-thresholds").value.trim();
+    if (thresholds) {
+      const values = numberList(thresholds, "thresholds_m", "Thresholds");
+      if (values.some((v) => v <= 0)) throw new FieldError("thresholds_m", "Thresholds: every distance must be more than 0 m.");
+      options.thresholds_m = values;
+    }
+    const worst = $("opt-worst").value.trim();
+    if (worst) {
+      const value = Number(worst);
+      if (!Number.isInteger(value) || value < 0) throw new FieldError("worst", "Worst poses listed: write a whole number, 0 or more.");
+      options.worst = value;
+    }
+    return options;
+  }
+
+  function readDeviceOptions() {
+    const options = {};
+    const offset = $("opt-offset").value.trim();
+    if (offset) options.offset = offset.replace(/[\s,]+/g, " ");
+    const datasetId = $("opt-device-dataset").value;
+    const fromLink = $("opt-device-from").value.trim();
+    const toLink = $("opt-device-to").value.trim();
+    if (datasetId) {
+      if (!fromLink) throw new FieldError("device.from_link", "From link: name the link the device offset starts at (e.g. base_link).");
+      if (!toLink) throw new FieldError("device.to_link", "To link: name the device's link (e.g. lidar_link).");
+      options.device = { dataset_id: datasetId, from_link: fromLink, to_link: toLink };
+    } else if (fromLink || toLink) {
+      throw new FieldError("device", "Device file: choose the URDF or bag that holds the two links.");
+    }
+    return options;
+  }
+
+  function readCadOptions() {
+    const options = {};
+    const site = $("opt-site").value.trim();
+    if (site) options.site = site.replace(/[\s,]+/g, " ");
+    const matrix = $("opt-site-matrix").value.trim();
+    if (matrix) {
+      const rows = matrix.split(/\n+/).map((line) => line.trim()).filter(Boolean);
+      const values = rows.map((row) => numberList(row, "site_matrix", "Site matrix"));
+      if (values.length !== 4 || values.some((row) => row.length !== 4)) {
+        throw new FieldError("site_matrix", "Site matrix: write 4 rows of 4 numbers, one row per line.");
+      }
+      options.site_matrix = values;
+    }
+    const simplify = $("opt-simplify").value.trim();
+    if (simplify) {
+      const value = Number(simplify);
+      if (!Number.isFinite(value) || value < 0) throw new FieldError("simplify_m", "Simplify paths: write a distance in metres, 0 or more.");
+      options.simplify_m = value;
+    }
+    const boxes = Array.from(document.querySelectorAll("#format-boxes input"));
+    const chosen = boxes.filter((b) => b.checked).map((b) => b.value);
+    if (chosen.length < boxes.length) options.formats = chosen;
+    return options;
+  }
+
+  function renderFormatBoxes() {
+    const holder = $("format-boxes");
+    holder.replaceChildren(...ALL_ARTIFACTS.map((name) => el("label", {},
+      el("input", {
+        type: "checkbox", value: name, checked: true,
+        disabled: name === "result.json", // always written: the figures of the evaluation
+      }),
+      el("span", { text: name }))));
+  }
+
+  /** Fill the device file choice with the uploaded URDFs and bags. */
+  function renderDeviceSelect() {
+    const select = $("opt-device-dataset");
+    const previous = select.value;
+    select.replaceChildren(el("option", { value: "", text: "— none —" }));
+    for (const dataset of state.datasets) {
+      const format = dataset.inspection && dataset.inspection.format;
+      if (format !== "urdf" && format !== "bag") continue;
+      select.append(el("option", {
+        value: dataset.id,
+        text: `${dataset.name || dataset.filename || dataset.id} (${format === "urdf" ? "URDF" : "bag"})`,
+      }));
+    }
+    select.value = Array.from(select.options).some((o) => o.value === previous) ? previous : "";
+    renderDeviceLinks();
+  }
+
+  /** Offer the chosen device file's links (URDF) or tf frames (bag) for the two link fields. */
+  function renderDeviceLinks() {
+    const dataset = state.datasets.find((d) => d.id === $("opt-device-dataset").value);
+    const inspection = (dataset && dataset.inspection) || {};
+    const links = Array.isArray(inspection.links)
+      ? inspection.links
+      : (Array.isArray(inspection.tf_tree) ? inspection.tf_tree.map((f) => f.frame) : []);
+    $("device-links").replaceChildren(...links.map((name) => el("option", { value: String(name) })));
   }
 
   async function startEvaluation(event) {
     event.preventDefault();
     const errorText = $("eval-form-error");
     errorText.textContent = "";
+    clearInvalid($("eval-form"));
     let body;
     try {
       body = readForm();
     } catch (err) {
       errorText.textContent = err.message;
+      if (err.fields) markInvalid(err.fields);
       return;
     }
     const button = $("start-button");
@@ -663,6 +867,7 @@
       loadHistory();
     } catch (err) {
       reportError(err, errorText);
+      if (err instanceof ApiError) markInvalid(err.fields);
     } finally {
       button.disabled = false;
     }
@@ -786,7 +991,7 @@
 
     if (status === "failed") {
       const problem = evaluation.error || {};
-      showProblem(problem.detail || problem.title || "No reason was given.", "The evaluation failed:");
+      showProblem(nameFields(problem.detail || problem.title || "No reason was given."), "The evaluation failed:");
     } else {
       setHidden($("current-error"), true);
     }
@@ -992,6 +1197,215 @@
     markHistoryRow();
   }
 
+  // --- schedules ---------------------------------------------------------------------------
+
+  async function loadSchedules() {
+    if (!state.key) return;
+    try {
+      const page = await api("/schedules");
+      state.schedules = Array.isArray(page.items) ? page.items : [];
+      const runs = await Promise.all(state.schedules.map((schedule) =>
+        api(`/schedules/${encodeURIComponent(schedule.id)}/runs?limit=1`)
+          .then((r) => (r.items && r.items[0]) || null)
+          .catch(() => null)));
+      state.scheduleRuns = new Map(state.schedules.map((schedule, i) => [schedule.id, runs[i]]));
+      renderSchedules();
+      for (const [id, run] of state.scheduleRuns) {
+        if (run && isActive(run.status) && !state.runTimers.has(id)) watchRun(id, run.id);
+      }
+    } catch (err) {
+      reportError(err);
+    }
+  }
+
+  function describeSelection(selection) {
+    const parts = [];
+    const tags = (selection && selection.tags) || [];
+    if (tags.length) parts.push(`tagged ${tags.join(", ")}`);
+    if (selection && selection.name_pattern) parts.push(`named ${selection.name_pattern}`);
+    if (selection && selection.uploaded_within_days) parts.push(`uploaded in the last ${selection.uploaded_within_days} days`);
+    return parts.length ? parts.join("; ") : "every recording";
+  }
+
+  function lastRunCell(run) {
+    if (!run) return el("span", { className: "muted", text: "never run" });
+    const rows = Array.isArray(run.rows) ? run.rows : [];
+    const failed = rows.filter((r) => r.status === "failed").length;
+    const facts = [formatTime(run.finished_at || run.started_at || run.created_at)];
+    if (rows.length) facts.push(plural(rows.length, "recording", "recordings") + (failed ? `, ${failed} failed` : ""));
+    if (isActive(run.status) && run.progress && run.progress.stage) facts.push(run.progress.stage);
+    return el("span", {},
+      statusBadge(run.status), " ",
+      el("span", { className: "muted small", text: facts.join(" · ") }),
+      run.error && run.error.detail ? el("div", { className: "error-text small", text: nameFields(run.error.detail) }) : null);
+  }
+
+  function renderSchedules() {
+    const body = $("schedules-body");
+    body.replaceChildren();
+    for (const schedule of state.schedules) {
+      const run = state.scheduleRuns.get(schedule.id) || null;
+      const message = el("span", { className: "error-text small" });
+      const summary = run && Array.isArray(run.artifacts)
+        ? run.artifacts.find((a) => a.name === "summary.html") || run.artifacts[0] : null;
+      const actions = el("div", { className: "schedule-actions" });
+      const runButton = el("button", {
+        type: "button", className: "secondary small", text: "Run now",
+        disabled: Boolean(run && isActive(run.status)),
+        onclick: () => runScheduleNow(schedule, runButton, message),
+      });
+      const pauseButton = el("button", {
+        type: "button", className: "secondary small", text: schedule.paused ? "Resume" : "Pause",
+        onclick: () => setSchedulePaused(schedule, !schedule.paused, pauseButton, message),
+      });
+      actions.append(runButton, pauseButton);
+      if (summary) {
+        const open = el("button", {
+          type: "button", className: "primary small", text: "Open summary",
+          dataset: { artifact: summary.name },
+        });
+        open.addEventListener("click", () => fetchArtifact(run, summary, true, open, message));
+        actions.append(open);
+      }
+      const remove = el("button", {
+        type: "button", className: "danger small", text: "Delete",
+        "aria-label": `Delete the schedule ${schedule.name}`,
+        onclick: () => deleteSchedule(schedule, remove, message),
+      });
+      actions.append(remove);
+      body.append(el("tr", { dataset: { scheduleId: schedule.id, paused: String(schedule.paused) } },
+        el("td", {}, el("strong", { text: schedule.name }),
+          schedule.paused ? el("div", {}, el("span", { className: "status status-queued", text: "paused" })) : null),
+        el("td", { className: "schedule-when", "data-label": "When" },
+          el("code", { text: schedule.cron }), " ",
+          el("span", { className: "muted small", text: schedule.timezone }),
+          el("div", { className: "muted small", text: schedule.paused || !schedule.next_fire_at
+            ? "does not fire while paused" : `next: ${formatTime(schedule.next_fire_at)}` })),
+        el("td", { "data-label": "Recordings", text: describeSelection(schedule.selection) }),
+        el("td", { "data-label": "Last run", className: "last-run" }, lastRunCell(run)),
+        el("td", { className: "actions" }, actions, message)));
+    }
+    const empty = state.schedules.length === 0;
+    setHidden($("schedules-table"), empty);
+    setHidden($("schedules-empty"), !empty);
+  }
+
+  async function runScheduleNow(schedule, button, message) {
+    message.textContent = "";
+    button.disabled = true;
+    try {
+      const run = await api(`/schedules/${encodeURIComponent(schedule.id)}/run`, { method: "POST" });
+      state.scheduleRuns.set(schedule.id, run);
+      renderSchedules();
+      if (isActive(run.status)) watchRun(schedule.id, run.id);
+    } catch (err) {
+      button.disabled = false;
+      reportError(err, message);
+    }
+  }
+
+  function watchRun(scheduleId, runId) {
+    clearTimeout(state.runTimers.get(scheduleId));
+    const tick = async () => {
+      try {
+        const run = await api(`/schedules/${encodeURIComponent(scheduleId)}/runs/${encodeURIComponent(runId)}`);
+        state.scheduleRuns.set(scheduleId, run);
+        renderSchedules();
+        if (!isActive(run.status)) {
+          state.runTimers.delete(scheduleId);
+          loadHistory(); // the run's evaluations are listed with the others
+          return;
+        }
+      } catch (err) {
+        state.runTimers.delete(scheduleId);
+        reportError(err);
+        return;
+      }
+      state.runTimers.set(scheduleId, setTimeout(tick, POLL_MS));
+    };
+    state.runTimers.set(scheduleId, setTimeout(tick, POLL_MS));
+  }
+
+  function stopRunWatching() {
+    for (const timer of state.runTimers.values()) clearTimeout(timer);
+    state.runTimers.clear();
+  }
+
+  async function setSchedulePaused(schedule, paused, button, message) {
+    message.textContent = "";
+    button.disabled = true;
+    try {
+      await api(`/schedules/${encodeURIComponent(schedule.id)}`, { method: "PATCH", json: { paused } });
+      await loadSchedules();
+    } catch (err) {
+      button.disabled = false;
+      reportError(err, message);
+    }
+  }
+
+  async function deleteSchedule(schedule, button, message) {
+    if (!window.confirm(`Delete the schedule “${schedule.name}” and its runs? This cannot be undone.`)) return;
+    button.disabled = true;
+    try {
+      await api(`/schedules/${encodeURIComponent(schedule.id)}`, { method: "DELETE" });
+      clearTimeout(state.runTimers.get(schedule.id));
+      state.runTimers.delete(schedule.id);
+      await loadSchedules();
+    } catch (err) {
+      button.disabled = false;
+      reportError(err, message);
+    }
+  }
+
+  function readScheduleForm() {
+    const name = $("sched-name").value.trim();
+    if (!name) throw new Error("Name the schedule (e.g. Weekly level 2).");
+    const cron = $("sched-cron").value.trim();
+    if (!cron) throw new Error("When: write a cron expression, e.g. 0 7 * * mon (Mondays at 07:00).");
+    const estimate = $("sched-estimate").value.trim();
+    const estimateName = $("sched-estimate-name").value.trim();
+    const reference = $("sched-reference").value.trim();
+    const tags = $("sched-tags").value.split(",").map((t) => t.trim()).filter(Boolean);
+    return {
+      name,
+      cron,
+      timezone: $("sched-timezone").value.trim() || "UTC",
+      selection: tags.length ? { tags } : {},
+      template: {
+        reference: { selector: reference || null },
+        estimates: [{ selector: estimate || null, name: estimateName || null }],
+        options: readOptions(),
+      },
+    };
+  }
+
+  async function createSchedule(event) {
+    event.preventDefault();
+    const errorText = $("schedule-form-error");
+    errorText.textContent = "";
+    clearInvalid($("eval-form"));
+    let body;
+    try {
+      body = readScheduleForm();
+    } catch (err) {
+      errorText.textContent = err.message;
+      if (err.fields) markInvalid(err.fields);
+      return;
+    }
+    const button = $("schedule-create-button");
+    button.disabled = true;
+    try {
+      await api("/schedules", { method: "POST", json: body });
+      $("schedule-form").reset();
+      await loadSchedules();
+    } catch (err) {
+      reportError(err, errorText);
+      if (err instanceof ApiError) markInvalid(err.fields);
+    } finally {
+      button.disabled = false;
+    }
+  }
+
   // --- start -------------------------------------------------------------------------------
 
   function init() {
@@ -1024,6 +1438,15 @@
     $("history-refresh").addEventListener("click", loadHistory);
     $("add-estimate").addEventListener("click", () => addEstimateRow().querySelector("select").focus());
     $("eval-form").addEventListener("submit", startEvaluation);
+    $("schedule-form").addEventListener("submit", createSchedule);
+    $("schedules-refresh").addEventListener("click", loadSchedules);
+    $("opt-device-dataset").addEventListener("change", renderDeviceLinks);
+    renderFormatBoxes();
+    try {
+      $("sched-timezone").defaultValue = Intl.DateTimeFormat().resolvedOptions().timeZone || "UTC";
+    } catch {
+      // keep UTC
+    }
     addEstimateRow();
     renderSourceSelects();
 

@@ -198,6 +198,23 @@ def test_import_does_not_load_rosbags():
     assert out.stdout.strip() == "False"
 
 
+def test_tf_sources_most_useful_first(tmp_path, records, rng):
+    """Fixed frame -> robot first, then fixed -> robot part, fixed -> fixed, inside the robot."""
+    wheel = bf.random_poses(rng, 30, dt_ns=NS // 20)
+    records = [*records, *bf.tf_records(bf.link_transforms("base_link", "left_wheel", wheel))]
+    bag = bf.write_bag(bf.bag_path(tmp_path, "mcap"), records, fmt="mcap")
+    insp = inspect_recording(bag)
+    tf_sources = [c.selector for c in insp.candidates if c.kind == "tf"]
+    assert tf_sources == [
+        "tf:map:base_link",  # group 0: fixed -> robot, map before odom
+        "tf:odom:base_link",
+        "tf:map:left_wheel",  # group 1: fixed -> a part of the robot (from the root only)
+        "tf:map:odom",  # group 2: fixed -> fixed
+        "tf:base_link:left_wheel",  # group 3: inside the robot
+    ]
+    assert [c.kind for c in insp.candidates[:3]] == ["topic"] * 3  # topics keep coming first
+
+
 @pytest.mark.public_data
 class TestPublicData:
     def test_nav2(self, public_data):
@@ -209,6 +226,22 @@ class TestPublicData:
         assert sources["/odom"].pose_count == 2639
         assert sources["tf:map:base_link"].description == "map -> odom -> base_link"
         assert insp.frames[0].frame == "map"
+
+    def test_nav2_lists_the_robot_chain_first(self, public_data):
+        """nav2_turtlebot.mcap: map -> base_link leads the tf sources, the wheel links trail."""
+        insp = inspect_recording(public_data / "nav2_turtlebot.mcap")
+        tf_sources = [c.selector for c in insp.candidates if c.kind == "tf"]
+        assert tf_sources == [
+            "tf:map:base_link",
+            "tf:map:base_footprint",
+            "tf:odom:base_link",
+            "tf:odom:base_footprint",
+            "tf:map:left_wheel",
+            "tf:map:right_wheel",
+            "tf:map:odom",
+            "tf:base_link:left_wheel",
+            "tf:base_link:right_wheel",
+        ]
 
     def test_ros_example(self, public_data):
         """ROS_example.bag lists its three PoseStamped topics with their counts."""

@@ -1,0 +1,90 @@
+"""The API's documentation page, ``/docs``, with Swagger UI's files served by the service.
+
+FastAPI's own ``/docs`` loads Swagger UI from a CDN, which a site network without internet
+cannot reach. Here the page and its script, stylesheet and icon come from the
+``swagger-ui-bundle`` package (Apache-2.0), so the documentation works offline.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Final
+
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.openapi.docs import get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
+from fastapi.responses import HTMLResponse, Response
+
+__all__ = ["ASSETS_PREFIX", "router"]
+
+ASSETS_PREFIX: Final = "/docs/assets"
+_ASSETS: Final = {
+    "swagger-ui-bundle.js": "text/javascript; charset=utf-8",
+    "swagger-ui.css": "text/css; charset=utf-8",
+    "favicon-32x32.png": "image/png",
+}
+_CACHE: Final = {"Cache-Control": "public, max-age=86400", "X-Content-Type-Options": "nosniff"}
+
+router = APIRouter(include_in_schema=False)
+
+
+def _assets_dir() -> Path:
+    """Return the folder of Swagger UI's files in the installed ``swagger-ui-bundle``."""
+    from swagger_ui_bundle import swagger_ui_path  # noqa: PLC0415  (only when /docs is asked)
+
+    return Path(swagger_ui_path)
+
+
+@router.get("/docs", response_class=HTMLResponse)
+def swagger_ui(request: Request) -> HTMLResponse:
+    """Return Swagger UI's page, pointing at this service's copies of its files.
+
+    Args:
+        request: The incoming request; its app names the title and the OpenAPI document.
+
+    Returns:
+        The page, with no address outside this service.
+    """
+    root = request.scope.get("root_path", "")
+    return get_swagger_ui_html(
+        openapi_url=f"{root}{request.app.openapi_url}",
+        title=f"{request.app.title} — API documentation",
+        swagger_js_url=f"{root}{ASSETS_PREFIX}/swagger-ui-bundle.js",
+        swagger_css_url=f"{root}{ASSETS_PREFIX}/swagger-ui.css",
+        swagger_favicon_url=f"{root}{ASSETS_PREFIX}/favicon-32x32.png",
+        oauth2_redirect_url=f"{root}/docs/oauth2-redirect",
+    )
+
+
+@router.get("/docs/oauth2-redirect", response_class=HTMLResponse)
+def swagger_ui_redirect() -> HTMLResponse:
+    """Return Swagger UI's OAuth2 redirect page (part of the UI, unused by API keys).
+
+    Returns:
+        The redirect page.
+    """
+    return get_swagger_ui_oauth2_redirect_html()
+
+
+@router.get(ASSETS_PREFIX + "/{name}")
+def swagger_asset(name: str) -> Response:
+    """Return one of Swagger UI's files.
+
+    Args:
+        name: The file's name; only the page's three files are served.
+
+    Returns:
+        The file with its media type, cacheable for a day.
+
+    Raises:
+        HTTPException: 404 for any other name, or when the package is not installed.
+    """
+    media_type = _ASSETS.get(name)
+    if media_type is None:
+        raise HTTPException(status_code=404, detail=f"{name} is not a file of the docs page")
+    try:
+        content = (_assets_dir() / name).read_bytes()
+    except (ImportError, FileNotFoundError) as err:
+        raise HTTPException(
+            status_code=404, detail="Swagger UI's files are not installed (swagger-ui-bundle)"
+        ) from err
+    return Response(content, media_type=media_type, headers=_CACHE)
