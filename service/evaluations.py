@@ -294,19 +294,7 @@ def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:
     sources = inspection.get("sources", [])
     selectors = [s.get("selector") for s in sources]
     if fmt == "bag":
-        topics = {t.get("name") for t in inspection.get("topics", [])}
-        if ref.selector is None:
-            listed = ", ".join(str(s) for s in selectors[:12]) or "none found"
-            msg = (
-                f"{label} is a bag; choose a selector (a pose topic or tf:PARENT:CHILD): {listed}."
-            )
-            raise InputError(msg)
-        if ref.selector.startswith("tf:"):
-            _check_tf_chain(inspection.get("tf_tree", []), ref.selector, label)
-        elif ref.selector not in topics:
-            listed = ", ".join(str(s) for s in selectors[:12]) or "none found"
-            msg = f"{label} has no topic {ref.selector!r}; its trajectory sources are: {listed}."
-            raise InputError(msg)
+        _check_bag_selector(inspection, ref, label, selectors)
         return
     if fmt == "motive":
         if ref.selector is None and len(selectors) == 1:
@@ -318,6 +306,23 @@ def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:
         return
     if ref.selector is not None:
         msg = f"{label} is a {fmt} file with one trajectory; leave its selector empty (null)."
+        raise InputError(msg)
+
+
+def _check_bag_selector(
+    inspection: dict[str, Any], ref: SourceRef, label: str, selectors: list[Any]
+) -> None:
+    """Fail now when a bag's selector is missing, names no topic, or an impossible tf chain."""
+    topics = {t.get("name") for t in inspection.get("topics", [])}
+    if ref.selector is None:
+        listed = ", ".join(str(s) for s in selectors[:12]) or "none found"
+        msg = f"{label} is a bag; choose a selector (a pose topic or tf:PARENT:CHILD): {listed}."
+        raise InputError(msg)
+    if ref.selector.startswith("tf:"):
+        _check_tf_chain(inspection.get("tf_tree", []), ref.selector, label)
+    elif ref.selector not in topics:
+        listed = ", ".join(str(s) for s in selectors[:12]) or "none found"
+        msg = f"{label} has no topic {ref.selector!r}; its trajectory sources are: {listed}."
         raise InputError(msg)
 
 
