@@ -1,0 +1,181 @@
+"""The shapes of the options table: the choices (StrEnums) and one option's specification.
+
+:mod:`loceval.options` holds the table itself (:data:`~loceval.options.OPTIONS`) and
+re-exports these names. Pure Python, like the table, so the CLI builds its parser without
+the numeric stack.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import StrEnum
+
+__all__ = [
+    "AlignMethod",
+    "AssociationMethod",
+    "OptionKind",
+    "OptionSpec",
+    "OptionValue",
+    "RPEUnit",
+    "StampSource",
+    "Units",
+    "UpAxis",
+]
+
+
+class AssociationMethod(StrEnum):
+    """How estimate poses are matched to reference poses in time."""
+
+    INTERPOLATE = "interpolate"
+    NEAREST = "nearest"
+
+
+class AlignMethod(StrEnum):
+    """How the estimate is brought into the reference's frame."""
+
+    SE3 = "se3"
+    SIM3 = "sim3"
+    ORIGIN = "origin"
+    YAW = "yaw"
+    CALIBRATE = "calibrate"
+    NONE = "none"
+
+
+class RPEUnit(StrEnum):
+    """What the RPE delta counts."""
+
+    FRAMES = "frames"
+    METRES = "m"
+    SECONDS = "s"
+
+
+class StampSource(StrEnum):
+    """Which stamps a bag's poses take: the message header's or the bag's receive time."""
+
+    HEADER = "header"
+    RECEIVE = "receive"
+
+
+class UpAxis(StrEnum):
+    """The up axis of a building mesh file (OBJ, PLY, STL): CAD's Z, or Y as many exporters."""
+
+    Z = "z"
+    Y = "y"
+
+
+class Units(StrEnum):
+    """Length units of CAD output."""
+
+    MM = "mm"
+    CM = "cm"
+    M = "m"
+
+    @property
+    def per_metre(self) -> float:
+        """How many of these units make a metre."""
+        return {"mm": 1000.0, "cm": 100.0, "m": 1.0}[self.value]
+
+
+class OptionKind(StrEnum):
+    """The type of an option's value (each front door spells it its own way)."""
+
+    NUMBER = "number"
+    """A finite float."""
+    INTEGER = "integer"
+    """An int."""
+    SWITCH = "switch"
+    """A bool, false by default (a CLI flag without a value)."""
+    CHOICE = "choice"
+    """One of ``choices``."""
+    TEXT = "text"
+    """A string in the option's own syntax, parsed by the core (``"0.10@95"``)."""
+    NUMBERS = "numbers"
+    """A list of finite floats (the CLI: separated by commas)."""
+    NAMES = "names"
+    """A list of names (the CLI: separated by commas)."""
+    MATRIX = "matrix"
+    """A 4x4 matrix (the CLI: a file holding it)."""
+    DEVICE = "device"
+    """A device file and two links (the API: an uploaded dataset's id and the links)."""
+    FILE = "file"
+    """A local file (CLI only)."""
+
+
+OptionValue = float | int | bool | str | tuple[float, ...] | tuple[str, ...] | None
+"""The type of a default."""
+
+
+@dataclass(frozen=True, slots=True)
+class OptionSpec:
+    """One option, as every front door shows it.
+
+    Attributes:
+        key: the option's key (the API's field, the options document's key, ``option=``
+            of errors).
+        kind: the type of its value.
+        default: the value when not given (None: not set).
+        help: one line for ``--help`` and the API schema's description.
+        words: how messages name it, front-door neutral ("the maximum time difference").
+        cli_name: the CLI's name of the flag, without its dashes (``max-dt``).
+        metavar: the CLI's placeholder of the value.
+        minimum: the least value (of each item, for lists), if bounded below.
+        maximum: the greatest value (of each item, for lists), if bounded above.
+        exclusive_minimum: ``minimum`` itself is not allowed.
+        choices: the allowed values of a ``CHOICE``.
+        max_length: the longest text, or the most items of a list.
+        min_length: the fewest items of a list.
+        pattern: a regular expression the text must match (the API checks it).
+        example: an example value for the API's documentation.
+        group: ``evaluation`` (the core's), ``reading``, ``export`` or ``ranging`` (only
+            ``loceval ranging`` and the ranging request take these).
+        api: the HTTP API takes it.
+        cli: the CLI takes it.
+        auto: the value may also be ``auto`` (estimated from the data; :data:`AUTO`).
+    """
+
+    key: str
+    kind: OptionKind
+    default: OptionValue
+    help: str
+    words: str
+    cli_name: str
+    metavar: str | None = None
+    minimum: float | None = None
+    maximum: float | None = None
+    exclusive_minimum: bool = False
+    choices: tuple[str, ...] = ()
+    max_length: int | None = None
+    min_length: int | None = None
+    pattern: str | None = None
+    example: str | None = None
+    group: str = "evaluation"
+    api: bool = True
+    cli: bool = True
+    auto: bool = False
+
+    @property
+    def flag(self) -> str:
+        """Return the CLI's flag (``--max-dt``)."""
+        return f"--{self.cli_name}"
+
+    @property
+    def bounds_text(self) -> str:
+        """Return the allowed range in words: ``"more than 0 and at most 3600"``."""
+        parts = []
+        if self.minimum is not None:
+            below = "more than" if self.exclusive_minimum else "at least"
+            parts.append(f"{below} {self.minimum:g}")
+        if self.maximum is not None:
+            parts.append(f"at most {self.maximum:g}")
+        return " and ".join(parts)
+
+    def within_bounds(self, value: float) -> bool:
+        """Return whether ``value`` is finite and within the bounds."""
+        if not math.isfinite(value):
+            return False
+        if self.minimum is not None and (
+            value < self.minimum or (self.exclusive_minimum and value == self.minimum)
+        ):
+            return False
+        return self.maximum is None or value <= self.maximum
