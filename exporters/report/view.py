@@ -10,11 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Final
-
-import numpy as np
-from scipy.spatial.transform import Rotation
 
 from exporters.options import ExportOptions
 from exporters.plots import (
@@ -27,12 +23,18 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
-from exporters.report.clocks import ClockSection, build_clock_section, time_offset_text
+from exporters.report.clocks import ClockSection, build_clock_section
 from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
+from exporters.report.provenance import (
+    alignment_rows,
+    estimate_name,
+    format_xyz,
+    input_rows,
+    option_rows,
+    trajectory_rows,
+)
 from exporters.report.ranging import RangingView, build_ranging_view
-from loceval.alignment import AlignWindow
-from loceval.evaluation import EstimateResult, EvaluationResult
-from loceval.gaps import GAP_RATE_FACTOR
+from loceval.evaluation import EvaluationResult
 from loceval.metrics import ErrorSeries, ErrorStats
 
 __all__ = ["BEST_MARK", "ReportView", "build_report_view"]
@@ -227,10 +229,6 @@ def length_unit(values_m: Iterable[float]) -> LengthUnit:
     return LengthUnit("m", 1.0, 3)
 
 
-def _name(e: EstimateResult, k: int) -> str:
-    return e.name or f"estimate {k + 1}"
-
-
 def _stats_rows(
     series: Sequence[ErrorSeries | None], unit: str, *, mark: bool, scale: LengthUnit | None = None
 ) -> tuple[StatsRow, ...]:
@@ -265,7 +263,7 @@ def _stats_table(
 ) -> StatsTable:
     mark = len(result.estimates) > 1
     columns = tuple(
-        f"{_name(e, k)} (n = {len(t):,})"
+        f"{estimate_name(e, k)} (n = {len(t):,})"
         for k, (e, t) in enumerate(zip(result.estimates, translation, strict=True))
     )
     unit = length_unit(float(getattr(t.stats, attr)) for t in translation for _, attr in _STAT_ROWS)
@@ -289,13 +287,9 @@ def _stats_table(
     )
 
 
-def _xyz(position: Iterable[float]) -> str:
-    return ", ".join(f"{v:.2f}" for v in position)
-
-
 def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> VerdictView:
     e = result.estimates[k]
-    name = _name(e, k)
+    name = estimate_name(e, k)
     colour = estimate_colour(k)
     ate = e.ate_translation
     shares = " · ".join(f"{share * 100:.1f} % within {t:g} m" for t, share in e.within.items())
@@ -306,7 +300,7 @@ def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> V
         else (
             f"The largest error is {worst.error:.2f} m, "
             f"{worst.t_s:.1f} s into the recording "
-            f"at x, y, z = {_xyz(worst.position_xyz)} m."
+            f"at x, y, z = {format_xyz(worst.position_xyz)} m."
         )
     )
     verdict = e.verdict
@@ -368,7 +362,7 @@ def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> V
             duration_s=f"{s.end_s - s.start_s:.2f}",
             poses=s.poses,
             max_error_m=_fmt(s.max_error_m),
-            where=_xyz(s.max_error_position_xyz),
+            where=format_xyz(s.max_error_position_xyz),
         )
         for n, s in enumerate(shown, start=1)
     )
@@ -390,142 +384,6 @@ def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> V
     )
 
 
-def _size(value: object) -> str:
-    """A byte count for people: ``123.5 kB``, ``987.7 MB``."""
-    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
-        return ""
-    units = ("B", "kB", "MB", "GB", "TB")
-    k = 0 if value < 1000 else min(int(math.log10(value)) // 3, len(units) - 1)
-    return f"{value:,} B" if k == 0 else f"{value / 1000**k:,.1f} {units[k]}"
-
-
-def _text(value: object) -> str:
-    return "" if value is None else str(value)
-
-
-def _inputs(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
-    rows = []
-    for info in result.inputs:
-        path = _text(info.get("path"))
-        rows.append(
-            {
-                "role": _text(info.get("role")),
-                "file": _text(info.get("file")) or (Path(path).name if path else ""),
-                "path": path,
-                "format": _text(info.get("format")),
-                "selector": _text(info.get("selector")),
-                "sha256": _text(info.get("sha256")),
-                "size": _size(info.get("bytes")),
-            }
-        )
-    return tuple(rows)
-
-
-def _trajectories(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
-    ref = result.reference
-    rows: list[Mapping[str, str]] = [
-        {
-            "role": "reference",
-            "name": ref.name or "reference",
-            "colour": REFERENCE_COLOUR,
-            "source": ref.source,
-            "poses": f"{len(ref):,}",
-            "matched": "",
-            "duration": f"{ref.duration_s:.1f} s",
-            "length": f"{ref.length_m:.1f} m",
-            "rate": f"{ref.rate_hz:.1f} Hz",
-            "orientation": "yes" if ref.has_orientation else "no",
-        }
-    ]
-    for k, e in enumerate(result.estimates):
-        est = e.estimate
-        rows.append(
-            {
-                "role": "estimate",
-                "name": _name(e, k),
-                "colour": estimate_colour(k),
-                "source": est.source,
-                "poses": f"{len(est):,}",
-                "matched": f"{len(e.association):,}",
-                "duration": f"{est.duration_s:.1f} s",
-                "length": f"{est.length_m:.1f} m",
-                "rate": f"{est.rate_hz:.1f} Hz",
-                "orientation": "yes" if est.has_orientation else "no",
-            }
-        )
-    return tuple(rows)
-
-
-def _options(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
-    cfg = result.config
-    gaps = (
-        f"tracking loss: an interval longer than {cfg.max_gap_s:g} s and than "
-        f"{GAP_RATE_FACTOR} of the source's median intervals"
-    )
-    association = (
-        f"interpolate the reference at the estimate's stamps ({gaps}, never bridged)"
-        if cfg.association.value == "interpolate"
-        else f"nearest reference pose within {cfg.max_dt_s:g} s ({gaps})"
-    )
-    rows = [
-        ("Association", association),
-        ("Time offset", time_offset_text(cfg)),
-        ("Alignment", f"{cfg.align.value} (estimated on {_window(cfg.align_first)})"),
-        (
-            "RPE step",
-            describe_rpe_step(result.config)
-            + (", every pose starts a pair" if cfg.rpe_all_pairs else ", consecutive steps"),
-        ),
-        ("Thresholds", ", ".join(f"{t:g} m" for t in cfg.thresholds_m)),
-        ("Tolerance", "none given" if cfg.tolerance is None else str(cfg.tolerance)),
-    ]
-    if cfg.align.value == "calibrate":
-        at = "the first matched pose" if cfg.calibrate_at_s is None else f"{cfg.calibrate_at_s:g} s"
-        rows.insert(3, ("Calibration pose", at))
-    if cfg.reference_offset is not None:
-        t = cfg.reference_offset.translation
-        rows.append(("Device offset", f"{_xyz(t)} m (rigid body → sensor)"))
-    return tuple(rows)
-
-
-def _window(window: AlignWindow) -> str:
-    """Return the alignment window in words: ``all poses``, ``the first 5 s``."""
-    if window.poses is not None:
-        return "the first pose" if window.poses == 1 else f"the first {window.poses:,} poses"
-    if window.seconds is not None:
-        return f"the first {window.seconds:g} s"
-    return "all poses"
-
-
-def _alignment_rows(result: EvaluationResult) -> tuple[tuple[str, tuple[str, ...]], ...]:
-    """The transform found per estimate, rows down and estimates across (as Tables 1-2)."""
-    labels = (
-        "method",
-        "poses used",
-        "translation [m]",
-        "rotation (yaw, pitch, roll)",
-        "scale",
-        "matrix [sR | t]",
-    )
-    columns: list[tuple[str, ...]] = []
-    for e in result.estimates:
-        a = e.alignment
-        tf = a.transform
-        yaw, pitch, roll = Rotation.from_matrix(tf.rotation).as_euler("ZYX", degrees=True)
-        matrix = np.hstack([tf.scale * tf.rotation, tf.translation[:, None]])
-        columns.append(
-            (
-                a.method.value,
-                f"{a.poses_used:,} (window: {a.window})",
-                _xyz(tf.translation),
-                f"{yaw:.2f}°, {pitch:.2f}°, {roll:.2f}°",
-                f"{tf.scale:.6f}",
-                "\n".join(" ".join(f"{v:+.4f}" for v in row) for row in matrix),
-            )
-        )
-    return tuple((label, tuple(col[r] for col in columns)) for r, label in enumerate(labels))
-
-
 def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
     tables = []
     for k, e in enumerate(result.estimates):
@@ -542,7 +400,7 @@ def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
             )
             for r, w in enumerate(e.worst, start=1)
         )
-        tables.append(WorstTable(name=_name(e, k), rows=rows, error_unit=unit.symbol))
+        tables.append(WorstTable(name=estimate_name(e, k), rows=rows, error_unit=unit.symbol))
     return tuple(tables)
 
 
@@ -550,13 +408,13 @@ def _warnings(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
     ref_name = result.reference.name or "reference"
     out = [(f"{ref_name} (reference)", w) for w in result.reference_warnings]
     for k, e in enumerate(result.estimates):
-        out.extend((_name(e, k), w) for w in e.warnings)
+        out.extend((estimate_name(e, k), w) for w in e.warnings)
     return tuple(out)
 
 
 def _summary(result: EvaluationResult) -> str:
     ref = result.reference
-    names = [_name(e, k) for k, e in enumerate(result.estimates)]
+    names = [estimate_name(e, k) for k, e in enumerate(result.estimates)]
     listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
     return (
         f"{listed} against {ref.name or 'the reference'} (ground truth): "
@@ -641,13 +499,13 @@ def build_report_view(
             _verdict_view(result, k, figure_of.get(f"ate_path_{k}")) for k in range(len(estimates))
         ),
         shares=shares,
-        estimate_names=tuple(_name(e, k) for k, e in enumerate(estimates)),
+        estimate_names=tuple(estimate_name(e, k) for k, e in enumerate(estimates)),
         estimate_colours=tuple(estimate_colour(k) for k in range(len(estimates))),
         reference_colour=REFERENCE_COLOUR,
-        inputs=_inputs(result),
-        trajectories=_trajectories(result),
-        options=_options(result),
-        alignments=_alignment_rows(result),
+        inputs=input_rows(result),
+        trajectories=trajectory_rows(result),
+        options=option_rows(result),
+        alignments=alignment_rows(result),
         tables=tables,
         figures=figures,
         worst=_worst(result),

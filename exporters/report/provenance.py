@@ -1,0 +1,181 @@
+"""The report's provenance tables: input files, trajectories, options and the alignment.
+
+Split from :mod:`exporters.report.view`, which assembles them into the report's view.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from exporters.plots import (
+    REFERENCE_COLOUR,
+    describe_rpe_step,
+    estimate_colour,
+)
+from exporters.report.clocks import time_offset_text
+from loceval.alignment import AlignWindow
+from loceval.evaluation import EstimateResult, EvaluationResult
+from loceval.gaps import GAP_RATE_FACTOR
+
+__all__ = [
+    "alignment_rows",
+    "estimate_name",
+    "format_xyz",
+    "input_rows",
+    "option_rows",
+    "trajectory_rows",
+]
+
+
+def estimate_name(e: EstimateResult, k: int) -> str:
+    """Return an estimate's name, or its number when it has none."""
+    return e.name or f"estimate {k + 1}"
+
+
+def format_xyz(position: Iterable[float]) -> str:
+    """Return a position as the report writes it: ``1.23, 4.56, 0.10``."""
+    return ", ".join(f"{v:.2f}" for v in position)
+
+
+def _size(value: object) -> str:
+    """A byte count for people: ``123.5 kB``, ``987.7 MB``."""
+    if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+        return ""
+    units = ("B", "kB", "MB", "GB", "TB")
+    k = 0 if value < 1000 else min(int(math.log10(value)) // 3, len(units) - 1)
+    return f"{value:,} B" if k == 0 else f"{value / 1000**k:,.1f} {units[k]}"
+
+
+def _text(value: object) -> str:
+    return "" if value is None else str(value)
+
+
+def input_rows(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
+    """Return the input files: role, file, format, selector, size and SHA-256."""
+    rows = []
+    for info in result.inputs:
+        path = _text(info.get("path"))
+        rows.append(
+            {
+                "role": _text(info.get("role")),
+                "file": _text(info.get("file")) or (Path(path).name if path else ""),
+                "path": path,
+                "format": _text(info.get("format")),
+                "selector": _text(info.get("selector")),
+                "sha256": _text(info.get("sha256")),
+                "size": _size(info.get("bytes")),
+            }
+        )
+    return tuple(rows)
+
+
+def trajectory_rows(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
+    """Return the trajectories as read: poses, duration, length and rate."""
+    ref = result.reference
+    rows: list[Mapping[str, str]] = [
+        {
+            "role": "reference",
+            "name": ref.name or "reference",
+            "colour": REFERENCE_COLOUR,
+            "source": ref.source,
+            "poses": f"{len(ref):,}",
+            "matched": "",
+            "duration": f"{ref.duration_s:.1f} s",
+            "length": f"{ref.length_m:.1f} m",
+            "rate": f"{ref.rate_hz:.1f} Hz",
+            "orientation": "yes" if ref.has_orientation else "no",
+        }
+    ]
+    for k, e in enumerate(result.estimates):
+        est = e.estimate
+        rows.append(
+            {
+                "role": "estimate",
+                "name": estimate_name(e, k),
+                "colour": estimate_colour(k),
+                "source": est.source,
+                "poses": f"{len(est):,}",
+                "matched": f"{len(e.association):,}",
+                "duration": f"{est.duration_s:.1f} s",
+                "length": f"{est.length_m:.1f} m",
+                "rate": f"{est.rate_hz:.1f} Hz",
+                "orientation": "yes" if est.has_orientation else "no",
+            }
+        )
+    return tuple(rows)
+
+
+def option_rows(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
+    """Return the evaluation's options in words."""
+    cfg = result.config
+    gaps = (
+        f"tracking loss: an interval longer than {cfg.max_gap_s:g} s and than "
+        f"{GAP_RATE_FACTOR} of the source's median intervals"
+    )
+    association = (
+        f"interpolate the reference at the estimate's stamps ({gaps}, never bridged)"
+        if cfg.association.value == "interpolate"
+        else f"nearest reference pose within {cfg.max_dt_s:g} s ({gaps})"
+    )
+    rows = [
+        ("Association", association),
+        ("Time offset", time_offset_text(cfg)),
+        ("Alignment", f"{cfg.align.value} (estimated on {_window(cfg.align_first)})"),
+        (
+            "RPE step",
+            describe_rpe_step(result.config)
+            + (", every pose starts a pair" if cfg.rpe_all_pairs else ", consecutive steps"),
+        ),
+        ("Thresholds", ", ".join(f"{t:g} m" for t in cfg.thresholds_m)),
+        ("Tolerance", "none given" if cfg.tolerance is None else str(cfg.tolerance)),
+    ]
+    if cfg.align.value == "calibrate":
+        at = "the first matched pose" if cfg.calibrate_at_s is None else f"{cfg.calibrate_at_s:g} s"
+        rows.insert(3, ("Calibration pose", at))
+    if cfg.reference_offset is not None:
+        t = cfg.reference_offset.translation
+        rows.append(("Device offset", f"{format_xyz(t)} m (rigid body → sensor)"))
+    return tuple(rows)
+
+
+def _window(window: AlignWindow) -> str:
+    """Return the alignment window in words: ``all poses``, ``the first 5 s``."""
+    if window.poses is not None:
+        return "the first pose" if window.poses == 1 else f"the first {window.poses:,} poses"
+    if window.seconds is not None:
+        return f"the first {window.seconds:g} s"
+    return "all poses"
+
+
+def alignment_rows(result: EvaluationResult) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """The transform found per estimate, rows down and estimates across (as Tables 1-2)."""
+    labels = (
+        "method",
+        "poses used",
+        "translation [m]",
+        "rotation (yaw, pitch, roll)",
+        "scale",
+        "matrix [sR | t]",
+    )
+    columns: list[tuple[str, ...]] = []
+    for e in result.estimates:
+        a = e.alignment
+        tf = a.transform
+        yaw, pitch, roll = Rotation.from_matrix(tf.rotation).as_euler("ZYX", degrees=True)
+        matrix = np.hstack([tf.scale * tf.rotation, tf.translation[:, None]])
+        columns.append(
+            (
+                a.method.value,
+                f"{a.poses_used:,} (window: {a.window})",
+                format_xyz(tf.translation),
+                f"{yaw:.2f}°, {pitch:.2f}°, {roll:.2f}°",
+                f"{tf.scale:.6f}",
+                "\n".join(" ".join(f"{v:+.4f}" for v in row) for row in matrix),
+            )
+        )
+    return tuple((label, tuple(col[r] for col in columns)) for r, label in enumerate(labels))
