@@ -31,6 +31,7 @@ __all__ = [
     "EvaluationValues",
     "ExportValues",
     "RangingValues",
+    "artifact_names",
     "checkpoints_from_options",
     "config_from_options",
     "device_offset",
@@ -251,6 +252,19 @@ def config_from_options(
         reference_offset_source=reference_offset_source,
         planar=options.planar,
     )
+
+
+def artifact_names(formats: Sequence[str] | None) -> list[str] | None:
+    """Return the artifact file names that ``formats`` name (``dxf`` -> ``paths.dxf``).
+
+    Raises:
+        ExportOptionsError: a name that is neither an artifact nor a format alias.
+    """
+    if formats is None:
+        return None
+    from exporters import artifact_name  # noqa: PLC0415  (the exporters load on use)
+
+    return list(dict.fromkeys(artifact_name(f) for f in formats))
 
 
 def is_auto(value: object) -> bool:

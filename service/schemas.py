@@ -15,7 +15,8 @@ from pydantic import (
 )
 from pydantic_core import core_schema
 
-from exporters import ARTIFACTS
+from exporters import ARTIFACT_ALIASES, ARTIFACTS, artifact_name
+from exporters.errors import ExportOptionsError
 from loceval.options import AUTO, OptionKind, option
 
 __all__ = [
@@ -230,11 +231,21 @@ class EvaluationOptions(_Strict):
     @field_validator("formats")
     @classmethod
     def _known_formats(cls, value: list[str] | None) -> list[str] | None:
-        unknown = [v for v in value or [] if v not in ARTIFACTS]
-        if unknown:
-            msg = f"unknown artifact {unknown[0]!r}; choose from {', '.join(ARTIFACTS)}"
-            raise ValueError(msg)
-        return value
+        """Accept file names and format aliases (``dxf``, ``pdf``, ``glb``); store file names."""
+        if value is None:
+            return None
+        names = []
+        for v in value:  # at most 20
+            try:
+                names.append(artifact_name(v))
+            except ExportOptionsError:
+                aliases = ", ".join(ARTIFACT_ALIASES)
+                msg = (
+                    f"unknown artifact {v!r}; choose from {', '.join(ARTIFACTS)}, or a format "
+                    f"({aliases})"
+                )
+                raise ValueError(msg) from None
+        return list(dict.fromkeys(names))
 
 
 class EvaluationCreate(_Strict):

@@ -15,6 +15,7 @@ from loceval.readers import TrajectoryFormat, parse_source
 from service.options import (
     EvaluationValues,
     ExportValues,
+    artifact_names,
     checkpoints_from_options,
     config_from_options,
     device_offset,
@@ -69,7 +70,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         config=config,
         stamp=args.stamp,
         export=export,
-        formats=args.formats,
+        formats=artifact_names(args.formats),
         visits=_visits_source(args.visits),
         checkpoints=checkpoints_from_options(cast("EvaluationValues", args)),
     )

@@ -17,6 +17,7 @@ from service.options import (
     EvaluationValues,
     ExportValues,
     RangingValues,
+    artifact_names,
     config_from_options,
     export_from_options,
     ranging_from_options,
@@ -56,7 +57,7 @@ def run_ranging(args: argparse.Namespace) -> int:
         config=config,
         stamp=args.stamp,
         export=export,
-        formats=args.formats,
+        formats=artifact_names(args.formats),
         ranging=RangingSources(
             anchors=anchors_spec.path,
             ranges=ranges_spec,
