@@ -6,7 +6,8 @@ import pytest
 from matplotlib.figure import Figure
 
 from exporters.plots.series import _label_thresholds
-from exporters.report.view import MM_BELOW_M, _window, length_unit
+from exporters.report.provenance import _window
+from exporters.report.view import MM_BELOW_M, length_unit
 from loceval.alignment import AlignWindow
 
 
