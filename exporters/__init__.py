@@ -120,6 +120,7 @@ ARTIFACT_ALIASES: Final[Mapping[str, str]] = {
     "grasshopper": "paths.3dm.json",
     "glb": "paths.glb",
     "gltf": "paths.glb",
+    "ifc": "paths.ifc",
 }
 """Format names a user may give instead of file names (``dxf`` for ``paths.dxf``)."""
 

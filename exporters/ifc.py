@@ -32,7 +32,6 @@ clockwise). Without a CRS the vertices are the DXF's model coordinates, as they 
 
 from __future__ import annotations
 
-import itertools
 import json
 import math
 import re
@@ -49,11 +48,10 @@ from exporters.building import georeferenced_options
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
 from exporters.placement import Marker, PlacedPath, Placement, place_evaluation
-from loceval._typing import FloatArray, StampsNs
+from loceval._typing import FloatArray
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import ErrorSeries
-from loceval.trajectory import Trajectory
 
 __all__ = [
     "MARKER_TYPES",
@@ -61,8 +59,6 @@ __all__ = [
     "Georeference",
     "export_ifc",
     "georeference",
-    "split_at_gaps",
-    "tracking_losses",
 ]
 
 TRAJECTORY_TYPE: Final = "trajectory"
@@ -78,41 +74,6 @@ _PLACEHOLDER_TEXT: Final = "((0.,0.,0.),(0.,0.,0.))"
 _PLACEHOLDER_LINE: Final = re.compile(
     r"^#(\d+)=IFCCARTESIANPOINTLIST3D\(" + re.escape(_PLACEHOLDER_TEXT), re.MULTILINE
 )
-
-
-def tracking_losses(result: EvaluationResult, trajectory: Trajectory) -> list[tuple[int, int]]:
-    """Return the ``(start_ns, end_ns)`` of every tracking loss of a trajectory.
-
-    The one place the IFC asks where a path is interrupted: today an interval between
-    poses longer than the evaluation's ``max_gap_s``.
-
-    Args:
-        result: the evaluation (its configuration holds the gap rule).
-        trajectory: the reference or an aligned estimate of ``result``.
-    """
-    return trajectory.gaps(round(result.config.max_gap_s * _NS_PER_S))
-
-
-def split_at_gaps(stamps_ns: StampsNs, gaps_ns: Sequence[tuple[int, int]]) -> list[slice]:
-    """Return the slices of the continuous pieces of a polyline cut at tracking losses.
-
-    A piece ends at the last vertex before a gap and the next begins at the first vertex
-    after it; a vertex-less gap (both ends dropped by simplification) still cuts.
-
-    Args:
-        stamps_ns: (M,) increasing stamps of the polyline's vertices.
-        gaps_ns: ``(start_ns, end_ns)`` of each tracking loss.
-
-    Returns:
-        Slices into the vertices, in order, covering every vertex once.
-    """
-    stamps = np.asarray(stamps_ns)
-    if not gaps_ns:
-        return [slice(0, len(stamps))]
-    ends = np.array([end for _, end in gaps_ns], dtype=np.int64)
-    cuts = np.unique(np.searchsorted(stamps, ends, side="left"))
-    bounds = [0, *(int(c) for c in cuts if 0 < c < len(stamps)), len(stamps)]
-    return [slice(a, b) for a, b in itertools.pairwise(bounds)]
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -342,9 +303,8 @@ class _IfcBuilder:
 
     def _path(self, path: PlacedPath) -> ifcopenshell.entity_instance:
         f = self.f
-        est = path.estimate
-        trajectory = self.placement.result.reference if est is None else est.aligned
-        pieces = split_at_gaps(path.stamps_ns, tracking_losses(self.placement.result, trajectory))
+        # the placement's pieces: the same breaks at tracking loss as every other CAD file
+        pieces = [slice(a, b) for a, b in path.pieces()]
         vertices = self.coords(path.vertices)
         items = []
         for piece in pieces:

@@ -49,14 +49,19 @@ def assert_valid(model: ifcopenshell.file, *, express_rules: bool = False) -> No
 
 
 def dxf_paths(data: bytes) -> dict[str, np.ndarray]:
-    """Return the vertices of each trajectory's 3D POLYLINE of a DXF, by layer."""
+    """Return the vertices of each trajectory's 3D POLYLINEs of a DXF, joined, by layer.
+
+    A trajectory is one POLYLINE per continuous piece (it breaks at tracking loss); the
+    pieces are joined in file order, as :func:`pieces` joins the IFC's curves.
+    """
     doc = ezdxf.read(io.StringIO(data.decode("utf-8")))
-    out = {}
+    parts: dict[str, list[np.ndarray]] = {}
     for polyline in doc.modelspace().query("POLYLINE"):
         if polyline.dxf.layer.endswith(" ATE"):
             continue
-        out[polyline.dxf.layer] = np.array([v.dxf.location.xyz for v in polyline.vertices])
-    return out
+        vertices = np.array([v.dxf.location.xyz for v in polyline.vertices])
+        parts.setdefault(polyline.dxf.layer, []).append(vertices)
+    return {layer: np.concatenate(found) for layer, found in parts.items()}
 
 
 def trajectories(model: ifcopenshell.file) -> dict[str, ifcopenshell.entity_instance]:
@@ -113,7 +118,7 @@ def assert_same_as_dxf(
     assert sorted(found) == sorted(names)
     per_mm = options.units.per_metre / 1000.0
     for name in names:
-        local = np.concatenate(pieces(found[name]))
+        local = np.concatenate([c for c in pieces(found[name]) if len(c) >= 2])  # DXF: curves only
         if options.crs is not None:
             placed = apply_map_conversion(model, local) * options.units.per_metre
         else:
@@ -232,17 +237,6 @@ def test_split_at_tracking_loss(rng: np.random.Generator) -> None:
     assert all(len(pieces_items(a)) == 2 for a in worst)  # the point and the line to the truth
 
 
-def test_split_at_gaps_lone_vertex() -> None:
-    """A vertex alone between two losses is its own piece; gaps without vertices still cut."""
-    stamps = np.array([0, 10, 20, 100, 200, 210], dtype=np.int64)
-    gaps = [(20, 100), (100, 200)]
-    assert ifc.split_at_gaps(stamps, gaps) == [slice(0, 3), slice(3, 4), slice(4, 6)]
-    assert ifc.split_at_gaps(stamps, []) == [slice(0, 6)]
-    # simplification kept neither end of the loss 20 .. 100: the cut is still between them
-    kept = np.array([0, 10, 150, 200], dtype=np.int64)
-    assert ifc.split_at_gaps(kept, [(20, 100)]) == [slice(0, 2), slice(2, 4)]
-
-
 def test_bad_crs_is_refused() -> None:
     """A CRS that is not AUTHORITY:CODE names the value and the form to use."""
     with pytest.raises(ExportOptionsError, match=r"'25832' is not of the form") as info:
@@ -285,4 +279,7 @@ def test_public_recordings(
     vertex_counts = {n: len(v) for n, v in dxf_paths(dxf_data).items()}
     for name, annotation in trajectories(model).items():
         values = property_set(annotation, "Loceval_Path")
-        assert values["Vertices"] == vertex_counts[name]
+        found = pieces(annotation)
+        assert values["Vertices"] == sum(len(c) for c in found)
+        # every vertex of a curve is the DXF's; the IFC also keeps lone poses as points
+        assert sum(len(c) for c in found if len(c) >= 2) == vertex_counts[name]

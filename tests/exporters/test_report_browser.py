@@ -95,8 +95,8 @@ def test_report_loads_cleanly_in_chromium(two_estimates: EvaluationResult, tmp_p
     html = render_report_html(two_estimates, ExportOptions(title="Browser check")).decode()
     summary = _check_in_chromium(html, tmp_path)
     assert summary["errors"] == []
-    assert summary["images"] == 7
-    assert summary["decoded"] == 7
+    assert summary["images"] == 8  # Figs. 1-7 and the clock correlation (issue 13)
+    assert summary["decoded"] == 8
 
 
 def test_probe_catches_broken_and_external_images(tmp_path: Path) -> None:
