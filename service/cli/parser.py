@@ -238,7 +238,9 @@ def _add_ranging(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpars
             add_option(rg, spec)
     rg.add_argument("--json", action="store_true", help="print the result as JSON")
     rg.add_argument("--out", type=_folder, default=None, metavar="DIR", help="write artifacts here")
-    rg.set_defaults(handler="service.cli.ranging:run_ranging")
+    # The options it does not take keep their defaults, so the option builders see every key.
+    skipped = {spec.key: spec.default for spec in OPTIONS if spec.key in RANGING_SKIPPED}
+    rg.set_defaults(handler="service.cli.ranging:run_ranging", **skipped)
 
 
 def _add_report(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparsers action)

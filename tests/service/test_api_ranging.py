@@ -47,13 +47,13 @@ def _post(api: Api, body: dict[str, Any]) -> Any:
 
 
 def test_uploads_are_recognised(api: Api, uploads: dict[str, str]) -> None:
-    """The upload inspection names the anchors and ranges tables."""
-    for role in ("anchors", "ranges"):
+    """The upload inspection names the ranges table and the anchors' survey (points)."""
+    for role, kind in (("anchors", "points"), ("ranges", "ranges")):
         dataset = api.client.get(f"/api/v1/datasets/{uploads[role]}", headers=api.headers).json()
-        assert dataset["kind"] == role
-        assert dataset["inspection"]["format"] == role
+        assert dataset["kind"] == kind
+        assert dataset["inspection"]["format"] == kind
     anchors = api.client.get(f"/api/v1/datasets/{uploads['anchors']}", headers=api.headers)
-    assert anchors.json()["inspection"]["anchors"] == list(make_anchors().ids)
+    assert anchors.json()["inspection"]["ids"] == list(make_anchors().ids)
 
 
 def test_ranging_job_runs(api: Api, uploads: dict[str, str]) -> None:

@@ -45,9 +45,11 @@ def test_nav2_sources_evaluate(public_data: Path, capsys: pytest.CaptureFixture[
     mcap = public_data / "nav2_turtlebot.mcap"
     sources = [f"{mcap}@/amcl_pose", f"{mcap}@tf:map:base_link", f"{mcap}@/odom"]
     sparse = _json(capsys, "evaluate", *sources, "--json")
-    # AMCL publishes about once a second: interpolation refuses to bridge that and says why.
-    warnings = sparse["estimates"][0]["warnings"]  # type: ignore[index]
-    assert any("match nearest poses within a maximum time difference" in w for w in warnings)
+    # AMCL publishes about once a second: its gaps are judged against its own rate
+    # (issue 12), so interpolating it at the estimates' stamps keeps most of them.
+    matched = [e["matched"] for e in sparse["estimates"]]  # type: ignore[index]
+    poses = [e["poses"] for e in sparse["estimates"]]  # type: ignore[index]
+    assert all(m > 0.9 * p for m, p in zip(matched, poses, strict=True)), (matched, poses)
     doc = _json(
         capsys, "evaluate", *sources, "--associate", "nearest", "--max-dt", "0.05", "--json"
     )

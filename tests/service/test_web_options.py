@@ -201,7 +201,9 @@ def test_schedules_view(page: Any, live_server: Any, public_data: Path, tmp_path
     expect(row).to_contain_text("never run")
     (schedule,) = _api(live_server, "GET", "/schedules")["items"]
     assert schedule["template"]["options"]["tolerance"] == "0.10@95"
-    assert schedule["template"]["estimates"] == [{"selector": None, "name": "SLAM"}]
+    assert schedule["template"]["estimates"] == [
+        {"selector": None, "name": "SLAM", "dataset_id": None}
+    ]
 
     row.get_by_role("button", name="Pause").click()
     expect(row).to_have_attribute("data-paused", "true")

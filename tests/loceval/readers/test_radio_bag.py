@@ -98,8 +98,9 @@ def test_sniff_and_inspect_radio_tables(tmp_path: Path, rng: np.random.Generator
     assert sniff_radio_table(trajectory) is None
     assert sniff_radio_table(tmp_path / "missing.csv") is None
     described = inspect(anchors).to_dict()
-    assert described["kind"] == "anchors"
-    assert described["anchors"] == list(make_anchors().ids)
+    # a survey id,x,y,z is inspected as surveyed points: control points or a radio's anchors
+    assert described["kind"] == "points"
+    assert described["ids"] == list(make_anchors().ids)
     described = inspect(ranges).to_dict()
     assert described["kind"] == "ranges"
     assert described["ranges"] == len(ranges.read_text().splitlines()) - 1
