@@ -497,7 +497,8 @@
   function describeDataset(dataset) {
     const sources = (dataset.inspection && dataset.inspection.sources) || [];
     const kind = dataset.kind ? `${dataset.kind}, ` : "";
-    return `${kind}${plural(sources.length, "trajectory source", "trajectory sources")}.`;
+    const table = sources.length ? "" : radioSummary(dataset.inspection || {});
+    return `${kind}${table || plural(sources.length, "trajectory source", "trajectory sources")}.`;
   }
 
   // --- datasets ----------------------------------------------------------------------------
