@@ -194,6 +194,12 @@ def test_ranging_evaluation_from_the_page(
     page.screenshot(path=str(tmp_path / "ranging.png"), full_page=True)
     _check_report(page, evaluation)
 
+    # A narrow window: the new card and the ranging table fit the screen.
+    page.set_viewport_size({"width": 400, "height": 900})
+    overflow = page.evaluate("document.documentElement.scrollWidth - window.innerWidth")
+    page.screenshot(path=str(tmp_path / "ranging-narrow.png"), full_page=True)
+    assert overflow <= 0
+
 
 def test_ranging_form_names_its_fields(
     page: Any,
