@@ -178,6 +178,7 @@
     $("schedules-body").replaceChildren();
     state.sources.clear();
     renderSourceSelects();
+    renderRadioSelects();
     $("datasets-body").replaceChildren();
     $("history-body").replaceChildren();
     $("upload-list").replaceChildren();
@@ -496,7 +497,8 @@
   function describeDataset(dataset) {
     const sources = (dataset.inspection && dataset.inspection.sources) || [];
     const kind = dataset.kind ? `${dataset.kind}, ` : "";
-    return `${kind}${plural(sources.length, "trajectory source", "trajectory sources")}.`;
+    const table = sources.length ? "" : radioSummary(dataset.inspection || {});
+    return `${kind}${table || plural(sources.length, "trajectory source", "trajectory sources")}.`;
   }
 
   // --- datasets ----------------------------------------------------------------------------
@@ -514,6 +516,7 @@
       renderDatasets(page.count);
       renderSourceSelects();
       renderDeviceSelect();
+      renderRadioSelects();
       if (state.history) renderHistory(state.history.items, state.history.count);
     } catch (err) {
       reportError(err);
@@ -556,7 +559,7 @@
             typeof s.pose_count === "number" ? plural(s.pose_count, "pose", "poses") : null,
             typeof s.duration_s === "number" ? formatSeconds(s.duration_s) : null,
           ].filter(Boolean).join(", ")}` }))))
-        : el("span", { className: "muted", text: dataset.kind === "urdf" ? "No trajectory (device description)" : "No trajectory found" });
+        : el("span", { className: "muted", text: dataset.kind === "urdf" ? "No trajectory (device description)" : radioSummary(inspection) || "No trajectory found" });
       if (sources.length > 4) {
         const topics = sources.filter((s) => s.kind === "topic").length;
         const summary = `${plural(sources.length, "trajectory source", "trajectory sources")}` +
@@ -636,6 +639,7 @@
     }
     const none = state.sources.size === 0;
     fillSourceSelect($("reference-select"), none ? "Upload a recording first" : "— choose the ground truth —");
+    fillSourceSelect($("ranging-reference-select"), none ? "Upload a recording first" : "— choose the ground truth —");
     for (const select of document.querySelectorAll(".estimate-select")) {
       fillSourceSelect(select, none ? "Upload a recording first" : "— choose an estimate —");
     }
@@ -873,6 +877,168 @@
     }
   }
 
+
+  // --- ranging evaluation ------------------------------------------------------------------
+  // Anchors and ranges are uploads of their own kinds; the job is an evaluation like the
+  // others (POST /ranging), so progress, summary and files show in the same card.
+
+  const RANGE_MSGTYPE = "sensor_msgs/msg/Range";
+
+  /** What a table without a trajectory holds, for the datasets list ("13 surveyed points"). */
+  function radioSummary(inspection) {
+    if (inspection.format === "anchors" && Array.isArray(inspection.anchors)) {
+      return plural(inspection.anchors.length, "radio anchor", "radio anchors");
+    }
+    if (inspection.format === "points" && Array.isArray(inspection.ids)) {
+      return `${plural(inspection.ids.length, "surveyed point", "surveyed points")} (control points or radio anchors)`;
+    }
+    if (inspection.format === "ranges" && typeof inspection.ranges === "number") {
+      const anchors = Array.isArray(inspection.anchor_ids) ? inspection.anchor_ids.length : 0;
+      return `${plural(inspection.ranges, "range", "ranges")} to ${plural(anchors, "anchor", "anchors")}`;
+    }
+    return "";
+  }
+
+  function datasetLabel(dataset) {
+    return dataset.name || dataset.filename || dataset.id;
+  }
+
+  /** The anchors (anchors or surveyed points tables) and the ranges (tables, bags' Range topics). */
+  function radioChoices() {
+    const anchors = [];
+    const ranges = [];
+    for (const dataset of state.datasets) {
+      const inspection = dataset.inspection || {};
+      if (inspection.format === "anchors" || inspection.format === "points") {
+        const ids = inspection.format === "anchors" ? inspection.anchors : inspection.ids;
+        const count = Array.isArray(ids) ? ` (${plural(ids.length, "anchor", "anchors")})` : "";
+        anchors.push({ value: dataset.id, text: `${datasetLabel(dataset)}${count}` });
+      } else if (inspection.format === "ranges") {
+        const what = radioSummary(inspection);
+        ranges.push({ value: sourceValue(dataset.id, null), text: `${datasetLabel(dataset)}${what ? ` (${what})` : ""}` });
+      } else if (inspection.format === "bag") {
+        for (const topic of Array.isArray(inspection.topics) ? inspection.topics : []) {
+          if (topic.msgtype !== RANGE_MSGTYPE) continue;
+          const count = typeof topic.message_count === "number" ? ` (${plural(topic.message_count, "range", "ranges")})` : "";
+          ranges.push({ value: sourceValue(dataset.id, topic.name), text: `${datasetLabel(dataset)} @ ${topic.name}${count}` });
+        }
+      }
+    }
+    return { anchors, ranges };
+  }
+
+  function fillChoice(select, choices, empty, placeholder) {
+    const previous = select.value;
+    select.replaceChildren(el("option", { value: "", text: choices.length ? placeholder : empty }),
+      ...choices.map((c) => el("option", { value: c.value, text: c.text })));
+    select.value = choices.some((c) => c.value === previous) ? previous : "";
+  }
+
+  function renderRadioSelects() {
+    const { anchors, ranges } = radioChoices();
+    fillChoice($("ranging-anchors-select"), anchors, "Upload an anchors table (id,x,y,z)", "— choose the anchors —");
+    fillChoice($("ranging-ranges-select"), ranges, "Upload ranges (t,anchor_id,range_m) or a bag", "— choose the ranges —");
+  }
+
+  /** The tag height applies to 2D positioning only. */
+  function updateTagHeight() {
+    $("ranging-tag-height").disabled = $("ranging-dims").value !== "2";
+  }
+
+  /** The ranging options as the API's ``options`` object (defaults left out). */
+  function readRangingOptions() {
+    const options = {};
+    const solve = Array.from(document.querySelectorAll("input[name=ranging-solve]:checked")).map((b) => b.value);
+    if (!solve.length) throw new FieldError("solve", "Solvers: choose at least one (nlls or minmax).");
+    options.solve = solve;
+    options.dims = $("ranging-dims").value;
+    const number = (id, key, label) => {
+      const text = $(id).value.trim();
+      if (!text || $(id).disabled) return;
+      const value = Number(text);
+      if (!Number.isFinite(value)) throw new FieldError(key, `${label}: “${text}” is not a number.`);
+      options[key] = value;
+    };
+    number("ranging-epoch", "epoch_s", "Epoch");
+    number("ranging-tag-height", "tag_height_m", "Tag height");
+    number("ranging-outlier", "outlier_threshold_m", "Outlier threshold");
+    number("ranging-distance-bin", "distance_bin_m", "Distance bins");
+    const offset = $("ranging-tag-offset").value.trim();
+    if (offset) options.tag_offset_xyz = offset.replace(/[\s,]+/g, " ");
+    return options;
+  }
+
+  function readRangingForm() {
+    const reference = $("ranging-reference-select").value;
+    if (!reference) throw new Error("Choose the reference (ground truth) trajectory.");
+    const anchors = $("ranging-anchors-select").value;
+    if (!anchors) throw new Error("Choose the anchors (an uploaded id,x,y,z table).");
+    const ranges = $("ranging-ranges-select").value;
+    if (!ranges) throw new Error("Choose the ranges (an uploaded t,anchor_id,range_m table or a bag's Range topic).");
+    const source = parseSource(ranges);
+    return {
+      reference: { ...parseSource(reference), name: null },
+      anchors,
+      ranges: source.selector === null ? source.dataset_id : source,
+      options: readRangingOptions(),
+    };
+  }
+
+  async function startRanging(event) {
+    event.preventDefault();
+    const form = $("ranging-form");
+    const errorText = $("ranging-form-error");
+    errorText.textContent = "";
+    clearInvalid(form);
+    let body;
+    try {
+      body = readRangingForm();
+    } catch (err) {
+      errorText.textContent = err.message;
+      if (err.fields) markInvalid(err.fields);
+      return;
+    }
+    const button = $("ranging-start-button");
+    button.disabled = true;
+    try {
+      const evaluation = await api("/ranging", { method: "POST", json: body });
+      watch(evaluation.id, evaluation);
+      loadHistory();
+      $("current-card").scrollIntoView({ behavior: "smooth", block: "start" });
+    } catch (err) {
+      reportError(err, errorText);
+      if (err instanceof ApiError) markInvalid(err.fields);
+    } finally {
+      button.disabled = false;
+    }
+  }
+
+  function formatShare(x) {
+    return typeof x === "number" && Number.isFinite(x) ? `${(x * 100).toFixed(1)} %` : "—";
+  }
+
+  /** The ranging figures of a finished ranging evaluation: overall, then per anchor. */
+  function renderRanging(evaluation) {
+    const ranging = evaluation.result && evaluation.result.ranging;
+    setHidden($("current-ranging"), !ranging);
+    if (!ranging) return;
+    const row = (name, s, className) => el("tr", { className },
+      el("th", { scope: "row", className: "name", text: name }),
+      el("td", { className: "num", "data-label": "Ranges", text: typeof s.n === "number" ? s.n.toLocaleString() : "—" }),
+      el("td", { className: "num", "data-label": "Bias", text: formatMetres(s.bias_m) }),
+      el("td", { className: "num", "data-label": "Std", text: formatMetres(s.std_m) }),
+      el("td", { className: "num ranging-rmse", "data-label": "RMSE", dataset: { valueM: String(s.rmse_m) }, text: formatMetres(s.rmse_m) }),
+      el("td", { className: "num", "data-label": "Outliers", text: formatShare(s.outlier_share) }));
+    const anchors = Array.isArray(ranging.anchors) ? ranging.anchors : [];
+    $("ranging-body").replaceChildren(
+      row("All anchors", ranging.overall || {}, "overall"),
+      ...anchors.map((a) => row(String(a.id), a, "anchor")));
+    const unused = Array.isArray(ranging.unused_anchors) ? ranging.unused_anchors : [];
+    const notes = [`Error = measured − true distance; an outlier is beyond ${formatMetres(ranging.outlier_threshold_m)}.`];
+    if (unused.length) notes.push(`Never heard: ${unused.join(", ")}.`);
+    $("ranging-note").textContent = notes.join(" ");
+  }
+
   // --- current evaluation ------------------------------------------------------------------
 
   function stopWatching() {
@@ -998,6 +1164,7 @@
 
     if (status === "succeeded") {
       renderSummary(evaluation);
+      renderRanging(evaluation);
       renderArtifacts(evaluation);
       setHidden($("current-result"), false);
     } else {
@@ -1439,6 +1606,8 @@
     $("add-estimate").addEventListener("click", () => addEstimateRow().querySelector("select").focus());
     $("eval-form").addEventListener("submit", startEvaluation);
     $("schedule-form").addEventListener("submit", createSchedule);
+    $("ranging-form").addEventListener("submit", startRanging);
+    $("ranging-dims").addEventListener("change", updateTagHeight);
     $("schedules-refresh").addEventListener("click", loadSchedules);
     $("opt-device-dataset").addEventListener("change", renderDeviceLinks);
     renderFormatBoxes();
