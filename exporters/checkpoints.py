@@ -67,15 +67,11 @@ def checkpoint_errors_csv(evaluation: CheckpointEvaluation) -> bytes:
     return out.getvalue().encode()
 
 
-def _render(
+def _render_cad(
     evaluation: CheckpointEvaluation, options: ExportOptions, wanted: list[str]
 ) -> dict[str, bytes]:
-    """Render every wanted artifact (the report's HTML and PDF share one pass)."""
+    """Render the wanted CAD files: the points, measured positions and error lines."""
     out: dict[str, bytes] = {}
-    if "result.json" in wanted:
-        out["result.json"] = checkpoint_result_json(evaluation, options)
-    if "errors.csv" in wanted:
-        out["errors.csv"] = checkpoint_errors_csv(evaluation)
     if "paths.dxf" in wanted:
         from exporters.dxf_points import export_points_dxf  # noqa: PLC0415
 
@@ -91,6 +87,19 @@ def _render(
         from exporters.gltf_points import export_points_glb  # noqa: PLC0415
 
         out["paths.glb"] = export_points_glb(evaluation, options)
+    return out
+
+
+def _render(
+    evaluation: CheckpointEvaluation, options: ExportOptions, wanted: list[str]
+) -> dict[str, bytes]:
+    """Render every wanted artifact (the report's HTML and PDF share one pass)."""
+    out: dict[str, bytes] = {}
+    if "result.json" in wanted:
+        out["result.json"] = checkpoint_result_json(evaluation, options)
+    if "errors.csv" in wanted:
+        out["errors.csv"] = checkpoint_errors_csv(evaluation)
+    out.update(_render_cad(evaluation, options, wanted))
     if "report.html" in wanted or "report.pdf" in wanted:
         from exporters.report.checkpoints import render_checkpoint_report  # noqa: PLC0415
 

@@ -72,9 +72,7 @@ def export_points_glb(evaluation: CheckpointEvaluation, options: ExportOptions) 
     gltf = scene.gltf
     gltf.asset = pygltflib.Asset(version="2.0", generator=str(metadata["generator"]))
     gltf.extensionsUsed = [_UNLIT]
-    gltf.scenes = [
-        pygltflib.Scene(name=str(metadata["title"]), nodes=scene.roots, extras=metadata)
-    ]
+    gltf.scenes = [pygltflib.Scene(name=str(metadata["title"]), nodes=scene.roots, extras=metadata)]
     gltf.scene = 0
     scene.blob.extend(b"\0" * (-len(scene.blob) % 4))
     gltf.buffers = [pygltflib.Buffer(byteLength=len(scene.blob))]

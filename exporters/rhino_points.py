@@ -70,7 +70,9 @@ def _items(placed: PlacedControlPoints) -> list[Item]:
         items.append(("control point", pid, layer, POINTS_RGB, tuple(xyz)))
     for est in placed.estimates:
         measured, errors = f"{root}::{est.measured_layer}", f"{root}::{est.errors_layer}"
-        rows = zip(est.labels, est.colours(), est.surveyed.tolist(), est.measured.tolist())
+        rows = zip(
+            est.labels, est.colours(), est.surveyed.tolist(), est.measured.tolist(), strict=True
+        )
         for label, rgb, start, end in rows:  # one group per visit
             items.append(("measured", label, measured, rgb, tuple(end)))
             items.append(("error", label, errors, rgb, (*start, *end)))

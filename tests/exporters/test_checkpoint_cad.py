@@ -98,7 +98,11 @@ def test_3dm_matches_the_dxf(out: Path) -> None:
     assert model.Settings.ModelUnitSystem == rhino3dm.UnitSystem.Millimeters
     layers = [layer.FullPath for layer in model.Layers]
     assert layers == [
-        "loceval", ROOT, f"{ROOT}::control points", f"{ROOT}::est measured", f"{ROOT}::est errors"
+        "loceval",
+        ROOT,
+        f"{ROOT}::control points",
+        f"{ROOT}::est measured",
+        f"{ROOT}::est errors",
     ]
     by_layer: dict[str, dict[str, list]] = {name: {} for name in layers}
     for obj in model.Objects:  # a few dozen objects
@@ -121,7 +125,9 @@ def test_3dm_matches_the_dxf(out: Path) -> None:
         [*p3(o.Geometry.PointAtStart), *p3(o.Geometry.PointAtEnd)] for o in errors["LineCurve"]
     ])  # fmt: skip
     np.testing.assert_allclose(lines, dxf["lines"], atol=TOL_MM)
-    assert [o.Geometry.Text for o in errors["TextDot"]] == dxf_labels(out / "paths.dxf", "est errors")
+    assert [o.Geometry.Text for o in errors["TextDot"]] == dxf_labels(
+        out / "paths.dxf", "est errors"
+    )
     grey = [o.Attributes.ObjectColor[:3] for o in errors["LineCurve"]]
     assert sorted(set(grey)) == [(128, 128, 128), (212, 0, 154)]  # alignment, estimate 0
     assert model.Strings["loceval.evaluation_id"] == "ev1"
@@ -161,7 +167,7 @@ def test_grasshopper_script_reads_the_control_points_document(out: Path) -> None
     available = set(doc) | set(doc["metadata"]) | set(doc["paths"][0]) | set(doc["markers"][0])
     available |= set(doc["points"][0])
     assert keys - {"bin", "curve"} <= available, keys - available  # ATE runs: none here
-    assert "document.get(\"points\", [])" in SCRIPT.read_text(encoding="utf-8")
+    assert 'document.get("points", [])' in SCRIPT.read_text(encoding="utf-8")
 
 
 def glb_world(model: pygltflib.GLTF2, node: pygltflib.Node, primitive: int = 0) -> np.ndarray:

@@ -347,9 +347,8 @@ def test_a_bag_topic_that_announces_nothing(
     assert "arrivals at control points are read from std_msgs/String" in err
 
 
-def test_every_cad_format_with_out(
-    recording: StopAndGo, tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
+@pytest.mark.usefixtures("recording")
+def test_every_cad_format_with_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--out writes every format; the CAD files agree on the error lines at the site."""
     rhino3dm = pytest.importorskip("rhino3dm")
     pygltflib = pytest.importorskip("pygltflib")
@@ -365,8 +364,8 @@ def test_every_cad_format_with_out(
         "report.pdf", "result.json",
     ]  # fmt: skip
     visits = json.loads(out)["estimates"][0]["checkpoints"]["visits"]
-    # the site "100 200 0 90" by hand: yaw 90 deg about z, then (100, 200, 0) m: (x, y, z) ->
-    # (100 - y, 200 + x, z)
+    # the site "100 200 0 90" by hand: a quarter turn about z (east becomes north, north
+    # becomes west), then 100 m east and 200 m north
     lines = []
     for v in visits:  # a reference loop, per visit
         (sx, sy, sz), (mx, my, mz) = v["surveyed"], v["measured"]
