@@ -13,7 +13,9 @@ The same content as the DXF (:mod:`exporters.dxf_points`), on layers below
 Absolute model coordinates in the output units, the site transform applied; the base
 point (the points' bounding-box centre rounded to whole metres) is the EarthAnchorPoint's
 model base point. The JSON follows :func:`exporters.rhino.export_3dm_json`'s layout
-(format version 2): the error lines are ``paths`` (one encoded ``LineCurve`` per visit),
+(format version 2): the error lines are ``paths`` (an encoded two-point ``PolylineCurve``
+per visit, so the Grasshopper script and Hops read them as trajectory pieces; ``poses``
+counts the visits, one measured position each),
 the ids and labels are ``markers`` with a ``color``, and the point objects are the extra
 list ``points`` (``{"kind", "label", "layer", "color", "position"}``), which
 ``grasshopper/loceval_paths.py`` reads.
@@ -28,7 +30,7 @@ from typing import Any
 
 import rhino3dm as _rhino3dm
 
-from exporters.colours import RGB
+from exporters.colours import RGB, layer_name
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
 from exporters.points_placement import (
@@ -56,8 +58,6 @@ Item = tuple[str, str, str, RGB, tuple[float, ...]]
 
 def points_layer_root(placed: PlacedControlPoints) -> str:
     """Return the evaluation's layer path: ``loceval::<title>`` (the id without a title)."""
-    from exporters.colours import layer_name  # noqa: PLC0415
-
     return f"{ROOT_LAYER}::{layer_name(placed.title.strip() or placed.evaluation_id)}"
 
 
@@ -118,8 +118,11 @@ def export_points_3dm_json(evaluation: CheckpointEvaluation, options: ExportOpti
                 "color": list(est.color_rgb),
                 "color_hex": "#{:02x}{:02x}{:02x}".format(*est.color_rgb),
                 "labels": list(est.labels),
+                "poses": len(est.labels),
+                "vertices": 2 * len(est.labels),
+                "max_deviation_m": 0.0,
                 "curves": [
-                    _line(item[4]).Encode()
+                    _polyline(item[4]).Encode()
                     for item in items
                     if item[0] == "error" and item[2] == f"{root}::{est.errors_layer}"
                 ],
@@ -155,6 +158,14 @@ def export_points_3dm_json(evaluation: CheckpointEvaluation, options: ExportOpti
         "paths": paths,
     }
     return (json.dumps(document, indent=1, allow_nan=False) + "\n").encode("utf-8")
+
+
+def _polyline(start_end: tuple[float, ...]) -> Any:  # noqa: ANN401
+    """Return a two-point PolylineCurve (what every ``curves`` entry of the JSON is)."""
+    points = rhino3dm.Point3dList(2)
+    points.Add(*start_end[:3])
+    points.Add(*start_end[3:])
+    return rhino3dm.PolylineCurve(points)
 
 
 def _line(start_end: tuple[float, ...]) -> Any:  # noqa: ANN401  (rhino3dm is untyped here)

@@ -40,12 +40,12 @@ TOL_MM = 1.0
 
 @pytest.fixture
 def evaluation(rng: np.random.Generator) -> CheckpointEvaluation:
-    """A 3 x 4 grid at 30 cm visited twice; 4 points fix a rigid alignment (grey visits)."""
+    """A 3 x 4 grid at 30 cm visited twice; the 4 corners' 8 visits are alignment (grey)."""
     rec = stop_and_go(rng, grid_points(3, 4), passes=2)
     return evaluate_control_points(
         rec.points,
         [rec.estimate],
-        EvaluationConfig(align=AlignMethod.SE3),
+        EvaluationConfig(align=AlignMethod.NONE),
         CheckpointConfig(align_points=("P00", "P03", "P20", "P23")),
         reference_name="survey",
     )
@@ -87,8 +87,8 @@ def p3(point: rhino3dm.Point3d) -> list[float]:
 
 def test_alignment_visits_exist(evaluation: CheckpointEvaluation) -> None:
     """The fixture has grey (alignment) and scored visits, so both colours are tested."""
-    flags = {v.used_for_alignment for v in evaluation.estimates[0].result.visits}
-    assert flags == {True, False}
+    flags = [v.used_for_alignment for v in evaluation.estimates[0].result.visits]
+    assert (len(flags), sum(flags)) == (24, 8)  # 12 points x 2 passes; 4 corners x 2
 
 
 def test_3dm_matches_the_dxf(out: Path) -> None:
@@ -143,6 +143,11 @@ def test_json_matches_the_dxf(out: Path) -> None:
     (path,) = doc["paths"]
     assert path["layer"] == f"{ROOT}::est errors"
     curves = [rhino3dm.CommonObject.Decode(c) for c in path["curves"]]
+    assert {type(c).__name__ for c in curves} == {"PolylineCurve"}  # as a trajectory's
+    assert {c.PointCount for c in curves} == {2}
+    assert path["poses"] == len(curves) == 24  # 12 points, 2 passes
+    hops = {"name", "kind", "source", "poses", "vertices", "max_deviation_m", "color"}
+    assert hops <= set(path)  # what service/api/hops.py reads of a path
     lines = np.array([[*p3(c.PointAtStart), *p3(c.PointAtEnd)] for c in curves])
     np.testing.assert_allclose(lines, dxf["lines"], atol=TOL_MM)
     for layer in ("control points", "est measured"):
