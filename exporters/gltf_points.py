@@ -157,9 +157,9 @@ class _Scene:
             for k, (model, rgb) in enumerate(groups)
         ]
         self.gltf.meshes.append(pygltflib.Mesh(name=name, primitives=primitives))
-        anchors = self._local(groups[0][0] if at is None else at).astype(np.float64)
         children = []
-        for label, local in zip(labels, anchors.tolist()[: len(labels)], strict=True):
+        anchors = self._local(groups[0][0] if at is None else at) if labels else np.empty((0, 3))
+        for label, local in zip(labels, anchors.astype(np.float64).tolist(), strict=True):
             self.gltf.nodes.append(pygltflib.Node(name=label, translation=local))
             children.append(len(self.gltf.nodes) - 1)
         kind = "points" if mode == pygltflib.POINTS else "lines"
