@@ -1,9 +1,11 @@
-"""The artifacts of an evaluation against control points: result, errors.csv, report, DXF.
+"""The artifacts of an evaluation against control points: result, errors.csv, report, CAD.
 
 The names are those of :data:`exporters.ARTIFACTS` (so the service lists and serves them):
-``result.json``, ``errors.csv``, ``report.html``, ``report.pdf`` and ``paths.dxf``, which
-here holds the control points, the measured positions and the error lines
-(:mod:`exporters.dxf_points`); the other CAD formats are not written for control points.
+``result.json``, ``errors.csv``, ``report.html``, ``report.pdf``, and ``paths.dxf``,
+``paths.3dm``, ``paths.3dm.json`` and ``paths.glb``, which here hold the control points, the
+measured positions and the error lines (:mod:`exporters.dxf_points`,
+:mod:`exporters.rhino_points`, :mod:`exporters.gltf_points`); ``paths.ifc`` is not written
+for control points.
 
 ``errors.csv`` has one row per visit of every estimate::
 
@@ -42,6 +44,9 @@ CHECKPOINT_ARTIFACTS: Final = (
     "report.html",
     "report.pdf",
     "paths.dxf",
+    "paths.3dm",
+    "paths.3dm.json",
+    "paths.glb",
 )
 """The artifacts an evaluation against control points writes."""
 
@@ -62,6 +67,29 @@ def checkpoint_errors_csv(evaluation: CheckpointEvaluation) -> bytes:
     return out.getvalue().encode()
 
 
+def _render_cad(
+    evaluation: CheckpointEvaluation, options: ExportOptions, wanted: list[str]
+) -> dict[str, bytes]:
+    """Render the wanted CAD files: the points, measured positions and error lines."""
+    out: dict[str, bytes] = {}
+    if "paths.dxf" in wanted:
+        from exporters.dxf_points import export_points_dxf  # noqa: PLC0415
+
+        out["paths.dxf"] = export_points_dxf(evaluation, options)
+    if "paths.3dm" in wanted or "paths.3dm.json" in wanted:
+        from exporters.rhino_points import export_points_3dm, export_points_3dm_json  # noqa: PLC0415
+
+        if "paths.3dm" in wanted:
+            out["paths.3dm"] = export_points_3dm(evaluation, options)
+        if "paths.3dm.json" in wanted:
+            out["paths.3dm.json"] = export_points_3dm_json(evaluation, options)
+    if "paths.glb" in wanted:
+        from exporters.gltf_points import export_points_glb  # noqa: PLC0415
+
+        out["paths.glb"] = export_points_glb(evaluation, options)
+    return out
+
+
 def _render(
     evaluation: CheckpointEvaluation, options: ExportOptions, wanted: list[str]
 ) -> dict[str, bytes]:
@@ -71,10 +99,7 @@ def _render(
         out["result.json"] = checkpoint_result_json(evaluation, options)
     if "errors.csv" in wanted:
         out["errors.csv"] = checkpoint_errors_csv(evaluation)
-    if "paths.dxf" in wanted:
-        from exporters.dxf_points import export_points_dxf  # noqa: PLC0415
-
-        out["paths.dxf"] = export_points_dxf(evaluation, options)
+    out.update(_render_cad(evaluation, options, wanted))
     if "report.html" in wanted or "report.pdf" in wanted:
         from exporters.report.checkpoints import render_checkpoint_report  # noqa: PLC0415
 

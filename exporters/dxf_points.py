@@ -29,6 +29,7 @@ from ezdxf.lldxf.const import DXFError
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
 from exporters.plots.figure import estimate_colour
+from exporters.points_placement import POINTS_LAYER, error_label
 from loceval._typing import FloatArray
 from loceval._version import __version__
 from loceval.checkpoint_evaluation import CheckpointEvaluation
@@ -36,7 +37,6 @@ from loceval.checkpoints import VisitResult
 
 __all__ = ["POINTS_LAYER", "export_points_dxf"]
 
-POINTS_LAYER: Final = "control points"
 _INSUNITS: Final = {Units.MM: dxf_units.MM, Units.CM: dxf_units.CM, Units.M: dxf_units.M}
 _PDMODE_CIRCLE_CROSS: Final = 35
 _ALIGNMENT_ACI: Final = 8  # grey
@@ -130,9 +130,9 @@ def _add_estimate(
         grey = {"color": _ALIGNMENT_ACI} if visit.used_for_alignment else {}
         msp.add_point(end, dxfattribs={"layer": measured_layer, **grey})
         msp.add_line(start, end, dxfattribs={"layer": errors_layer, **grey})
-        text = f"{visit.point_id} {visit.error_m * 1000:.1f} mm"
-        if visit.used_for_alignment:
-            text += " (alignment)"
+        text = error_label(
+            visit.point_id, visit.error_m, used_for_alignment=visit.used_for_alignment
+        )
         msp.add_text(text, height=0.5 * text_h, dxfattribs={
             "layer": errors_layer, "insert": (end[0], end[1] - 0.8 * text_h, end[2]), **grey
         })  # fmt: skip

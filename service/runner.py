@@ -278,7 +278,8 @@ def _run_checkpoints(
         report("writing", _EVALUATE)
         title = f"{result.reference_name} vs {', '.join(e.name for e in result.estimates)}"
         export = replace(job.export, title=title)
-        write_checkpoint_artifacts(result, out_dir, export, names=job.formats)
+        names = None if job.formats is None else dict.fromkeys(["result.json", *job.formats])
+        write_checkpoint_artifacts(result, out_dir, export, names=names)
     report("done", 1.0)
     return result
 

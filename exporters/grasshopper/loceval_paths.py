@@ -14,7 +14,9 @@ Outputs:
     curves: polyline curves, one per continuous piece, reference first, document units
     names, colours, layers: per curve
     ate_curves, ate_colours, ate_layers: the estimates cut into ATE-coloured runs
-    dots, dot_layers: text dots at the greatest errors and at each tracking loss
+    dots, dot_layers: text dots at the greatest errors and at each tracking loss (or the
+        control point ids and error labels of an evaluation against control points)
+    points, point_layers: control points and measured positions (control points only)
     info: evaluation, units, simplification tolerance and deviation, ATE legend
 """
 
@@ -86,6 +88,7 @@ source = globals().get("source")  # the component's inputs
 bake = globals().get("bake")
 curves, names, colours, layers, info = [], [], [], [], ""
 ate_curves, ate_colours, ate_layers, dots, dot_layers = [], [], [], [], []
+points, point_layers = [], []
 if source:
     document = load(str(source).strip())
     if document.get("format") != "loceval.paths.3dm.json" or document["format_version"] != 2:
@@ -116,7 +119,13 @@ if source:
         dots.append(Rhino.Geometry.TextDot(marker["label"], Rhino.Geometry.Point3d(x, y, z)))
         dot_layers.append(marker["layer"])
         rgb = path_colours[marker["path"]] if marker["kind"] == "worst" else [158, 158, 158]
+        rgb = marker.get("color", rgb)
         items.append((dots[-1], marker["label"], marker["layer"], rgb))
+    for point in document.get("points", []):  # control points and measured positions
+        x, y, z = (factor * v for v in point["position"])
+        points.append(Rhino.Geometry.Point(Rhino.Geometry.Point3d(x, y, z)))
+        point_layers.append(point["layer"])
+        items.append((points[-1], point["label"], point["layer"], point["color"]))
     if bake and doc is not None:
         bake_all(doc, items)
     meta = document["metadata"]

@@ -102,10 +102,10 @@ def test_report_and_dxf(evaluation: CheckpointEvaluation, tmp_path: Path) -> Non
     assert len(msp.query('TEXT[layer=="control points"]')) == 12
 
 
-def test_other_cad_formats_are_refused(evaluation: CheckpointEvaluation, tmp_path: Path) -> None:
-    """A glTF of control points is not written: the error names what is."""
-    with pytest.raises(ExportOptionsError, match=r"writes result.json, .*not 'paths.glb'"):
+def test_ifc_is_refused(evaluation: CheckpointEvaluation, tmp_path: Path) -> None:
+    """An IFC of control points is not written: the error names what is."""
+    with pytest.raises(ExportOptionsError, match=r"writes result.json, .*not 'paths.ifc'"):
         write_checkpoint_artifacts(
-            evaluation, tmp_path / "out", ExportOptions(), names=["paths.glb"]
+            evaluation, tmp_path / "out", ExportOptions(), names=["paths.glb", "paths.ifc"]
         )
     assert not (tmp_path / "out").exists()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -207,3 +208,34 @@ def test_surveys_and_visits_are_not_estimates(
         422,
         detail=r"The reference dataset 'visits.csv' is a visits table",
     )
+
+
+@pytest.mark.usefixtures("recording")
+def test_cad_files_and_hops(api: Api, tmp_path: Path) -> None:
+    """The service serves the GLB and 3DM files; Hops returns the error lines of the JSON."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    folder = tmp_path / "in"
+    survey = _upload(api, folder, "survey.csv")["id"]
+    estimate = _upload(api, folder, "est.txt")["id"]
+    body = _body(survey, estimate)
+    body["options"]["formats"] = ["paths.3dm", "paths.3dm.json", "paths.glb"]
+    evaluation = api.evaluate(body).json()
+    assert evaluation["status"] == "succeeded", evaluation["error"]
+    url = f"/api/v1/evaluations/{evaluation['id']}/artifacts"
+    glb = api.client.get(f"{url}/paths.glb", headers=api.headers)
+    assert glb.status_code == 200
+    assert glb.content.startswith(b"glTF")
+    assert api.client.get(f"{url}/paths.3dm", headers=api.headers).content.startswith(b"3D G")
+    document = api.client.get(f"{url}/paths.3dm.json", headers=api.headers).json()
+    values = [
+        {"ParamName": name, "InnerTree": {"{0}": [{"type": "System.String", "data": data}]}}
+        for name, data in (("Evaluation", f'"{evaluation["id"]}"'), ("Trajectory", '""'))
+    ]
+    solve = {"pointer": "hops/paths", "values": values, "warnings": [], "errors": []}
+    response = api.client.post("/hops/paths", json=solve, headers={"RhinoComputeKey": api.key})
+    assert response.status_code == 200, response.text
+    (paths,) = [v["InnerTree"] for v in response.json()["values"] if v["ParamName"] == "Paths"]
+    (items,) = paths.values()
+    assert len(items) == len(document["paths"][0]["curves"]) == 24  # a line per visit
+    curve = rhino3dm.CommonObject.Decode(json.loads(items[0]["data"]))
+    assert curve.PointCount == 2

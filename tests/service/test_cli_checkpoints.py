@@ -345,3 +345,48 @@ def test_a_bag_topic_that_announces_nothing(
     )  # fmt: skip
     assert code == 1
     assert "arrivals at control points are read from std_msgs/String" in err
+
+
+@pytest.mark.usefixtures("recording")
+def test_every_cad_format_with_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--out writes every format; the CAD files agree on the error lines at the site."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    pygltflib = pytest.importorskip("pygltflib")
+    ezdxf = pytest.importorskip("ezdxf")
+    out_dir = tmp_path / "out"
+    code, out, err = _run(
+        capsys, "evaluate", tmp_path / "survey.csv", tmp_path / "est.txt", "--align", "none",
+        "--json", "--out", out_dir, "--units", "m", "--site", "100 200 0 90",
+    )  # fmt: skip
+    assert code == 0, err
+    assert sorted(p.name for p in out_dir.iterdir()) == [
+        "errors.csv", "paths.3dm", "paths.3dm.json", "paths.dxf", "paths.glb", "report.html",
+        "report.pdf", "result.json",
+    ]  # fmt: skip
+    visits = json.loads(out)["estimates"][0]["checkpoints"]["visits"]
+    # the site "100 200 0 90" by hand: a quarter turn about z (east becomes north, north
+    # becomes west), then 100 m east and 200 m north
+    lines = []
+    for v in visits:  # a reference loop, per visit
+        (sx, sy, sz), (mx, my, mz) = v["surveyed"], v["measured"]
+        lines.append([100 - sy, 200 + sx, sz, 100 - my, 200 + mx, mz])
+    expected = np.array(lines)
+    msp = ezdxf.readfile(out_dir / "paths.dxf").modelspace()
+    dxf = np.array([(*e.dxf.start, *e.dxf.end) for e in msp.query('LINE[layer=="est errors"]')])
+    np.testing.assert_allclose(dxf, expected, atol=1e-3)
+    doc = json.loads((out_dir / "paths.3dm.json").read_text())
+    curves = [rhino3dm.CommonObject.Decode(c) for c in doc["paths"][0]["curves"]]
+    ends = [(c.PointAtStart, c.PointAtEnd) for c in curves]
+    got = np.array([[a.X, a.Y, a.Z, b.X, b.Y, b.Z] for a, b in ends])
+    np.testing.assert_allclose(got, expected, atol=1e-3)
+    model = rhino3dm.File3dm.Read(str(out_dir / "paths.3dm"))
+    kinds = [type(o.Geometry).__name__ for o in model.Objects]
+    assert kinds.count("LineCurve") == 135
+    assert kinds.count("Point") == 45 + 135  # the grid, then a measured position per visit
+    glb = pygltflib.GLTF2.load_from_bytes((out_dir / "paths.glb").read_bytes())
+    roots = [glb.nodes[k].name for k in glb.scenes[0].nodes]
+    assert roots == ["control points", "est measured", "est errors"]
+    errors = glb.nodes[glb.scenes[0].nodes[2]]
+    assert [glb.nodes[k].name for k in errors.children] == [
+        f"{v['id']} {v['error_m'] * 1000:.1f} mm" for v in visits
+    ]
