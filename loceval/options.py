@@ -313,8 +313,9 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "building",
         OptionKind.FILE,
         None,
-        "a building model (OBJ, PLY, STL, GLB or IFC) to put in the glTF scene; an IFC's "
-        "map conversion places the paths when no site is given",
+        "a building model (OBJ, PLY, STL, GLB or IFC) to put in the glTF scene and under "
+        "the report's plan views, or a DXF floor plan (plan views only); an IFC's map "
+        "conversion places the paths when no site is given",
         "the building model",
         "building",
         "FILE",
