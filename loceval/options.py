@@ -243,7 +243,8 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "site",
         OptionKind.TEXT,
         None,
-        'evaluation frame -> model frame "tx ty tz yaw_deg" (metres, degrees about Z)',
+        'evaluation frame -> model frame "tx ty tz yaw_deg": metres whatever the units, '
+        "yaw in degrees counter-clockwise about Z from the model's (map's) x axis",
         "the site transform",
         "site",
         '"tx ty tz yaw_deg"',

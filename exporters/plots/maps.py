@@ -32,7 +32,7 @@ from exporters.plots.figure import (
     decimate_uniform,
     estimate_colour,
 )
-from exporters.plots.underlay import draw_floor_plan
+from exporters.plots.underlay import draw_floor_plan, floor_plan_note
 from loceval._typing import FloatArray
 from loceval.evaluation import EstimateResult, EvaluationResult
 
@@ -180,7 +180,8 @@ def plot_overlay_xy(
         caption=(
             f"The ground truth in cyan and the aligned estimates ({names}) seen from "
             "above; the circle marks the start."
-        ),
+        )
+        + floor_plan_note(floor_plan),
     )
 
 
@@ -272,6 +273,7 @@ def plot_ate_path(
             " Numbered circles mark where the worst stretches beyond the tolerance peak "
             "(see the verdict)."
         )
+    caption += floor_plan_note(floor_plan)
     return _plot(
         fig,
         formats,

@@ -18,7 +18,7 @@ from exporters.building import georeferenced_options, read_underlay, section_seg
 from exporters.options import ExportOptions
 from loceval._typing import FloatArray
 
-__all__ = ["FLOOR_PLAN_GID", "draw_floor_plan", "floor_plan_segments"]
+__all__ = ["FLOOR_PLAN_GID", "draw_floor_plan", "floor_plan_note", "floor_plan_segments"]
 
 FLOOR_PLAN_GID: Final = "floor-plan"
 """The SVG group id of the floor plan's lines (one ``<path>`` per segment)."""
@@ -58,3 +58,10 @@ def draw_floor_plan(ax: Axes, segments: FloatArray | None) -> None:
     )
     lines.set_gid(FLOOR_PLAN_GID)
     ax.add_collection(lines, autolim=False)
+
+
+def floor_plan_note(segments: FloatArray | None) -> str:
+    """Return the caption's sentence about the floor plan ("" without one)."""
+    if segments is None or not len(segments):
+        return ""
+    return " Grey lines: the building model cut at the device's median height."

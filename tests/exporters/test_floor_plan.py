@@ -111,3 +111,29 @@ def test_dxf_floor_plan_under_the_overlay(
 def test_no_building_no_floor_plan(two_estimates: EvaluationResult) -> None:
     """Without a building model there is nothing to cut."""
     assert floor_plan_segments(np.array([1.3]), ExportOptions()) is None
+
+
+def test_checkpoint_plan_over_a_floor_plan(rng: np.random.Generator, tmp_path: Path) -> None:
+    """The control-point plan of the checkpoint report is drawn over a DXF floor plan."""
+    from exporters.report.checkpoints import build_checkpoint_view  # noqa: PLC0415
+    from loceval.alignment import AlignMethod  # noqa: PLC0415
+    from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points  # noqa: PLC0415
+    from loceval.evaluation import EvaluationConfig  # noqa: PLC0415
+    from tests.checkpoint_factory import grid_points, stop_and_go  # noqa: PLC0415
+
+    rec = stop_and_go(rng, grid_points(3, 4), passes=1)
+    evaluation = evaluate_control_points(
+        rec.points, [rec.estimate], EvaluationConfig(align=AlignMethod.NONE), CheckpointConfig()
+    )
+    doc = ezdxf.new()
+    doc.header["$INSUNITS"] = 6  # metres
+    doc.modelspace().add_lwpolyline([(-0.1, -0.1), (1.0, -0.1), (1.0, 0.7)])  # two walls
+    plan = tmp_path / "plan.dxf"
+    doc.saveas(plan)
+    view = build_checkpoint_view(evaluation, ExportOptions(building=plan))
+    (section,) = view.estimates
+    svg = base64.b64decode(section.figure[0].split(",", 1)[1])
+    assert len(floor_plan_paths(svg)) == 2
+    assert "Grey lines" in section.figure[2]
+    plain = build_checkpoint_view(evaluation, ExportOptions())
+    assert floor_plan_paths(base64.b64decode(plain.estimates[0].figure[0].split(",", 1)[1])) == []
