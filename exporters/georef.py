@@ -32,7 +32,14 @@ if TYPE_CHECKING:
 
     from exporters.placement import Placement
 
-__all__ = ["UtmZone", "add_geodata", "crs_definition", "set_earth_anchor", "utm_to_lat_lon", "utm_zone"]
+__all__ = [
+    "UtmZone",
+    "add_geodata",
+    "crs_definition",
+    "set_earth_anchor",
+    "utm_to_lat_lon",
+    "utm_zone",
+]
 
 _A_M: Final = 6378137.0
 """Semi-major axis of GRS 80 and WGS 84, metres."""
@@ -98,18 +105,22 @@ def utm_to_lat_lon(
     f = 1.0 / _INV_F[zone.datum]
     n = f / (2.0 - f)
     big_a = _A_M / (1.0 + n) * (1.0 + n**2 / 4.0 + n**4 / 64.0)
-    beta = np.array([  # Karney (2011), eq. 36, to n^4
-        n / 2 - 2 * n**2 / 3 + 37 * n**3 / 96 - n**4 / 360,
-        n**2 / 48 + n**3 / 15 - 437 * n**4 / 1440,
-        17 * n**3 / 480 - 37 * n**4 / 840,
-        4397 * n**4 / 161280,
-    ])
-    delta = np.array([  # conformal latitude -> latitude, to n^4
-        2 * n - 2 * n**2 / 3 - 2 * n**3 + 116 * n**4 / 45,
-        7 * n**2 / 3 - 8 * n**3 / 5 - 227 * n**4 / 45,
-        56 * n**3 / 15 - 136 * n**4 / 35,
-        4279 * n**4 / 630,
-    ])
+    beta = np.array(
+        [  # Karney (2011), eq. 36, to n^4
+            n / 2 - 2 * n**2 / 3 + 37 * n**3 / 96 - n**4 / 360,
+            n**2 / 48 + n**3 / 15 - 437 * n**4 / 1440,
+            17 * n**3 / 480 - 37 * n**4 / 840,
+            4397 * n**4 / 161280,
+        ]
+    )
+    delta = np.array(
+        [  # conformal latitude -> latitude, to n^4
+            2 * n - 2 * n**2 / 3 - 2 * n**3 + 116 * n**4 / 45,
+            7 * n**2 / 3 - 8 * n**3 / 5 - 227 * n**4 / 45,
+            56 * n**3 / 15 - 136 * n**4 / 35,
+            4279 * n**4 / 630,
+        ]
+    )
     false_northing = 0.0 if zone.north else _FALSE_NORTHING_SOUTH_M
     xi = (northing_m - false_northing) / (_K0 * big_a)
     eta = (easting_m - _FALSE_EASTING_M) / (_K0 * big_a)

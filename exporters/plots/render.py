@@ -34,9 +34,7 @@ def render_plots(
         The overlay, one error-coloured path per estimate, ATE and RPE over time, the CDF
         and, for a 3D path, the side views; then, for ranges, the ranging plots.
     """
-    plots = [
-        plot_overlay_xy(result, max_points=max_points, formats=formats, floor_plan=floor_plan)
-    ]
+    plots = [plot_overlay_xy(result, max_points=max_points, formats=formats, floor_plan=floor_plan)]
     plots.extend(
         plot_ate_path(result, k, max_points=max_points, formats=formats, floor_plan=floor_plan)
         for k in range(len(result.estimates))

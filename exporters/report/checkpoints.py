@@ -177,8 +177,7 @@ def build_checkpoint_view(
 
     floor_plan = floor_plan_segments(device_heights_m(evaluation), options)  # once
     sections = tuple(
-        _section(evaluation, k, image_format, floor_plan)
-        for k in range(len(evaluation.estimates))
+        _section(evaluation, k, image_format, floor_plan) for k in range(len(evaluation.estimates))
     )
     scored = "; ".join(
         f"{s.name}: Hilti {s.scores[0][1]}, LaMAria {s.scores[1][1]}" for s in sections

@@ -11,7 +11,10 @@ import numpy as np
 import pytest
 
 from exporters.options import ExportOptions
-from loceval.evaluation import EvaluationResult
+from loceval.alignment import AlignMethod
+from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points
+from loceval.evaluation import EvaluationConfig, EvaluationResult
+from tests.checkpoint_factory import grid_points, stop_and_go
 
 pytest.importorskip("trimesh")
 ezdxf = pytest.importorskip("ezdxf")
@@ -20,6 +23,7 @@ pytest.importorskip("ifcopenshell")
 from exporters.plots import render_plots  # noqa: E402  (after the importorskip of its libraries)
 from exporters.plots.underlay import FLOOR_PLAN_GID, floor_plan_segments  # noqa: E402
 from exporters.report import render_report  # noqa: E402
+from exporters.report.checkpoints import build_checkpoint_view  # noqa: E402
 from tests.exporters.ifcfactory import ROOM_X_M, ROOM_Y_M, WALL_M, write_room  # noqa: E402
 
 CONVERSION = {
@@ -66,7 +70,9 @@ def test_ifc_room_is_the_floor_plan_of_the_paths(
         ends = np.array([[float(v) for v in re.findall(r"-?[\d.]+", d)] for d in drawn])
         assert ends.shape == (len(segments), 4)
         width, height = np.ptp(ends[:, [0, 2]]), np.ptp(ends[:, [1, 3]])
-        assert width / height == pytest.approx((ROOM_X_M + 2 * WALL_M) / (ROOM_Y_M + 2 * WALL_M), rel=0.01)
+        assert width / height == pytest.approx(
+            (ROOM_X_M + 2 * WALL_M) / (ROOM_Y_M + 2 * WALL_M), rel=0.01
+        )
     # the other plots (time series, CDF, side views) are not plans
     assert all(p.svg is not None and not floor_plan_paths(p.svg) for p in plots[3:])
     plain = render_plots(two_estimates, formats=("svg",))
@@ -88,9 +94,7 @@ def test_report_pdf_and_html_carry_the_floor_plan(
     assert len(floor_plan_paths(fig1)) > 0
 
 
-def test_dxf_floor_plan_under_the_overlay(
-    tmp_path: Path, two_estimates: EvaluationResult
-) -> None:
+def test_dxf_floor_plan_under_the_overlay(tmp_path: Path, two_estimates: EvaluationResult) -> None:
     """A DXF floor plan in millimetres is drawn as it is, placed by the inverse site."""
     doc = ezdxf.new()
     doc.header["$INSUNITS"] = 4  # millimetres
@@ -108,18 +112,13 @@ def test_dxf_floor_plan_under_the_overlay(
     assert len(floor_plan_paths(plot.svg)) == 4
 
 
-def test_no_building_no_floor_plan(two_estimates: EvaluationResult) -> None:
+def test_no_building_no_floor_plan() -> None:
     """Without a building model there is nothing to cut."""
     assert floor_plan_segments(np.array([1.3]), ExportOptions()) is None
 
 
 def test_checkpoint_plan_over_a_floor_plan(rng: np.random.Generator, tmp_path: Path) -> None:
     """The control-point plan of the checkpoint report is drawn over a DXF floor plan."""
-    from exporters.report.checkpoints import build_checkpoint_view  # noqa: PLC0415
-    from loceval.alignment import AlignMethod  # noqa: PLC0415
-    from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points  # noqa: PLC0415
-    from loceval.evaluation import EvaluationConfig  # noqa: PLC0415
-    from tests.checkpoint_factory import grid_points, stop_and_go  # noqa: PLC0415
 
     rec = stop_and_go(rng, grid_points(3, 4), passes=1)
     evaluation = evaluate_control_points(

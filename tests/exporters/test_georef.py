@@ -40,7 +40,12 @@ def test_utm_zones() -> None:
     """EPSG codes of UTM zones are recognised, other CRSs are not."""
     zone = utm_zone("EPSG:25832")
     assert zone is not None
-    assert (zone.zone, zone.north, zone.datum, zone.central_meridian_deg) == (32, True, "ETRS89", 9.0)
+    assert (zone.zone, zone.north, zone.datum, zone.central_meridian_deg) == (
+        32,
+        True,
+        "ETRS89",
+        9.0,
+    )
     south = utm_zone("epsg:32733")
     assert south is not None
     assert (south.zone, south.north, south.central_meridian_deg) == (33, False, 15.0)
@@ -69,9 +74,13 @@ def test_inverse_is_symmetric_and_converges() -> None:
     assert east[0] == pytest.approx(west[0], abs=1e-12)
     assert east[1] - 9.0 == pytest.approx(9.0 - west[1], abs=1e-12)
     # 12.34 km east at 48.8°: about 0.1666° of longitude (12340 m / (cos 48.8° * 111.2 km))
-    assert east[1] - 9.0 == pytest.approx(12340.0 / (math.cos(math.radians(48.8)) * 111_200.0), rel=0.01)
+    assert east[1] - 9.0 == pytest.approx(
+        12340.0 / (math.cos(math.radians(48.8)) * 111_200.0), rel=0.01
+    )
     assert east[0] == pytest.approx(48.78, abs=0.01)
-    assert 0.0 < east[2] == pytest.approx((east[1] - 9.0) * math.sin(math.radians(east[0])), rel=1e-3)
+    assert (
+        0.0 < east[2] == pytest.approx((east[1] - 9.0) * math.sin(math.radians(east[0])), rel=1e-3)
+    )
     southern = utm_zone("EPSG:32733")
     assert southern is not None
     assert utm_to_lat_lon(500000.0, 10000000.0, southern)[:2] == pytest.approx((0.0, 15.0))
@@ -103,7 +112,7 @@ def test_crs_definition_of_another_crs() -> None:
     assert "Transverse Mercator" not in text
 
 
-def test_3dm_earth_anchor(two_estimates: EvaluationResult, tmp_path: object) -> None:
+def test_3dm_earth_anchor(two_estimates: EvaluationResult) -> None:
     """With a UTM CRS the .3dm EarthAnchorPoint holds the base point's latitude/longitude."""
     options = ExportOptions(site=parse_site(SITE), crs="EPSG:25832")
     placement = place_evaluation(two_estimates, options)
