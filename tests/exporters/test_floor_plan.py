@@ -20,6 +20,7 @@ pytest.importorskip("trimesh")
 ezdxf = pytest.importorskip("ezdxf")
 pytest.importorskip("ifcopenshell")
 
+from exporters import gltf  # noqa: E402
 from exporters.plots import render_plots  # noqa: E402  (after the importorskip of its libraries)
 from exporters.plots.underlay import FLOOR_PLAN_GID, floor_plan_segments  # noqa: E402
 from exporters.report import render_report  # noqa: E402
@@ -136,3 +137,14 @@ def test_checkpoint_plan_over_a_floor_plan(rng: np.random.Generator, tmp_path: P
     assert "Grey lines" in section.figure[2]
     plain = build_checkpoint_view(evaluation, ExportOptions())
     assert floor_plan_paths(base64.b64decode(plain.estimates[0].figure[0].split(",", 1)[1])) == []
+
+
+def test_glb_skips_a_dxf_floor_plan(tmp_path: Path, two_estimates: EvaluationResult) -> None:
+    """A DXF plan is no mesh: the GLB has no building node and says why in its extras."""
+    doc = ezdxf.new()
+    doc.modelspace().add_line((0, 0), (1, 0))
+    plan = tmp_path / "plan.dxf"
+    doc.saveas(plan)
+    glb = gltf.export_glb(two_estimates, ExportOptions(building=plan))
+    assert b'"building"' not in glb
+    assert b"plan.dxf is a 2D floor plan, not in the scene" in glb
