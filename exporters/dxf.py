@@ -36,6 +36,7 @@ from ezdxf.lldxf.const import DXFError
 
 from exporters._dxf_bulk import BulkPolylines
 from exporters.errors import ExportError
+from exporters.georef import add_geodata
 from exporters.options import ExportOptions, Units
 from exporters.placement import RGB, Marker, PlacedPath, Placement, place_evaluation
 from loceval._typing import FloatArray
@@ -71,6 +72,7 @@ def export_dxf(
     placement = placement or place_evaluation(result, options)
     try:
         doc, bulk = _drawing(placement)
+        add_geodata(doc, placement)  # where a CRS is known
         stream = io.StringIO()
         doc.write(stream)
     except DXFError as err:

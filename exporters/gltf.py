@@ -118,7 +118,8 @@ def export_glb(
         scene.add_markers(f"{path.name} markers", worst, placement.base_point, per_metre)
     losses = [m for m in markers if m.kind == "gap"]
     scene.add_markers("tracking loss", losses, placement.base_point, per_metre)
-    if options.building is not None:
+    plan_only = options.building is not None and options.building.suffix.lower() == ".dxf"
+    if options.building is not None and not plan_only:
         building = read_building(options.building, units=placement.units, up=options.building_up)
         local_m = (building.vertices_m - placement.base_point_m).astype(np.float32)
         scene.add_building(options.building, local_m, building.faces.astype(np.uint32))
@@ -129,6 +130,8 @@ def export_glb(
         base_point=placement.base_point_m.tolist(),
         gltf_convention="metres, Y up; node matrix = base point ∘ (Z-up -> Y-up)",
     )
+    if plan_only and options.building is not None:  # a 2D drawing has no mesh for the scene
+        meta["building_note"] = f"{options.building.name} is a 2D floor plan, not in the scene"
     try:
         return b"".join(scene.build(meta).save_to_bytes())
     except (ValueError, TypeError) as err:

@@ -211,6 +211,7 @@ class Placement:
         evaluation_id: the evaluation's id.
         title: a human title.
         paths: the reference first, then the estimates in evaluation order.
+        crs: the projected CRS the site places the paths in (``"EPSG:25832"``), if known.
     """
 
     result: EvaluationResult
@@ -221,6 +222,7 @@ class Placement:
     evaluation_id: str
     title: str
     paths: tuple[PlacedPath, ...]
+    crs: str | None = None
 
     @property
     def base_point(self) -> FloatArray:
@@ -490,6 +492,7 @@ def place_evaluation(result: EvaluationResult, options: ExportOptions) -> Placem
         evaluation_id=options.evaluation_id,
         title=options.title,
         paths=tuple(paths),
+        crs=options.crs,
     )
 
 

@@ -30,6 +30,7 @@ from typing import Any, Final
 import rhino3dm as _rhino3dm
 
 from exporters.errors import ExportError
+from exporters.georef import set_earth_anchor
 from exporters.options import ExportOptions, Units
 from exporters.placement import Marker, PlacedPath, Placement, layer_name, place_evaluation
 from loceval._typing import FloatArray
@@ -182,12 +183,12 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
     settings = model.Settings
     settings.ModelUnitSystem = _UNIT_SYSTEMS[placement.units]
     anchor = settings.EarthAnchorPoint
-    anchor.ModelBasePoint = rhino3dm.Point3d(*placement.base_point.tolist())
+    earth = set_earth_anchor(anchor, placement, rhino3dm)
     anchor.Name = "loceval base point"
     anchor.Description = (
         "Centre of the reference path, rounded to whole metres, in model units; the "
         f"evaluation frame {placement.frame!r} maps to model coordinates by "
-        "loceval.site_matrix_m."
+        f"loceval.site_matrix_m. {earth}"
     )
     settings.EarthAnchorPoint = anchor
     for key, value in placement.metadata().items():

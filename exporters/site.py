@@ -21,8 +21,8 @@ from loceval.errors import InputError
 from loceval.geometry import SimilarityTransform
 
 SITE_FORMAT: Final = '"tx ty tz yaw_deg"'
-BUILDING_SUFFIXES: Final = (".obj", ".ply", ".stl", ".glb", ".ifc")
-"""Building model formats accepted (read by :mod:`exporters.building`)."""
+BUILDING_SUFFIXES: Final = (".obj", ".ply", ".stl", ".glb", ".ifc", ".dxf")
+"""Building model formats accepted (read by :mod:`exporters.building`; a DXF is a floor plan)."""
 
 # --- options -------------------------------------------------------------------------------
 

@@ -243,7 +243,8 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "site",
         OptionKind.TEXT,
         None,
-        'evaluation frame -> model frame "tx ty tz yaw_deg" (metres, degrees about Z)',
+        'evaluation frame -> model frame "tx ty tz yaw_deg": metres whatever the units, '
+        "yaw in degrees counter-clockwise about Z from the model's (map's) x axis",
         "the site transform",
         "site",
         '"tx ty tz yaw_deg"',
@@ -313,8 +314,9 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "building",
         OptionKind.FILE,
         None,
-        "a building model (OBJ, PLY, STL, GLB or IFC) to put in the glTF scene; an IFC's "
-        "map conversion places the paths when no site is given",
+        "a building model (OBJ, PLY, STL, GLB or IFC) to put in the glTF scene and under "
+        "the report's plan views, or a DXF floor plan (plan views only); an IFC's map "
+        "conversion places the paths when no site is given",
         "the building model",
         "building",
         "FILE",

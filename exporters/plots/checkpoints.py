@@ -15,10 +15,11 @@ import numpy as np
 from matplotlib.axes import Axes
 
 from exporters.plots.figure import ImageFormat, Plot, _new_figure, _plot, _style, estimate_colour
+from exporters.plots.underlay import draw_floor_plan, floor_plan_note
 from loceval._typing import FloatArray
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 
-__all__ = ["error_vector_scale", "plot_checkpoint_plan"]
+__all__ = ["device_heights_m", "error_vector_scale", "plot_checkpoint_plan"]
 
 _ARROW_SHARE = 1.0 / 3.0
 """The largest error's arrow spans this share of the smallest point spacing."""
@@ -38,8 +39,21 @@ def error_vector_scale(evaluation: CheckpointEvaluation) -> float:
     return step * power
 
 
+def device_heights_m(evaluation: CheckpointEvaluation) -> FloatArray:
+    """Return the device's heights at the visits (measured), else the control points'."""
+    visits = [v for e in evaluation.estimates for v in e.result.visits]
+    if not visits:
+        heights: FloatArray = evaluation.points.positions_xyz[:, 2]
+        return heights
+    return np.array([v.measured_xyz[2] for v in visits])
+
+
 def plot_checkpoint_plan(
-    evaluation: CheckpointEvaluation, index: int, *, formats: Sequence[ImageFormat] = ("svg",)
+    evaluation: CheckpointEvaluation,
+    index: int,
+    *,
+    formats: Sequence[ImageFormat] = ("svg",),
+    floor_plan: FloatArray | None = None,
 ) -> Plot:
     """Draw the plan (x-y) of the control points with one estimate's error arrows.
 
@@ -47,6 +61,8 @@ def plot_checkpoint_plan(
         evaluation: the evaluation.
         index: which estimate.
         formats: the encodings to produce.
+        floor_plan: the building's floor plan drawn under the points, (K, 2, 2) metres
+            (see :func:`exporters.plots.underlay.floor_plan_segments`).
 
     Returns:
         The plot (key ``checkpoints-<index>``).
@@ -57,6 +73,7 @@ def plot_checkpoint_plan(
     fig = _new_figure(5.0)
     ax = fig.add_subplot()
     _style(ax)
+    draw_floor_plan(ax, floor_plan)
     xy = points.positions_xyz[:, :2]
     ax.scatter(xy[:, 0], xy[:, 1], s=14, marker="+", color="#212121", label="control point")
     visited = {v.point_id for v in entry.result.visits}
@@ -94,7 +111,8 @@ def plot_checkpoint_plan(
             f"Crosses: the surveyed points (red labels: never visited). Arrows: from the "
             f"surveyed point along the horizontal error of each visit, drawn {scale:g} times "
             "longer than the error; the bar shows the plan length of the error it names."
-        ),
+        )
+        + floor_plan_note(floor_plan),
     )
 
 

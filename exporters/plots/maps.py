@@ -32,6 +32,8 @@ from exporters.plots.figure import (
     decimate_uniform,
     estimate_colour,
 )
+from exporters.plots.underlay import draw_floor_plan, floor_plan_note
+from loceval._typing import FloatArray
 from loceval.evaluation import EstimateResult, EvaluationResult
 
 __all__ = [
@@ -150,10 +152,16 @@ def plot_overlay_xy(
     *,
     max_points: int = DEFAULT_MAX_POINTS,
     formats: Sequence[ImageFormat] = ("svg",),
+    floor_plan: FloatArray | None = None,
 ) -> Plot:
-    """Top-down (x-y) overlay of the reference and every aligned estimate."""
+    """Top-down (x-y) overlay of the reference and every aligned estimate.
+
+    ``floor_plan`` (see :func:`exporters.plots.underlay.floor_plan_segments`) is drawn
+    under the paths in light grey.
+    """
     fig = _new_figure(_xy_figure_height(result, plot_width_in=_WIDTH_IN - 0.8))
     ax = fig.add_subplot()
+    draw_floor_plan(ax, floor_plan)
     _draw_reference_xy(ax, result, max_points, on_top=True)
     for k in range(len(result.estimates)):
         _draw_estimate(ax, result, k, max_points)
@@ -172,7 +180,8 @@ def plot_overlay_xy(
         caption=(
             f"The ground truth in cyan and the aligned estimates ({names}) seen from "
             "above; the circle marks the start."
-        ),
+        )
+        + floor_plan_note(floor_plan),
     )
 
 
@@ -182,8 +191,12 @@ def plot_ate_path(
     *,
     max_points: int = DEFAULT_MAX_POINTS,
     formats: Sequence[ImageFormat] = ("svg",),
+    floor_plan: FloatArray | None = None,
 ) -> Plot:
-    """Top-down path of one estimate coloured by its ATE, with failing stretches numbered."""
+    """Top-down path of one estimate coloured by its ATE, with failing stretches numbered.
+
+    ``floor_plan`` is drawn under the path in light grey, as in :func:`plot_overlay_xy`.
+    """
     e = result.estimates[index]
     name = e.name or f"estimate {index + 1}"
     ate = e.ate_translation.values
@@ -204,6 +217,7 @@ def plot_ate_path(
     tolerance = e.verdict.tolerance.distance_m if e.verdict is not None else None
     fig = _new_figure(_xy_figure_height(result, plot_width_in=_WIDTH_IN - 1.8))
     ax = fig.add_subplot()
+    draw_floor_plan(ax, floor_plan)
     _draw_reference_xy(ax, result, max_points)
     collection = LineCollection(
         list(segments[keep_segment]),
@@ -259,6 +273,7 @@ def plot_ate_path(
             " Numbered circles mark where the worst stretches beyond the tolerance peak "
             "(see the verdict)."
         )
+    caption += floor_plan_note(floor_plan)
     return _plot(
         fig,
         formats,

@@ -8,6 +8,7 @@ from exporters.plots.figure import DEFAULT_MAX_POINTS, ImageFormat, Plot
 from exporters.plots.maps import is_3d, plot_ate_path, plot_overlay_xy, plot_side_views
 from exporters.plots.ranging import plot_ranging
 from exporters.plots.series import plot_ate_over_time, plot_error_cdf, plot_rpe_over_time
+from loceval._typing import FloatArray
 from loceval.evaluation import EvaluationResult
 
 __all__ = ["render_plots"]
@@ -18,6 +19,7 @@ def render_plots(
     *,
     max_points: int = DEFAULT_MAX_POINTS,
     formats: Sequence[ImageFormat] = ("svg",),
+    floor_plan: FloatArray | None = None,
 ) -> tuple[Plot, ...]:
     """Render every plot of the report, in report order.
 
@@ -25,14 +27,16 @@ def render_plots(
         result: the evaluation.
         max_points: most vertices drawn per line (drawing only; statistics use all poses).
         formats: the encodings to produce from each figure (SVG for HTML, PNG for PDF).
+        floor_plan: the building's floor plan drawn under the plan views, (K, 2, 2)
+            evaluation-frame metres (see :func:`exporters.plots.underlay.floor_plan_segments`).
 
     Returns:
         The overlay, one error-coloured path per estimate, ATE and RPE over time, the CDF
         and, for a 3D path, the side views; then, for ranges, the ranging plots.
     """
-    plots = [plot_overlay_xy(result, max_points=max_points, formats=formats)]
+    plots = [plot_overlay_xy(result, max_points=max_points, formats=formats, floor_plan=floor_plan)]
     plots.extend(
-        plot_ate_path(result, k, max_points=max_points, formats=formats)
+        plot_ate_path(result, k, max_points=max_points, formats=formats, floor_plan=floor_plan)
         for k in range(len(result.estimates))
     )
     plots.append(plot_ate_over_time(result, max_points=max_points, formats=formats))

@@ -25,6 +25,7 @@ from loceval.checkpoint_evaluation import CheckpointEstimate, CheckpointEvaluati
 
 if TYPE_CHECKING:
     from exporters.plots.figure import ImageFormat
+    from loceval._typing import FloatArray
 
 __all__ = [
     "CHECKPOINT_TEMPLATE",
@@ -120,14 +121,19 @@ def _point_rows(entry: CheckpointEstimate, ids: Sequence[str]) -> tuple[tuple[st
     return tuple(rows)
 
 
-def _section(evaluation: CheckpointEvaluation, index: int, image_format: str) -> EstimateSection:
+def _section(
+    evaluation: CheckpointEvaluation,
+    index: int,
+    image_format: str,
+    floor_plan: FloatArray | None = None,
+) -> EstimateSection:
     from exporters.plots.checkpoints import plot_checkpoint_plan  # noqa: PLC0415
 
     entry = evaluation.estimates[index]
     result = entry.result
     doc = cast("dict[str, Any]", result.to_dict()["checkpoints"])
     fmt: ImageFormat = "png" if image_format == "png" else "svg"
-    plot = plot_checkpoint_plan(evaluation, index, formats=(fmt,))
+    plot = plot_checkpoint_plan(evaluation, index, formats=(fmt,), floor_plan=floor_plan)
     stats = result.stats
     scores = [("Hilti 2023 score", f"{doc['score']['hilti']:.1f} %"),
               ("LaMAria score", f"{doc['score']['lamaria']:.1f} %")]  # fmt: skip
@@ -166,8 +172,12 @@ def build_checkpoint_view(
     """Return the report's variables (the plan views encoded as ``image_format``)."""
     points = evaluation.points
     extent = points.positions_xyz.max(axis=0) - points.positions_xyz.min(axis=0)
+    from exporters.plots.checkpoints import device_heights_m  # noqa: PLC0415
+    from exporters.plots.underlay import floor_plan_segments  # noqa: PLC0415
+
+    floor_plan = floor_plan_segments(device_heights_m(evaluation), options)  # once
     sections = tuple(
-        _section(evaluation, k, image_format) for k in range(len(evaluation.estimates))
+        _section(evaluation, k, image_format, floor_plan) for k in range(len(evaluation.estimates))
     )
     scored = "; ".join(
         f"{s.name}: Hilti {s.scores[0][1]}, LaMAria {s.scores[1][1]}" for s in sections

@@ -12,6 +12,7 @@ from typing import Final
 from exporters.errors import ExportError, ExportUnavailableError
 from exporters.options import ExportOptions
 from exporters.plots import DEFAULT_MAX_POINTS, render_plots
+from exporters.plots.underlay import floor_plan_segments
 from exporters.report.view import ReportView, build_report_view
 from loceval.evaluation import EvaluationResult
 
@@ -159,7 +160,12 @@ def render_report(
     """
     options = options or ExportOptions()
     folder = _templates_dir(options, templates_dir)
-    plots = render_plots(result, max_points=max_points, formats=("svg", "png"))
+    plots = render_plots(
+        result,
+        max_points=max_points,
+        formats=("svg", "png"),
+        floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
+    )
     html = render_view_html(
         build_report_view(result, options, plots=plots, image_format="svg"), templates_dir=folder
     )

@@ -23,6 +23,7 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
+from exporters.plots.underlay import floor_plan_segments
 from exporters.report.clocks import ClockSection, build_clock_section
 from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
 from exporters.report.provenance import (
@@ -446,7 +447,12 @@ def build_report_view(
     rendered = (
         tuple(plots)
         if plots is not None
-        else render_plots(result, max_points=max_points, formats=(image_format,))
+        else render_plots(
+            result,
+            max_points=max_points,
+            formats=(image_format,),
+            floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
+        )
     )
     figures = tuple(
         FigureView(
