@@ -132,7 +132,8 @@ def _sorted_unique(
             quat_xyzw = None if quat_xyzw is None else quat_xyzw[keep]
             cov6 = None if cov6 is None else cov6[keep]
             notes.append(
-                f"{where}: {dropped} poses with a duplicate stamp dropped (first one kept)."
+                f"{where}: {dropped} {'pose' if dropped == 1 else 'poses'} with a duplicate "
+                "stamp dropped (first one kept)."
             )
     return stamps_ns, positions_xyz, quat_xyzw, cov6
 

@@ -86,7 +86,7 @@ class TestTum:
         read = read_tum(path)
         assert len(read) == 3
         np.testing.assert_array_equal(read.positions_xyz[:, 0], [0.0, 1.0, 2.0])
-        assert any("1 poses with a duplicate stamp" in w for w in read.warnings)
+        assert any("1 pose with a duplicate stamp" in w for w in read.warnings)
 
     def test_slightly_off_quaternions_are_normalized(self, tmp_path):
         """Quaternions within 1e-3 of unit norm are normalized."""
@@ -404,7 +404,7 @@ class TestPublicData:
         """fr2_desk ground truth repeats one stamp and V102.txt four; both are reported."""
         fr2 = read_tum(public_data / "fr2_desk_groundtruth.txt")
         v102 = read_tum(public_data / "V102.txt")
-        assert any("1 poses with a duplicate stamp" in w for w in fr2.warnings)
+        assert any("1 pose with a duplicate stamp" in w for w in fr2.warnings)
         assert any("4 poses with a duplicate stamp" in w for w in v102.warnings)
 
     def test_euroc_ground_truth(self, public_data: Path):
