@@ -316,12 +316,12 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         None,
         "a building model (OBJ, PLY, STL, GLB or IFC) to put in the glTF scene and under "
         "the report's plan views, or a DXF floor plan (plan views only); an IFC's map "
-        "conversion places the paths when no site is given",
+        "conversion places the paths when no site is given (the API: the model's dataset id)",
         "the building model",
         "building",
         "FILE",
+        max_length=64,
         group="export",
-        api=False,
     ),
     OptionSpec(
         "no_ci",

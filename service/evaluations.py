@@ -84,6 +84,8 @@ def create_evaluation(
             wanted.add(options.device.dataset_id)
         if visits_dataset_id(options.visits) is not None:
             wanted.add(options.visits.strip())
+        if options.building is not None:
+            wanted.add(options.building)
         datasets = {
             d.id: d
             for d in session.scalars(
@@ -98,6 +100,8 @@ def create_evaluation(
         ]:
             _check_selector(datasets[ref.dataset_id], ref, role)
         _check_visits(datasets, body)
+        if options.building is not None:
+            _check_building(datasets[options.building])
         check_options(options)
         evaluation = Evaluation(
             project_id=project_id,
@@ -228,6 +232,16 @@ def _queued(
                 session.commit()
         raise
     return get_owned(runtime.sessions, Evaluation, evaluation.id, project_id)
+
+
+def _check_building(dataset: Dataset) -> None:
+    """Fail now when the building option names a dataset that is not a building model."""
+    if dataset.inspection.get("kind") != "building":
+        msg = (
+            f"The dataset {dataset.name!r} is not a building model; upload an IFC, OBJ, PLY, "
+            "STL or GLB model, or a DXF floor plan, and give its id."
+        )
+        raise InputError(msg, option="building")
 
 
 def check_options(options: EvaluationOptions) -> None:

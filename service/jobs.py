@@ -140,6 +140,9 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
         provenance = file_provenance("visits", spec, sha256=table.sha256)
         provenance.update(path=table.filename, dataset_id=table.id)
         visits = JobSource(spec, Path(table.filename).stem, provenance, table.filename)
+    building = None
+    if options.building is not None:
+        building = runtime.store.path(_dataset(session, project_id, options.building).storage_path)
     return Job(
         reference=reference,
         estimates=estimates,
@@ -149,7 +152,7 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
             reference_offset_source="urdf" if isinstance(options.device, DeviceOffset) else "given",
         ),
         stamp=options.stamp,
-        export=export_from_options(options, evaluation_id=evaluation.id),
+        export=export_from_options(options, evaluation_id=evaluation.id, building=building),
         formats=options.formats,
         visits=visits,
         checkpoints=checkpoints_from_options(options),

@@ -11,7 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from loceval.errors import ReaderError
+from exporters.site import BUILDING_SUFFIXES
+from loceval.errors import LocevalError, ReaderError
 from loceval.inspection import URDF_SUFFIXES, inspect
 
 __all__ = ["inspect_upload"]
@@ -37,6 +38,8 @@ def inspect_upload(path: Path, filename: str) -> dict[str, Any]:
     if path.stat().st_size == 0:
         msg = f"{filename!r} is empty; upload the recording itself."
         raise ReaderError(msg)
+    if Path(filename).suffix.lower() in BUILDING_SUFFIXES:
+        return _inspect_building(path, filename)
     kind = "urdf" if Path(filename).suffix.lower() in URDF_SUFFIXES else None
     inspection = inspect(path, kind=kind).to_dict()
     inspection.pop("path", None)
@@ -47,3 +50,31 @@ def inspect_upload(path: Path, filename: str) -> dict[str, Any]:
     if isinstance(warnings, list):
         inspection["warnings"] = [str(w).replace(server_path, filename) for w in warnings]
     return inspection
+
+
+def _inspect_building(path: Path, filename: str) -> dict[str, Any]:
+    """Read a building model or DXF floor plan once, so a broken one is refused at upload.
+
+    Mesh units are not stored in OBJ, PLY or STL files: they are read as metres here; the
+    evaluation reads the model again in its own units and up axis.
+    """
+    from exporters.building import BuildingModel, read_underlay  # noqa: PLC0415  (CAD libraries)
+    from exporters.options import Units, UpAxis  # noqa: PLC0415
+
+    try:
+        model = read_underlay(path, units=Units.M, up=UpAxis.Z)
+    except LocevalError as err:
+        msg = str(err).replace(str(path), filename)
+        raise ReaderError(msg) from err
+    suffix = Path(filename).suffix.lower().lstrip(".")
+    out: dict[str, Any] = {"kind": "building", "format": suffix, "sources": [], "warnings": []}
+    if isinstance(model, BuildingModel):
+        out |= {
+            "vertices": len(model.vertices_m),
+            "faces": len(model.faces),
+            "crs": model.crs,
+            "georeferenced": model.site is not None,
+        }
+    else:
+        out |= {"segments": len(model.segments_m), "crs": None, "georeferenced": False}
+    return out

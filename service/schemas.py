@@ -217,6 +217,7 @@ class EvaluationOptions(_Strict):
     crs: str | None = _field("crs")
     building_up: Annotated[str, _Choices("building_up")] = _field("building_up")
     formats: list[_Artifact] | None = _field("formats")
+    building: str | None = _field("building")
     no_ci: bool = _field("no_ci")
     reference_sigma_m: float | None = _field("reference_sigma_m")
     planar: bool = _field("planar")
