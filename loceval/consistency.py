@@ -30,11 +30,10 @@ from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
-from scipy.spatial.transform import Rotation
-from scipy.stats import chi2
 
 from loceval._typing import BoolArray, FloatArray
 from loceval.errors import InputError, MetricError
+from loceval.rotation import Rotation
 from loceval.uncertainty import n_effective
 
 __all__ = [
@@ -197,6 +196,8 @@ class NEESResult:
 
 def _chi2_band(dof: float) -> FloatArray:
     """Return the (2,) 2.5 % and 97.5 % quantiles of a chi-square with ``dof`` degrees."""
+    from scipy.stats import chi2  # noqa: PLC0415  (scipy.stats costs 0.7 s to import)
+
     out: FloatArray = np.asarray(chi2.ppf([0.025, 0.975], dof), dtype=np.float64)
     return out
 
