@@ -140,6 +140,15 @@ class Comparison:
         }
 
 
+def _verdict(lo: float, hi: float) -> ComparisonVerdict:
+    """Return A better, B better or within the noise from the 95 % interval of A - B."""
+    if hi < 0.0:
+        return ComparisonVerdict.A_BETTER
+    if lo > 0.0:
+        return ComparisonVerdict.B_BETTER
+    return ComparisonVerdict.WITHIN_NOISE
+
+
 def compare_errors(
     stamps_a_ns: StampsNs,
     errors_a: FloatArray,
@@ -212,12 +221,7 @@ def compare_errors(
     diffs = np.sqrt(means[0]) - np.sqrt(means[1])
     rmse_a, rmse_b = math.sqrt(float(sq_a.mean())), math.sqrt(float(sq_b.mean()))
     lo, hi = percentile_interval(diffs)
-    if hi < 0.0:
-        verdict = ComparisonVerdict.A_BETTER
-    elif lo > 0.0:
-        verdict = ComparisonVerdict.B_BETTER
-    else:
-        verdict = ComparisonVerdict.WITHIN_NOISE
+    verdict = _verdict(lo, hi)
     return Comparison(
         a=a,
         b=b,
@@ -332,12 +336,7 @@ def compare_runs(
     diffs = boots[0].means(arrays[0]) - boots[1].means(arrays[1])
     mean_a, mean_b = float(arrays[0].mean()), float(arrays[1].mean())
     lo, hi = percentile_interval(diffs)
-    if hi < 0.0:
-        verdict = ComparisonVerdict.A_BETTER
-    elif lo > 0.0:
-        verdict = ComparisonVerdict.B_BETTER
-    else:
-        verdict = ComparisonVerdict.WITHIN_NOISE
+    verdict = _verdict(lo, hi)
     return Comparison(
         a=a,
         b=b,
