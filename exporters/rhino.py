@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Final
 
@@ -48,6 +49,7 @@ __all__ = [
     "export_3dm",
     "export_3dm_json",
     "layer_path",
+    "write_3dm",
 ]
 
 RHINO_VERSION: Final = 7
@@ -95,8 +97,17 @@ def export_3dm(
         ExportError: rhino3dm could not build or write the model.
     """
     placement = placement or place_evaluation(result, options)
+    return write_3dm(lambda: _model(placement))
+
+
+def write_3dm(build: Callable[[], Any]) -> bytes:
+    """Build a rhino3dm ``File3dm`` with ``build`` and return it written as a Rhino 7 file.
+
+    Raises:
+        ExportError: rhino3dm could not build or write the model.
+    """
     try:
-        model = _model(placement)
+        model = build()
         with tempfile.TemporaryDirectory(prefix="loceval-3dm-") as tmp:
             target = Path(tmp) / "paths.3dm"
             if not model.Write(str(target), RHINO_VERSION):

@@ -24,8 +24,6 @@ list ``points`` (``{"kind", "label", "layer", "color", "position"}``), which
 from __future__ import annotations
 
 import json
-import tempfile
-from pathlib import Path
 from typing import Any
 
 import rhino3dm as _rhino3dm
@@ -39,7 +37,7 @@ from exporters.points_placement import (
     PlacedControlPoints,
     place_control_points,
 )
-from exporters.rhino import FORMAT, FORMAT_VERSION, RHINO_VERSION, ROOT_LAYER
+from exporters.rhino import FORMAT, FORMAT_VERSION, ROOT_LAYER, write_3dm
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 
 rhino3dm: Any = _rhino3dm  # untyped, as in exporters.rhino
@@ -86,17 +84,7 @@ def export_points_3dm(evaluation: CheckpointEvaluation, options: ExportOptions) 
         ExportError: rhino3dm could not build or write the model.
     """
     placed = place_control_points(evaluation, options)
-    try:
-        model = _model(placed)
-        with tempfile.TemporaryDirectory(prefix="loceval-3dm-") as tmp:
-            target = Path(tmp) / "paths.3dm"
-            if not model.Write(str(target), RHINO_VERSION):
-                msg = "rhino3dm could not write the .3dm model; please report this."
-                raise ExportError(msg)
-            return target.read_bytes()
-    except (RuntimeError, OSError) as err:
-        msg = f"rhino3dm could not build the .3dm model ({err}); please report this."
-        raise ExportError(msg) from err
+    return write_3dm(lambda: _model(placed))
 
 
 def export_points_3dm_json(evaluation: CheckpointEvaluation, options: ExportOptions) -> bytes:
