@@ -19,6 +19,8 @@ from service.api.middleware import ApiKeyMiddleware
 from service.errors import install_error_handlers
 from service.jobs import create_runtime
 from service.logs import RequestLogMiddleware, configure_logging
+from service.metrics import MetricsMiddleware, create_metrics
+from service.metrics import router as metrics_router
 from service.runtime import Runtime
 from service.schedules import tick
 from service.settings import Settings, get_settings
@@ -87,8 +89,10 @@ def create_app(
     )
     app.state.runtime = runtime
     app.state.settings = settings
+    app.state.metrics = create_metrics(runtime)
     install_error_handlers(app)
     app.add_middleware(ApiKeyMiddleware)
+    app.add_middleware(MetricsMiddleware, metrics=app.state.metrics)  # 401s counted too
     app.add_middleware(RequestLogMiddleware)  # added last: the outermost, it sees every request
     api = APIRouter(prefix="/api/v1")
     api.include_router(datasets.router)
@@ -96,6 +100,7 @@ def create_app(
     api.include_router(schedules.router)
     app.include_router(api)
     app.include_router(health.router)
+    app.include_router(metrics_router)  # GET /metrics: Prometheus, no key, no names or ids
     app.include_router(hops.router)  # Grasshopper Hops: /hops/ and POST /solve at the root
     app.include_router(docs.router)
     app.include_router(web.router)

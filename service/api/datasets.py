@@ -11,6 +11,7 @@ from service import datasets
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Dataset, get_owned
+from service.metrics import count_upload
 from service.schemas import DatasetPublic, DatasetsPublic
 from service.uploads import receive_multipart
 
@@ -70,6 +71,7 @@ async def create_dataset(
         )
     finally:
         form.discard()
+    count_upload(request, form)
     if not created:
         response.status_code = status.HTTP_200_OK
     response.headers["Location"] = f"{request.base_url}api/v1/datasets/{dataset.id}"

@@ -13,6 +13,7 @@ from service import evaluations
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Evaluation, get_owned
+from service.metrics import count_upload
 from service.schemas import EvaluationCreate, EvaluationPublic, EvaluationsPublic, RangingCreate
 from service.uploads import receive_multipart
 
@@ -182,6 +183,7 @@ async def evaluate_upload(
         )
     finally:
         form.discard()
+    count_upload(request, form)
     response.headers["Location"] = f"{request.base_url}api/v1/evaluations/{evaluation.id}"
     return evaluations.evaluation_public(
         evaluation, base_url=str(request.base_url), with_result=False
