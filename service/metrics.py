@@ -19,8 +19,10 @@ Where each figure comes from:
   runs the jobs would be invisible (or split) in the second case and lost on every restart.
   The job rows hold each job's state and its last attempt's ``started_at`` and
   ``finished_at``, so the figures are the same whichever process ran the job. Every replica
-  reports the same totals: take ``max``, not ``sum``, across replicas. Deleting a schedule
-  deletes its runs, which Prometheus sees as a counter reset.
+  reports the same totals: take ``max``, not ``sum``, across replicas. The histogram holds
+  every finished job in the tables (``increase()`` over a window gives the recent ones); a
+  scrape scans the job rows once, cheap at the thousands of jobs a site makes. Deleting a
+  schedule deletes its runs, which Prometheus sees as a counter reset.
 * ``loceval_queue_depth`` is the queue's pending count (``huey.pending_count()``; always 0
   with the ``immediate`` queue), also read at scrape time.
 * ``loceval_backend_up{backend}`` is 0 when the database or the queue could not be read for
