@@ -379,10 +379,10 @@ class _PinnedHTTPConnection(http.client.HTTPConnection):
 class _PinnedHTTPSConnection(http.client.HTTPSConnection):
     """HTTPS to the checked addresses only; SNI and the certificate check use the name."""
 
-    def __init__(self, target: WebhookTarget, timeout: float) -> None:
+    def __init__(self, target: WebhookTarget, timeout: float, tls: ssl.SSLContext) -> None:
         super().__init__(target.host, target.port, timeout=timeout)
         self._addresses = target.addresses
-        self._tls = ssl.create_default_context()
+        self._tls = tls
 
     def connect(self) -> None:
         """Connect to a checked address, then speak TLS to it as the URL's host."""
@@ -391,18 +391,31 @@ class _PinnedHTTPSConnection(http.client.HTTPSConnection):
 
 
 def post(
-    target: WebhookTarget, body: bytes, headers: Mapping[str, str], *, timeout: float
+    target: WebhookTarget,
+    body: bytes,
+    headers: Mapping[str, str],
+    *,
+    timeout: float,
+    tls: ssl.SSLContext | None = None,
 ) -> tuple[int, str | None]:
     """Post ``body`` once to a checked target; return the status and any ``Location``.
 
     Redirects are not followed: a 3xx comes back as it is.
+
+    Args:
+        target: the checked URL; the connection goes to one of its addresses.
+        body: the request body.
+        headers: the request headers (``Host`` is the URL's host and port).
+        timeout: seconds for the connection and for each read.
+        tls: the TLS settings of an https target (default: the system's certificate
+            authorities, with host name checks).
 
     Raises:
         OSError: the connection failed or timed out (:class:`ssl.SSLError` included).
         http.client.HTTPException: the answer is not HTTP.
     """
     connection: http.client.HTTPConnection = (
-        _PinnedHTTPSConnection(target, timeout)
+        _PinnedHTTPSConnection(target, timeout, tls or ssl.create_default_context())
         if target.https
         else _PinnedHTTPConnection(target, timeout)
     )
