@@ -384,7 +384,7 @@ def _attempt(runtime: Runtime, url: str, body: bytes, secret: str) -> tuple[dict
     except WebhookRefusedError as err:
         entry.update(error=f"Refused: {err}", refused=True)
         final = True
-    except (OSError, http.client.HTTPException) as err:
+    except (OSError, ValueError, http.client.HTTPException) as err:  # ValueError: InvalidURL
         entry["error"] = str(err) or type(err).__name__
     else:
         entry["status"] = status

@@ -81,6 +81,9 @@ SIGNATURE_TOLERANCE_S: Final = 300
 _FIELD: Final = "webhook_url"
 _WHAT_TO_DO: Final = f"use a public address, or ask the administrator to add it to {ALLOW_SETTING}."
 _HOST_NAME: Final = re.compile(r"^\.?(?=.{1,253}$)[a-z0-9_](?:[a-z0-9_.-]*[a-z0-9_])?$")
+_CONTROL: Final = re.compile(r"[\x00-\x20\x7f]")
+_URL_SAFE: Final = "!#$%&'()*+,/:;=?@[]~"
+"""Kept as they are in the request's path and query; other non-ASCII bytes are %-encoded."""
 _NAT64: Final = ipaddress.IPv6Network("64:ff9b::/96")
 _SHARED: Final = ipaddress.IPv4Network("100.64.0.0/10")
 
@@ -231,6 +234,9 @@ def _internal_kind(address: _Address) -> str | None:
 
 def _split(url: str) -> tuple[bool, str, int, str]:
     """Return ``(https, host, port, target)`` of a URL, or refuse its form."""
+    if _CONTROL.search(url):
+        msg = f"{_FIELD}: the URL contains spaces or control characters; percent-encode them."
+        raise WebhookRefusedError(msg)
     try:
         parts = urllib.parse.urlsplit(url)
         port = parts.port
@@ -251,9 +257,9 @@ def _split(url: str) -> tuple[bool, str, int, str]:
     if not host:
         msg = f"{_FIELD}: {url!r} names no host; give e.g. 'https://example.com/hook'."
         raise WebhookRefusedError(msg)
-    target = parts.path or "/"
+    target = urllib.parse.quote(parts.path or "/", safe=_URL_SAFE)
     if parts.query:
-        target += f"?{parts.query}"
+        target += "?" + urllib.parse.quote(parts.query, safe=_URL_SAFE)
     return scheme == "https", host, port or (443 if scheme == "https" else 80), target
 
 

@@ -190,6 +190,31 @@ def test_the_allow_list_lets_named_internal_targets_through(make_client, receive
     assert by_name.post("/api/v1/schedules", json=_schedule_body(webhook_url=url)).is_success
 
 
+@pytest.mark.parametrize(
+    ("url", "match"),
+    [
+        ("ftp://example.com/hook", "scheme 'ftp'"),
+        ("https://example.com/a\x01b", "control characters"),
+        ("https://example.com@10.0.0.1/hook", "user name or password"),
+        ("https://[::1/hook", "not a valid URL"),
+    ],
+)
+def test_the_form_of_a_url_is_checked_before_any_lookup(url: str, match: str):
+    """Scheme, control characters, credentials and syntax are refused without resolving."""
+    with pytest.raises(webhooks.WebhookRefusedError, match=match):
+        webhooks.check_webhook_url(url, webhooks.AllowList(), addresses=["93.184.216.34"])
+
+
+def test_a_public_target_keeps_its_path_and_query_encoded():
+    """A public address passes; non-ASCII in the path and query is percent-encoded."""
+    target = webhooks.check_webhook_url(
+        "https://Hooks.Example.com./häk?team=ü", webhooks.AllowList(), addresses=["93.184.216.34"]
+    )
+    assert (target.host, target.port, target.https) == ("hooks.example.com", 443, True)
+    assert target.target == "/h%C3%A4k?team=%C3%BC"
+    assert target.addresses == ("93.184.216.34",)
+
+
 def test_a_bad_allow_list_entry_stops_the_settings():
     """An entry that is neither a name nor an address or network is named at start."""
     with pytest.raises(ValidationError, match=r"LOCEVAL_WEBHOOK_ALLOW: 'not a host'"):
