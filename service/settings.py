@@ -15,8 +15,6 @@ from typing import Annotated
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from service.webhooks import AllowList
-
 __all__ = ["Settings", "get_settings"]
 
 _REPO = Path(__file__).resolve().parent.parent
@@ -71,6 +69,8 @@ class Settings(BaseSettings):
     @field_validator("webhook_allow")
     @classmethod
     def _known_webhook_targets(cls, value: str) -> str:
+        from service.webhooks import AllowList  # noqa: PLC0415  (it imports fastapi's errors)
+
         AllowList.parse(value)  # ValueError names the entry
         return value
 

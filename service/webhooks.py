@@ -50,9 +50,9 @@ import time
 import urllib.parse
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import ClassVar, Final
+from typing import Final
 
-from loceval.errors import InputError
+from service.errors import WebhookRefusedError, WebhookUnresolvedError
 
 __all__ = [
     "ALLOW_SETTING",
@@ -89,18 +89,6 @@ _SHARED: Final = ipaddress.IPv4Network("100.64.0.0/10")
 
 _Address = ipaddress.IPv4Address | ipaddress.IPv6Address
 _Network = ipaddress.IPv4Network | ipaddress.IPv6Network
-
-
-class WebhookRefusedError(InputError):
-    """A webhook URL that the service will not post to (its scheme, or where it points)."""
-
-    code: ClassVar[str] = "schedule.webhook_refused"
-
-
-class WebhookUnresolvedError(WebhookRefusedError):
-    """A webhook host that does not resolve (now; at delivery it is retried)."""
-
-    code: ClassVar[str] = "schedule.webhook_unresolved"
 
 
 def new_secret() -> str:
