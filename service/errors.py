@@ -41,6 +41,8 @@ __all__ = [
     "ServiceUnavailableError",
     "UploadError",
     "UploadTooLargeError",
+    "WebhookRefusedError",
+    "WebhookUnresolvedError",
     "install_error_handlers",
     "internal_problem",
     "problem",
@@ -90,6 +92,18 @@ class UploadTooLargeError(UploadError):
     """The upload is larger than the configured limit."""
 
     code: ClassVar[str] = "upload.too_large"
+
+
+class WebhookRefusedError(InputError):
+    """A webhook URL the service will not post to: its form, or an internal address."""
+
+    code: ClassVar[str] = "schedule.webhook_refused"
+
+
+class WebhookUnresolvedError(WebhookRefusedError):
+    """A webhook host that does not resolve (at delivery: retried, it may be temporary)."""
+
+    code: ClassVar[str] = "schedule.webhook_unresolved"
 
 
 class ServiceUnavailableError(LocevalError):

@@ -11,11 +11,10 @@ consumer thread sleeps between attempts. Every attempt is recorded with the run.
 from __future__ import annotations
 
 import datetime as dt
+import http.client
 import json
 import logging
 import time
-import urllib.error
-import urllib.request
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Final
@@ -40,6 +39,14 @@ from service.schemas import (
     TemplateSource,
 )
 from service.tracking import ProgressWriter, tracked_job
+from service.webhooks import (
+    AllowList,
+    WebhookRefusedError,
+    WebhookUnresolvedError,
+    check_webhook_url,
+    post,
+    signature_headers,
+)
 
 __all__ = [
     "WEBHOOK",
@@ -315,6 +322,11 @@ def webhook_payload(runtime: Runtime, run: ScheduleRun, schedule: Schedule) -> d
 def deliver_webhook(runtime: Runtime, run_id: str, *, attempt: int) -> None:
     """Post a finished run's summary to its schedule's webhook once and record the attempt.
 
+    The URL is checked again first (:func:`service.webhooks.check_webhook_url`: the name may
+    resolve elsewhere now, or the allow-list changed); a refused target is recorded with
+    ``"refused": true`` and not retried, and neither is a redirect (3xx), which is never
+    followed. The body is signed with the schedule's secret (``X-Loceval-Signature``).
+
     Raises:
         WebhookNotDeliveredError: the attempt failed and the queue has attempts left (the
             queue task retries on it); the last failed attempt is recorded and logged only.
@@ -326,7 +338,7 @@ def deliver_webhook(runtime: Runtime, run_id: str, *, attempt: int) -> None:
         return
     url = schedule.webhook_url
     body = json.dumps(webhook_payload(runtime, run, schedule)).encode("utf-8")
-    entry = _post(url, body)
+    entry, final = _attempt(runtime, url, body, schedule.webhook_secret)
     delivered = 200 <= int(entry.get("status", 0)) < 300
     record: dict[str, Any] = dict(run.webhook or {}) if attempt > 1 else {}
     record = {
@@ -334,10 +346,15 @@ def deliver_webhook(runtime: Runtime, run_id: str, *, attempt: int) -> None:
         "delivered": delivered,
         "attempts": [*record.get("attempts", []), entry],
     }
+    if entry.get("refused"):
+        record["refused"] = True
     with runtime.sessions() as session:
         session.execute(update(ScheduleRun).where(ScheduleRun.id == run_id).values(webhook=record))
         session.commit()
     if delivered:
+        return
+    if final:
+        logger.warning("Webhook of run %s not delivered, not retried: %s", run_id, entry["error"])
         return
     if attempt < WEBHOOK_ATTEMPTS:
         msg = f"Webhook {url} attempt {attempt} failed: {entry.get('error')}; the queue retries."
@@ -345,24 +362,40 @@ def deliver_webhook(runtime: Runtime, run_id: str, *, attempt: int) -> None:
     logger.warning("Webhook %s not delivered after %d attempts", url, WEBHOOK_ATTEMPTS)
 
 
-def _post(url: str, body: bytes) -> dict[str, Any]:
-    """Post once; return the attempt's record (time, status or error, duration)."""
+def _attempt(runtime: Runtime, url: str, body: bytes, secret: str) -> tuple[dict[str, Any], bool]:
+    """Check the target and post once; return the attempt's record and whether it is final.
+
+    Final (not retried): a refused target and a redirect. A host that does not resolve, a
+    connection error and any other answer may be retried.
+    """
     entry: dict[str, Any] = {"at": utcnow().isoformat()}
     started = time.monotonic()
-    request = urllib.request.Request(  # noqa: S310  (http/https checked at creation)
-        url,
-        data=body,
-        headers={"Content-Type": "application/json", "User-Agent": "loceval-webhook"},
-        method="POST",
-    )
+    final = False
     try:
-        with urllib.request.urlopen(request, timeout=_WEBHOOK_TIMEOUT_S) as response:  # noqa: S310
-            entry["status"] = response.status
-    except urllib.error.HTTPError as err:
-        entry["status"] = err.code
-        entry["error"] = f"HTTP {err.code} {err.reason}"
-    except (urllib.error.URLError, OSError, TimeoutError) as err:
-        entry["error"] = str(getattr(err, "reason", err))
+        target = check_webhook_url(url, AllowList.parse(runtime.settings.webhook_allow))
+        headers = {
+            "Content-Type": "application/json",
+            "User-Agent": "loceval-webhook",
+            **signature_headers(secret, body),
+        }
+        status, location = post(target, body, headers, timeout=_WEBHOOK_TIMEOUT_S)
+    except WebhookUnresolvedError as err:
+        entry["error"] = str(err)
+    except WebhookRefusedError as err:
+        entry.update(error=f"Refused: {err}", refused=True)
+        final = True
+    except (OSError, ValueError, http.client.HTTPException) as err:  # ValueError: InvalidURL
+        entry["error"] = str(err) or type(err).__name__
+    else:
+        entry["status"] = status
+        if 300 <= status < 400:
+            entry["error"] = (
+                f"HTTP {status} redirect{f' to {location}' if location else ''} not followed; "
+                "give the final URL as webhook_url."
+            )
+            final = True
+        elif not 200 <= status < 300:
+            entry["error"] = f"HTTP {status} {http.client.responses.get(status, '')}".rstrip()
     logger.info(
         "webhook attempt",
         extra={
@@ -371,4 +404,4 @@ def _post(url: str, body: bytes) -> dict[str, Any]:
             "duration_ms": round((time.monotonic() - started) * 1000, 1),
         },
     )
-    return entry
+    return entry, final

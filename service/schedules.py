@@ -44,8 +44,10 @@ from service.schemas import (
     SchedulePatch,
     SchedulePublic,
     ScheduleRunPublic,
+    ScheduleWithSecret,
     Selection,
 )
+from service.webhooks import AllowList, check_webhook_url, new_secret
 
 __all__ = [
     "RUN",
@@ -58,9 +60,11 @@ __all__ = [
     "list_runs",
     "list_schedules",
     "next_fire",
+    "rotate_secret",
     "run_artifact_path",
     "run_public",
     "schedule_public",
+    "schedule_with_secret",
     "select_datasets",
     "tick",
     "trigger_run",
@@ -298,14 +302,34 @@ def run_public(run: ScheduleRun, base_url: str) -> ScheduleRunPublic:
     )
 
 
+def schedule_with_secret(schedule: Schedule) -> ScheduleWithSecret:
+    """Return the HTTP view of a schedule with its signing secret (create and rotate only)."""
+    return ScheduleWithSecret.model_validate(schedule, from_attributes=True)
+
+
+def _check_webhook(runtime: Runtime, url: str | None) -> None:
+    """Refuse a webhook URL that is not http(s) or points at an internal address.
+
+    Raises:
+        WebhookRefusedError: the URL is refused (the message names webhook_url and says
+            what to do); a subclass of InputError, so a 422 problem.
+    """
+    if url is not None:
+        check_webhook_url(url, AllowList.parse(runtime.settings.webhook_allow))
+
+
 def create_schedule(runtime: Runtime, project_id: str, body: ScheduleCreate) -> Schedule:
     """Check and record a new schedule; it fires first at the cron's next time.
 
+    The schedule gets its webhook signing secret here; only the create answer shows it.
+
     Raises:
-        InputError: the cron, the time zone or an option of the template is not usable.
+        InputError: the cron, the time zone, an option of the template or the webhook URL
+            is not usable.
     """
     check_cron(body.cron, body.timezone)
     check_options(body.template.options)
+    _check_webhook(runtime, body.webhook_url)
     now = utcnow()
     schedule = Schedule(
         project_id=project_id,
@@ -317,6 +341,7 @@ def create_schedule(runtime: Runtime, project_id: str, body: ScheduleCreate) -> 
         template=body.template.model_dump(mode="json"),
         produce=body.produce.model_dump(mode="json"),
         webhook_url=body.webhook_url,
+        webhook_secret=new_secret(),
         next_fire_at=next_fire(body.cron, body.timezone, now),
         created_at=now,
         updated_at=now,
@@ -344,7 +369,8 @@ def update_schedule(
 
     Raises:
         NotFoundError: no such schedule in the project.
-        InputError: the cron, the time zone or an option of the template is not usable.
+        InputError: the cron, the time zone, an option of the template or the webhook URL
+            is not usable.
     """
     schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
     changes = body.model_dump(exclude_unset=True, mode="json")
@@ -353,6 +379,7 @@ def update_schedule(
     check_cron(cron, timezone)
     if body.template is not None:
         check_options(body.template.options)
+    _check_webhook(runtime, changes.get("webhook_url"))
     now = utcnow()
     resumed = schedule.paused and changes.get("paused") is False
     if resumed or "cron" in changes or "timezone" in changes:
@@ -362,6 +389,21 @@ def update_schedule(
         for key, value in changes.items():
             setattr(row, key, value)
         row.updated_at = now
+        session.commit()
+    return row
+
+
+def rotate_secret(runtime: Runtime, project_id: str, schedule_id: str) -> Schedule:
+    """Give a schedule a new webhook signing secret; the old one stops verifying at once.
+
+    Raises:
+        NotFoundError: no such schedule in the project.
+    """
+    schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
+    with runtime.sessions() as session:
+        row = session.get_one(Schedule, schedule.id)
+        row.webhook_secret = new_secret()
+        row.updated_at = utcnow()
         session.commit()
     return row
 

@@ -39,6 +39,7 @@ __all__ = [
     "SchedulePublic",
     "ScheduleRunPublic",
     "ScheduleRunsPublic",
+    "ScheduleWithSecret",
     "SchedulesPublic",
     "Selection",
     "SourceRef",
@@ -446,7 +447,11 @@ class ScheduleCreate(_Strict):
     selection: Selection = Field(default_factory=Selection)
     template: EvaluationTemplate
     produce: Produce = Field(default_factory=Produce)
-    webhook_url: _Url | None = Field(default=None, description="receives a JSON summary")
+    webhook_url: _Url | None = Field(
+        default=None,
+        description="receives a signed JSON summary; a public address unless the "
+        "administrator allows it (LOCEVAL_WEBHOOK_ALLOW)",
+    )
     paused: bool = False
 
 
@@ -479,6 +484,15 @@ class SchedulePublic(BaseModel):
     last_fired_at: dt.datetime | None
     created_at: dt.datetime
     updated_at: dt.datetime
+
+
+class ScheduleWithSecret(SchedulePublic):
+    """A schedule with its webhook signing secret: answered once, on create and on rotate."""
+
+    webhook_secret: str = Field(
+        description="the key of each delivery's X-Loceval-Signature (HMAC-SHA256 over "
+        "'<X-Loceval-Timestamp>.<body>'); shown only now, so store it"
+    )
 
 
 class SchedulesPublic(BaseModel):

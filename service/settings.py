@@ -37,6 +37,10 @@ class Settings(BaseSettings):
         public_url: the service's address as users reach it, for links in webhooks.
         host: the address ``loceval serve`` listens on when ``--host`` is not given.
         port: the port ``loceval serve`` listens on when ``--port`` is not given.
+        webhook_allow: internal webhook targets let through anyway, comma-separated host
+            names (``.internal`` for every name under it), addresses and CIDR networks;
+            webhooks to loopback, link-local, private and similar addresses are refused
+            otherwise (:mod:`service.webhooks`).
     """
 
     model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
@@ -52,6 +56,7 @@ class Settings(BaseSettings):
     public_url: str = "http://127.0.0.1:8000"
     host: Annotated[str, Field(min_length=1)] = "127.0.0.1"
     port: Annotated[int, Field(ge=1, le=65535)] = 8000
+    webhook_allow: str = ""
 
     @field_validator("queue_url")
     @classmethod
@@ -60,6 +65,14 @@ class Settings(BaseSettings):
             return value
         msg = f"LOCEVAL_QUEUE_URL must be sqlite, immediate or redis://HOST:PORT/DB, not {value!r}"
         raise ValueError(msg)
+
+    @field_validator("webhook_allow")
+    @classmethod
+    def _known_webhook_targets(cls, value: str) -> str:
+        from service.webhooks import AllowList  # noqa: PLC0415  (it imports fastapi's errors)
+
+        AllowList.parse(value)  # ValueError names the entry
+        return value
 
     @property
     def resolved_database_url(self) -> str:

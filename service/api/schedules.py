@@ -11,7 +11,12 @@ from service import schedules
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Schedule, get_owned
-from service.schedules import SUMMARY_ARTIFACTS, run_public, schedule_public
+from service.schedules import (
+    SUMMARY_ARTIFACTS,
+    run_public,
+    schedule_public,
+    schedule_with_secret,
+)
 from service.schemas import (
     ScheduleCreate,
     SchedulePatch,
@@ -19,6 +24,7 @@ from service.schemas import (
     ScheduleRunPublic,
     ScheduleRunsPublic,
     SchedulesPublic,
+    ScheduleWithSecret,
 )
 
 __all__ = ["router"]
@@ -29,17 +35,22 @@ router = APIRouter(prefix="/schedules", tags=["schedules"])
 @router.post(
     "",
     status_code=status.HTTP_201_CREATED,
-    response_model=SchedulePublic,
+    response_model=ScheduleWithSecret,
     responses=problems(),
 )
 def create_schedule(
     body: ScheduleCreate, request: Request, response: Response, runtime: RuntimeDep,
     project_id: ProjectDep,
-) -> SchedulePublic:  # fmt: skip
-    """Create a schedule: cron and time zone, the recordings it covers, how to evaluate them."""
+) -> ScheduleWithSecret:  # fmt: skip
+    """Create a schedule: cron and time zone, the recordings it covers, how to evaluate them.
+
+    The answer carries ``webhook_secret``, the key of the signature on each webhook delivery
+    (``X-Loceval-Signature``); it is shown only here, so store it. A webhook URL must reach a
+    public address unless the administrator allows it (``LOCEVAL_WEBHOOK_ALLOW``).
+    """
     schedule = schedules.create_schedule(runtime, project_id, body)
     response.headers["Location"] = f"{request.base_url}api/v1/schedules/{schedule.id}"
-    return schedule_public(schedule)
+    return schedule_with_secret(schedule)
 
 
 @router.get("", response_model=SchedulesPublic, responses=problems())
@@ -62,9 +73,17 @@ def update_schedule(
     """Pause or resume, change the cron, the selection, the template or the webhook.
 
     Changing the cron or the time zone, or resuming, counts the next fire from now: fires
-    missed while paused are not run.
+    missed while paused are not run. A new webhook URL is checked as on create.
     """
     return schedule_public(schedules.update_schedule(runtime, project_id, schedule_id, body))
+
+
+@router.post("/{schedule_id}/secret", response_model=ScheduleWithSecret, responses=problems(404))
+def rotate_secret(
+    schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep
+) -> ScheduleWithSecret:
+    """Replace the webhook signing secret and show the new one (once); the old one stops."""
+    return schedule_with_secret(schedules.rotate_secret(runtime, project_id, schedule_id))
 
 
 @router.delete("/{schedule_id}", status_code=status.HTTP_204_NO_CONTENT, responses=problems(404))

@@ -33,6 +33,8 @@ from service.errors import (
     ServiceUnavailableError,
     UploadError,
     UploadTooLargeError,
+    WebhookRefusedError,
+    WebhookUnresolvedError,
     internal_problem,
     problem_for,
     status_for,
@@ -58,6 +60,8 @@ EXPECTED: dict[type[LocevalError], tuple[int, str]] = {
     UploadError: (400, "upload.invalid"),
     UploadTooLargeError: (413, "upload.too_large"),
     ServiceUnavailableError: (503, "service.unavailable"),
+    WebhookRefusedError: (422, "schedule.webhook_refused"),
+    WebhookUnresolvedError: (422, "schedule.webhook_unresolved"),
 }
 """The intended status and ``type`` code of every error class the project defines."""
 

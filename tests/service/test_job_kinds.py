@@ -20,7 +20,7 @@ from tests.service.test_schedules_api import _Hook
 @pytest.fixture
 def runtime(tmp_path: Path) -> Iterator[Runtime]:
     """A runtime on huey's SQLite queue with no consumer: tasks wait until executed here."""
-    rt = create_runtime(Settings(data_dir=tmp_path / "data"))
+    rt = create_runtime(Settings(data_dir=tmp_path / "data", webhook_allow="127.0.0.1"))
     yield rt
     rt.close()
 

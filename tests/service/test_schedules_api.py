@@ -27,8 +27,10 @@ from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
 
 @pytest.fixture
 def client(tmp_path: Path) -> Iterator[TestClient]:
-    """A client of a fresh service whose jobs run inside the requests."""
-    app = create_app(Settings(data_dir=tmp_path / "data", queue_url="immediate"))
+    """A client of a fresh service whose jobs run inside the requests (webhooks to 127.0.0.1)."""
+    app = create_app(
+        Settings(data_dir=tmp_path / "data", queue_url="immediate", webhook_allow="127.0.0.1")
+    )
     with app.state.runtime.sessions() as session:
         key = create_key(session, "site")
     with TestClient(app, headers={"Authorization": f"Bearer {key}"}) as test_client:
