@@ -36,6 +36,7 @@ __all__ = [
     "STATUS_BY_ERROR",
     "AuthenticationError",
     "ConflictError",
+    "InsufficientStorageError",
     "NotFoundError",
     "NotReadyError",
     "ServiceUnavailableError",
@@ -92,6 +93,12 @@ class UploadTooLargeError(UploadError):
     code: ClassVar[str] = "upload.too_large"
 
 
+class InsufficientStorageError(LocevalError):
+    """The data directory is nearly full: an upload would leave less than the set reserve."""
+
+    code: ClassVar[str] = "storage.full"
+
+
 class ServiceUnavailableError(LocevalError):
     """The database or the queue cannot be reached."""
 
@@ -110,6 +117,7 @@ STATUS_BY_ERROR: Final[Mapping[type[LocevalError], int]] = {
     ConflictError: 409,
     AuthenticationError: 401,
     ServiceUnavailableError: 503,
+    InsufficientStorageError: 507,
     ExportUnavailableError: 501,
     LocevalError: 500,
 }
