@@ -40,6 +40,7 @@ __all__ = [
     "NotFoundError",
     "NotReadyError",
     "ServiceUnavailableError",
+    "StartupError",
     "UploadError",
     "UploadTooLargeError",
     "install_error_handlers",
@@ -103,6 +104,12 @@ class ServiceUnavailableError(LocevalError):
     """The database or the queue cannot be reached."""
 
     code: ClassVar[str] = "service.unavailable"
+
+
+class StartupError(ServiceUnavailableError):
+    """The service cannot start: its data directory or database is not usable as it is."""
+
+    code: ClassVar[str] = "service.startup"
 
 
 STATUS_BY_ERROR: Final[Mapping[type[LocevalError], int]] = {

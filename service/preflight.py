@@ -20,16 +20,16 @@ import logging
 import shutil
 import uuid
 from pathlib import Path
-from typing import ClassVar, Final
+from typing import Final
 
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import Engine
 
 from loceval import __version__
-from loceval.errors import LocevalError
 from service import migrations
 from service.db import migrate
+from service.errors import StartupError
 from service.settings import Settings
 
 __all__ = ["StartupError", "check_data_dir", "format_bytes", "prepare_schema", "schema_heads"]
@@ -37,12 +37,6 @@ __all__ = ["StartupError", "check_data_dir", "format_bytes", "prepare_schema", "
 logger = logging.getLogger(__name__)
 
 _MIGRATIONS: Final = Path(migrations.__file__).resolve().parent
-
-
-class StartupError(LocevalError):
-    """The service cannot start: its data directory or database is not usable as it is."""
-
-    code: ClassVar[str] = "service.startup"
 
 
 def format_bytes(size: int) -> str:

@@ -119,8 +119,13 @@ def _mark_deleted_in_runs(session: Session, project_id: str, deleted: set[str]) 
         session.execute(update(ScheduleRun).where(ScheduleRun.id == run_id).values(rows=marked))
 
 
-def _expired_batch(runtime: Runtime, cutoff: dt.datetime) -> list[str]:
-    """Delete up to one batch of finished evaluations that ended before ``cutoff``."""
+def _expired_batch(runtime: Runtime, cutoff: dt.datetime) -> tuple[int, int]:
+    """Delete up to one batch of finished evaluations that ended before ``cutoff``.
+
+    Returns:
+        How many were found and how many of them this call deleted (a sweep running in
+        another worker at the same time may have taken some).
+    """
     ended_before = or_(
         Evaluation.finished_at < cutoff,
         and_(Evaluation.finished_at.is_(None), Evaluation.created_at < cutoff),
@@ -132,9 +137,9 @@ def _expired_batch(runtime: Runtime, cutoff: dt.datetime) -> list[str]:
             .limit(_BATCH)
         ).all()
         if not rows:
-            return []
+            return 0, 0
         ids = [str(job_id) for job_id, _ in rows]
-        session.execute(
+        done = session.execute(
             delete(Evaluation).where(
                 Evaluation.id.in_(ids), Evaluation.status.in_(FINISHED_STATUSES)
             )
@@ -147,7 +152,7 @@ def _expired_batch(runtime: Runtime, cutoff: dt.datetime) -> list[str]:
         session.commit()
     for job_id in ids:
         runtime.store.remove_job(EVALUATIONS, job_id)
-    return ids
+    return len(ids), int(done.rowcount)  # type: ignore[attr-defined]
 
 
 def _existing(runtime: Runtime, model: JobModel, ids: Sequence[str]) -> set[str]:
@@ -201,8 +206,11 @@ def sweep(runtime: Runtime, *, now: dt.datetime | None = None) -> SweepCounts:
     cutoff = None
     if days > 0:
         cutoff = (now or utcnow()) - dt.timedelta(days=days)
-        while batch := _expired_batch(runtime, cutoff):
-            expired += len(batch)
+        while True:
+            found, deleted = _expired_batch(runtime, cutoff)
+            expired += deleted
+            if found < _BATCH:
+                break
     counts = SweepCounts(
         evaluations=expired, orphans=sweep_orphans(runtime), partial_uploads=runtime.store.sweep()
     )

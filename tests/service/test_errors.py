@@ -28,9 +28,11 @@ from service.errors import (
     STATUS_BY_ERROR,
     AuthenticationError,
     ConflictError,
+    InsufficientStorageError,
     NotFoundError,
     NotReadyError,
     ServiceUnavailableError,
+    StartupError,
     UploadError,
     UploadTooLargeError,
     internal_problem,
@@ -58,6 +60,8 @@ EXPECTED: dict[type[LocevalError], tuple[int, str]] = {
     UploadError: (400, "upload.invalid"),
     UploadTooLargeError: (413, "upload.too_large"),
     ServiceUnavailableError: (503, "service.unavailable"),
+    StartupError: (503, "service.startup"),
+    InsufficientStorageError: (507, "storage.full"),
 }
 """The intended status and ``type`` code of every error class the project defines."""
 
