@@ -16,10 +16,10 @@ from loceval import __version__
 from service import web
 from service.api import datasets, docs, evaluations, health, hops, schedules
 from service.api.middleware import ApiKeyMiddleware
-from service.errors import install_error_handlers
+from service.errors import StartupError, install_error_handlers
 from service.jobs import create_runtime
 from service.logs import RequestLogMiddleware, configure_logging
-from service.preflight import StartupError, check_data_dir
+from service.preflight import check_data_dir
 from service.runtime import Runtime
 from service.schedules import tick
 from service.settings import Settings, get_settings

@@ -20,7 +20,6 @@ import hashlib
 import os
 import shutil
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Final
@@ -257,7 +256,7 @@ def check_free_space(store: BlobStore, min_free_bytes: int, *, incoming_bytes: i
         raise InsufficientStorageError(_STORAGE_FULL)
 
 
-@contextmanager
+@contextlib.contextmanager
 def _disk_full_refused() -> Iterator[None]:
     """Turn a write that failed for a full disk (ENOSPC, EDQUOT) into the 507 refusal."""
     try:
