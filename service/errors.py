@@ -36,9 +36,11 @@ __all__ = [
     "STATUS_BY_ERROR",
     "AuthenticationError",
     "ConflictError",
+    "InsufficientStorageError",
     "NotFoundError",
     "NotReadyError",
     "ServiceUnavailableError",
+    "StartupError",
     "UploadError",
     "UploadTooLargeError",
     "WebhookRefusedError",
@@ -104,12 +106,22 @@ class WebhookUnresolvedError(WebhookRefusedError):
     """A webhook host that does not resolve (at delivery: retried, it may be temporary)."""
 
     code: ClassVar[str] = "schedule.webhook_unresolved"
+class InsufficientStorageError(LocevalError):
+    """The data directory is nearly full: an upload would leave less than the set reserve."""
+
+    code: ClassVar[str] = "storage.full"
 
 
 class ServiceUnavailableError(LocevalError):
     """The database or the queue cannot be reached."""
 
     code: ClassVar[str] = "service.unavailable"
+
+
+class StartupError(ServiceUnavailableError):
+    """The service cannot start: its data directory or database is not usable as it is."""
+
+    code: ClassVar[str] = "service.startup"
 
 
 STATUS_BY_ERROR: Final[Mapping[type[LocevalError], int]] = {
@@ -124,6 +136,7 @@ STATUS_BY_ERROR: Final[Mapping[type[LocevalError], int]] = {
     ConflictError: 409,
     AuthenticationError: 401,
     ServiceUnavailableError: 503,
+    InsufficientStorageError: 507,
     ExportUnavailableError: 501,
     LocevalError: 500,
 }

@@ -29,7 +29,6 @@ from service.db import (
     ScheduleRun,
     create_db_engine,
     make_session_factory,
-    migrate,
 )
 from service.evaluations import EVALUATION, visits_dataset_id
 from service.options import (
@@ -40,6 +39,8 @@ from service.options import (
     offset_or_none,
     ranging_from_options,
 )
+from service.preflight import check_data_dir, prepare_schema
+from service.retention import sweep
 from service.runner import Job, JobSource, RangingSources, file_provenance, run_job
 from service.runtime import JobKind, Runtime, create_huey
 from service.schedule_runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run
@@ -256,14 +257,25 @@ JOB_KINDS: Final = (
 def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runtime:
     """Open the database (migrated to the newest schema), the blob store and the queue.
 
+    The start-up checks run first (:mod:`service.preflight`): the data directory must be
+    writable and the database not newer than this code.
+
     Each job kind becomes a queue task named ``run_<kind>`` whose only argument is the job
     id; webhooks of finished runs are the task ``deliver_webhook`` (retried by the queue);
-    ``every_minute`` recovers abandoned jobs and fires due schedules.
+    ``every_minute`` recovers abandoned jobs and fires due schedules; ``retention_sweep``
+    (hourly) deletes expired evaluations and orphaned files (:mod:`service.retention`).
+
+    Raises:
+        StartupError: the data directory is not writable, or the database is at a migration
+            this code does not know.
     """
-    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    check_data_dir(settings)  # raises when unusable; the low-space warning is the callers'
     engine = create_db_engine(settings.resolved_database_url)
-    if apply_migrations:
-        migrate(engine)
+    try:
+        prepare_schema(engine, apply_migrations=apply_migrations)
+    except BaseException:
+        engine.dispose()
+        raise
     huey = create_huey(settings)
     runtime = Runtime(
         settings=settings,
@@ -293,6 +305,10 @@ def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runt
     def every_minute() -> None:
         recover(runtime)
         tick(runtime)
+
+    @huey.periodic_task(crontab(minute="17"), name="retention_sweep")  # type: ignore[untyped-decorator]
+    def hourly_sweep() -> None:
+        sweep(runtime)
 
     runtime.tasks[WEBHOOK] = deliver
     return runtime

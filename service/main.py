@@ -16,11 +16,12 @@ from loceval import __version__
 from service import web
 from service.api import datasets, docs, evaluations, health, hops, schedules
 from service.api.middleware import ApiKeyMiddleware
-from service.errors import install_error_handlers
+from service.errors import StartupError, install_error_handlers
 from service.jobs import create_runtime
 from service.logs import RequestLogMiddleware, configure_logging
 from service.metrics import MetricsMiddleware, create_metrics
 from service.metrics import router as metrics_router
+from service.preflight import check_data_dir
 from service.runtime import Runtime
 from service.schedules import tick
 from service.settings import Settings, get_settings
@@ -61,6 +62,13 @@ def create_app(
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         configure_logging()  # here, after uvicorn set up its loggers: they go through ours
+        try:  # again: the runtime may have been opened long before (and logging was not set up)
+            low_space = check_data_dir(runtime.settings)
+        except StartupError as err:
+            logger.error("%s", err)  # noqa: TRY400  (the message says what to do; no traceback)
+            raise
+        if low_space:
+            logger.warning("%s", low_space)
         swept = runtime.store.sweep()
         if swept:
             logger.warning("Removed %d uploads left half-received by a crash", swept)

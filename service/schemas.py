@@ -513,7 +513,11 @@ class ScheduleRunPublic(BaseModel):
     progress: ProgressPublic
     note: str | None
     rows: list[dict[str, Any]] | None = Field(
-        default=None, description="per recording: dataset, status, error, evaluation_id, summary"
+        default=None,
+        description=(
+            "per recording: dataset, status, error, evaluation_id, summary "
+            "(and evaluation_deleted: true once that evaluation was deleted)"
+        ),
     )
     error: Problem | None = None
     artifacts: list[ArtifactPublic] | None = None

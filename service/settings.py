@@ -41,6 +41,10 @@ class Settings(BaseSettings):
             names (``.internal`` for every name under it), addresses and CIDR networks;
             webhooks to loopback, link-local, private and similar addresses are refused
             otherwise (:mod:`service.webhooks`).
+        retention_days: finished evaluations (and their artifacts) older than this many days
+            are deleted by an hourly sweep; 0 keeps them forever. Datasets are never swept.
+        min_free_bytes: free space the data directory keeps: an upload that would leave less
+            gets 507, and start-up warns below it; 0 turns the check off.
     """
 
     model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
@@ -57,6 +61,8 @@ class Settings(BaseSettings):
     host: Annotated[str, Field(min_length=1)] = "127.0.0.1"
     port: Annotated[int, Field(ge=1, le=65535)] = 8000
     webhook_allow: str = ""
+    retention_days: Annotated[int, Field(ge=0, le=36500)] = 0
+    min_free_bytes: Annotated[int, Field(ge=0, le=1 << 50)] = _GIB
 
     @field_validator("queue_url")
     @classmethod

@@ -6,13 +6,20 @@ file part is written to ``incoming/<uuid>.part`` in the data directory as it arr
 on the way, and the request is refused with 413 the moment it passes the limit. Memory use
 is a few chunks whatever the file size. A file is fsynced before it is handed on; on any
 failure the partial files are deleted, so nothing half-received is ever visible.
+
+The data directory keeps a reserve of free space (``min_free_bytes``): an upload whose
+announced size would eat into it is refused with 507 before a byte is read, and one without
+a size (or a disk filling from elsewhere) is stopped as soon as the free space drops below it.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
 import os
-from collections.abc import Callable
+import shutil
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Final
@@ -22,15 +29,16 @@ from python_multipart.exceptions import MultipartParseError
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
-from service.errors import UploadError, UploadTooLargeError
+from service.errors import InsufficientStorageError, UploadError, UploadTooLargeError
 from service.storage import BlobStore
 
-__all__ = ["ReceivedFile", "ReceivedForm", "receive_multipart"]
+__all__ = ["ReceivedFile", "ReceivedForm", "check_free_space", "receive_multipart"]
 
 _MAX_FIELD_BYTES: Final = 64 * 1024
 _MAX_FIELDS: Final = 200
 _BATCH_BYTES: Final = 1 << 20
 _FORM_OVERHEAD: Final = 1 << 20  # headers and text fields allowed beyond the file limit
+_SPACE_CHECK_BYTES: Final = 16 << 20  # the free space is checked again after this many bytes
 
 
 @dataclass(slots=True)
@@ -78,12 +86,20 @@ class _Receiver:
     """The push parser's callbacks: route part data to files or text fields."""
 
     def __init__(
-        self, store: BlobStore, *, file_fields: frozenset[str], max_bytes: int, max_files: int
+        self,
+        store: BlobStore,
+        *,
+        file_fields: frozenset[str],
+        max_bytes: int,
+        max_files: int,
+        min_free_bytes: int = 0,
     ) -> None:
         self.store = store
         self.file_fields = file_fields
         self.max_bytes = max_bytes
         self.max_files = max_files
+        self.min_free_bytes = min_free_bytes
+        self._next_space_check = 0
         self.form = ReceivedForm()
         self.ended = False
         self._header_field = b""
@@ -159,7 +175,11 @@ class _Receiver:
             self._total += len(chunk)
             if self._total > self.max_bytes:
                 raise UploadTooLargeError(_too_large(self.max_bytes))
-            self._fh.write(chunk)
+            if self.min_free_bytes and self._total >= self._next_space_check:
+                self._next_space_check = self._total + _SPACE_CHECK_BYTES
+                check_free_space(self.store, self.min_free_bytes)
+            with _disk_full_refused():
+                self._fh.write(chunk)
             self._digest.update(chunk)
         elif self._text is not None:
             self._text += chunk
@@ -172,8 +192,9 @@ class _Receiver:
 
     def _part_end(self) -> None:
         if self._fh is not None and self._path is not None:
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
+            with _disk_full_refused():
+                self._fh.flush()
+                os.fsync(self._fh.fileno())
             self._fh.close()
             self._fh = None
             received = ReceivedFile(
@@ -195,7 +216,8 @@ class _Receiver:
     def abort(self) -> None:
         """Close and delete everything received so far."""
         if self._fh is not None:
-            self._fh.close()
+            with contextlib.suppress(OSError):  # an unflushable buffer (a full disk): it goes
+                self._fh.close()
             self._fh = None
         if self._path is not None:
             self._path.unlink(missing_ok=True)
@@ -209,6 +231,40 @@ def _too_large(max_bytes: int) -> str:
         f"The upload is larger than the limit of {limit}; split the "
         "recording, or raise LOCEVAL_MAX_UPLOAD_BYTES on the server."
     )
+
+
+_STORAGE_FULL: Final = (
+    "The server's storage is nearly full, so the upload was not accepted (nothing of it was "
+    "kept); try again later, or ask the server's administrator to free space."
+)
+
+
+def check_free_space(store: BlobStore, min_free_bytes: int, *, incoming_bytes: int = 0) -> None:
+    """Refuse an upload that would leave less than ``min_free_bytes`` free in the data dir.
+
+    Args:
+        store: the data directory's blobs (uploads land in its ``incoming/`` folder).
+        min_free_bytes: the reserve to keep; 0 checks nothing.
+        incoming_bytes: bytes still to arrive (the announced size; 0 while receiving).
+
+    Raises:
+        InsufficientStorageError: the free space minus ``incoming_bytes`` is below the reserve.
+    """
+    if min_free_bytes <= 0:
+        return
+    if shutil.disk_usage(store.incoming).free - incoming_bytes < min_free_bytes:
+        raise InsufficientStorageError(_STORAGE_FULL)
+
+
+@contextlib.contextmanager
+def _disk_full_refused() -> Iterator[None]:
+    """Turn a write that failed for a full disk (ENOSPC, EDQUOT) into the 507 refusal."""
+    try:
+        yield
+    except OSError as err:
+        if err.errno in {errno.ENOSPC, errno.EDQUOT}:
+            raise InsufficientStorageError(_STORAGE_FULL) from None
+        raise
 
 
 async def _feed(request: Request, parser: MultipartParser) -> None:
@@ -231,6 +287,7 @@ async def receive_multipart(
     max_bytes: int,
     file_fields: frozenset[str],
     max_files: int = 1,
+    min_free_bytes: int = 0,
 ) -> ReceivedForm:
     """Stream a ``multipart/form-data`` request to disk.
 
@@ -240,6 +297,7 @@ async def receive_multipart(
         max_bytes: the limit on the sum of the file sizes.
         file_fields: the field names that take files; files in other fields are refused.
         max_files: how many files the request may hold.
+        min_free_bytes: the free space the data directory keeps (0: not checked).
 
     Returns:
         The files (on disk, to be published or discarded by the caller) and text fields.
@@ -248,6 +306,8 @@ async def receive_multipart(
         UploadError: not multipart, malformed or truncated body, or a stray file field.
         UploadTooLargeError: more than ``max_bytes`` of files (checked on Content-Length
             first, then while receiving).
+        InsufficientStorageError: the upload would leave less than ``min_free_bytes`` free
+            (checked on Content-Length first, then while receiving); nothing is kept.
     """
     content_type, params = parse_options_header(request.headers.get("content-type"))
     if content_type != b"multipart/form-data" or not params.get(b"boundary"):
@@ -260,7 +320,15 @@ async def receive_multipart(
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > max_bytes + _FORM_OVERHEAD:
         raise UploadTooLargeError(_too_large(max_bytes))
-    receiver = _Receiver(store, file_fields=file_fields, max_bytes=max_bytes, max_files=max_files)
+    announced = int(declared) if declared is not None and declared.isdigit() else 0
+    check_free_space(store, min_free_bytes, incoming_bytes=announced)
+    receiver = _Receiver(
+        store,
+        file_fields=file_fields,
+        max_bytes=max_bytes,
+        max_files=max_files,
+        min_free_bytes=min_free_bytes,
+    )
     parser = MultipartParser(params[b"boundary"], receiver.callbacks())  # type: ignore[arg-type]
     try:
         await _feed(request, parser)

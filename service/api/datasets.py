@@ -49,7 +49,7 @@ def dataset_public(dataset: Dataset) -> DatasetPublic:
     openapi_extra={"requestBody": _UPLOAD_BODY},
     responses={
         200: {"model": DatasetPublic, "description": "the same file was uploaded before"},
-        **problems(400, 413),
+        **problems(400, 413, 507),
     },
 )
 async def create_dataset(
@@ -64,6 +64,7 @@ async def create_dataset(
         runtime.store,
         max_bytes=runtime.settings.max_upload_bytes,
         file_fields=frozenset({"file"}),
+        min_free_bytes=runtime.settings.min_free_bytes,
     )
     try:
         dataset, created = await anyio.to_thread.run_sync(

@@ -9,7 +9,7 @@ from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import FileResponse
 
 from exporters import ARTIFACTS
-from service import evaluations
+from service import evaluations, retention
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Evaluation, get_owned
@@ -105,6 +105,21 @@ def read_evaluation(
     )
 
 
+@router.delete(
+    "/evaluations/{evaluation_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    responses=problems(404, 409),
+)
+def delete_evaluation(evaluation_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
+    """Delete a finished evaluation and its artifacts (409 while it is queued or running).
+
+    A schedule run that made it keeps its summary report and figures; its row for the
+    recording is marked ``evaluation_deleted``.
+    """
+    retention.delete_evaluation(runtime, project_id, evaluation_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
 @router.get(
     "/evaluations/{evaluation_id}/artifacts/{name}",
     response_class=FileResponse,
@@ -159,7 +174,7 @@ _ONE_SHOT_BODY = {
     status_code=status.HTTP_202_ACCEPTED,
     response_model=EvaluationPublic,
     openapi_extra={"requestBody": _ONE_SHOT_BODY},
-    responses=problems(400, 404, 413, 503),
+    responses=problems(400, 404, 413, 503, 507),
 )
 async def evaluate_upload(
     request: Request, response: Response, runtime: RuntimeDep, project_id: ProjectDep
@@ -176,6 +191,7 @@ async def evaluate_upload(
         max_bytes=runtime.settings.max_upload_bytes,
         file_fields=frozenset({"reference", "estimate"}),
         max_files=1 + _MAX_ESTIMATES,
+        min_free_bytes=runtime.settings.min_free_bytes,
     )
     try:
         evaluation = await anyio.to_thread.run_sync(

@@ -50,9 +50,11 @@ def run_serve(args: argparse.Namespace) -> int:
 def run_worker(_args: argparse.Namespace) -> int:
     """Run queue consumers until SIGINT or SIGTERM."""
     import signal  # noqa: PLC0415
+    import sys  # noqa: PLC0415
     import threading  # noqa: PLC0415
 
     from service.jobs import create_runtime, recover  # noqa: PLC0415
+    from service.preflight import check_data_dir  # noqa: PLC0415
     from service.schedules import tick  # noqa: PLC0415
     from service.settings import get_settings  # noqa: PLC0415
 
@@ -64,6 +66,9 @@ def run_worker(_args: argparse.Namespace) -> int:
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
+    low_space = check_data_dir(settings)  # create_runtime refused an unwritable one already
+    if low_space:
+        print(f"loceval: warning: {low_space}", file=sys.stderr, flush=True)  # noqa: T201
     consumer = runtime.start_consumer()
     recover(runtime)
     tick(runtime)

@@ -965,7 +965,7 @@ def test_unknown_routes(api: Api, path: str) -> None:
         ("PUT", "/api/v1/datasets", "GET, POST"),
         ("PATCH", "/api/v1/datasets/x", "GET, DELETE"),
         ("DELETE", "/api/v1/evaluations", "GET, POST"),
-        ("POST", "/api/v1/evaluations/x", "GET"),
+        ("POST", "/api/v1/evaluations/x", "GET, DELETE"),
         ("DELETE", "/api/v1/evaluations/x/artifacts/result.json", "GET"),
         ("GET", "/api/v1/evaluate", "POST"),
         ("POST", "/healthz", "GET"),

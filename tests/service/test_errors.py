@@ -28,9 +28,11 @@ from service.errors import (
     STATUS_BY_ERROR,
     AuthenticationError,
     ConflictError,
+    InsufficientStorageError,
     NotFoundError,
     NotReadyError,
     ServiceUnavailableError,
+    StartupError,
     UploadError,
     UploadTooLargeError,
     WebhookRefusedError,
@@ -62,6 +64,8 @@ EXPECTED: dict[type[LocevalError], tuple[int, str]] = {
     ServiceUnavailableError: (503, "service.unavailable"),
     WebhookRefusedError: (422, "schedule.webhook_refused"),
     WebhookUnresolvedError: (422, "schedule.webhook_unresolved"),
+    StartupError: (503, "service.startup"),
+    InsufficientStorageError: (507, "storage.full"),
 }
 """The intended status and ``type`` code of every error class the project defines."""
 
