@@ -19,6 +19,7 @@ __all__ = ["Settings", "get_settings"]
 
 _REPO = Path(__file__).resolve().parent.parent
 _GIB = 1 << 30
+_MIN_JOB_MEMORY_MB = 1024
 
 
 class Settings(BaseSettings):
@@ -37,6 +38,11 @@ class Settings(BaseSettings):
         public_url: the service's address as users reach it, for links in webhooks.
         host: the address ``loceval serve`` listens on when ``--host`` is not given.
         port: the port ``loceval serve`` listens on when ``--port`` is not given.
+        job_timeout_s: an evaluation running longer than this is stopped and fails with the
+            reason; its worker takes the next job.
+        job_memory_mb: the memory (address space, MiB) an evaluation's process may use
+            before it fails with the reason, at least 1024 (the loaded libraries take about
+            600); 0: no limit.
     """
 
     model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
@@ -52,6 +58,8 @@ class Settings(BaseSettings):
     public_url: str = "http://127.0.0.1:8000"
     host: Annotated[str, Field(min_length=1)] = "127.0.0.1"
     port: Annotated[int, Field(ge=1, le=65535)] = 8000
+    job_timeout_s: Annotated[float, Field(gt=0, le=7 * 86400)] = 1800.0
+    job_memory_mb: Annotated[int, Field(ge=0, le=1 << 22)] = 4096
 
     @field_validator("queue_url")
     @classmethod
@@ -59,6 +67,17 @@ class Settings(BaseSettings):
         if value in {"sqlite", "immediate"} or value.startswith(("redis://", "rediss://")):
             return value
         msg = f"LOCEVAL_QUEUE_URL must be sqlite, immediate or redis://HOST:PORT/DB, not {value!r}"
+        raise ValueError(msg)
+
+    @field_validator("job_memory_mb")
+    @classmethod
+    def _enough_memory(cls, value: int) -> int:
+        if value == 0 or value >= _MIN_JOB_MEMORY_MB:
+            return value
+        msg = (
+            f"LOCEVAL_JOB_MEMORY_MB must be 0 (no limit) or at least {_MIN_JOB_MEMORY_MB}: "
+            f"an evaluation's libraries alone take about 600 MiB, not {value}"
+        )
         raise ValueError(msg)
 
     @property
