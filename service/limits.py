@@ -65,7 +65,7 @@ _CRASH_SIGNALS: Final = frozenset({signal.SIGSEGV, signal.SIGABRT, signal.SIGBUS
 """How a C library that does not check its allocations dies when the address space is full."""
 _ADVICE: Final = (
     "evaluate shorter recordings or fewer estimates, or use coarser options (a larger "
-    "options.rpe_delta, fewer formats); the operator can raise {setting}."
+    "options.rpe_delta, fewer options.formats); the operator can raise {setting}."
 )
 
 Progress = Callable[[str, float], None]
@@ -131,15 +131,24 @@ class Limits:
         )
         return JobTimeoutError(msg)
 
-    def memory_error(self) -> JobMemoryError:
-        """Return the error of a job that ran out of memory."""
-        if self.memory_mb:
-            needed = f"needed more than {self.memory_mb} MiB of memory (LOCEVAL_JOB_MEMORY_MB)"
+    def memory_error(self, *, killed: bool = False) -> JobMemoryError:
+        """Return the error of a job that ran out of memory (``killed``: by the system)."""
+        if killed:
+            msg = (
+                f"The {self.what} was killed by the system (SIGKILL), most likely because the "
+                "server ran out of memory; " + _ADVICE.format(setting="the server's memory")
+            )
+        elif self.memory_mb:
+            msg = (
+                f"The {self.what} needed more than {self.memory_mb} MiB of memory "
+                "(LOCEVAL_JOB_MEMORY_MB) and was stopped; "
+                + _ADVICE.format(setting="LOCEVAL_JOB_MEMORY_MB")
+            )
         else:
-            needed = "needed more memory than the server has"
-        msg = f"The {self.what} {needed} and was stopped; " + _ADVICE.format(
-            setting="LOCEVAL_JOB_MEMORY_MB"
-        )
+            msg = (
+                f"The {self.what} ran out of memory (the server has no more) and was stopped; "
+                + _ADVICE.format(setting="the server's memory")
+            )
         return JobMemoryError(msg)
 
 
@@ -243,7 +252,9 @@ def _raise(outcome: tuple[Any, ...] | None, exitcode: int | None, limits: Limits
             sig = signal.Signals(-exitcode)
             # Not our kill (that is a timeout): the kernel's out-of-memory killer, or a C
             # library whose allocation failed at the address-space limit.
-            if sig is signal.SIGKILL or (limits.memory_mb and sig in _CRASH_SIGNALS):
+            if sig is signal.SIGKILL:
+                raise limits.memory_error(killed=True)
+            if limits.memory_mb and sig in _CRASH_SIGNALS:
                 raise limits.memory_error()
             msg = f"The {limits.what}'s process was killed by {sig.name}."
             raise JobProcessError(msg)

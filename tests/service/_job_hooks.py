@@ -28,6 +28,7 @@ __all__ = [
     "killed",
     "no_overlap",
     "report_then_fail",
+    "sleep_forever",
     "sleep_if_sleeper",
 ]
 
@@ -63,6 +64,12 @@ def sleep_if_sleeper(job: Job, out_dir: Path, progress: ProgressCallback) -> Non
         progress("searching pairs", 0.3)
         time.sleep(3600)
     run_job(job, out_dir, progress)
+
+
+def sleep_forever(*, progress: ProgressCallback) -> None:
+    """Report the process id, then hang."""
+    progress(f"pid {os.getpid()}", 0.0)
+    time.sleep(3600)
 
 
 def grow(*_args: object, **_kwargs: object) -> None:
