@@ -5,7 +5,10 @@
 kind into a huey task, together with the webhook task and the once-a-minute tick. The
 evaluation job itself is here too; schedule runs are in :mod:`service.schedule_runs`. Every
 executor runs inside :func:`service.tracking.tracked_job` (claim, heartbeat, finish,
-cleanup), so a kind is only what differs: what it reads and what it stores.
+cleanup), so a kind is only what differs: what it reads and what it stores. An evaluation's
+computation runs in a child process within the settings' wall-time and memory limits
+(:func:`service.limits.run_limited`), so a runaway one fails with the reason and frees its
+worker.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from service.db import (
     make_session_factory,
 )
 from service.evaluations import EVALUATION, visits_dataset_id
+from service.limits import Limits, run_limited
 from service.options import (
     checkpoints_from_options,
     config_from_options,
@@ -73,7 +77,10 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
             work = _job_for(session, runtime, evaluation)
         runtime.store.clear_job(job.kind.folder, evaluation_id)
         staging = job.staging_dir()
-        run_job(work, staging, job.progress)
+        # In a child process: stopped at the wall-time limit, capped at the memory limit.
+        run_limited(
+            Limits.from_settings(runtime.settings), run_job, work, staging, progress=job.progress
+        )
         final = job.publish(staging)
         document = json.loads((final / "result.json").read_text())
         job.succeed(

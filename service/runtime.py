@@ -20,6 +20,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from service.adapters import converted
 from service.db import Evaluation, ScheduleRun
+from service.limits import warm_up
 from service.logs import configure_logging, log_transition
 from service.settings import Settings
 from service.storage import BlobStore
@@ -111,6 +112,7 @@ class Runtime:
     def start_consumer(self, *, periodic: bool = True) -> Consumer:
         """Start queue consumer threads in this process (no signal handlers of its own)."""
         configure_logging()
+        warm_up()  # the jobs' forkserver imports the evaluation modules now, not at the first job
         consumer = _EmbeddedConsumer(
             self.huey,
             workers=self.settings.workers,

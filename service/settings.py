@@ -19,6 +19,7 @@ __all__ = ["Settings", "get_settings"]
 
 _REPO = Path(__file__).resolve().parent.parent
 _GIB = 1 << 30
+_MIN_JOB_MEMORY_MB = 1024
 
 
 class Settings(BaseSettings):
@@ -45,6 +46,11 @@ class Settings(BaseSettings):
             are deleted by an hourly sweep; 0 keeps them forever. Datasets are never swept.
         min_free_bytes: free space the data directory keeps: an upload that would leave less
             gets 507, and start-up warns below it; 0 turns the check off.
+        job_timeout_s: an evaluation running longer than this is stopped and fails with the
+            reason; its worker takes the next job.
+        job_memory_mb: the memory (address space, MiB) an evaluation's process may use
+            before it fails with the reason, at least 1024 (the loaded libraries take about
+            600); 0: no limit.
     """
 
     model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
@@ -63,6 +69,8 @@ class Settings(BaseSettings):
     webhook_allow: str = ""
     retention_days: Annotated[int, Field(ge=0, le=36500)] = 0
     min_free_bytes: Annotated[int, Field(ge=0, le=1 << 50)] = _GIB
+    job_timeout_s: Annotated[float, Field(gt=0, le=7 * 86400)] = 1800.0
+    job_memory_mb: Annotated[int, Field(ge=0, le=1 << 22)] = 4096
 
     @field_validator("queue_url")
     @classmethod
@@ -79,6 +87,16 @@ class Settings(BaseSettings):
 
         AllowList.parse(value)  # ValueError names the entry
         return value
+    @field_validator("job_memory_mb")
+    @classmethod
+    def _enough_memory(cls, value: int) -> int:
+        if value == 0 or value >= _MIN_JOB_MEMORY_MB:
+            return value
+        msg = (
+            f"LOCEVAL_JOB_MEMORY_MB must be 0 (no limit) or at least {_MIN_JOB_MEMORY_MB}: "
+            f"an evaluation's libraries alone take about 600 MiB, not {value}"
+        )
+        raise ValueError(msg)
 
     @property
     def resolved_database_url(self) -> str:

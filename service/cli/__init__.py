@@ -2,6 +2,7 @@
 
 A :class:`~loceval.errors.LocevalError` prints its message and exits 1 (bad input, no
 traceback); an error about an option is prefixed with the option's flag (``--max-dt: ...``).
+Running out of memory exits 1 too, with what to do about it.
 Anything else is a bug: the traceback is printed and the exit code is 2.
 
 Each command lives in its own module, imported only when that command runs: ``loceval
@@ -22,7 +23,13 @@ from service.cli.parser import EXIT_BUG, EXIT_INPUT, build_parser
 if TYPE_CHECKING:
     import argparse
 
-__all__ = ["main"]
+__all__ = ["OUT_OF_MEMORY", "main"]
+
+OUT_OF_MEMORY = (
+    "The command ran out of memory and stopped; evaluate shorter recordings or fewer "
+    "estimates, or use coarser options (a larger --rpe-delta, fewer --formats)."
+)
+"""The message of a command that ran out of memory (a very small --rpe-delta, say)."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -35,6 +42,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INPUT
     except KeyboardInterrupt:
         return 130
+    except MemoryError:  # the input, not a bug: say what to do instead of a traceback
+        print(f"loceval: error: {OUT_OF_MEMORY}", file=sys.stderr)  # noqa: T201
+        return EXIT_INPUT
     except Exception:  # noqa: BLE001  (the documented bug path: traceback, exit 2)
         traceback.print_exc()
         print(  # noqa: T201

@@ -12,12 +12,12 @@ from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import inspect, select
 
-from loceval.errors import AssociationError
 from service import jobs
 from service.db import Base, Dataset, Evaluation, Project, Schedule, ScheduleRun, utcnow
 from service.jobs import Runtime, create_runtime, execute_evaluation, recover
 from service.settings import Settings
 from tests.factories import make_trajectory, write_tum
+from tests.service import _job_hooks as hooks
 
 
 @pytest.fixture
@@ -141,12 +141,7 @@ def test_bad_input_fails_the_job_with_the_core_message(
     runtime: Runtime, evaluation_id: str, monkeypatch
 ):
     """A LocevalError becomes a failed job with a problem document and no half artifacts."""
-
-    def fail(*_args, **_kwargs):
-        msg = f"No overlap in {runtime.store.root}/datasets/{evaluation_id}/est.txt; time offset?"
-        raise AssociationError(msg, option="time_offset_s")
-
-    monkeypatch.setattr(jobs, "run_job", fail)
+    monkeypatch.setattr(jobs, "run_job", hooks.no_overlap)  # raised in the job's process
     execute_evaluation(runtime, evaluation_id)
     row = _row(runtime, evaluation_id)
     assert row.status == "failed"
@@ -163,12 +158,7 @@ def test_a_bug_fails_the_job_with_an_error_id(
     runtime: Runtime, evaluation_id: str, monkeypatch, caplog
 ):
     """Any other exception is logged with its traceback; the job shows only an error id."""
-
-    def crash(*_args, **_kwargs):
-        msg = "boom"
-        raise RuntimeError(msg)
-
-    monkeypatch.setattr(jobs, "run_job", crash)
+    monkeypatch.setattr(jobs, "run_job", hooks.crash)  # raised in the job's process
     with caplog.at_level(logging.ERROR, logger="service.jobs"):
         execute_evaluation(runtime, evaluation_id)
     row = _row(runtime, evaluation_id)

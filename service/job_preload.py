@@ -1,0 +1,50 @@
+"""Imported once by the jobs' forkserver: what every job's process starts with.
+
+:mod:`service.limits` runs each job in a process forked from a server process that imported
+this module, so a job does not import NumPy, SciPy, Matplotlib, WeasyPrint and the CAD
+libraries anew (seconds per job). A module that fails to import is left out here (the job
+that needs it reports the failure itself); the server must start whatever is missing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+from typing import Final
+
+__all__ = ["MODULES"]
+
+MODULES: Final = (
+    "service.runner",
+    "loceval.evaluation",
+    "loceval.readers",
+    "loceval.checkpoint_evaluation",
+    "loceval.assessment",
+    "exporters",
+    "exporters.placement",
+    "exporters.tables",
+    "exporters.report",
+    "exporters.plots",
+    "exporters.plots.figure",
+    "exporters.plots.maps",
+    "exporters.plots.series",
+    "exporters.plots.render",
+    "exporters.report.render",
+    "jinja2",
+    "weasyprint",
+    "exporters.dxf",
+    "exporters.rhino",
+    "exporters.gltf",
+    "exporters.ifc",
+    "exporters.checkpoints",
+)
+"""The modules a job's process needs, loaded once in the forkserver."""
+
+
+def _preload() -> None:
+    for name in MODULES:
+        with contextlib.suppress(Exception):  # e.g. a missing system library of WeasyPrint
+            importlib.import_module(name)
+
+
+_preload()
