@@ -25,6 +25,7 @@ import numpy as np
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.readers._common import seconds_to_ns
+from loceval.readers._plain import parse_plain
 from loceval.readers.source import missing_file_error
 
 __all__ = [
@@ -141,6 +142,13 @@ def parse_table(
         ReaderError: a line has the wrong number of cells or a cell is not a number.
     """
     first_line, first_pos = _skip_leading_lines(text, skip_lines, comments)
+    # ASCII text: character offsets are byte offsets, and the encoding is a copy.
+    body = text.encode()[first_pos:] if text.isascii() else text[first_pos:].encode()
+    plain = parse_plain(body, delimiter=delimiter, usecols=usecols, int_first=int_first)
+    if plain is not None:
+        values, rows, first_int = plain
+        numbered: IntArray = rows + (first_line + 1)
+        return NumericTable(values, numbered, np.zeros(len(values), dtype=bool), first_int)
     # Without comments below the leading block the C parser need not look for them.
     body_comments = comments if comments and text.find(comments, first_pos) >= 0 else None
     fill = empty_cells and delimiter is not None
