@@ -10,6 +10,8 @@ commands get is relative to it.
 
 from __future__ import annotations
 
+import itertools
+
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
@@ -250,12 +252,12 @@ def _obj(path: Path) -> Path:
 
 def _dxf(path: Path) -> Path:
     """A square room as DXF lines (a floor plan ezdxf reads)."""
-    import ezdxf  # noqa: PLC0415  (a CAD library: loaded only for this input)
+    import ezdxf
 
     doc = ezdxf.new()
     space = doc.modelspace()
     square = [(0, 0), (4, 0), (4, 4), (0, 4), (0, 0)]
-    for a, b in zip(square, square[1:], strict=False):
+    for a, b in itertools.pairwise(square):
         space.add_line(a, b)
     doc.saveas(path)
     return path
