@@ -11,7 +11,6 @@ commands get is relative to it.
 from __future__ import annotations
 
 import itertools
-
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
