@@ -75,7 +75,8 @@ def build_trajectory(
         raise ReaderError(msg)
     if quat_xyzw is not None:
         _reject_nonfinite(quat_xyzw, lines, where=where, what="quaternion")
-        norms = np.linalg.norm(quat_xyzw, axis=1)
+        with np.errstate(over="ignore"):  # a 1e308 component: norm inf, refused below
+            norms = np.linalg.norm(quat_xyzw, axis=1)
         bad = np.flatnonzero(np.abs(norms - 1.0) > QUAT_NORM_TOLERANCE)
         if bad.size:
             i = int(bad[0])

@@ -153,6 +153,8 @@ def _message_data(
     if opcode != _OP_MESSAGE or record_channel != channel_id or record_time != log_time:
         raise _NotServableError
     data_size = length - 22
+    if not 0 <= data_size <= os.fstat(fd).st_size:  # a garbage length: no read of exabytes
+        raise _NotServableError
     start = at + _MESSAGE_HEAD.size
     if start + data_size <= len(block):
         return block[start : start + data_size]

@@ -28,7 +28,6 @@ used column are dropped and counted in a warning.
 
 from __future__ import annotations
 
-import csv
 import io
 import re
 from collections.abc import Mapping
@@ -42,7 +41,7 @@ from loceval._typing import IntArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.readers._common import build_trajectory
 from loceval.readers.source import SourceSpec, TrajectoryFormat
-from loceval.readers.text import load_text, parse_table, stamps_from_values
+from loceval.readers.text import csv_rows, load_text, parse_table, stamps_from_values
 from loceval.trajectory import Trajectory
 
 __all__ = ["CSV_KEYS", "LENGTH_UNITS", "TIME_UNITS", "read_csv"]
@@ -212,7 +211,7 @@ def _find_header(text: str, *, where: str) -> tuple[int, str | None, list[str]]:
             header_index, header = previous
             delimiter = max(_DELIMITERS, key=header.count)
             sep = delimiter if header.count(delimiter) else None
-            cells = _header_cells(header.lstrip("#"), sep)
+            cells = _header_cells(header.lstrip("#"), sep, where=where)
             return header_index, sep, [cell.strip() for cell in cells]
         previous = (index, line)
     msg = (
@@ -222,10 +221,10 @@ def _find_header(text: str, *, where: str) -> tuple[int, str | None, list[str]]:
     raise ReaderError(msg)
 
 
-def _header_cells(line: str, delimiter: str | None) -> list[str]:
+def _header_cells(line: str, delimiter: str | None, *, where: str) -> list[str]:
     if delimiter is None:
         return line.split()
-    return next(csv.reader([line], delimiter=delimiter))
+    return csv_rows([line], delimiter, where=where)[0]
 
 
 def _looks_numeric(line: str) -> bool:

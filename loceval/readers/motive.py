@@ -27,7 +27,6 @@ Conventions:
 from __future__ import annotations
 
 import calendar
-import csv
 import io
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -41,7 +40,7 @@ from loceval.errors import ReaderError
 from loceval.geometry import SimilarityTransform
 from loceval.readers._common import build_trajectory
 from loceval.readers.source import SourceSpec, TrajectoryFormat
-from loceval.readers.text import load_text, parse_table, stamps_from_values
+from loceval.readers.text import csv_rows, load_text, parse_table, stamps_from_values
 from loceval.trajectory import Trajectory
 
 __all__ = ["MOTIVE_FRAME_ID", "Y_UP_TO_Z_UP", "list_rigid_bodies", "read_motive"]
@@ -195,7 +194,7 @@ def _read_layout(text: str, *, where: str) -> _Layout:
         head.append(raw.rstrip("\r\n"))
         if len(head) >= _HEADER_SEARCH_LINES:
             break
-    rows = list(csv.reader(head))
+    rows = csv_rows(head, ",", where=where)
     first = [cell.strip() for cell in rows[0]] if rows else []
     if not first or first[0] != "Format Version":
         msg = (

@@ -11,8 +11,6 @@ names are matched without regard to case, spaces or a unit suffix in brackets.
 
 from __future__ import annotations
 
-import csv
-import io
 import re
 from pathlib import Path
 
@@ -22,7 +20,7 @@ from loceval._typing import FloatArray
 from loceval.controlpoints import ControlPoints, Visits
 from loceval.errors import InputError, ReaderError
 from loceval.readers._common import seconds_to_ns
-from loceval.readers.text import load_text
+from loceval.readers.text import csv_rows, load_text
 from loceval.trajectory import MAX_COORDINATE_M, MAX_SPAN_S
 
 __all__ = [
@@ -69,23 +67,35 @@ def _first_row(text: str) -> list[str] | None:
     return None
 
 
-def _split(line: str) -> list[str]:
+def _split(line: str, *, where: str = "The table") -> list[str]:
+    """Split a row at its first delimiter among ``, ; TAB`` (CSV quoting), else whitespace.
+
+    Raises:
+        ReaderError: not CSV the csv module can split (a huge cell, a stray line break).
+    """
     delimiter = next((d for d in (",", ";", "\t") if d in line), None)
     if delimiter is None:
         return line.split()
-    return [cell.strip() for cell in next(csv.reader(io.StringIO(line), delimiter=delimiter))]
+    return [cell.strip() for cell in csv_rows([line], delimiter, where=where)[0]]
 
 
 def looks_like_control_points(first_line: str) -> bool:
     """Tell whether a header row is a control-point survey (``id,x,y,z`` and no time)."""
-    keys = _header_keys(_split(first_line.strip()))
-    timed = {"t", "time", "timestamp", "t_start"} & {_normalise(c) for c in _split(first_line)}
+    try:
+        cells = _split(first_line.strip())
+    except ReaderError:  # not CSV the csv module splits: no survey header
+        return False
+    keys = _header_keys(cells)
+    timed = {"t", "time", "timestamp", "t_start"} & {_normalise(c) for c in cells}
     return all(k in keys for k in _POINT_KEYS) and not timed
 
 
 def looks_like_visits(first_line: str) -> bool:
     """Tell whether a header row is a visits table (``id,t_start,t_end``)."""
-    keys = _header_keys(_split(first_line.strip()))
+    try:
+        keys = _header_keys(_split(first_line.strip()))
+    except ReaderError:  # not CSV the csv module splits: no visits header
+        return False
     return all(k in keys for k in _VISIT_KEYS)
 
 
@@ -100,7 +110,7 @@ def _rows(
         msg = f"{where} is empty; {what} need a header row {','.join(required)} and rows."
         raise ReaderError(msg)
     header_line, header = lines[0]
-    keys = _header_keys(_split(header))
+    keys = _header_keys(_split(header, where=where))
     missing = [k for k in required if k not in keys]
     if missing:
         msg = (
@@ -109,7 +119,7 @@ def _rows(
             f"{','.join(required)}."
         )
         raise ReaderError(msg)
-    rows = [(n, _split(line)) for n, line in lines[1:]]
+    rows = [(n, _split(line, where=where)) for n, line in lines[1:]]
     if not rows:
         msg = f"{where} has a header but no rows; add one row per {what[:-1]}."
         raise ReaderError(msg)

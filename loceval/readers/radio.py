@@ -19,7 +19,6 @@ tables apart by their header (uploads are recognised by it).
 
 from __future__ import annotations
 
-import csv
 import io
 import re
 from collections.abc import Sequence
@@ -32,7 +31,7 @@ import numpy as np
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import InputError, ReaderError
 from loceval.readers.csv import TIME_UNITS
-from loceval.readers.text import load_text
+from loceval.readers.text import csv_rows, load_text
 from loceval.trajectory import MAX_COORDINATE_M
 
 __all__ = [
@@ -217,7 +216,10 @@ def sniff_radio_table(path: Path) -> str | None:
         if not line or (line.startswith("#") and _is_comment(line)):
             continue
         delimiter = max(_DELIMITERS, key=line.count)
-        cells = _split(line.lstrip("#"), delimiter if line.count(delimiter) else None)
+        try:
+            cells = _split(line.lstrip("#"), delimiter if line.count(delimiter) else None)
+        except ReaderError:  # not CSV the csv module splits: no radio table
+            return None
         names = {_normalize(c)[0] for c in cells}
         names |= {n.rpartition("_")[0] for n in names if n.rpartition("_")[2] in _UNIT_SPELLINGS}
         if all(names & set(_RANGE_NAMES[k]) for k in ("t", "anchor_id", "range_m")):
@@ -350,13 +352,17 @@ def read_ranges(path: Path, anchors: Anchors) -> Ranges:
     limit = float(np.iinfo(np.int64).max) / ns_per_unit
     bad_time = shaped & ~(np.abs(t_raw) < limit)
     bad_range = shaped & ~bad_time & ~np.isfinite(range_raw)
+    with np.errstate(invalid="ignore"):
+        too_far = shaped & ~bad_time & ~bad_range & (np.abs(range_raw) > MAX_COORDINATE_M)
+    bad_range |= too_far
     negative = shaped & ~bad_time & ~bad_range & (range_raw < 0)
     unknown = shaped & ~bad_time & ~bad_range & ~negative & (index < 0)
     keep = shaped & ~bad_time & ~bad_range & ~negative & ~unknown
     reasons = [
         (int((~shaped).sum()), f"with other than {width} cells"),
         (int(bad_time.sum()), "whose time is not a finite number"),
-        (int(bad_range.sum()), "whose range is NaN or not a number"),
+        (int((bad_range & ~too_far).sum()), "whose range is NaN or not a number"),
+        (int(too_far.sum()), f"whose range is beyond {MAX_COORDINATE_M:g} m"),
         (int(negative.sum()), "with a negative range"),
         (int(unknown.sum()), "with an anchor id not in the anchors file"),
     ]
@@ -456,7 +462,7 @@ def _read_rows(
     header_line, header_text = header
     delimiter = max(_DELIMITERS, key=header_text.count)
     sep = delimiter if header_text.count(delimiter) else None
-    headers = [c.strip() for c in _split(header_text.lstrip("#"), sep)]
+    headers = [c.strip() for c in _split(header_text.lstrip("#"), sep, where=where)]
     if sum(_is_number(c) for c in headers) >= 2:  # no header has two numbers as names
         expected = "id,x,y,z" if kind == "anchors" else "t,anchor_id,range_m"
         msg = (
@@ -472,7 +478,7 @@ def _read_rows(
     ]
     lines = [number for number, _ in numbered]
     raws = [raw.strip() for _, raw in numbered]
-    rows = [r.split() for r in raws] if sep is None else list(csv.reader(raws, delimiter=sep))
+    rows = [r.split() for r in raws] if sep is None else csv_rows(raws, sep, where=where)
     return header_line, headers, rows, np.array(lines, dtype=np.intp)
 
 
@@ -491,10 +497,15 @@ def _is_comment(line: str) -> bool:
     return known < 2
 
 
-def _split(line: str, delimiter: str | None) -> list[str]:
+def _split(line: str, delimiter: str | None, *, where: str = "The table") -> list[str]:
+    """Split a line at ``delimiter`` (CSV quoting), or at whitespace without one.
+
+    Raises:
+        ReaderError: not CSV the csv module can split (a huge cell, a stray line break).
+    """
     if delimiter is None:
         return line.split()
-    return next(csv.reader([line], delimiter=delimiter))
+    return csv_rows([line], delimiter, where=where)[0]
 
 
 def _is_number(cell: str) -> bool:

@@ -91,6 +91,8 @@ def _sniff_text(head: bytes) -> TrajectoryFormat | None:
     if not head.strip() or b"\x00" in head:
         return None
     text = head.decode("utf-8-sig", errors="replace")
+    if "\r" in text and "\n" not in text:
+        text = text.replace("\r", "\n")  # old Mac line ends, as load_text reads them
     if len(head) == _HEAD_BYTES and "\n" in text:
         text = text[: text.rindex("\n")]  # drop the cut-off last line
     lines = [line.strip() for line in text.split("\n") if line.strip()]

@@ -31,6 +31,7 @@ from loceval.readers.source import missing_file_error
 __all__ = [
     "NS_PER_S",
     "NumericTable",
+    "csv_rows",
     "load_text",
     "parse_table",
     "positions_and_quat",
@@ -102,6 +103,31 @@ def load_text(path: Path) -> str:
     if "\r" in text and "\n" not in text:
         text = text.replace("\r", "\n")
     return text
+
+
+def csv_rows(lines: Sequence[str], delimiter: str, *, where: str) -> list[list[str]]:
+    """Split lines into CSV cells (quotes honoured), as :func:`csv.reader` does.
+
+    Args:
+        lines: the lines, without their line ends.
+        delimiter: the cell delimiter.
+        where: the file, for the message.
+
+    Returns:
+        The cells of each line.
+
+    Raises:
+        ReaderError: a line is not CSV the csv module can split: a cell longer than its
+            limit (128 KiB) or a line break inside a cell.
+    """
+    try:
+        return list(csv.reader(lines, delimiter=delimiter))
+    except csv.Error as err:
+        msg = (
+            f"{where} is not a readable CSV table ({err}); check that it is a text table "
+            "with one row per line and cells of ordinary length."
+        )
+        raise ReaderError(msg) from err
 
 
 def parse_table(
@@ -386,7 +412,7 @@ def _parse_slow(
         line = raw.split(comments, 1)[0] if comments is not None else raw
         if not line.strip():
             continue
-        cells = _split_cells(line.rstrip("\r"), delimiter)
+        cells = _split_cells(line.rstrip("\r"), delimiter, where=where)
         if expected is None:
             expected = (len(cells), lineno)
         picked = _pick_cells(
@@ -449,10 +475,10 @@ def _pick_cells(
     return [cells[c] for c in cols]
 
 
-def _split_cells(line: str, delimiter: str | None) -> list[str]:
+def _split_cells(line: str, delimiter: str | None, *, where: str) -> list[str]:
     if delimiter is None:
         return line.split()
-    return next(csv.reader([line], delimiter=delimiter))
+    return csv_rows([line], delimiter, where=where)[0]
 
 
 def _convert_cells(

@@ -10,17 +10,19 @@ import os
 import sqlite3
 import struct
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import BinaryIO, Final
 
+import apsw  # rosbags' SQLite driver: a damaged .db3 raises its errors, not sqlite3's
 from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.interfaces import Connection
 from rosbags.rosbag1 import ReaderError as Rosbag1ReaderError
 from rosbags.rosbag2 import Reader as Rosbag2Reader
 from rosbags.rosbag2 import ReaderError as Rosbag2ReaderError
+from rosbags.rosbag2 import storage_mcap
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, TypesysError, get_typestore
 from rosbags.typesys.store import Typestore
@@ -58,6 +60,7 @@ _FOREIGN_ERRORS: Final = (
     SerdeError,
     TypesysError,
     sqlite3.Error,
+    apsw.Error,
     ZstdError,
     struct.error,
     EOFError,
@@ -67,8 +70,33 @@ _FOREIGN_ERRORS: Final = (
     KeyError,
     IndexError,
     AssertionError,
+    OverflowError,
+    MemoryError,  # a damaged length field: the reader tries to allocate exabytes
     TypeError,  # rosbags' MCAP reader calls ord() on an empty read of a truncated file
 )
+
+
+def _read_within_file(read_exact: Callable[[BinaryIO, int], bytes]) -> Callable[..., bytes]:
+    """Wrap rosbags' MCAP ``read_exact`` so a record longer than the rest of the file is refused.
+
+    A damaged MCAP file holds garbage record lengths; unchecked, ``read(size)`` asks for
+    exabytes (MemoryError) or, worse, for gigabytes that are allocated and filled.
+    """
+
+    def read_within_file(bio: BinaryIO, size: int) -> bytes:
+        pos = bio.tell()
+        end = bio.seek(0, os.SEEK_END)
+        bio.seek(pos)
+        if size > end - pos:
+            msg = f"Truncated record at offset {pos}: expected {size} bytes, got {end - pos}."
+            raise Rosbag2ReaderError(msg)
+        return read_exact(bio, size)
+
+    return read_within_file
+
+
+if storage_mcap.read_exact.__name__ != "read_within_file":  # once, even if reimported
+    storage_mcap.read_exact = _read_within_file(storage_mcap.read_exact)
 
 
 # --- Opening bags.
