@@ -6,7 +6,9 @@ the summary report (:mod:`exporters.summary`).
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
+from types import ModuleType
 from typing import Final
 
 from exporters.errors import ExportError, ExportUnavailableError
@@ -102,6 +104,42 @@ def render_view_html(view: ReportView, *, templates_dir: Path) -> bytes:
     )
 
 
+_WEASYPRINT_LOCK: Final = threading.Lock()
+_weasyprint_loaded: tuple[ModuleType, type[Exception]] | str | None = None
+
+
+def _weasyprint() -> tuple[ModuleType, type[Exception]]:
+    """Import WeasyPrint once per process: the module and its fatal URL-fetching error.
+
+    The import is made once, under a lock, and its outcome kept: two report jobs on two
+    worker threads importing it at the same time would otherwise see a half-initialised
+    module (an AttributeError, reported as a bug), and a missing system library would be
+    looked for again by every report.
+
+    Raises:
+        ExportUnavailableError: WeasyPrint or its system libraries (pango) are missing.
+    """
+    global _weasyprint_loaded  # noqa: PLW0603  (the process-wide outcome of one import)
+    with _WEASYPRINT_LOCK:
+        if _weasyprint_loaded is None:
+            try:
+                import weasyprint  # noqa: PLC0415  (optional dependency: loceval[report])
+                from weasyprint.urls import FatalURLFetchingError  # noqa: PLC0415
+            except (ImportError, OSError) as err:  # OSError: pango/glib libraries missing
+                first = (str(err).strip().splitlines() or [type(err).__name__])[0]
+                _weasyprint_loaded = (
+                    "report.pdf needs WeasyPrint and its system libraries (pango); install "
+                    f"loceval[report] and the packages libpango-1.0-0 and libpangoft2-1.0-0 "
+                    f"({first[:200]})."
+                )
+            else:
+                _weasyprint_loaded = (weasyprint, FatalURLFetchingError)
+        loaded = _weasyprint_loaded
+    if isinstance(loaded, str):
+        raise ExportUnavailableError(loaded)
+    return loaded
+
+
 def html_to_pdf(html: bytes) -> bytes:
     """Lay the report's HTML out on A4 pages with WeasyPrint.
 
@@ -112,20 +150,12 @@ def html_to_pdf(html: bytes) -> bytes:
         ExportUnavailableError: WeasyPrint (or its system libraries) is not installed.
         ExportError: the layout failed or the HTML referred to a non-``data:`` resource.
     """
-    try:
-        import weasyprint  # noqa: PLC0415  (optional dependency: loceval[report])
-        from weasyprint.urls import FatalURLFetchingError  # noqa: PLC0415
-    except (ImportError, OSError) as err:  # OSError: pango/cairo libraries missing
-        msg = (
-            "report.pdf needs WeasyPrint and its system libraries (pango); install "
-            f"loceval[report] and libpango-1.0-0 ({err})."
-        )
-        raise ExportUnavailableError(msg) from err
+    weasyprint, fatal_fetch = _weasyprint()
     fetcher = weasyprint.URLFetcher(allowed_protocols=("data",), fail_on_errors=True)
     try:
         document = weasyprint.HTML(string=html.decode("utf-8"), url_fetcher=fetcher)
         pdf = document.write_pdf()
-    except FatalURLFetchingError as err:
+    except fatal_fetch as err:
         msg = f"The report refers to a resource that is not embedded: {err}."
         raise ExportError(msg) from err
     return bytes(pdf)

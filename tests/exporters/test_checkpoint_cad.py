@@ -91,6 +91,7 @@ def test_alignment_visits_exist(evaluation: CheckpointEvaluation) -> None:
     assert (len(flags), sum(flags)) == (24, 8)  # 12 points x 2 passes; 4 corners x 2
 
 
+@pytest.mark.pdf
 def test_3dm_matches_the_dxf(out: Path) -> None:
     """.3dm: point objects, text dots and lines on the DXF's layers at its coordinates."""
     dxf = dxf_content(out / "paths.dxf")
@@ -133,6 +134,7 @@ def test_3dm_matches_the_dxf(out: Path) -> None:
     assert model.Strings["loceval.evaluation_id"] == "ev1"
 
 
+@pytest.mark.pdf
 def test_json_matches_the_dxf(out: Path) -> None:
     """paths.3dm.json: encoded lines, points and dots carry the DXF's coordinates."""
     dxf = dxf_content(out / "paths.dxf")
@@ -158,6 +160,7 @@ def test_json_matches_the_dxf(out: Path) -> None:
     np.testing.assert_allclose(doc["base_point"], [512340000.0, 5403211000.0, 112000.0])
 
 
+@pytest.mark.pdf
 def test_grasshopper_script_reads_the_control_points_document(out: Path) -> None:
     """Every key the Grasshopper script subscripts exists in the control-point document."""
     doc = json.loads((out / "paths.3dm.json").read_text())
@@ -186,6 +189,7 @@ def glb_world(model: pygltflib.GLTF2, node: pygltflib.Node, primitive: int = 0) 
     return out
 
 
+@pytest.mark.pdf
 def test_glb_matches_the_dxf(out: Path, validate: Validator) -> None:
     """GLB: POINTS and LINES nodes per layer, Y up in metres, the DXF's points within 1 mm."""
     data = (out / "paths.glb").read_bytes()

@@ -81,6 +81,7 @@ def test_ifc_room_is_the_floor_plan_of_the_paths(
     assert floor_plan_paths(plain[0].svg) == []
 
 
+@pytest.mark.pdf
 def test_report_pdf_and_html_carry_the_floor_plan(
     tmp_path: Path, two_estimates: EvaluationResult
 ) -> None:

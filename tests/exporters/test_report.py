@@ -418,6 +418,7 @@ def test_large_series_render_small(rng: np.random.Generator) -> None:
 # --- HTML -------------------------------------------------------------------------------
 
 
+@pytest.mark.pdf
 def test_html_is_self_contained(rendered: tuple[str, bytes]) -> None:
     """The HTML loads nothing: no scripts, links or non-data URLs; a CSP forbids the rest."""
     html, _ = rendered
@@ -430,6 +431,7 @@ def test_html_is_self_contained(rendered: tuple[str, bytes]) -> None:
     assert len(html.encode()) < 3_000_000
 
 
+@pytest.mark.pdf
 def test_html_header_names_inputs_and_options(
     rendered: tuple[str, bytes], result: EvaluationResult
 ) -> None:
@@ -462,6 +464,7 @@ def test_html_header_names_inputs_and_options(
     ]
 
 
+@pytest.mark.pdf
 def test_html_tables_equal_the_statistics(
     rendered: tuple[str, bytes], result: EvaluationResult
 ) -> None:
@@ -482,6 +485,7 @@ def test_html_tables_equal_the_statistics(
     assert not rpe["translation RMSE"][1].endswith(BEST_MARK)
 
 
+@pytest.mark.pdf
 def test_html_has_every_plot_inline(rendered: tuple[str, bytes]) -> None:
     """Every figure is an inline SVG data URI that parses, with its numbered caption."""
     html, _ = rendered
@@ -507,6 +511,7 @@ def test_html_has_every_plot_inline(rendered: tuple[str, bytes]) -> None:
         assert root.tag == "{http://www.w3.org/2000/svg}svg"
 
 
+@pytest.mark.pdf
 def test_html_verdict_comes_first(rendered: tuple[str, bytes]) -> None:
     """The verdict is the first section, before the inputs, tables and plots."""
     html, _ = rendered
@@ -542,6 +547,7 @@ def _pdf_pages(pdf: bytes) -> list[str]:
     return [" ".join(page.extract_text().split()) for page in reader.pages]
 
 
+@pytest.mark.pdf
 def test_pdf_pages_and_text(rendered: tuple[str, bytes], result: EvaluationResult) -> None:
     """The PDF is A4 with the verdict on page 1 and each section starting a new page."""
     pypdf = pytest.importorskip("pypdf")
@@ -574,6 +580,7 @@ def test_pdf_pages_and_text(rendered: tuple[str, bytes], result: EvaluationResul
     assert "Warnings" in pages[-1]
 
 
+@pytest.mark.pdf
 def test_pdf_embeds_every_plot(rendered: tuple[str, bytes]) -> None:
     """Each of the eight figures (seven plots and the clock check's) is an image in the PDF."""
     pypdf = pytest.importorskip("pypdf")
@@ -589,6 +596,7 @@ def test_pdf_embeds_every_plot(rendered: tuple[str, bytes]) -> None:
     assert len(distinct) == 8
 
 
+@pytest.mark.pdf
 def test_pdf_tables_are_not_split(rendered: tuple[str, bytes]) -> None:
     """Table 1 and Table 2 each sit whole on one page (caption through MAX row)."""
     _, pdf = rendered
@@ -599,6 +607,7 @@ def test_pdf_tables_are_not_split(rendered: tuple[str, bytes]) -> None:
         assert tail.count("MAX") >= 2  # translation and rotation groups both there
 
 
+@pytest.mark.pdf
 def test_pdf_refuses_external_resources() -> None:
     """A non-data URL in the HTML stops the PDF instead of touching the network or disk."""
     for url in ("http://example.invalid/x.png", "file:///etc/hostname"):

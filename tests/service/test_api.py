@@ -493,6 +493,7 @@ def test_selectors_are_checked_before_queueing(
 # --- artifacts -------------------------------------------------------------------------
 
 
+@pytest.mark.pdf
 def test_all_artifacts(api: Api, datasets: tuple[str, str]) -> None:
     """With the default formats every artifact is listed and served with its media type."""
     evaluation = api.evaluate(evaluation_body(*datasets, options={})).json()

@@ -145,6 +145,7 @@ def test_duplicate_ids_are_refused_at_upload(api: Api, tmp_path: Path) -> None:
     assert_problem(response, 422, detail=r"survey\.csv")
 
 
+@pytest.mark.pdf
 def test_a_schedule_evaluates_each_recording_against_a_fixed_survey(
     api: Api, rng: np.random.Generator, tmp_path: Path
 ) -> None:

@@ -185,6 +185,7 @@ def test_unknown_artifact_is_an_input_error(
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.pdf
 def test_out_writes_every_artifact(
     demo: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:

@@ -347,6 +347,7 @@ def test_a_bag_topic_that_announces_nothing(
     assert "arrivals at control points are read from std_msgs/String" in err
 
 
+@pytest.mark.pdf
 @pytest.mark.usefixtures("recording")
 def test_every_cad_format_with_out(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--out writes every format; the CAD files agree on the error lines at the site."""

@@ -36,6 +36,7 @@ def template(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.mark.pdf
 def test_report_writes_the_summary_with_each_recordings_figures(
     tmp_path: Path, rng, template: Path, capsys
 ):

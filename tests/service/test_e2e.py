@@ -177,6 +177,7 @@ def test_upload_recognises_tum_and_deduplicates(fr1: dict[str, Any], public_data
         assert fr1["again"][name]["id"] == dataset["id"]
 
 
+@pytest.mark.pdf
 def test_evaluation_equals_the_cli(fr1: dict[str, Any], public_data: Path) -> None:
     """The job's ATE equals ``loceval evaluate --json`` on the same files to 1e-12."""
     evaluation = succeeded(fr1["evaluation"])
@@ -193,6 +194,7 @@ def test_evaluation_equals_the_cli(fr1: dict[str, Any], public_data: Path) -> No
     assert shas == [i["sha256"] for i in expected["inputs"]]
 
 
+@pytest.mark.pdf
 def test_every_artifact_downloads_and_opens(
     fr1: dict[str, Any], client: httpx2.Client, tmp_path: Path
 ) -> None:
@@ -208,6 +210,7 @@ def test_unknown_artifact_is_404(fr1: dict[str, Any], client: httpx2.Client) -> 
     assert "report.pdf" in answer.json()["detail"]
 
 
+@pytest.mark.pdf
 def test_one_shot_evaluate_equals_the_evaluation(
     fr1: dict[str, Any], client: httpx2.Client, public_data: Path
 ) -> None:
@@ -239,6 +242,7 @@ def test_mcap_upload_lists_topics_and_tf(bag: dict[str, Any]) -> None:
     assert {"/amcl_pose", "/odom", "tf:map:base_link"} <= selectors
 
 
+@pytest.mark.pdf
 def test_mcap_evaluation_equals_the_cli(
     bag: dict[str, Any], client: httpx2.Client, public_data: Path, tmp_path: Path
 ) -> None:
@@ -255,6 +259,7 @@ def test_mcap_evaluation_equals_the_cli(
     _check_all_artifacts(client, evaluation, tmp_path)
 
 
+@pytest.mark.pdf
 def test_one_shot_bag_takes_estimates_from_the_reference_file(
     bag: dict[str, Any], client: httpx2.Client, public_data: Path
 ) -> None:

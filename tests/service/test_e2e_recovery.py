@@ -141,6 +141,7 @@ def _write_synthetic_pair(folder: Path, poses: int) -> tuple[Path, Path]:
     return paths
 
 
+@pytest.mark.pdf
 def test_server_killed_mid_job_finishes_it_after_a_restart(
     tmp_path: Path, tmp_path_factory: pytest.TempPathFactory
 ) -> None:

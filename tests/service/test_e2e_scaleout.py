@@ -97,6 +97,7 @@ def _stop_worker(worker: ServiceProcess) -> tuple[int, float]:
     return code, time.monotonic() - started
 
 
+@pytest.mark.pdf
 def test_workers_run_the_jobs_of_a_server_without_consumer(
     tmp_path_factory: pytest.TempPathFactory,
     postgres_url: str,

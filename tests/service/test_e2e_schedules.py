@@ -56,6 +56,7 @@ def _wait_for_run(client: httpx2.Client, schedule_id: str, timeout: float = 180)
     pytest.fail(f"no finished run of {schedule_id} within {timeout} s: {runs}")
 
 
+@pytest.mark.pdf
 def test_trigger_a_run_and_read_its_summary(tmp_path: Path, rng):
     """Upload three runs, trigger the schedule; the PDF table equals each evaluation's ATE."""
     from pypdf import PdfReader
@@ -85,6 +86,7 @@ def test_trigger_a_run_and_read_its_summary(tmp_path: Path, rng):
             assert f"{rpe:.3f}" in text
 
 
+@pytest.mark.pdf
 def test_a_fire_missed_while_down_runs_once_at_start(tmp_path: Path, rng):
     """A schedule due while the service was stopped runs once when it starts, and says so."""
     data = tmp_path / "data"

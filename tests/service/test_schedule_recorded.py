@@ -70,6 +70,7 @@ def _bag(tmp_path: Path, rng: np.random.Generator, name: str, start_s: int) -> P
     return write_bag(tmp_path / f"{name}.bag", records, fmt="rosbag1")
 
 
+@pytest.mark.pdf
 def test_backlog_keeps_its_recording_dates(
     client: TestClient, tmp_path: Path, rng: np.random.Generator
 ) -> None:

@@ -98,6 +98,7 @@ def _pdf_text(data: bytes) -> str:
     return "\n".join(page.extract_text() for page in PdfReader(io.BytesIO(data)).pages)
 
 
+@pytest.mark.pdf
 def test_a_run_reports_every_recording_and_its_table_matches(client: TestClient, recordings):
     """Trigger a run: each selected recording is evaluated; the summary PDF shows their figures."""
     created = client.post("/api/v1/schedules", json=_schedule_body())
@@ -132,6 +133,7 @@ def test_a_run_reports_every_recording_and_its_table_matches(client: TestClient,
     assert [r["id"] for r in listed["items"]] == [run["id"]]
 
 
+@pytest.mark.pdf
 def test_an_empty_selection_gives_a_report_that_says_so(client: TestClient, recordings):
     """A selection matching nothing still succeeds, with a report saying nothing matched."""
     del recordings
@@ -249,6 +251,7 @@ def no_backoff(monkeypatch):
     monkeypatch.setattr(schedule_runs.time, "sleep", refuse)
 
 
+@pytest.mark.pdf
 @pytest.mark.usefixtures("no_backoff")
 def test_the_webhook_receives_the_summary(client: TestClient, recordings):
     """A finished run posts its links and each recording's verdicts to the webhook."""
@@ -271,6 +274,7 @@ def test_the_webhook_receives_the_summary(client: TestClient, recordings):
     assert recorded["webhook"]["delivered"] is True
 
 
+@pytest.mark.pdf
 @pytest.mark.usefixtures("no_backoff")
 def test_a_failing_webhook_is_retried_and_recorded(client: TestClient):
     """A webhook answering 500 is tried three times; the run still succeeds."""
@@ -288,6 +292,7 @@ def test_a_failing_webhook_is_retried_and_recorded(client: TestClient):
     assert [a["status"] for a in recorded["webhook"]["attempts"]] == [500, 500, 500]
 
 
+@pytest.mark.pdf
 @pytest.mark.usefixtures("no_backoff")
 def test_an_unreachable_webhook_does_not_fail_the_run(client: TestClient):
     """A webhook nobody listens on is recorded as undelivered; the run is not affected."""

@@ -178,6 +178,7 @@ def _check_report(page: Any, evaluation: Any) -> None:
     report.close()
 
 
+@pytest.mark.pdf
 def test_ranging_evaluation_from_the_page(
     page: Any,
     live_server: Any,

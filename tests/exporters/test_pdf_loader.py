@@ -1,0 +1,52 @@
+"""WeasyPrint is imported once per process, and its absence is a clear export error."""
+
+from __future__ import annotations
+
+import sys
+import threading
+from types import ModuleType
+
+import pytest
+
+from exporters.errors import ExportUnavailableError
+from exporters.report import html_to_pdf
+from exporters.report import render as report_render
+
+
+def test_missing_weasyprint_is_an_unavailable_export_every_time(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Without WeasyPrint every report says what to install, once looked for (not per call)."""
+    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
+    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
+    for _ in range(2):
+        with pytest.raises(ExportUnavailableError, match=r"libpango-1\.0-0") as caught:
+            html_to_pdf(b"<p>x</p>")
+        assert "\n" not in str(caught.value)
+    assert isinstance(report_render._weasyprint_loaded, str)
+
+
+@pytest.mark.pdf
+def test_threads_rendering_at_once_share_one_import(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Eight threads asking for WeasyPrint at once all get the same, whole module."""
+    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
+    start = threading.Barrier(8)
+    modules: list[ModuleType] = []
+    errors: list[BaseException] = []
+
+    def load() -> None:
+        start.wait()
+        try:
+            modules.append(report_render._weasyprint()[0])
+        except BaseException as err:  # noqa: BLE001  (collected and asserted below)
+            errors.append(err)
+
+    threads = [threading.Thread(target=load) for _ in range(8)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert errors == []
+    assert len(modules) == 8
+    assert len({id(m) for m in modules}) == 1
+    assert hasattr(modules[0], "HTML")
