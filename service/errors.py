@@ -106,6 +106,8 @@ class WebhookUnresolvedError(WebhookRefusedError):
     """A webhook host that does not resolve (at delivery: retried, it may be temporary)."""
 
     code: ClassVar[str] = "schedule.webhook_unresolved"
+
+
 class InsufficientStorageError(LocevalError):
     """The data directory is nearly full: an upload would leave less than the set reserve."""
 

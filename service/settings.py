@@ -87,6 +87,7 @@ class Settings(BaseSettings):
 
         AllowList.parse(value)  # ValueError names the entry
         return value
+
     @field_validator("job_memory_mb")
     @classmethod
     def _enough_memory(cls, value: int) -> int:
