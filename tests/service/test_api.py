@@ -80,7 +80,7 @@ def test_upload_tum(api: Api, tum: tuple[bytes, bytes]) -> None:
     response = api.upload("truth.txt", tum[0])
     assert response.status_code == 201
     dataset = response.json()
-    assert response.headers["location"] == f"http://testserver/api/v1/datasets/{dataset['id']}"
+    assert response.headers["location"] == f"http://127.0.0.1:8000/api/v1/datasets/{dataset['id']}"
     assert dataset["kind"] == "tum"
     assert dataset["filename"] == "truth.txt"
     assert dataset["name"] == "truth.txt"
@@ -297,7 +297,7 @@ def test_create_evaluation(api: Api, datasets: tuple[str, str]) -> None:
     response = api.evaluate(body)
     assert response.status_code == 202
     evaluation = response.json()
-    url = f"http://testserver/api/v1/evaluations/{evaluation['id']}"
+    url = f"http://127.0.0.1:8000/api/v1/evaluations/{evaluation['id']}"
     assert response.headers["location"] == url
     assert evaluation["status"] == "succeeded"
     assert evaluation["progress"] == {"stage": "done", "fraction": 1.0}
