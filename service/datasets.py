@@ -231,11 +231,11 @@ def store_form(
         RequestValidationError: the name or the tags are over their limits.
         ReaderError: the file is not a recording loceval can read (nothing is kept).
     """
+    name = form.value("name")
+    tags = parse_tags(",".join(form.values("tags")))
     if not form.files:
         msg = "The upload has no file; send it in the multipart field 'file'."
         raise UploadError(msg)
-    name = form.value("name")
-    tags = parse_tags(",".join(form.values("tags")))
     return store_upload(runtime, project_id, form.files[0], name=name, tags=tags)
 
 
