@@ -54,8 +54,32 @@ _Id = Annotated[str, Field(min_length=1, max_length=64, examples=["0b8e6c1e-..."
 _Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
+def _holds_nul(value: object) -> bool:
+    if isinstance(value, str):
+        return "\x00" in value
+    if isinstance(value, list | tuple):
+        return any(_holds_nul(v) for v in value)
+    if isinstance(value, dict):
+        return any(_holds_nul(k) or _holds_nul(v) for k, v in value.items())
+    return False
+
+
 class _Strict(BaseModel):
+    """A request body: unknown fields and NUL characters in any text are refused.
+
+    No text a client sends is meant to hold NUL, and PostgreSQL cannot store one (the
+    request would fail with a 500 at the database instead of a 422 naming the field).
+    """
+
     model_config = ConfigDict(extra="forbid")
+
+    @field_validator("*", mode="after")
+    @classmethod
+    def _no_nul(cls, value: Any) -> Any:  # noqa: ANN401  (every field's type)
+        if _holds_nul(value):
+            msg = "holds a NUL character (\\u0000); remove it"
+            raise PydanticCustomError("nul_character", msg)  # noqa: EM101  (the error type)
+        return value
 
 
 class Problem(BaseModel):
@@ -498,7 +522,7 @@ _Url = Annotated[str, Field(max_length=2000, pattern=r"^https?://[^\s]+$")]
 class ScheduleCreate(_Strict):
     """A recurring summary report."""
 
-    name: Annotated[str, Field(min_length=1, max_length=200)]
+    name: Annotated[str, Field(min_length=1, max_length=200), _Printable]
     cron: Annotated[str, Field(min_length=1, max_length=200, examples=["0 7 * * mon"])]
     timezone: Annotated[str, Field(min_length=1, max_length=64, examples=["Europe/Berlin"])] = "UTC"
     selection: Selection = Field(default_factory=Selection)
@@ -511,7 +535,7 @@ class ScheduleCreate(_Strict):
 class SchedulePatch(_Strict):
     """Changes to a schedule; absent fields stay as they are."""
 
-    name: Annotated[str, Field(min_length=1, max_length=200)] | None = None
+    name: Annotated[str, Field(min_length=1, max_length=200), _Printable] | None = None
     cron: Annotated[str, Field(min_length=1, max_length=200)] | None = None
     timezone: Annotated[str, Field(min_length=1, max_length=64)] | None = None
     selection: Selection | None = None

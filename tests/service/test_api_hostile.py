@@ -29,6 +29,7 @@ from service.settings import Settings
 from service.storage import MAX_FILENAME_BYTES, sanitize_filename
 from tests.factories import make_trajectory, write_tum
 from tests.service._api_fixtures import Api, assert_problem, open_api, tum_pair
+from tests.service.test_e2e_scaleout import postgres_url  # noqa: F401  (a fixture)
 
 CHEAP = {"formats": ["result.json"]}
 PUBLIC = "https://loceval.example.org/site/"
@@ -404,6 +405,63 @@ def test_sanitize_filename_reports_each_change() -> None:
     ]
     assert sanitize_filename(name) == (name, [])
     assert sanitize_filename("run.bag") == ("run.bag", [])
+
+
+_SCHEDULE = {
+    "name": "weekly",
+    "cron": "0 7 * * mon",
+    "template": {"reference": {"selector": "/gt"}, "estimates": [{"selector": "/est"}]},
+}
+
+
+@pytest.mark.parametrize("database", ["sqlite", "postgresql"])
+def test_nul_characters_are_refused_everywhere(
+    tmp_path: Path, tum: bytes, database: str, request: pytest.FixtureRequest
+) -> None:
+    """NUL in a path, a query, a JSON body, a form field or a Hops id is a 4xx, never a 500.
+
+    PostgreSQL cannot store or compare text holding NUL: each of these was a 500 there.
+    """
+    url = "" if database == "sqlite" else request.getfixturevalue("postgres_url")
+    with open_api(tmp_path, database_url=url, raise_server_exceptions=False) as api:
+        dataset = api.dataset("run.txt", tum)
+        client, headers = api.client, api.headers
+        evaluation = {
+            "reference": {"dataset_id": dataset["id"], "name": "r\x00"},
+            "estimates": [{"dataset_id": dataset["id"]}],
+        }
+        selection = {**_SCHEDULE, "selection": {"tags": ["a\x00"], "name_pattern": "\x00"}}
+        hops = {
+            "pointer": "hops/paths",
+            "values": [
+                {
+                    "ParamName": "Evaluation",
+                    "InnerTree": {"{0}": [{"type": "System.String", "data": '"a\\u0000"'}]},
+                }
+            ],
+        }
+        answers = {
+            "path id": client.get("/api/v1/datasets/a%00", headers=headers),
+            "patch id": client.patch("/api/v1/schedules/x%00", headers=headers, json={}),
+            "query tag": client.get("/api/v1/datasets", params={"tag": "a\x00"}, headers=headers),
+            "query status": client.get("/api/v1/evaluations?status=%00", headers=headers),
+            "schedule name": client.post(
+                "/api/v1/schedules", headers=headers, json={**_SCHEDULE, "name": "a\x00"}
+            ),
+            "schedule selection": client.post("/api/v1/schedules", headers=headers, json=selection),
+            "evaluation name": client.post("/api/v1/evaluations", headers=headers, json=evaluation),
+            "upload name": api.upload("other.txt", tum + b"\n", name="a\x00"),
+            "hops id": client.post("/solve", headers=headers, json=hops),
+        }
+        statuses = {k: r.status_code for k, r in answers.items()}
+        assert all(400 <= s < 500 for s in statuses.values()), statuses
+        for what in ("path id", "query tag", "query status", "schedule name", "evaluation name"):
+            assert_problem(answers[what], 422, type_="request.invalid")
+        assert answers["query tag"].json()["errors"][0]["loc"] == ["query", "tag"]
+        assert statuses["hops id"] == 404, answers["hops id"].text
+        locations = {tuple(e["loc"]) for e in answers["schedule selection"].json()["errors"]}
+        assert locations == {("body", "selection", "tags"), ("body", "selection", "name_pattern")}
+        assert len(api.stored()) == 1
 
 
 # --- 3. links from the configured address ------------------------------------------------
