@@ -34,6 +34,7 @@ _UPLOAD_BODY = {
             "schema": {
                 "type": "object",
                 "required": ["file"],
+                "additionalProperties": False,
                 "properties": {
                     "file": {
                         "type": "string",
@@ -43,9 +44,9 @@ _UPLOAD_BODY = {
                     },
                     "name": {
                         "type": "string",
-                        "minLength": 1,
                         "maxLength": MAX_DATASET_NAME,
-                        "description": "default: the file name; longer names are refused (422)",
+                        "description": "default (or empty): the file name; a longer name or "
+                        "one with control characters is refused (422), never shortened",
                     },
                     "tags": {
                         "type": "string",

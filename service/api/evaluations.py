@@ -136,6 +136,7 @@ _ONE_SHOT_BODY = {
             "schema": {
                 "type": "object",
                 "required": ["reference"],
+                "additionalProperties": False,
                 "properties": {
                     "reference": {"type": "string", "format": "binary"},
                     "estimate": {
