@@ -259,8 +259,10 @@ def get_owned(
         NotFoundError: no such row in this project (another project's ids included, so
             their existence is not revealed).
     """
-    with sessions() as session:
-        row = session.get(model, row_id)
+    row = None
+    if "\x00" not in row_id:  # no id holds NUL, and PostgreSQL cannot compare one
+        with sessions() as session:
+            row = session.get(model, row_id)
     if row is None or row.project_id != project_id:
         plural = str(model.__tablename__)
         msg = f"No {plural[:-1]} {row_id!r} in this project; list them with GET /{plural}."

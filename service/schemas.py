@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Final, Literal
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -13,7 +14,7 @@ from pydantic import (
     ValidationError,
     field_validator,
 )
-from pydantic_core import core_schema
+from pydantic_core import PydanticCustomError, core_schema
 
 from exporters import ARTIFACT_ALIASES, ARTIFACTS, artifact_name
 from exporters.errors import ExportOptionsError
@@ -21,7 +22,9 @@ from loceval.options import AUTO, OptionKind, option
 
 __all__ = [
     "ArtifactPublic",
+    "DatasetFields",
     "DatasetPublic",
+    "DatasetUploaded",
     "DatasetsPublic",
     "DeviceOffset",
     "EvaluationCreate",
@@ -45,14 +48,39 @@ __all__ = [
     "SourceRef",
     "SummaryRow",
     "TemplateSource",
+    "UploadPublic",
 ]
 
 _Id = Annotated[str, Field(min_length=1, max_length=64, examples=["0b8e6c1e-..."])]
 _Finite = Annotated[float, Field(allow_inf_nan=False)]
 
 
+def _holds_nul(value: object) -> bool:
+    if isinstance(value, str):
+        return "\x00" in value
+    if isinstance(value, list | tuple):
+        return any(_holds_nul(v) for v in value)
+    if isinstance(value, dict):
+        return any(_holds_nul(k) or _holds_nul(v) for k, v in value.items())
+    return False
+
+
 class _Strict(BaseModel):
+    """A request body: unknown fields and NUL characters in any text are refused.
+
+    No text a client sends is meant to hold NUL, and PostgreSQL cannot store one (the
+    request would fail with a 500 at the database instead of a 422 naming the field).
+    """
+
     model_config = ConfigDict(extra="forbid")
+
+    @field_validator("*", mode="after")
+    @classmethod
+    def _no_nul(cls, value: Any) -> Any:  # noqa: ANN401  (every field's type)
+        if _holds_nul(value):
+            msg = "holds a NUL character (\\u0000); remove it"
+            raise PydanticCustomError("nul_character", msg)  # noqa: EM101  (the error type)
+        return value
 
 
 class Problem(BaseModel):
@@ -317,6 +345,60 @@ class DatasetPublic(BaseModel):
     )
 
 
+MAX_DATASET_NAME: Final = 300
+MAX_TAG: Final = 50
+MAX_TAGS: Final = 20
+
+
+def _printable(value: str) -> str:
+    """Refuse control characters (a database may not store them, a page cannot show them)."""
+    if any(ord(c) < 0x20 or ord(c) == 0x7F for c in value):
+        msg = "holds control characters (tab, newline, NUL, ...); remove them"
+        raise PydanticCustomError("control_characters", msg)  # noqa: EM101  (the error type)
+    return value
+
+
+_Printable = AfterValidator(_printable)
+
+
+class DatasetFields(_Strict):
+    """The text fields of ``POST /datasets``: checked, never cut to fit."""
+
+    name: Annotated[str, Field(min_length=1, max_length=MAX_DATASET_NAME), _Printable] | None = None
+    tags: Annotated[
+        list[Annotated[str, Field(min_length=1, max_length=MAX_TAG), _Printable]],
+        Field(max_length=MAX_TAGS),
+    ] = Field(default_factory=list)
+
+
+class UploadPublic(BaseModel):
+    """What ``POST /datasets`` did with this request's file name, name and tags."""
+
+    deduplicated: bool = Field(
+        description="these bytes were uploaded to this project before: the answer is that "
+        "dataset (status 200, not 201); nothing new is stored"
+    )
+    tags_added: list[str] = Field(
+        description="this request's tags that the dataset did not have; they were added "
+        "(the tags of identical uploads merge)"
+    )
+    name_kept: str | None = Field(
+        default=None,
+        description="deduplicated, and the request named the dataset otherwise: the "
+        "dataset keeps this name and the request's name is not applied",
+    )
+    notes: list[str] = Field(
+        description="in words, everything the server did not take as sent (file name "
+        "sanitised or shortened, name kept, tags merged)"
+    )
+
+
+class DatasetUploaded(DatasetPublic):
+    """The answer to an upload: the dataset, and what became of the request's fields."""
+
+    upload: UploadPublic
+
+
 class DatasetsPublic(BaseModel):
     """A page of datasets, newest first."""
 
@@ -441,7 +523,7 @@ _Url = Annotated[str, Field(max_length=2000, pattern=r"^https?://[^\s]+$")]
 class ScheduleCreate(_Strict):
     """A recurring summary report."""
 
-    name: Annotated[str, Field(min_length=1, max_length=200)]
+    name: Annotated[str, Field(min_length=1, max_length=200), _Printable]
     cron: Annotated[str, Field(min_length=1, max_length=200, examples=["0 7 * * mon"])]
     timezone: Annotated[str, Field(min_length=1, max_length=64, examples=["Europe/Berlin"])] = "UTC"
     selection: Selection = Field(default_factory=Selection)
@@ -458,7 +540,7 @@ class ScheduleCreate(_Strict):
 class SchedulePatch(_Strict):
     """Changes to a schedule; absent fields stay as they are."""
 
-    name: Annotated[str, Field(min_length=1, max_length=200)] | None = None
+    name: Annotated[str, Field(min_length=1, max_length=200), _Printable] | None = None
     cron: Annotated[str, Field(min_length=1, max_length=200)] | None = None
     timezone: Annotated[str, Field(min_length=1, max_length=64)] | None = None
     selection: Selection | None = None

@@ -11,6 +11,7 @@ from __future__ import annotations
 from functools import lru_cache
 from pathlib import Path
 from typing import Annotated
+from urllib.parse import urlsplit
 
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
@@ -35,7 +36,9 @@ class Settings(BaseSettings):
         job_attempts: how often an interrupted job is started before it is marked failed.
         job_lease_s: a running job whose heartbeat is older than this is taken as abandoned.
         templates_dir: Jinja2 templates of the reports and the web page.
-        public_url: the service's address as users reach it, for links in webhooks.
+        public_url: the service's address as users reach it (``https://host/prefix/``):
+            every absolute link (``Location``, artifact URLs, webhooks) starts with it; the
+            request's ``Host`` and forwarded headers are never used for links.
         host: the address ``loceval serve`` listens on when ``--host`` is not given.
         port: the port ``loceval serve`` listens on when ``--port`` is not given.
         webhook_allow: internal webhook targets let through anyway, comma-separated host
@@ -96,6 +99,19 @@ class Settings(BaseSettings):
         msg = (
             f"LOCEVAL_JOB_MEMORY_MB must be 0 (no limit) or at least {_MIN_JOB_MEMORY_MB}: "
             f"an evaluation's libraries alone take about 600 MiB, not {value}"
+        )
+        raise ValueError(msg)
+
+    @field_validator("public_url")
+    @classmethod
+    def _absolute_public_url(cls, value: str) -> str:
+        parts = urlsplit(value.strip())
+        absolute = parts.scheme in {"http", "https"} and bool(parts.hostname)
+        if absolute and not parts.query and not parts.fragment:
+            return value.strip()
+        msg = (
+            "LOCEVAL_PUBLIC_URL must be the service's address as users reach it, "
+            f"http(s)://HOST[:PORT][/PREFIX], not {value!r}"
         )
         raise ValueError(msg)
 

@@ -24,7 +24,14 @@ from typing import Final
 
 from service.errors import register_private_root
 
-__all__ = ["EVALUATIONS", "RUNS", "BlobStore", "safe_filename"]
+__all__ = [
+    "EVALUATIONS",
+    "MAX_FILENAME_BYTES",
+    "RUNS",
+    "BlobStore",
+    "safe_filename",
+    "sanitize_filename",
+]
 
 EVALUATIONS: Final = "evaluations"
 """The folder of evaluation jobs."""
@@ -32,17 +39,62 @@ RUNS: Final = "runs"
 """The folder of schedule runs."""
 
 _UNSAFE: Final = re.compile(r"[^\w.\-+]+")
+_SUFFIX: Final = re.compile(r"\.[0-9A-Za-z]{1,10}$")
+MAX_FILENAME_BYTES: Final = 120
+"""The longest stored file name, in UTF-8 bytes (file systems allow 255)."""
+
+
+def sanitize_filename(name: str, *, default: str = "upload") -> tuple[str, list[str]]:
+    r"""Return a file name safe to store and show, and what was changed, in words.
+
+    The client's name is text, never a path: folders (``/`` and ``\``) are dropped, then
+    everything but letters, digits, ``.``, ``-``, ``+`` and ``_`` (control characters,
+    spaces, shell characters) becomes ``_``, leading dots go, and a name longer than
+    :data:`MAX_FILENAME_BYTES` is shortened before its suffix (readers sniff ``.mcap``,
+    ``.bag``, ``.zip`` by it). The result is never empty, ``.`` or ``..``.
+
+    Args:
+        name: the name the client gave.
+        default: the name when nothing usable is left.
+
+    Returns:
+        The name, and one phrase per kind of change (empty when it is kept as sent).
+    """
+    changes: list[str] = []
+    base = name.replace("\\", "/").rsplit("/", 1)[-1]
+    if base != name:
+        changes.append("its folders were removed")
+    cleaned = _UNSAFE.sub("_", unicodedata.normalize("NFKC", base).strip().lstrip("."))
+    if cleaned != base:
+        changes.append(
+            "characters other than letters, digits, '.', '-', '+' and '_' were replaced, "
+            "leading dots removed"
+        )
+    fitted = _fit(cleaned, MAX_FILENAME_BYTES)
+    if fitted != cleaned:
+        changes.append(f"it was shortened to {MAX_FILENAME_BYTES} bytes")
+    if not fitted.strip("._"):
+        return default, [*changes, f"nothing usable was left, so it is {default!r}"]
+    return fitted, changes
 
 
 def safe_filename(name: str, *, default: str = "upload") -> str:
     """Return a file name safe to store: no folders, no control or shell characters.
 
-    The suffix is kept (readers sniff ``.mcap``, ``.bag``, ``.zip`` by it).
+    The suffix is kept (readers sniff ``.mcap``, ``.bag``, ``.zip`` by it); see
+    :func:`sanitize_filename`.
     """
-    base = name.replace("\\", "/").rsplit("/", 1)[-1]
-    base = unicodedata.normalize("NFKC", base).strip().lstrip(".")
-    base = _UNSAFE.sub("_", base)[-200:]
-    return base or default
+    return sanitize_filename(name, default=default)[0]
+
+
+def _fit(name: str, max_bytes: int) -> str:
+    """Shorten a name to ``max_bytes`` of UTF-8, cutting the stem and keeping the suffix."""
+    if len(name.encode("utf-8")) <= max_bytes:
+        return name
+    match = _SUFFIX.search(name)
+    suffix = match.group() if match else ""
+    stem = name[: len(name) - len(suffix)].encode("utf-8")[: max_bytes - len(suffix)]
+    return stem.decode("utf-8", "ignore") + suffix
 
 
 class BlobStore:

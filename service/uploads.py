@@ -18,14 +18,16 @@ import contextlib
 import errno
 import hashlib
 import os
+import re
 import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Final
+from urllib.parse import unquote_to_bytes
 
 import anyio.to_thread
-from python_multipart.exceptions import MultipartParseError
+from python_multipart.exceptions import FormParserError
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
@@ -39,6 +41,12 @@ _MAX_FIELDS: Final = 200
 _BATCH_BYTES: Final = 1 << 20
 _FORM_OVERHEAD: Final = 1 << 20  # headers and text fields allowed beyond the file limit
 _SPACE_CHECK_BYTES: Final = 16 << 20  # the free space is checked again after this many bytes
+_MAX_HEADER_BYTES: Final = 16 * 1024  # all header lines of one part
+_MAX_HEADERS: Final = 16  # header lines in one part
+_BOUNDARY: Final = re.compile(r"[0-9A-Za-z'()+_,\-./:=? ]{0,69}[0-9A-Za-z'()+_,\-./:=?]")
+"""RFC 2046's boundary: 1 to 70 characters of ``bchars``, not ending in a space."""
+_EXTENDED_FILENAME: Final = re.compile(rb"(?:^|;)\s*filename\*\s*=\s*([^;]*)", re.IGNORECASE)
+_EXTENDED_VALUE: Final = re.compile(rb"([A-Za-z0-9!#$&+^_`{}~-]+)'[A-Za-z0-9-]*'(.*)")
 
 
 @dataclass(slots=True)
@@ -68,9 +76,17 @@ class ReceivedForm:
     fields: dict[str, list[str]] = field(default_factory=dict)
 
     def value(self, name: str) -> str | None:
-        """Return the last non-empty value of a text field, or None."""
-        values = [v for v in self.fields.get(name, []) if v.strip()]
-        return values[-1].strip() if values else None
+        """Return the one non-empty value of a single-valued text field, or None.
+
+        Raises:
+            UploadError: the field was sent more than once with a value (one of them
+                would be dropped without a word).
+        """
+        values = [v.strip() for v in self.fields.get(name, []) if v.strip()]
+        if len(values) > 1:
+            msg = f"The form field {name!r} was sent {len(values)} times; send it once."
+            raise UploadError(msg)
+        return values[0] if values else None
 
     def values(self, name: str) -> list[str]:
         """Return every value of a repeated text field, in order."""
@@ -90,12 +106,14 @@ class _Receiver:
         store: BlobStore,
         *,
         file_fields: frozenset[str],
+        text_fields: frozenset[str] | None,
         max_bytes: int,
         max_files: int,
         min_free_bytes: int = 0,
     ) -> None:
         self.store = store
         self.file_fields = file_fields
+        self.text_fields = text_fields
         self.max_bytes = max_bytes
         self.max_files = max_files
         self.min_free_bytes = min_free_bytes
@@ -104,6 +122,7 @@ class _Receiver:
         self.ended = False
         self._header_field = b""
         self._header_value = b""
+        self._header_bytes = 0
         self._headers: dict[bytes, bytes] = {}
         self._name = ""
         self._filename: str | None = None
@@ -130,29 +149,56 @@ class _Receiver:
         self._headers = {}
         self._header_field = b""
         self._header_value = b""
+        self._header_bytes = 0
+
+    def _count_header_bytes(self, size: int) -> None:
+        self._header_bytes += size
+        if self._header_bytes > _MAX_HEADER_BYTES:
+            msg = (
+                f"A multipart part's headers are longer than {_MAX_HEADER_BYTES // 1024} KiB; "
+                "send a normal form (a file name of a few hundred characters at most)."
+            )
+            raise UploadError(msg)
 
     def _header_field_data(self, data: bytes, start: int, end: int) -> None:
+        self._count_header_bytes(end - start)
         self._header_field += data[start:end]
 
     def _header_value_data(self, data: bytes, start: int, end: int) -> None:
+        self._count_header_bytes(end - start)
         self._header_value += data[start:end]
 
     def _header_end(self) -> None:
+        if len(self._headers) >= _MAX_HEADERS:
+            msg = f"A multipart part has more than {_MAX_HEADERS} headers; send a normal form."
+            raise UploadError(msg)
         self._headers[self._header_field.lower()] = self._header_value
         self._header_field = b""
         self._header_value = b""
 
     def _headers_finished(self) -> None:
-        disposition, params = parse_options_header(self._headers.get(b"content-disposition"))
-        if disposition != b"form-data" or b"name" not in params:
-            msg = "A multipart part has no Content-Disposition form-data name; send a normal form."
+        raw = self._headers.get(b"content-disposition", b"")
+        disposition, params = parse_options_header(raw)
+        if disposition.lower() != b"form-data" or not params.get(b"name"):
+            msg = (
+                "A multipart part has no Content-Disposition: form-data with a name; "
+                "send a normal multipart/form-data form."
+            )
             raise UploadError(msg)
-        self._name = params[b"name"].decode("utf-8", "replace")
-        filename = params.get(b"filename")
-        self._filename = None if filename is None else filename.decode("utf-8", "replace")
+        self._name = _utf8(params[b"name"], "A form field's name")
+        self._filename = _part_filename(raw, params.get(b"filename"))
         if self._filename and self._name not in self.file_fields:
             fields = " or ".join(repr(f) for f in sorted(self.file_fields))
-            msg = f"The form field {self._name!r} holds a file; send files only in {fields}."
+            msg = f"The form field {_shown(self._name)} holds a file; send files only in {fields}."
+            raise UploadError(msg)
+        texts = frozenset({self._name}) if self.text_fields is None else self.text_fields
+        readable = self.file_fields | texts
+        if self._filename is None and self._name not in readable:
+            known = ", ".join(repr(f) for f in sorted(readable))
+            msg = (
+                f"The form field {_shown(self._name)} is not one this endpoint reads; "
+                f"send only {known}."
+            )
             raise UploadError(msg)
         if self._filename is not None and self._name in self.file_fields:
             if len(self.form.files) >= self.max_files:
@@ -185,7 +231,7 @@ class _Receiver:
             self._text += chunk
             if len(self._text) > _MAX_FIELD_BYTES:
                 msg = (
-                    f"The form field {self._name!r} is longer than {_MAX_FIELD_BYTES} bytes; "
+                    f"The form field {_shown(self._name)} is longer than {_MAX_FIELD_BYTES} bytes; "
                     "send files in file fields."
                 )
                 raise UploadError(msg)
@@ -206,7 +252,7 @@ class _Receiver:
             else:
                 self.form.files.append(received)
         elif self._text is not None:
-            text = self._text.decode("utf-8", "replace")
+            text = _utf8(bytes(self._text), f"The form field {_shown(self._name)}")
             self.form.fields.setdefault(self._name, []).append(text)
             self._text = None
 
@@ -223,6 +269,51 @@ class _Receiver:
             self._path.unlink(missing_ok=True)
             self._path = None
         self.form.discard()
+
+
+def _shown(name: str) -> str:
+    """Return a client's field name quoted for a message, shortened when it is long."""
+    return repr(name if len(name) <= 60 else name[:57] + "...")
+
+
+def _utf8(data: bytes, what: str) -> str:
+    """Decode a text the client sent; refuse one that is not UTF-8 (never guess)."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        msg = f"{what} is not UTF-8 text; send text fields and names in UTF-8."
+        raise UploadError(msg) from None
+
+
+def _part_filename(disposition: bytes, plain: bytes | None) -> str | None:
+    """Return a part's file name: RFC 5987 ``filename*`` first, then ``filename``.
+
+    Plain names that are not UTF-8 are read as Latin-1 (what old clients send); the name is
+    display text only, sanitised where it is stored.
+
+    Raises:
+        UploadError: a ``filename*`` that is not ``charset'lang'percent-encoded``.
+    """
+    extended = _EXTENDED_FILENAME.search(disposition)
+    if extended is not None:
+        value = _EXTENDED_VALUE.fullmatch(extended.group(1).strip().strip(b'"'))
+        charset = value.group(1).decode("ascii").lower() if value else ""
+        if value is not None and charset in {"utf-8", "iso-8859-1"}:
+            try:
+                return unquote_to_bytes(value.group(2)).decode(charset)
+            except UnicodeDecodeError:
+                pass
+        msg = (
+            "A part's Content-Disposition has a malformed filename*; send "
+            "filename*=UTF-8''NAME (percent-encoded) or a plain filename."
+        )
+        raise UploadError(msg)
+    if plain is None:
+        return None
+    try:
+        return plain.decode("utf-8")
+    except UnicodeDecodeError:
+        return plain.decode("latin-1")
 
 
 def _too_large(max_bytes: int) -> str:
@@ -286,6 +377,7 @@ async def receive_multipart(
     *,
     max_bytes: int,
     file_fields: frozenset[str],
+    text_fields: frozenset[str] | None = None,
     max_files: int = 1,
     min_free_bytes: int = 0,
 ) -> ReceivedForm:
@@ -296,6 +388,8 @@ async def receive_multipart(
         store: where the files go (``incoming/``).
         max_bytes: the limit on the sum of the file sizes.
         file_fields: the field names that take files; files in other fields are refused.
+        text_fields: the text fields the route reads; others are refused, so a misspelt
+            field is not dropped without a word (None: any).
         max_files: how many files the request may hold.
         min_free_bytes: the free space the data directory keeps (0: not checked).
 
@@ -310,7 +404,7 @@ async def receive_multipart(
             (checked on Content-Length first, then while receiving); nothing is kept.
     """
     content_type, params = parse_options_header(request.headers.get("content-type"))
-    if content_type != b"multipart/form-data" or not params.get(b"boundary"):
+    if content_type.lower() != b"multipart/form-data" or not params.get(b"boundary"):
         fields = " or ".join(repr(f) for f in sorted(file_fields))
         msg = (
             f"Send the upload as multipart/form-data with the file in the field {fields} "
@@ -322,21 +416,29 @@ async def receive_multipart(
         raise UploadTooLargeError(_too_large(max_bytes))
     announced = int(declared) if declared is not None and declared.isdigit() else 0
     check_free_space(store, min_free_bytes, incoming_bytes=announced)
+    boundary = params[b"boundary"]
+    if not _BOUNDARY.fullmatch(boundary.decode("latin-1")):
+        msg = (
+            f"The multipart boundary ({len(boundary)} characters) is not valid: RFC 2046 allows "
+            "1 to 70 letters, digits and '()+_,-./:=? characters; let the HTTP client choose it."
+        )
+        raise UploadError(msg)
     receiver = _Receiver(
         store,
         file_fields=file_fields,
+        text_fields=text_fields,
         max_bytes=max_bytes,
         max_files=max_files,
         min_free_bytes=min_free_bytes,
     )
-    parser = MultipartParser(params[b"boundary"], receiver.callbacks())  # type: ignore[arg-type]
+    parser = MultipartParser(boundary, receiver.callbacks())  # type: ignore[arg-type]
     try:
         await _feed(request, parser)
     except ClientDisconnect:
         receiver.abort()
         msg = "The upload was interrupted before it was complete; send it again."
         raise UploadError(msg) from None
-    except MultipartParseError as err:
+    except FormParserError as err:
         receiver.abort()
         msg = f"The multipart body is malformed ({err}); send a normal multipart/form-data form."
         raise UploadError(msg) from None

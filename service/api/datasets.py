@@ -11,8 +11,17 @@ from service import datasets
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Dataset, get_owned
+from service.links import api_url
 from service.metrics import count_upload
-from service.schemas import DatasetPublic, DatasetsPublic
+from service.schemas import (
+    MAX_DATASET_NAME,
+    MAX_TAG,
+    MAX_TAGS,
+    DatasetPublic,
+    DatasetsPublic,
+    DatasetUploaded,
+)
+from service.storage import MAX_FILENAME_BYTES
 from service.uploads import receive_multipart
 
 __all__ = ["router"]
@@ -26,10 +35,25 @@ _UPLOAD_BODY = {
             "schema": {
                 "type": "object",
                 "required": ["file"],
+                "additionalProperties": False,
                 "properties": {
-                    "file": {"type": "string", "format": "binary"},
-                    "name": {"type": "string", "maxLength": 300},
-                    "tags": {"type": "string", "description": "comma-separated"},
+                    "file": {
+                        "type": "string",
+                        "format": "binary",
+                        "description": "the recording; its file name is stored sanitised "
+                        f"(no folders, at most {MAX_FILENAME_BYTES} bytes)",
+                    },
+                    "name": {
+                        "type": "string",
+                        "maxLength": MAX_DATASET_NAME,
+                        "description": "default (or empty): the file name; a longer name or "
+                        "one with control characters is refused (422), never shortened",
+                    },
+                    "tags": {
+                        "type": "string",
+                        "description": f"comma-separated, at most {MAX_TAGS} tags of up to "
+                        f"{MAX_TAG} characters; longer ones are refused (422)",
+                    },
                 },
             }
         }
@@ -45,19 +69,26 @@ def dataset_public(dataset: Dataset) -> DatasetPublic:
 @router.post(
     "",
     status_code=status.HTTP_201_CREATED,
-    response_model=DatasetPublic,
+    response_model=DatasetUploaded,
     openapi_extra={"requestBody": _UPLOAD_BODY},
     responses={
-        200: {"model": DatasetPublic, "description": "the same file was uploaded before"},
+        200: {
+            "model": DatasetUploaded,
+            "description": "the same bytes were uploaded before: that dataset, with this "
+            "request's tags merged in (see upload)",
+        },
         **problems(400, 413, 507),
     },
 )
 async def create_dataset(
     request: Request, response: Response, runtime: RuntimeDep, project_id: ProjectDep
-) -> DatasetPublic:
+) -> DatasetUploaded:
     """Upload a recording (multipart field ``file``), streamed to disk and inspected.
 
-    Re-uploading identical bytes returns the existing dataset with 200.
+    Identical bytes are stored once per project: uploading them again answers 200 with
+    the existing dataset, this request's tags merged into its tags and its name kept.
+    ``upload`` reports what became of the request (tags added, name kept, file name
+    sanitised). A name or tag over its limit is refused with 422, never shortened.
     """
     form = await receive_multipart(
         request,
@@ -65,18 +96,21 @@ async def create_dataset(
         max_bytes=runtime.settings.max_upload_bytes,
         file_fields=frozenset({"file"}),
         min_free_bytes=runtime.settings.min_free_bytes,
+        text_fields=frozenset({"name", "tags"}),
     )
     try:
-        dataset, created = await anyio.to_thread.run_sync(
+        dataset, report = await anyio.to_thread.run_sync(
             lambda: datasets.store_form(runtime, project_id, form)
         )
     finally:
         form.discard()
     count_upload(request, form)
-    if not created:
+    if report.deduplicated:
         response.status_code = status.HTTP_200_OK
-    response.headers["Location"] = f"{request.base_url}api/v1/datasets/{dataset.id}"
-    return dataset_public(dataset)
+    response.headers["Location"] = api_url(runtime.settings, "datasets", dataset.id)
+    return DatasetUploaded.model_validate(
+        {**dataset_public(dataset).model_dump(), "upload": report}
+    )
 
 
 @router.get("", response_model=DatasetsPublic, responses=problems())

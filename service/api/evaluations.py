@@ -13,6 +13,7 @@ from service import evaluations, retention
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Evaluation, get_owned
+from service.links import api_url, public_base
 from service.metrics import count_upload
 from service.schemas import EvaluationCreate, EvaluationPublic, EvaluationsPublic, RangingCreate
 from service.uploads import receive_multipart
@@ -23,6 +24,9 @@ router = APIRouter(tags=["evaluations"])
 
 _INLINE = frozenset({"report.html", "report.pdf"})
 _MAX_ESTIMATES = 20
+_ONE_SHOT_FIELDS = frozenset(
+    {"reference_selector", "estimate_selector", "estimate_name", "options"}
+)
 
 
 @router.post(
@@ -33,16 +37,15 @@ _MAX_ESTIMATES = 20
 )
 def create_evaluation_job(
     body: EvaluationCreate,
-    request: Request,
     response: Response,
     runtime: RuntimeDep,
     project_id: ProjectDep,
 ) -> EvaluationPublic:
     """Queue an evaluation of uploaded datasets; poll ``GET /evaluations/{id}`` for it."""
     evaluation = evaluations.create_evaluation(runtime, project_id, body)
-    response.headers["Location"] = f"{request.base_url}api/v1/evaluations/{evaluation.id}"
+    response.headers["Location"] = api_url(runtime.settings, "evaluations", evaluation.id)
     return evaluations.evaluation_public(
-        evaluation, base_url=str(request.base_url), with_result=False
+        evaluation, base_url=public_base(runtime.settings), with_result=False
     )
 
 
@@ -54,7 +57,6 @@ def create_evaluation_job(
 )
 def create_ranging_job(
     body: RangingCreate,
-    request: Request,
     response: Response,
     runtime: RuntimeDep,
     project_id: ProjectDep,
@@ -66,15 +68,14 @@ def create_ranging_job(
     ``GET /evaluations/{id}``; its result holds the ``ranging`` object.
     """
     evaluation = evaluations.create_ranging(runtime, project_id, body)
-    response.headers["Location"] = f"{request.base_url}api/v1/evaluations/{evaluation.id}"
+    response.headers["Location"] = api_url(runtime.settings, "evaluations", evaluation.id)
     return evaluations.evaluation_public(
-        evaluation, base_url=str(request.base_url), with_result=False
+        evaluation, base_url=public_base(runtime.settings), with_result=False
     )
 
 
 @router.get("/evaluations", response_model=EvaluationsPublic, responses=problems())
-def read_evaluations(  # noqa: PLR0917  (FastAPI passes dependencies and queries by name)
-    request: Request,
+def read_evaluations(
     runtime: RuntimeDep,
     project_id: ProjectDep,
     status_: Annotated[
@@ -87,7 +88,7 @@ def read_evaluations(  # noqa: PLR0917  (FastAPI passes dependencies and queries
     rows, count = evaluations.list_evaluations(
         runtime, project_id, status=status_, limit=limit, offset=offset
     )
-    base = str(request.base_url)
+    base = public_base(runtime.settings)
     items = [evaluations.evaluation_public(e, base_url=base, with_result=False) for e in rows]
     return EvaluationsPublic(items=items, count=count)
 
@@ -96,12 +97,12 @@ def read_evaluations(  # noqa: PLR0917  (FastAPI passes dependencies and queries
     "/evaluations/{evaluation_id}", response_model=EvaluationPublic, responses=problems(404)
 )
 def read_evaluation(
-    evaluation_id: str, request: Request, runtime: RuntimeDep, project_id: ProjectDep
+    evaluation_id: str, runtime: RuntimeDep, project_id: ProjectDep
 ) -> EvaluationPublic:
     """Status and progress; the result document once succeeded, the problem once failed."""
     evaluation = get_owned(runtime.sessions, Evaluation, evaluation_id, project_id)
     return evaluations.evaluation_public(
-        evaluation, base_url=str(request.base_url), with_result=True
+        evaluation, base_url=public_base(runtime.settings), with_result=True
     )
 
 
@@ -151,6 +152,7 @@ _ONE_SHOT_BODY = {
             "schema": {
                 "type": "object",
                 "required": ["reference"],
+                "additionalProperties": False,
                 "properties": {
                     "reference": {"type": "string", "format": "binary"},
                     "estimate": {
@@ -190,6 +192,7 @@ async def evaluate_upload(
         runtime.store,
         max_bytes=runtime.settings.max_upload_bytes,
         file_fields=frozenset({"reference", "estimate"}),
+        text_fields=_ONE_SHOT_FIELDS,
         max_files=1 + _MAX_ESTIMATES,
         min_free_bytes=runtime.settings.min_free_bytes,
     )
@@ -200,7 +203,7 @@ async def evaluate_upload(
     finally:
         form.discard()
     count_upload(request, form)
-    response.headers["Location"] = f"{request.base_url}api/v1/evaluations/{evaluation.id}"
+    response.headers["Location"] = api_url(runtime.settings, "evaluations", evaluation.id)
     return evaluations.evaluation_public(
-        evaluation, base_url=str(request.base_url), with_result=False
+        evaluation, base_url=public_base(runtime.settings), with_result=False
     )

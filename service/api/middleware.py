@@ -9,19 +9,24 @@ A path under ``/api/v1`` that matches no route at all (``/api/v1/healthz``) is p
 without a key, so the app answers its 404 problem: asking for a key to reach nothing would
 send the user after the wrong fix. A known route with an unknown id, or with a method it
 does not answer to, still needs the key.
+
+Once the key is known, a path or query holding a NUL character (``%00``) is refused with
+422 here, for every route at once: no id, tag or filter is ever NUL-bearing, and PostgreSQL
+cannot even compare text with one (it would fail the request with a 500).
 """
 
 from __future__ import annotations
 
 import json
-from typing import Final
+from typing import Any, Final
+from urllib.parse import parse_qsl
 
 import anyio.to_thread
 from starlette.routing import Match
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from service.auth import authenticate
-from service.errors import PROBLEM_JSON, AuthenticationError, problem_for
+from service.errors import PROBLEM_JSON, AuthenticationError, problem, problem_for
 from service.logs import log_context
 from service.runtime import Runtime
 
@@ -60,6 +65,9 @@ class ApiKeyMiddleware:
         if project_id is None:
             await _refuse(send, _MISSING if key is None else _UNKNOWN)
             return
+        if nul := _nul_locations(scope):
+            await _send_problem(send, _nul_problem(nul))
+            return
         scope.setdefault("state", {})[PROJECT_STATE_KEY] = project_id
         with log_context(project=project_id):
             await self.app(scope, receive, send)
@@ -88,16 +96,42 @@ def _lookup(runtime: Runtime, key: str) -> str | None:
         return project_id
 
 
+def _nul_locations(scope: Scope) -> list[list[str]]:
+    """Return where the path or the query holds a NUL character (``loc`` lists)."""
+    found = [["path"]] if "\x00" in str(scope.get("path", "")) else []
+    query = bytes(scope.get("query_string", b"")).decode("latin-1")
+    if "%00" in query or "\x00" in query:
+        pairs = parse_qsl(query, keep_blank_values=True)
+        found += [["query", name] for name, value in pairs if "\x00" in name + value]
+    return found
+
+
+def _nul_problem(locations: list[list[str]]) -> dict[str, Any]:
+    msg = "holds a NUL character (%00); remove it"
+    errors = [{"loc": loc, "msg": msg, "type": "nul_character"} for loc in locations]
+    where = "; ".join(f"{'.'.join(loc)}: {msg}" for loc in locations)
+    detail = f"The request is not valid: {where}."
+    return problem(422, "request.invalid", "RequestValidationError", detail, errors=errors)
+
+
 async def _refuse(send: Send, detail: str) -> None:
-    body = json.dumps(problem_for(AuthenticationError(detail))).encode("utf-8")
+    await _send_problem(
+        send, problem_for(AuthenticationError(detail)), [(b"www-authenticate", b"Bearer")]
+    )
+
+
+async def _send_problem(
+    send: Send, document: dict[str, Any], headers: list[tuple[bytes, bytes]] | None = None
+) -> None:
+    body = json.dumps(document).encode("utf-8")
     await send(
         {
             "type": "http.response.start",
-            "status": 401,
+            "status": int(document["status"]),
             "headers": [
                 (b"content-type", PROBLEM_JSON.encode()),
                 (b"content-length", str(len(body)).encode()),
-                (b"www-authenticate", b"Bearer"),
+                *(headers or []),
             ],
         }
     )

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Query, Request, Response, status
+from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
 
 from service import schedules
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Schedule, get_owned
+from service.links import api_url, public_base
 from service.schedules import (
     SUMMARY_ARTIFACTS,
     run_public,
@@ -39,9 +40,8 @@ router = APIRouter(prefix="/schedules", tags=["schedules"])
     responses=problems(),
 )
 def create_schedule(
-    body: ScheduleCreate, request: Request, response: Response, runtime: RuntimeDep,
-    project_id: ProjectDep,
-) -> ScheduleWithSecret:  # fmt: skip
+    body: ScheduleCreate, response: Response, runtime: RuntimeDep, project_id: ProjectDep
+) -> ScheduleWithSecret:
     """Create a schedule: cron and time zone, the recordings it covers, how to evaluate them.
 
     The answer carries ``webhook_secret``, the key of the signature on each webhook delivery
@@ -49,7 +49,7 @@ def create_schedule(
     public address unless the administrator allows it (``LOCEVAL_WEBHOOK_ALLOW``).
     """
     schedule = schedules.create_schedule(runtime, project_id, body)
-    response.headers["Location"] = f"{request.base_url}api/v1/schedules/{schedule.id}"
+    response.headers["Location"] = api_url(runtime.settings, "schedules", schedule.id)
     return schedule_with_secret(schedule)
 
 
@@ -100,26 +100,25 @@ def delete_schedule(schedule_id: str, runtime: RuntimeDep, project_id: ProjectDe
     responses=problems(404),
 )
 def run_schedule_now(
-    schedule_id: str, request: Request, runtime: RuntimeDep, project_id: ProjectDep
+    schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep
 ) -> ScheduleRunPublic:
     """Start a run now (paused schedules too); poll ``GET .../runs/{run_id}``."""
     schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
     run_id = schedules.trigger_run(runtime, schedule)
     run = schedules.get_run(runtime, project_id, schedule.id, run_id)
-    return run_public(run, str(request.base_url))
+    return run_public(run, public_base(runtime.settings))
 
 
 @router.get("/{schedule_id}/runs", response_model=ScheduleRunsPublic, responses=problems(404))
 def read_runs(
     schedule_id: str,
-    request: Request,
     runtime: RuntimeDep,
     project_id: ProjectDep,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
 ) -> ScheduleRunsPublic:
     """List a schedule's runs, newest first, with status and links."""
     runs, count = schedules.list_runs(runtime, project_id, schedule_id, limit=limit)
-    base = str(request.base_url)
+    base = public_base(runtime.settings)
     return ScheduleRunsPublic(items=[run_public(r, base) for r in runs], count=count)
 
 
@@ -127,11 +126,11 @@ def read_runs(
     "/{schedule_id}/runs/{run_id}", response_model=ScheduleRunPublic, responses=problems(404)
 )
 def read_run(
-    schedule_id: str, run_id: str, request: Request, runtime: RuntimeDep, project_id: ProjectDep
+    schedule_id: str, run_id: str, runtime: RuntimeDep, project_id: ProjectDep
 ) -> ScheduleRunPublic:
     """Show one run."""
     run = schedules.get_run(runtime, project_id, schedule_id, run_id)
-    return run_public(run, str(request.base_url))
+    return run_public(run, public_base(runtime.settings))
 
 
 @router.get(

@@ -40,7 +40,8 @@ def run_serve(args: argparse.Namespace) -> int:
     port: int = args.port if args.port is not None else settings.port
     print(  # noqa: T201
         f"loceval {__version__}: http://{host}:{port}/ (data in "
-        f"{settings.data_dir.resolve()}, queue {settings.queue_url})",
+        f"{settings.data_dir.resolve()}, queue {settings.queue_url}; links start with "
+        f"{settings.public_url.rstrip('/')}/, set by LOCEVAL_PUBLIC_URL)",
         flush=True,
     )
     uvicorn.run(app, host=host, port=port, log_level="info", access_log=False)

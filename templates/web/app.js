@@ -463,11 +463,18 @@
             dataset = null;
           }
           const what = dataset ? describeDataset(dataset) : "";
+          const report = (dataset && dataset.upload) || {};
           if (status === 200) {
             const name = dataset && dataset.name ? ` as “${dataset.name}”` : "";
-            item.setState("duplicate", "Already uploaded", `These exact bytes were uploaded before${name}. ${what}`.trim());
+            const added = Array.isArray(report.tags_added) && report.tags_added.length
+              ? ` Tags added to it: ${report.tags_added.join(", ")}.` : "";
+            const kept = report.name_kept ? ` It keeps its name “${report.name_kept}”.` : "";
+            item.setState("duplicate", "Already uploaded",
+              `These exact bytes were uploaded before${name}.${added}${kept} ${what}`.trim());
           } else {
-            item.setState("done", "Uploaded", what);
+            // what the server changed (a file name sanitised or shortened), said once
+            const notes = Array.isArray(report.notes) ? report.notes.join(" ") : "";
+            item.setState("done", "Uploaded", `${what} ${notes}`.trim());
           }
           scheduleDatasetsReload();
         } else if (status === 401) {

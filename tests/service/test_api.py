@@ -80,7 +80,7 @@ def test_upload_tum(api: Api, tum: tuple[bytes, bytes]) -> None:
     response = api.upload("truth.txt", tum[0])
     assert response.status_code == 201
     dataset = response.json()
-    assert response.headers["location"] == f"http://testserver/api/v1/datasets/{dataset['id']}"
+    assert response.headers["location"] == f"http://127.0.0.1:8000/api/v1/datasets/{dataset['id']}"
     assert dataset["kind"] == "tum"
     assert dataset["filename"] == "truth.txt"
     assert dataset["name"] == "truth.txt"
@@ -165,11 +165,29 @@ def test_upload_urdf(api: Api) -> None:
 
 
 def test_same_bytes_are_deduplicated(api: Api, tum: tuple[bytes, bytes]) -> None:
-    """The same bytes again give 200 and the same dataset; another project gets its own."""
-    first = api.upload("truth.txt", tum[0])
-    again = api.upload("other-name.txt", tum[0], name="ignored", tags="ignored")
+    """The same bytes again give 200 and the same dataset; another project gets its own.
+
+    The second upload's tags are merged into the dataset and its name is not applied; the
+    ``upload`` report says both.
+    """
+    first = api.upload("truth.txt", tum[0], tags="site-a")
+    assert first.json()["upload"] == {
+        "deduplicated": False,
+        "tags_added": ["site-a"],
+        "name_kept": None,
+        "notes": [],
+    }
+    again = api.upload("other-name.txt", tum[0], name="second name", tags="level-2, site-a")
     assert (first.status_code, again.status_code) == (201, 200)
-    assert again.json() == first.json()
+    merged = again.json()
+    assert merged["id"] == first.json()["id"]
+    assert merged["name"] == "truth.txt"
+    assert merged["tags"] == ["site-a", "level-2"]
+    report = merged["upload"]
+    assert report["deduplicated"] is True
+    assert report["tags_added"] == ["level-2"]
+    assert report["name_kept"] == "truth.txt"
+    assert "'second name' of this request was not applied" in " ".join(report["notes"])
     assert again.headers["location"].endswith(first.json()["id"])
     theirs = api.upload("truth.txt", tum[0], headers=api.other_headers)
     assert theirs.status_code == 201
@@ -235,7 +253,8 @@ def test_read_dataset(api: Api, tum: tuple[bytes, bytes]) -> None:
     dataset = api.dataset("truth.txt", tum[0], tags="x")
     response = api.client.get(f"/api/v1/datasets/{dataset['id']}", headers=api.headers)
     assert response.status_code == 200
-    assert response.json() == dataset
+    assert "upload" not in response.json()  # the upload's report is in its answer only
+    assert response.json() == {k: v for k, v in dataset.items() if k != "upload"}
 
 
 def test_delete_dataset(api: Api, tum: tuple[bytes, bytes]) -> None:
@@ -297,7 +316,7 @@ def test_create_evaluation(api: Api, datasets: tuple[str, str]) -> None:
     response = api.evaluate(body)
     assert response.status_code == 202
     evaluation = response.json()
-    url = f"http://testserver/api/v1/evaluations/{evaluation['id']}"
+    url = f"http://127.0.0.1:8000/api/v1/evaluations/{evaluation['id']}"
     assert response.headers["location"] == url
     assert evaluation["status"] == "succeeded"
     assert evaluation["progress"] == {"stage": "done", "fraction": 1.0}

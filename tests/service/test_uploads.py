@@ -217,12 +217,12 @@ def test_error_in_second_file_removes_first(store: BlobStore) -> None:
         (b"this is no multipart body", r"malformed"),
         (
             f"--{BOUNDARY}\r\nContent-Type: text/plain\r\n\r\nx\r\n--{BOUNDARY}--\r\n".encode(),
-            r"no Content-Disposition form-data name",
+            r"no Content-Disposition: form-data with a name",
         ),
         (
             f'--{BOUNDARY}\r\nContent-Disposition: attachment; name="file"\r\n\r\nx\r\n'
             f"--{BOUNDARY}--\r\n".encode(),
-            r"no Content-Disposition form-data name",
+            r"no Content-Disposition: form-data with a name",
         ),
         (b"", r"ended before its closing boundary"),
     ],
