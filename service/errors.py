@@ -37,6 +37,8 @@ __all__ = [
     "AuthenticationError",
     "ConflictError",
     "InsufficientStorageError",
+    "JobMemoryError",
+    "JobTimeoutError",
     "NotFoundError",
     "NotReadyError",
     "ServiceUnavailableError",
@@ -112,6 +114,18 @@ class InsufficientStorageError(LocevalError):
     """The data directory is nearly full: an upload would leave less than the set reserve."""
 
     code: ClassVar[str] = "storage.full"
+
+
+class JobTimeoutError(InputError):
+    """The job ran longer than ``job_timeout_s`` and was stopped."""
+
+    code: ClassVar[str] = "job.timeout"
+
+
+class JobMemoryError(InputError):
+    """The job needed more memory than ``job_memory_mb`` (or than the server had)."""
+
+    code: ClassVar[str] = "job.out_of_memory"
 
 
 class ServiceUnavailableError(LocevalError):

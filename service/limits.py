@@ -38,9 +38,10 @@ from multiprocessing.connection import Connection, wait
 from multiprocessing.context import ForkServerContext
 from multiprocessing.reduction import ForkingPickler
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any, ClassVar, Final
+from typing import TYPE_CHECKING, Any, Final
 
-from loceval.errors import InputError, LocevalError
+from loceval.errors import LocevalError
+from service.errors import JobMemoryError, JobTimeoutError
 
 if TYPE_CHECKING:
     from service.settings import Settings
@@ -85,18 +86,6 @@ def _reduce_mapping_proxy(
 
 # Only for what goes to a job's process (multiprocessing's own pickler), not pickling at large.
 ForkingPickler.register(MappingProxyType, _reduce_mapping_proxy)
-
-
-class JobTimeoutError(InputError):
-    """The job ran longer than ``job_timeout_s`` and was stopped."""
-
-    code: ClassVar[str] = "job.timeout"
-
-
-class JobMemoryError(InputError):
-    """The job needed more memory than ``job_memory_mb`` (or than the server had)."""
-
-    code: ClassVar[str] = "job.out_of_memory"
 
 
 class JobProcessError(RuntimeError):
