@@ -34,7 +34,7 @@ from loceval.options import (
     choice_default,
     number_default,
 )
-from loceval.trajectory import Trajectory
+from loceval.trajectory import MAX_OFFSET_M, Trajectory
 from loceval.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
 
 if TYPE_CHECKING:
@@ -282,7 +282,8 @@ def parse_offset(text: str) -> SimilarityTransform:
     """Parse ``"x y z qx qy qz qw"`` (or ``"x y z"``) into a rigid offset.
 
     Raises:
-        InputError: not 3 or 7 numbers, or a quaternion that is not unit.
+        InputError: not 3 or 7 finite numbers, a translation beyond
+            ±:data:`~loceval.trajectory.MAX_OFFSET_M`, or a quaternion that is not unit.
     """
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
@@ -292,6 +293,12 @@ def parse_offset(text: str) -> SimilarityTransform:
         msg = (
             f'The device offset takes "x y z qx qy qz qw" in metres and a unit quaternion '
             f'(or just "x y z"), got {text!r}.'
+        )
+        raise InputError(msg, option="offset")
+    if float(np.abs(values[:3]).max()) > MAX_OFFSET_M:
+        msg = (
+            f"The device offset's translation {values[:3]!r} reaches beyond ±{MAX_OFFSET_M:g} m, "
+            "more than any lever arm on one device; give x y z in metres."
         )
         raise InputError(msg, option="offset")
     quat = np.array(values[3:] if len(values) == 7 else [0.0, 0.0, 0.0, 1.0])

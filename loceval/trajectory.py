@@ -13,12 +13,14 @@ from loceval.gaps import tracking_losses
 from loceval.geometry import SimilarityTransform
 from loceval.rotation import Rotation
 
-__all__ = ["MAX_COORDINATE_M", "MAX_SPAN_S", "MIN_POSES", "Trajectory"]
+__all__ = ["MAX_COORDINATE_M", "MAX_OFFSET_M", "MAX_SPAN_S", "MIN_POSES", "Trajectory"]
 
 MIN_POSES = 3
 """Fewest poses a trajectory may have: alignment and RPE need at least three."""
 MAX_COORDINATE_M = 1e9
 """Largest position magnitude accepted: beyond any site (ECEF is 6.4e6 m); not metres."""
+MAX_OFFSET_M = 1e3
+"""Largest lever arm on one device (a rigid body to its sensor, a tag), metres."""
 MAX_SPAN_S = 1e9
 """Longest time span (about 32 years) an option may name: stamps are int64 ns (±292 years),
 so a longer span overflows them and can only be a typo."""

@@ -77,6 +77,10 @@ def sniff_format(path: Path) -> TrajectoryFormat:
         raise ReaderError(msg) from err
     if head.startswith(_BAG_MAGICS):
         return TrajectoryFormat.BAG
+    if not head.strip():
+        what = "empty" if not head else "empty but for whitespace"
+        msg = f"{str(path)!r} is {what}; give the file that holds the recording."
+        raise ReaderError(msg)
     fmt = _sniff_text(head)
     if fmt is None:
         msg = (
