@@ -155,8 +155,8 @@ def _check_translation(values: Sequence[float], *, option: str, what: str) -> No
     for axis, value in zip(_AXES, values, strict=True):
         if abs(float(value)) > MAX_COORDINATE_M:
             msg = (
-                f"{what}'s {axis} is {float(value):g} m, beyond ±{MAX_COORDINATE_M:g} m, which "
-                "is no site's coordinate; give the translation in metres."
+                f"{what} has {axis} = {float(value):g} m, beyond ±{MAX_COORDINATE_M:g} m, "
+                "which is no site's coordinate; give the translation in metres."
             )
             raise ExportOptionsError(msg, option=option)
 
