@@ -24,8 +24,7 @@ _LINE_ENDS: Final = re.compile(r"\r\n|[\r\v\f\u2028\u2029]")
 """Line ends of every kind, made LF in multi-line text."""
 
 _UNSAFE: Final = re.compile(
-    "[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f\u061c\u200e\u200f\u202a-\u202e\u2066-\u2069"
-    "\ud800-\udfff]"
+    "[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f\u061c\u200e\u200f\u202a-\u202e\u2066-\u2069\ud800-\udfff]"
 )
 """C0 and C1 controls (ESC, NUL, DEL, CSI ...), the bidirectional marks, embeddings,
 overrides and isolates (U+061C, U+200E/F, U+202A-E, U+2066-9), and lone surrogates (bytes

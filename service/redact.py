@@ -24,8 +24,8 @@ _PRIVATE_ROOTS: set[str] = set()
 _ID_FOLDER: Final = re.compile(
     r"(?:datasets|evaluations|runs)/[0-9a-f-]{36}/(?:\.staging-[0-9a-f]+/|artifacts/)?"
 )
-_PATH_END: Final = r"""[^\s'"`,;:()\[\]<>]"""
-"""A character a path in a message may hold (quotes, brackets and separators end it)."""
+_NAME_CHAR: Final = r"""[^/\s'"`,;:()\[\]<>]"""
+"""A character of a folder's name in a message (quotes, brackets and separators end it)."""
 
 
 def register_private_root(root: Path) -> None:
@@ -39,8 +39,8 @@ def _temp_patterns() -> tuple[re.Pattern[str], re.Pattern[str]]:
     """Return (loceval's temporary folders, any folder) under the temporary directory."""
     roots = {tempfile.gettempdir(), str(Path(tempfile.gettempdir()).resolve()), "/tmp"}  # noqa: S108
     prefix = "|".join(re.escape(r.rstrip("/")) for r in sorted(roots, key=len, reverse=True))
-    ours = re.compile(rf"(?:{prefix})/loceval-{_PATH_END}*/?")
-    folders = re.compile(rf"(?:{prefix})/(?:{_PATH_END}+/)*")
+    ours = re.compile(rf"(?:{prefix})/loceval-{_NAME_CHAR}*/?")
+    folders = re.compile(rf"(?:{prefix})/(?:{_NAME_CHAR}+/)*")
     return ours, folders
 
 

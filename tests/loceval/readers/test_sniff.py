@@ -94,7 +94,6 @@ class TestSniffFormat:
             b"1 2 3 4 5\n",
             b"1,2,3\n",
             b"\x00\x01binary",
-            b"# only\n",
         ],
     )
     def test_unknown_content(self, tmp_path, content):
@@ -113,6 +112,13 @@ class TestSniffFormat:
         path = tmp_path / "x"
         path.write_bytes(content)
         with pytest.raises(ReaderError, match=rf"'.*x' is {what}.*; give the file that holds"):
+            sniff_format(path)
+
+    def test_comments_only(self, tmp_path):
+        """A file of comments only is said to hold no data rows."""
+        path = tmp_path / "x"
+        path.write_bytes(b"# only\n\n# timestamp tx ty tz\n")
+        with pytest.raises(ReaderError, match=r"'.*x' holds only comments .*, no data rows"):
             sniff_format(path)
 
     def test_missing(self, tmp_path):
