@@ -9,17 +9,10 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator, Mapping
-from typing import ClassVar
 
 from exporters.errors import ExportError
 
-__all__ = ["NonFiniteNumberError", "finite_json"]
-
-
-class NonFiniteNumberError(ExportError):
-    """A document to write holds NaN or infinity, which JSON cannot carry."""
-
-    code: ClassVar[str] = "export.non_finite"
+__all__ = ["finite_json"]
 
 
 def finite_json(document: object, *, indent: int | None = 2, what: str = "The result") -> str:
@@ -34,7 +27,7 @@ def finite_json(document: object, *, indent: int | None = 2, what: str = "The re
         The JSON text (no trailing newline).
 
     Raises:
-        NonFiniteNumberError: a number is NaN or infinite; the message names its place.
+        ExportError: a number is NaN or infinite; the message names its place.
     """
     try:
         return json.dumps(document, indent=indent, allow_nan=False)
@@ -45,7 +38,7 @@ def finite_json(document: object, *, indent: int | None = 2, what: str = "The re
             "option is too large to compute with (check the coordinates, units and the "
             "site transform), or this is a bug to report with the inputs."
         )
-        raise NonFiniteNumberError(msg) from err
+        raise ExportError(msg) from err
 
 
 def _non_finite(value: object, path: str) -> Iterator[tuple[str, float]]:

@@ -282,8 +282,7 @@ def parse_offset(text: str) -> SimilarityTransform:
     """Parse ``"x y z qx qy qz qw"`` (or ``"x y z"``) into a rigid offset.
 
     Raises:
-        InputError: not 3 or 7 finite numbers, a translation beyond
-            ±:data:`~loceval.trajectory.MAX_OFFSET_M`, or a quaternion that is not unit.
+        InputError: not 3 or 7 finite numbers, x y z over MAX_OFFSET_M, a non-unit quaternion.
     """
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
@@ -296,10 +295,7 @@ def parse_offset(text: str) -> SimilarityTransform:
         )
         raise InputError(msg, option="offset")
     if float(np.abs(values[:3]).max()) > MAX_OFFSET_M:
-        msg = (
-            f"The device offset's translation {values[:3]!r} reaches beyond ±{MAX_OFFSET_M:g} m, "
-            "more than any lever arm on one device; give x y z in metres."
-        )
+        msg = f"The device offset's x y z {values[:3]!r} exceed ±{MAX_OFFSET_M:g} m; give metres."
         raise InputError(msg, option="offset")
     quat = np.array(values[3:] if len(values) == 7 else [0.0, 0.0, 0.0, 1.0])
     norm = float(np.linalg.norm(quat))

@@ -126,7 +126,7 @@ def test_files_without_rows(api: Api, filename: str, content: str, detail: str) 
             {"site_matrix": [[1, 0, 0, 1e308], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
             r"options\.site_matrix: .*has tx = 1e\+308 m, beyond ±1e\+09 m",
         ),
-        ({"offset": "0 1e308 0"}, r"options\.offset: The device offset's translation"),
+        ({"offset": "0 1e308 0"}, r"options\.offset: The device offset's x y z .* exceed ±1000 m"),
     ],
 )
 def test_coordinates_beyond_any_site(

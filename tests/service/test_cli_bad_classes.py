@@ -268,7 +268,7 @@ def test_site_matrix_beyond_any_coordinate(tmp_path: Path, pair: tuple[Path, Pat
 def test_device_offset_beyond_a_lever_arm(pair: tuple[Path, Path]) -> None:
     """A device offset of 1e308 m is refused where it is parsed, naming the option."""
     line = _error_line(_cli("evaluate", *pair, "--offset", "1e308 0 0", "--formats", "result.json"))
-    assert "--offset: The device offset's translation" in line, line
+    assert "--offset: The device offset's x y z [1e+308, 0.0, 0.0] exceed ±1000 m" in line, line
 
 
 # --- 4. EuRoC without orientation columns ---------------------------------------------------
