@@ -16,5 +16,11 @@ __all__ = ["emit"]
 
 
 def emit(text: str, *, file: TextIO | None = None) -> None:
-    """Print ``text`` (one or more lines) without control characters (tabs and LF kept)."""
-    print(display_text(text, one_line=False), file=file or sys.stdout)
+    """Print ``text`` (one or more lines) without control characters (tabs and LF kept).
+
+    What the terminal's encoding cannot show (U+FFFD on a Latin-1 terminal) becomes ``?``.
+    """
+    stream = file or sys.stdout
+    shown = display_text(text, one_line=False)
+    encoding = getattr(stream, "encoding", None) or "utf-8"
+    print(shown.encode(encoding, errors="replace").decode(encoding), file=stream)
