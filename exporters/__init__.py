@@ -8,7 +8,6 @@ when their artifact is asked for, so the CLI starts fast without matplotlib or C
 from __future__ import annotations
 
 import importlib
-import json
 import shutil
 import tempfile
 from collections.abc import Iterable, Mapping
@@ -17,6 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Final, Protocol, cast
 
 from exporters.errors import ExportError, ExportOptionsError, ExportUnavailableError
+from exporters.jsondoc import finite_json
 from exporters.options import ExportOptions, Units
 from loceval.evaluation import EvaluationResult, ProgressCallback
 
@@ -164,7 +164,7 @@ def export_result_json(
     document = {"evaluation_id": options.evaluation_id, **result.to_dict()}
     if cad is not None:
         document["cad"] = dict(cad)
-    return (json.dumps(document, indent=2, allow_nan=False) + "\n").encode()
+    return (finite_json(document, indent=2) + "\n").encode()
 
 
 def render_artifact(name: str, result: EvaluationResult, options: ExportOptions) -> bytes:

@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import shutil
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Final
 
 from exporters.errors import ExportError, ExportOptionsError
+from exporters.jsondoc import finite_json
 from exporters.options import ExportOptions
 from loceval.checkpoint_evaluation import CheckpointEvaluation, errors_table
 
@@ -54,7 +54,7 @@ CHECKPOINT_ARTIFACTS: Final = (
 def checkpoint_result_json(evaluation: CheckpointEvaluation, options: ExportOptions) -> bytes:
     """Return the ``--json`` document, with the evaluation id, as UTF-8 bytes."""
     document = {"evaluation_id": options.evaluation_id, **evaluation.to_dict()}
-    return (json.dumps(document, indent=2, allow_nan=False) + "\n").encode()
+    return (finite_json(document, indent=2) + "\n").encode()
 
 
 def checkpoint_errors_csv(evaluation: CheckpointEvaluation) -> bytes:

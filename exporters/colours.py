@@ -15,6 +15,7 @@ from typing import Final, TypeAlias
 
 import numpy as np
 
+from loceval.display import display_text
 from loceval.evaluation import EvaluationResult
 
 RGB: TypeAlias = tuple[int, int, int]
@@ -34,7 +35,7 @@ PALETTE: Final[tuple[RGB, ...]] = (
 )
 """Trajectory colours in order: the reference first, then the estimates."""
 
-_INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f]+')
+_INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f\ufffd]+')
 _BIN_COLORS: Final[tuple[RGB, ...]] = ((0, 170, 0), (230, 200, 0), (255, 120, 0), (220, 0, 0))
 _MAX_EXTRA_EDGES: Final = 4  # at most this many 1-2-5 edges above the last threshold
 
@@ -58,10 +59,11 @@ def layer_name(name: str) -> str:
     r"""Return ``name`` made valid as a DXF, Rhino and glTF layer/node name.
 
     Characters that DXF forbids in table names (``<>/\\":;?*|=,```) or that Rhino uses in
-    layer paths (``::``, brackets, braces) become ``_``; the result is at most 200
+    layer paths (``::``, brackets, braces) become ``_``, as do control characters and
+    bidirectional overrides (:func:`~loceval.display.display_text`); the result is at most 200
     characters and never empty.
     """
-    cleaned = _INVALID_LAYER_CHARS.sub("_", name).strip()[:200].strip()
+    cleaned = _INVALID_LAYER_CHARS.sub("_", display_text(name)).strip()[:200].strip()
     return cleaned or "unnamed"
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Final
 
 from exporters.errors import ExportOptionsError
+from loceval.display import display_text
 from loceval.geometry import SimilarityTransform
 from loceval.options import Units, UpAxis, choice_default, number_default
 
@@ -53,11 +54,13 @@ class ExportOptions:
     building_up: UpAxis = UpAxis.Z
 
     def __post_init__(self) -> None:
-        """Check that the coordinate reference system reads ``AUTHORITY:CODE``.
+        """Make the title plain one-line text; check that the CRS reads ``AUTHORITY:CODE``.
 
         Raises:
             ExportOptionsError: a CRS that is not of the form ``EPSG:25832``.
         """
+        # The title is shown in reports, CAD metadata and layer names: plain one-line text.
+        object.__setattr__(self, "title", display_text(self.title))
         if self.crs is not None and not _CRS_NAME.fullmatch(self.crs):
             msg = (
                 f"The coordinate reference system {self.crs!r} is not of the form "

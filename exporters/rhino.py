@@ -32,6 +32,7 @@ import rhino3dm as _rhino3dm
 
 from exporters.errors import ExportError
 from exporters.georef import set_earth_anchor
+from exporters.jsondoc import finite_json
 from exporters.options import ExportOptions, Units
 from exporters.placement import Marker, PlacedPath, Placement, layer_name, place_evaluation
 from loceval._typing import FloatArray
@@ -185,7 +186,7 @@ def export_3dm_json(
         ],
         "paths": paths,
     }
-    return (json.dumps(document, indent=1, allow_nan=False) + "\n").encode("utf-8")
+    return (finite_json(document, indent=1, what="The Grasshopper document") + "\n").encode()
 
 
 def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped here)

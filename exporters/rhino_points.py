@@ -30,6 +30,7 @@ import rhino3dm as _rhino3dm
 
 from exporters.colours import RGB, layer_name
 from exporters.errors import ExportError
+from exporters.jsondoc import finite_json
 from exporters.options import ExportOptions, Units
 from exporters.points_placement import (
     POINTS_LAYER,
@@ -145,7 +146,7 @@ def export_points_3dm_json(evaluation: CheckpointEvaluation, options: ExportOpti
         "points": points,
         "paths": paths,
     }
-    return (json.dumps(document, indent=1, allow_nan=False) + "\n").encode("utf-8")
+    return (finite_json(document, indent=1, what="The Grasshopper document") + "\n").encode()
 
 
 def _polyline(start_end: tuple[float, ...]) -> Any:  # noqa: ANN401

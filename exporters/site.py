@@ -19,8 +19,14 @@ from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval.errors import InputError
 from loceval.geometry import SimilarityTransform
+from loceval.trajectory import MAX_COORDINATE_M
 
 SITE_FORMAT: Final = '"tx ty tz yaw_deg"'
+MAX_YAW_DEG: Final = 360.0
+"""Largest site yaw magnitude, degrees (a turn; more is a typo)."""
+SCALE_RANGE: Final = (1e-6, 1e6)
+"""Smallest and largest scale of a site matrix (units are a separate option)."""
+_AXES: Final = ("tx", "ty", "tz")
 BUILDING_SUFFIXES: Final = (".obj", ".ply", ".stl", ".glb", ".ifc", ".dxf")
 """Building model formats accepted (read by :mod:`exporters.building`; a DXF is a floor plan)."""
 
@@ -49,7 +55,8 @@ def parse_site(text: str) -> SimilarityTransform:
     tz"`` alone means no rotation. Commas may separate the numbers.
 
     Raises:
-        ExportOptionsError: not three or four finite numbers.
+        ExportOptionsError: not three or four finite numbers, a translation beyond
+            ±:data:`~loceval.trajectory.MAX_COORDINATE_M` metres or a yaw beyond ±360°.
     """
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
@@ -61,7 +68,14 @@ def parse_site(text: str) -> SimilarityTransform:
             f'"512340.0 5403210.5 112.3 37.5", got {text!r}.'
         )
         raise ExportOptionsError(msg, option="site")
+    _check_translation(values[:3], option="site", what="The site transform")
     yaw_deg = values[3] if len(values) == 4 else 0.0
+    if abs(yaw_deg) > MAX_YAW_DEG:
+        msg = (
+            f"The site transform's yaw must be within ±{MAX_YAW_DEG:g} degrees, got "
+            f"{yaw_deg:g}; give the yaw as an angle of one turn at most, in degrees."
+        )
+        raise ExportOptionsError(msg, option="site")
     rotation = Rotation.from_euler("z", yaw_deg, degrees=True).as_matrix()
     return SimilarityTransform(rotation, np.array(values[:3]), 1.0)
 
@@ -93,7 +107,9 @@ def site_from_values(values: Sequence[float] | None, *, where: str) -> Similarit
         where: names the matrix in messages (``"the site matrix file 'site.txt'"``).
 
     Raises:
-        ExportOptionsError: not 16 finite numbers, or not a similarity transform.
+        ExportOptionsError: not 16 finite numbers, not a similarity transform, a
+            translation beyond ±:data:`~loceval.trajectory.MAX_COORDINATE_M` metres or a
+            scale outside :data:`SCALE_RANGE`.
     """
     if values is None or len(values) != 16 or not all(math.isfinite(v) for v in values):
         msg = (
@@ -114,14 +130,35 @@ def site_from_values(values: Sequence[float] | None, *, where: str) -> Similarit
     if abs(det) < 1e-12:
         msg = f"The matrix of {where} is singular (det={det:.3g}); check its values."
         raise ExportOptionsError(msg, option="site_matrix")
+    _check_translation(list(matrix[:3, 3]), option="site_matrix", what=f"The matrix of {where}")
     try:
-        return SimilarityTransform.from_matrix(matrix)
+        transform = SimilarityTransform.from_matrix(matrix)
     except InputError as err:
         msg = (
             f"The matrix of {where} is not a rotation with uniform scale and a "
             f"translation ({err}); check its values."
         )
         raise ExportOptionsError(msg, option="site_matrix") from err
+    low, high = SCALE_RANGE
+    if not low <= transform.scale <= high:
+        msg = (
+            f"The matrix of {where} scales by {transform.scale:.6g}, outside {low:g} to "
+            f"{high:g}; give a rotation and translation in metres (the CAD units are an "
+            "option of their own)."
+        )
+        raise ExportOptionsError(msg, option="site_matrix")
+    return transform
+
+
+def _check_translation(values: Sequence[float], *, option: str, what: str) -> None:
+    """Refuse a translation coordinate beyond any site (it would overflow the CAD output)."""
+    for axis, value in zip(_AXES, values, strict=True):
+        if abs(float(value)) > MAX_COORDINATE_M:
+            msg = (
+                f"{what} has {axis} = {float(value):g} m, beyond ±{MAX_COORDINATE_M:g} m, "
+                "which is no site's coordinate; give the translation in metres."
+            )
+            raise ExportOptionsError(msg, option=option)
 
 
 def _matrix_numbers(text: str) -> list[float] | None:

@@ -34,7 +34,7 @@ from loceval.options import (
     choice_default,
     number_default,
 )
-from loceval.trajectory import Trajectory
+from loceval.trajectory import MAX_OFFSET_M, Trajectory
 from loceval.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
 
 if TYPE_CHECKING:
@@ -282,7 +282,7 @@ def parse_offset(text: str) -> SimilarityTransform:
     """Parse ``"x y z qx qy qz qw"`` (or ``"x y z"``) into a rigid offset.
 
     Raises:
-        InputError: not 3 or 7 numbers, or a quaternion that is not unit.
+        InputError: not 3 or 7 finite numbers, x y z over MAX_OFFSET_M, a non-unit quaternion.
     """
     try:
         values = [float(v) for v in text.replace(",", " ").split()]
@@ -293,6 +293,9 @@ def parse_offset(text: str) -> SimilarityTransform:
             f'The device offset takes "x y z qx qy qz qw" in metres and a unit quaternion '
             f'(or just "x y z"), got {text!r}.'
         )
+        raise InputError(msg, option="offset")
+    if float(np.abs(values[:3]).max()) > MAX_OFFSET_M:
+        msg = f"The device offset's x y z {values[:3]!r} exceed ±{MAX_OFFSET_M:g} m; give metres."
         raise InputError(msg, option="offset")
     quat = np.array(values[3:] if len(values) == 7 else [0.0, 0.0, 0.0, 1.0])
     norm = float(np.linalg.norm(quat))

@@ -37,6 +37,8 @@ __all__ = [
 
 
 _NS_PER_S = 1_000_000_000
+_MIN_RPE_DELTA = {RPEUnit.SECONDS: 1e-6, RPEUnit.METRES: 1e-6}
+"""The least RPE delta whatever the data: a microsecond, a micrometre."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,8 +198,15 @@ def rpe_pairs(
     pose (each pair starts where the last one ended), as KITTI and evo do; with it, every
     pose starts a pair.
 
+    Every pair spans at least one step (``j > i``), so there are at most N - 1 pairs
+    whatever the delta; a delta in seconds below the reference's median sampling interval,
+    or in metres below its median step (of the steps that move), is refused: such a pair
+    would not measure a step at all (and a delta that rounds to nothing would pair a pose
+    with itself).
+
     Raises:
-        MetricError: ``delta`` is not positive, or a whole number of frames.
+        MetricError: ``delta`` is not positive, not a whole number of frames, or shorter
+            than one sampling interval or step; the error suggests the least valid delta.
     """
     n = len(reference)
     if not (np.isfinite(delta) and delta > 0):
@@ -212,10 +221,20 @@ def rpe_pairs(
         return starts, starts + step
     if unit is RPEUnit.METRES:
         axis = reference.distances_m()
+        steps = np.diff(axis)
+        moving = steps[steps > 0]
+        _check_delta_resolution(
+            delta, float(np.median(moving)) if moving.size else 0.0, unit, "step length"
+        )
         reach = np.searchsorted(axis, axis + delta, side="left")
     else:
         axis_ns = reference.stamps_ns
+        interval_s = float(np.median(np.diff(axis_ns))) / _NS_PER_S if n > 1 else 0.0
+        _check_delta_resolution(delta, interval_s, unit, "sampling interval")
         reach = np.searchsorted(axis_ns, axis_ns + round(delta * _NS_PER_S), side="left")
+    # A pair ends at least one pose after it starts: at most N - 1 pairs, and the chain of
+    # segments below advances on every turn.
+    reach = np.maximum(reach, np.arange(1, n + 1))
     if all_pairs:
         starts = np.flatnonzero(reach < n)
         return starts, reach[starts]
@@ -229,6 +248,30 @@ def rpe_pairs(
         i = reach_list[i]
     starts = np.asarray(firsts, dtype=np.intp)
     return starts, reach[starts]
+
+
+def _check_delta_resolution(delta: float, resolution: float, unit: RPEUnit, what: str) -> None:
+    """Refuse an RPE delta below the reference's median sampling interval or step length."""
+    least = max(resolution, _MIN_RPE_DELTA[unit])
+    if delta >= least * (1.0 - 1e-3):  # a thousandth of slack: the suggestion passes
+        return
+    suggest = _round_up(least)
+    msg = (
+        f"An RPE delta of {delta:g} {unit.value} is below the reference's median {what} "
+        f"({least:.3g} {unit.value}), so its pairs would not span a step; give at least "
+        f"{suggest} {unit.value}, or count the delta in frames."
+    )
+    raise MetricError(msg, option="rpe_delta", suggest=suggest)
+
+
+def _round_up(value: float) -> str:
+    """Return ``value`` rounded up to two significant digits, as text (``0.011``).
+
+    Values a thousandth above a round number (a median of 10000000.5 ns) round to it.
+    """
+    exponent = int(np.floor(np.log10(value))) - 1
+    scale = 10.0**exponent
+    return f"{np.ceil(value / scale - 1e-2) * scale:.2g}"
 
 
 def compute_rpe(

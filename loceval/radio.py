@@ -29,7 +29,7 @@ from loceval.multilateration import Solver, solve_positions
 from loceval.options import check_option, number_default
 from loceval.ranging import evaluate_ranging
 from loceval.readers.radio import Ranges
-from loceval.trajectory import Trajectory
+from loceval.trajectory import MAX_OFFSET_M, Trajectory
 
 __all__ = ["RangingConfig", "evaluate_radio", "parse_solvers", "parse_tag_offset"]
 
@@ -110,7 +110,8 @@ def parse_tag_offset(text: str | None) -> tuple[float, float, float] | None:
     """Parse ``"x y z"`` metres (commas allowed); None or empty text for no offset.
 
     Raises:
-        InputError: not three finite numbers.
+        InputError: not three finite numbers, or one beyond
+            ±:data:`~loceval.trajectory.MAX_OFFSET_M` metres.
     """
     if text is None or not text.strip():
         return None
@@ -120,6 +121,12 @@ def parse_tag_offset(text: str | None) -> tuple[float, float, float] | None:
         values = []
     if len(values) != 3 or not np.isfinite(values).all():
         msg = f'The tag offset takes three numbers "x y z" in metres, got {text!r}.'
+        raise InputError(msg, option="tag_offset_xyz")
+    if max(abs(v) for v in values) > MAX_OFFSET_M:
+        msg = (
+            f"The tag offset {text!r} reaches beyond ±{MAX_OFFSET_M:g} m, more than any lever "
+            'arm on one device; give "x y z" in metres.'
+        )
         raise InputError(msg, option="tag_offset_xyz")
     return (values[0], values[1], values[2])
 

@@ -2,28 +2,28 @@
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
+from loceval.display import display_text
 from loceval.errors import TrajectoryError
 from loceval.gaps import tracking_losses
 from loceval.geometry import SimilarityTransform
 from loceval.rotation import Rotation
 
-__all__ = ["MAX_COORDINATE_M", "MAX_SPAN_S", "MIN_POSES", "Trajectory"]
+__all__ = ["MAX_COORDINATE_M", "MAX_OFFSET_M", "MAX_SPAN_S", "MIN_POSES", "Trajectory"]
 
 MIN_POSES = 3
 """Fewest poses a trajectory may have: alignment and RPE need at least three."""
 MAX_COORDINATE_M = 1e9
 """Largest position magnitude accepted: beyond any site (ECEF is 6.4e6 m); not metres."""
+MAX_OFFSET_M = 1e3
+"""Largest lever arm on one device (a rigid body to its sensor, a tag), metres."""
 MAX_SPAN_S = 1e9
 """Longest time span (about 32 years) an option may name: stamps are int64 ns (±292 years),
 so a longer span overflows them and can only be a typo."""
-
-_CONTROL = re.compile(r"[\x00-\x1f\x7f]+")
 
 _NS_PER_S = 1_000_000_000
 
@@ -116,8 +116,9 @@ class Trajectory:
         if self.cov6 is not None:
             object.__setattr__(self, "cov6", self._checked_cov6(self.cov6, n))
         object.__setattr__(self, "warnings", tuple(self.warnings))
-        # Names travel into CSV cells, DXF text and file metadata: one line, no controls.
-        object.__setattr__(self, "name", " ".join(_CONTROL.sub(" ", self.name).split()))
+        # Names travel into terminals, reports, CSV cells, DXF text and file metadata: one
+        # line, no control characters or bidirectional overrides.
+        object.__setattr__(self, "name", display_text(self.name))
 
     def _checked_cov6(self, cov6: FloatArray, n: int) -> FloatArray:
         """Return a read-only float64 copy of ``cov6`` after checking shape and values."""

@@ -9,10 +9,8 @@ from __future__ import annotations
 
 import json
 import logging
-import re
 import uuid
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any, ClassVar, Final
 
 from fastapi import FastAPI, Request
@@ -23,6 +21,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
 from exporters.errors import ExportUnavailableError
+from loceval.display import display_text
 from loceval.errors import (
     AlignmentError,
     AssociationError,
@@ -30,6 +29,7 @@ from loceval.errors import (
     LocevalError,
     MetricError,
 )
+from service.redact import register_private_root, scrub
 
 __all__ = [
     "PROBLEM_JSON",
@@ -175,33 +175,17 @@ def problem(
     return {"type": type_, "title": title, "status": status, "detail": detail, **extra}
 
 
-_PRIVATE_ROOTS: set[str] = set()
-_ID_FOLDER: Final = re.compile(
-    r"(?:datasets|evaluations|runs)/[0-9a-f-]{36}/(?:\.staging-[0-9a-f]+/|artifacts/)?"
-)
-
-
-def register_private_root(root: Path) -> None:
-    """Name a server folder (the data directory) that no message to a client may show."""
-    _PRIVATE_ROOTS.add(f"{root.resolve()}/")
-
-
-def scrub(message: str) -> str:
-    """Remove the server's private folders from a message, keeping file names."""
-    for root in sorted(_PRIVATE_ROOTS, key=len, reverse=True):
-        message = message.replace(root, "")
-    return _ID_FOLDER.sub("", message)
-
-
 def problem_for(exc: LocevalError) -> dict[str, Any]:
     """Return the problem document of a domain error (also stored with failed jobs).
 
-    This is the one place where messages are scrubbed of server paths: every problem a
+    This is the one place where messages are scrubbed of server paths (the data directory,
+    temporary and extraction folders: :func:`service.redact.scrub`) and of control
+    characters (:func:`loceval.display.display_text`): every problem a
     client sees, from a route or stored with a failed job, is built here. An error about an
     option names it as the API does: ``options.max_dt_s: ...`` in the detail, and
     ``"option": "options.max_dt_s"`` as a member a client can point at.
     """
-    detail = scrub(str(exc))
+    detail = display_text(scrub(str(exc), all_temp=True), one_line=False)
     if exc.option is None:
         return problem(status_for(exc), exc.code, type(exc).__name__, detail)
     name = f"options.{exc.option}"

@@ -16,6 +16,7 @@ from fastapi.responses import HTMLResponse, Response
 from jinja2 import Environment, FileSystemLoader
 
 from loceval import __version__
+from loceval.display import shown_text
 
 __all__ = ["router"]
 
@@ -37,7 +38,7 @@ _ASSETS: Final = {
 @lru_cache(maxsize=8)
 def _environment(templates_dir: Path) -> Environment:
     """Return the Jinja2 environment of a templates folder (one per folder, reused)."""
-    return Environment(loader=FileSystemLoader(templates_dir), autoescape=True)
+    return Environment(loader=FileSystemLoader(templates_dir), autoescape=True, finalize=shown_text)
 
 
 def _templates_dir(request: Request) -> Path:

@@ -16,6 +16,7 @@ from exporters.options import ExportOptions
 from exporters.plots import DEFAULT_MAX_POINTS, render_plots
 from exporters.plots.underlay import floor_plan_segments
 from exporters.report.view import ReportView, build_report_view
+from loceval.display import shown_text
 from loceval.evaluation import EvaluationResult
 
 __all__ = [
@@ -78,6 +79,7 @@ def render_template(
         trim_blocks=True,
         lstrip_blocks=True,
         keep_trailing_newline=True,
+        finalize=shown_text,
     )
     try:
         html = env.get_template(name).render(**context)

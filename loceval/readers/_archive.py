@@ -17,7 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path, PurePosixPath
 from typing import IO
 
-from loceval.errors import ReaderError
+from loceval.errors import LocevalError, ReaderError
 
 __all__ = [
     "DEFAULT_MAX_RATIO",
@@ -70,29 +70,30 @@ def extract_zip(
         msg = f"Zip file {str(zip_path)!r} does not exist; check the path."
         raise ReaderError(msg) from err
     except (zipfile.BadZipFile, OSError) as err:
-        msg = f"File {str(zip_path)!r} is not a readable zip archive ({err}); re-create the zip."
+        msg = f"File {zip_path.name!r} is not a readable zip archive ({err}); re-create the zip."
         raise ReaderError(msg) from err
     with archive:
         members = archive.infolist()
         if len(members) > MAX_MEMBERS:
             msg = (
-                f"Zip file {str(zip_path)!r} holds {len(members):,} members, more than the "
+                f"Zip file {zip_path.name!r} holds {len(members):,} members, more than the "
                 f"{MAX_MEMBERS:,} a bag needs; zip only the bag folder."
             )
             raise ReaderError(msg)
+        _check_unique(members, zip_path)
         for info in members:
             _check_member(info, root, zip_path, max_ratio=max_ratio)
         declared = sum(info.file_size for info in members)
         compressed = sum(info.compress_size for info in members)
         if declared > max_total_bytes:
             msg = (
-                f"Zip file {str(zip_path)!r} would extract to {declared} bytes, more than "
+                f"Zip file {zip_path.name!r} would extract to {declared} bytes, more than "
                 f"the limit of {max_total_bytes}; upload a smaller bag or raise the limit."
             )
             raise ReaderError(msg)
         if declared > _RATIO_MIN_BYTES and declared > max_ratio * max(compressed, 1):
             msg = (
-                f"Zip file {str(zip_path)!r} inflates {declared / max(compressed, 1):.0f}-fold, "
+                f"Zip file {zip_path.name!r} inflates {declared / max(compressed, 1):.0f}-fold, "
                 f"more than the limit of {max_ratio:g} (a zip bomb?); upload the bag unzipped "
                 "or zip it without nested archives."
             )
@@ -179,7 +180,9 @@ def extracted_bag(
         The bag paths (see :func:`find_bag`).
 
     Raises:
-        ReaderError: see :func:`extract_zip` and :func:`find_bag`.
+        ReaderError: see :func:`extract_zip` and :func:`find_bag`. Any loceval error raised
+            while the bag is read from the temporary folder names the files in it as
+            members of the zip (``rec.zip:bag/metadata.yaml``), never by the folder.
     """
     if target_dir is not None:
         target_dir.mkdir(parents=True, exist_ok=True)
@@ -187,8 +190,14 @@ def extracted_bag(
         yield find_bag(target_dir, what=zip_path.name)
         return
     with tempfile.TemporaryDirectory(prefix="loceval-zip-") as tmp:
-        extract_zip(zip_path, Path(tmp), max_total_bytes=max_total_bytes, max_ratio=max_ratio)
-        yield find_bag(Path(tmp), what=zip_path.name)
+        try:
+            extract_zip(zip_path, Path(tmp), max_total_bytes=max_total_bytes, max_ratio=max_ratio)
+            yield find_bag(Path(tmp), what=zip_path.name)
+        except LocevalError as err:
+            # Whatever failed inside (rosbags, the YAML, sqlite) names extracted files by
+            # their temporary path: name them as members of the zip instead.
+            err.args = (_as_members(str(err), Path(tmp), zip_path.name), *err.args[1:])
+            raise
 
 
 def zip_contains_bag(zip_path: Path) -> bool:
@@ -205,18 +214,32 @@ def zip_contains_bag(zip_path: Path) -> bool:
     )
 
 
+def _check_unique(members: list[zipfile.ZipInfo], zip_path: Path) -> None:
+    """Refuse a zip that holds a member name twice (which copy would be the bag's?)."""
+    names = [PurePosixPath(i.filename.replace("\\", "/")).as_posix() for i in members]
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            msg = (
+                f"Zip file {zip_path.name!r} holds the member {name!r} twice; re-create the "
+                "zip from the bag folder."
+            )
+            raise ReaderError(msg)
+        seen.add(name)
+
+
 def _check_member(info: zipfile.ZipInfo, root: Path, zip_path: Path, *, max_ratio: float) -> None:
     _destination(info.filename, root, zip_path)
     mode = info.external_attr >> 16
     if stat.S_ISLNK(mode):
         msg = (
-            f"Zip file {str(zip_path)!r} holds the symbolic link {info.filename!r}, which is "
+            f"Zip file {zip_path.name!r} holds the symbolic link {info.filename!r}, which is "
             "refused; zip the files themselves, not links to them."
         )
         raise ReaderError(msg)
     if info.flag_bits & 0x1:
         msg = (
-            f"Zip file {str(zip_path)!r} holds the encrypted member {info.filename!r}; upload "
+            f"Zip file {zip_path.name!r} holds the encrypted member {info.filename!r}; upload "
             "an unencrypted zip."
         )
         raise ReaderError(msg)
@@ -224,7 +247,7 @@ def _check_member(info: zipfile.ZipInfo, root: Path, zip_path: Path, *, max_rati
         info.compress_size, 1
     ):
         msg = (
-            f"Zip member {info.filename!r} of {str(zip_path)!r} inflates "
+            f"Zip member {info.filename!r} of {zip_path.name!r} inflates "
             f"{info.file_size / max(info.compress_size, 1):.0f}-fold, more than the limit of "
             f"{max_ratio:g} (a zip bomb?); upload the bag unzipped."
         )
@@ -238,14 +261,14 @@ def _destination(name: str, root: Path, zip_path: Path) -> Path:
     drive_like = bool(parts.parts) and parts.parts[0].endswith(":")
     if parts.is_absolute() or drive_like or ".." in parts.parts:
         msg = (
-            f"Zip file {str(zip_path)!r} holds the member {name!r}, whose path leaves the "
+            f"Zip file {zip_path.name!r} holds the member {name!r}, whose path leaves the "
             "extraction folder; re-create the zip with relative paths."
         )
         raise ReaderError(msg)
     dest = (root / parts).resolve()
     if not dest.is_relative_to(root):
         msg = (
-            f"Zip file {str(zip_path)!r} holds the member {name!r}, whose path leaves the "
+            f"Zip file {zip_path.name!r} holds the member {name!r}, whose path leaves the "
             "extraction folder; re-create the zip with relative paths."
         )
         raise ReaderError(msg)
@@ -268,14 +291,14 @@ def _copy_member(
     except (zipfile.BadZipFile, EOFError, OSError, ValueError) as err:
         dest.unlink(missing_ok=True)
         msg = (
-            f"Zip member {info.filename!r} of {str(zip_path)!r} cannot be extracted ({err}); "
+            f"Zip member {info.filename!r} of {zip_path.name!r} cannot be extracted ({err}); "
             "re-create the zip."
         )
         raise ReaderError(msg) from err
     if copied is None:
         dest.unlink(missing_ok=True)
         msg = (
-            f"Zip member {info.filename!r} of {str(zip_path)!r} inflates beyond its declared "
+            f"Zip member {info.filename!r} of {zip_path.name!r} inflates beyond its declared "
             "size or the total size limit; upload the bag unzipped."
         )
         raise ReaderError(msg)
@@ -291,6 +314,13 @@ def _copy_limited(src: IO[bytes], out: IO[bytes], *, limit: int) -> int | None:
             return None
         out.write(block)
     return copied
+
+
+def _as_members(message: str, folder: Path, zip_name: str) -> str:
+    """Write paths inside the extraction ``folder`` as ``ZIP:MEMBER`` (``rec.zip:bag/x``)."""
+    for form in sorted({str(folder), str(folder.resolve())}, key=len, reverse=True):
+        message = message.replace(f"{form}/", f"{zip_name}:").replace(form, zip_name)
+    return message
 
 
 def _listing(names: list[str]) -> str:

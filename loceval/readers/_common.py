@@ -58,9 +58,17 @@ def build_trajectory(
         The validated trajectory.
 
     Raises:
-        ReaderError: a value is NaN/inf, a quaternion is not unit, or fewer than three poses.
+        ReaderError: no poses at all (an empty or header-only file), a value is NaN/inf, a
+            quaternion is not unit, or fewer than three poses.
     """
     n = int(stamps_ns.shape[0])
+    if n == 0:
+        msg = (
+            f"{where} holds no poses (no data rows or messages: it is empty, or only a header "
+            "or comments); export the recording again, or name the file or topic that "
+            "holds the poses."
+        )
+        raise ReaderError(msg)
     lines = np.arange(1, n + 1) if line_numbers is None else line_numbers
     notes = list(warnings)
     _reject_nonfinite(positions_xyz, lines, where=where, what="position")

@@ -28,7 +28,10 @@ def read_euroc(path: Path, *, name: str = "") -> Trajectory:
     number of ignored columns (velocities, biases); the quaternion is w-first in the file
     and x y z w in the result. Stamps are parsed exactly as int64 nanoseconds. A ``#``
     header (or one header row without ``#``) is skipped. Position-only files with
-    ``timestamp, x, y, z`` or ``timestamp, x, y`` rows are accepted.
+    ``timestamp, x, y, z`` or ``timestamp, x, y`` rows are accepted, but a file whose
+    header names EuRoC's ground-truth columns (``p_RS_R_x`` ...) without their orientation
+    (``q_RS_w`` ...) is refused: that is a ground-truth export that lost its quaternion,
+    and the message says to read it with the ``csv:`` prefix if position-only is meant.
 
     Args:
         path: the file.
@@ -38,7 +41,8 @@ def read_euroc(path: Path, *, name: str = "") -> Trajectory:
         The trajectory; ``source`` is ``euroc:PATH``.
 
     Raises:
-        ReaderError: the file is missing or unreadable, a row is too short or holds a
+        ReaderError: the file is missing or unreadable, holds no data rows, has a EuRoC
+            header without the orientation columns, a row is too short or holds a
             non-number, a value is NaN/inf, a quaternion is not unit, or fewer than three
             poses remain.
     """
@@ -46,8 +50,9 @@ def read_euroc(path: Path, *, name: str = "") -> Trajectory:
     where = str(path)
     text = load_text(path)
     skip, first = _skip_header_row(text)
-    width = first.count(",") + 1 if first else 0
-    if first and width not in {3, 4} and width < 8:
+    _check_rows_and_columns(text, first, where=where)
+    width = first.count(",") + 1
+    if width not in {3, 4} and width < 8:
         msg = (
             f"{where}, line {skip + 1}: {width} columns, but a EuRoC row holds "
             "timestamp, p_x, p_y, p_z, q_w, q_x, q_y, q_z (8 or more) or timestamp, x, y[, z]; "
@@ -108,6 +113,51 @@ def read_euroc(path: Path, *, name: str = "") -> Trajectory:
         source=str(SourceSpec(TrajectoryFormat.EUROC, path)),
         warnings=tuple(notes),
     )
+
+
+def _check_rows_and_columns(text: str, first: str, *, where: str) -> None:
+    """Refuse a file without data rows, or a EuRoC header without its orientation columns."""
+    header = _header_line(text)
+    if not first:
+        what = f"its header {header!r} but no data rows" if header else "no data rows"
+        msg = (
+            f"{where} holds {what}; a EuRoC file needs one row per pose (timestamp [ns], "
+            "p_x, p_y, p_z, q_w, q_x, q_y, q_z): export the recording again."
+        )
+        raise ReaderError(msg)
+    if header is None or first.count(",") + 1 >= 8:
+        return
+    names = [cell.strip().lower() for cell in header.lstrip("#").split(",")]
+    if not any("p_rs_r_" in name for name in names) or any(n.startswith("q") for n in names):
+        # A header of its own (timestamp,x,y,z) says position-only on purpose; one with
+        # quaternion columns leaves it to the rows' width (too few cells).
+        return
+    cells = ", ".join(cell.strip() for cell in header.lstrip("#").split(","))
+    msg = (
+        f"{where}: the header names the columns {cells} but no orientation columns "
+        "(q_RS_w, q_RS_x, q_RS_y, q_RS_z), so these are positions only; export the "
+        "ground truth with its quaternion, or read the file as position-only with the "
+        f"csv: prefix (csv:{where})."
+    )
+    raise ReaderError(msg)
+
+
+def _header_line(text: str) -> str | None:
+    """Return the header row (``#``-prefixed or not) above the first data row, if any."""
+    header = None
+    for raw in io.StringIO(text):
+        line = raw.strip()
+        if not line:
+            continue
+        try:
+            float(line.lstrip("#").split(",", 1)[0].strip())
+        except ValueError:
+            if "," in line:
+                header = line
+            continue
+        if not line.startswith("#"):
+            return header
+    return header
 
 
 def _skip_header_row(text: str) -> tuple[int, str]:

@@ -77,7 +77,17 @@ def sniff_format(path: Path) -> TrajectoryFormat:
         raise ReaderError(msg) from err
     if head.startswith(_BAG_MAGICS):
         return TrajectoryFormat.BAG
+    if not head.strip():
+        what = "empty" if not head else "empty but for whitespace"
+        msg = f"{str(path)!r} is {what}; give the file that holds the recording."
+        raise ReaderError(msg)
     fmt = _sniff_text(head)
+    if fmt is None and _comments_only(head):
+        msg = (
+            f"{str(path)!r} holds only comments (lines starting with #), no data rows; give "
+            "the file that holds the recording."
+        )
+        raise ReaderError(msg)
     if fmt is None:
         msg = (
             f"Cannot tell the format of {str(path)!r} from its first lines; name it with a "
@@ -128,6 +138,14 @@ def _sniff_delimited(data: list[str], last_comment: str | None) -> TrajectoryFor
         return TrajectoryFormat.CSV  # a '#'-prefixed header row
     headerless_euroc = delimiter == "," and len(cells) >= 8 and cells[0].isdigit()
     return TrajectoryFormat.EUROC if headerless_euroc else None
+
+
+def _comments_only(head: bytes) -> bool:
+    """Whether every non-blank line of a (whole, short) file is a ``#`` comment."""
+    if len(head) == _HEAD_BYTES:
+        return False  # the first 64 KiB only: the data may come later
+    lines = [line.strip() for line in head.split(b"\n") if line.strip()]
+    return bool(lines) and all(line.startswith(b"#") for line in lines)
 
 
 def _is_euroc_header(line: str) -> bool:

@@ -3,6 +3,8 @@
 A :class:`~loceval.errors.LocevalError` prints its message and exits 1 (bad input, no
 traceback); an error about an option is prefixed with the option's flag (``--max-dt: ...``).
 Running out of memory exits 1 too, with what to do about it.
+The message is scrubbed of loceval's temporary folders (:func:`service.redact.scrub`) and
+printed without control characters (:func:`service.cli.output.emit`).
 Anything else is a bug: the traceback is printed and the exit code is 2.
 
 Each command lives in its own module, imported only when that command runs: ``loceval
@@ -18,7 +20,9 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, cast
 
 from loceval.errors import LocevalError
+from service.cli.output import emit
 from service.cli.parser import EXIT_BUG, EXIT_INPUT, build_parser
+from service.redact import scrub
 
 if TYPE_CHECKING:
     import argparse
@@ -38,7 +42,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         return int(_handler(args.handler)(args))
     except LocevalError as err:
-        print(f"loceval: error: {describe(err)}", file=sys.stderr)  # noqa: T201
+        emit(f"loceval: error: {scrub(describe(err))}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
         return 130

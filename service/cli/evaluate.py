@@ -6,12 +6,12 @@ builders as the API's options (:mod:`service.options`).
 
 from __future__ import annotations
 
-import json
 from typing import TYPE_CHECKING, cast
 
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError
 from loceval.readers import TrajectoryFormat, parse_source
+from service.cli.output import emit
 from service.options import (
     EvaluationValues,
     ExportValues,
@@ -76,17 +76,19 @@ def run_evaluate(args: argparse.Namespace) -> int:
     )
     result = run_job(job, args.out)
     if args.json:
-        print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
+        from exporters.jsondoc import finite_json  # noqa: PLC0415
+
+        print(finite_json(result.to_dict()))  # noqa: T201
     elif isinstance(result, CheckpointEvaluation):
         from service.cli.tables import format_checkpoint_tables  # noqa: PLC0415
 
-        print(format_checkpoint_tables(result))  # noqa: T201
+        emit(format_checkpoint_tables(result))
     else:
         from service.cli.tables import format_tables  # noqa: PLC0415
 
-        print(format_tables(result))  # noqa: T201
+        emit(format_tables(result))
     if not args.json and args.out is not None:
-        print(f"\nArtifacts written to {args.out}")  # noqa: T201
+        emit(f"\nArtifacts written to {args.out}")
     return 0
 
 

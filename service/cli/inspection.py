@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING
 
+from service.cli.output import emit
+
 if TYPE_CHECKING:
     import argparse
 
@@ -24,5 +26,5 @@ def run_inspect(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(inspection.to_dict(), indent=2))  # noqa: T201
     else:
-        print(render_inspection_text(inspection))  # noqa: T201
+        emit(render_inspection_text(inspection))
     return 0

@@ -7,12 +7,12 @@ builders as the API's options (:mod:`service.options`); the job is run by
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, cast
 
 from loceval.evaluation import EvaluationResult
 from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
+from service.cli.output import emit
 from service.options import (
     EvaluationValues,
     ExportValues,
@@ -73,16 +73,18 @@ def run_ranging(args: argparse.Namespace) -> int:
         msg = "A ranging job produced a control-point evaluation; please report this."
         raise TypeError(msg)
     if args.json:
-        print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
+        from exporters.jsondoc import finite_json  # noqa: PLC0415
+
+        print(finite_json(result.to_dict()))  # noqa: T201
         return 0
     from service.cli.tables import format_tables  # noqa: PLC0415
 
     if result.ranging is not None:
-        print(format_ranging_table(result.ranging))  # noqa: T201
-        print()  # noqa: T201
-    print(format_tables(result))  # noqa: T201
+        emit(format_ranging_table(result.ranging))
+        emit("")
+    emit(format_tables(result))
     if args.out is not None:
-        print(f"\nArtifacts written to {args.out}")  # noqa: T201
+        emit(f"\nArtifacts written to {args.out}")
     return 0
 
 

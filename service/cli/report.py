@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec
+from service.cli.output import emit
 from service.options import config_from_options, offset_or_none
 from service.runner import Job, JobSource, default_name, file_provenance, run_job
 
@@ -78,8 +79,8 @@ def run_report(args: argparse.Namespace) -> int:
             f"{name} ATE {fig.ate_rmse_m:.3f} m" if fig.ate_rmse_m is not None else name
             for name, fig in run.systems.items()
         )
-        print(f"{run.dataset}: {run.status}" + (f" ({run.error})" if run.error else f", {figures}"))  # noqa: T201
-    print(f"\nSummary written to {args.out}")  # noqa: T201
+        emit(f"{run.dataset}: {run.status}" + (f" ({run.error})" if run.error else f", {figures}"))
+    emit(f"\nSummary written to {args.out}")
     return 0
 
 

@@ -21,6 +21,7 @@ from loceval.metrics import (
     share_within,
 )
 from loceval.trajectory import Trajectory
+from tests.factories import make_trajectory
 
 
 def _series(values: list[float]) -> ErrorSeries:
@@ -134,3 +135,30 @@ def test_metrics_need_matched_inputs(truth: Trajectory) -> None:
     """Unmatched lengths are a MetricError, not a silent broadcast."""
     with pytest.raises(MetricError, match="matched poses"):
         compute_ate(truth, truth.select(np.arange(10)))
+
+
+@pytest.mark.parametrize(
+    ("delta", "unit", "suggest"),
+    [
+        (1e-12, RPEUnit.SECONDS, "0.1"),
+        (1e-300, RPEUnit.METRES, None),
+        (0.05, RPEUnit.SECONDS, "0.1"),
+    ],
+)
+@pytest.mark.parametrize("all_pairs", [False, True])
+def test_rpe_delta_below_one_step_is_refused(
+    delta: float, unit: RPEUnit, suggest: str | None, *, all_pairs: bool
+) -> None:
+    """A delta below the sampling interval (or step) is an error suggesting the least valid one."""
+    rng = np.random.default_rng(7)
+    ref = make_trajectory(rng, 100, dt_ns=100_000_000)
+    with pytest.raises(MetricError, match=r"below the reference's median") as err:
+        rpe_pairs(ref, delta=delta, unit=unit, all_pairs=all_pairs)
+    assert err.value.option == "rpe_delta"
+    assert err.value.suggest is not None
+    if suggest is not None:
+        assert err.value.suggest == suggest
+    i, j = rpe_pairs(ref, delta=float(err.value.suggest), unit=unit, all_pairs=all_pairs)
+    assert i.size
+    assert (j > i).all()
+    assert i.size <= len(ref) - 1

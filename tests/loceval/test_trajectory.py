@@ -136,9 +136,9 @@ def test_compose_quat_matches_scipy() -> None:
 
 
 def test_names_are_one_line() -> None:
-    """Control characters in a name (CR, LF, tab, NUL) become single spaces."""
+    """Line ends and tabs in a name become single spaces; NUL becomes a visible U+FFFD."""
     traj = Trajectory(np.arange(3, dtype=np.int64), np.zeros((3, 3)), name=" RTAB\r\nMap\t\x00v2 ")
-    assert traj.name == "RTAB Map v2"
+    assert traj.name == "RTAB Map \ufffdv2"
 
 
 def test_positions_beyond_any_site_are_rejected() -> None:

@@ -90,13 +90,10 @@ class TestSniffFormat:
     @pytest.mark.parametrize(
         "content",
         [
-            b"",
-            b"\n\n",
             b"hello world\n",
             b"1 2 3 4 5\n",
             b"1,2,3\n",
             b"\x00\x01binary",
-            b"# only\n",
         ],
     )
     def test_unknown_content(self, tmp_path, content):
@@ -104,6 +101,24 @@ class TestSniffFormat:
         path = tmp_path / "x"
         path.write_bytes(content)
         with pytest.raises(ReaderError, match=r"Cannot tell the format of '.*x' .* e\.g\. tum:"):
+            sniff_format(path)
+
+    @pytest.mark.parametrize(
+        ("content", "what"),
+        [(b"", "empty"), (b"\n\n", "empty but for whitespace"), (b" \t\r\n", "empty but")],
+    )
+    def test_empty_content(self, tmp_path, content, what):
+        """An empty or whitespace-only file is called empty, not of an unknown format."""
+        path = tmp_path / "x"
+        path.write_bytes(content)
+        with pytest.raises(ReaderError, match=rf"'.*x' is {what}.*; give the file that holds"):
+            sniff_format(path)
+
+    def test_comments_only(self, tmp_path):
+        """A file of comments only is said to hold no data rows."""
+        path = tmp_path / "x"
+        path.write_bytes(b"# only\n\n# timestamp tx ty tz\n")
+        with pytest.raises(ReaderError, match=r"'.*x' holds only comments .*, no data rows"):
             sniff_format(path)
 
     def test_missing(self, tmp_path):
