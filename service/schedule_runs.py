@@ -29,15 +29,9 @@ from service.db import Dataset, Evaluation, JobStatus, Schedule, ScheduleRun, ut
 from service.errors import ServiceUnavailableError, problem_for
 from service.evaluations import EVALUATION, create_evaluation
 from service.runtime import Runtime
+from service.schedule_schemas import EvaluationTemplate, Produce, Selection, TemplateSource
 from service.schedules import RUN, SUMMARY_ARTIFACTS, describe_selection, select_datasets
-from service.schemas import (
-    EvaluationCreate,
-    EvaluationTemplate,
-    Produce,
-    Selection,
-    SourceRef,
-    TemplateSource,
-)
+from service.schemas import EvaluationCreate, SourceRef
 from service.tracking import ProgressWriter, tracked_job
 from service.webhooks import (
     AllowList,

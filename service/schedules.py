@@ -37,9 +37,7 @@ from service.db import (
 from service.errors import NotFoundError, NotReadyError
 from service.evaluations import check_options
 from service.runtime import Runtime
-from service.schemas import (
-    ArtifactPublic,
-    ProgressPublic,
+from service.schedule_schemas import (
     ScheduleCreate,
     SchedulePatch,
     SchedulePublic,
@@ -47,6 +45,7 @@ from service.schemas import (
     ScheduleWithSecret,
     Selection,
 )
+from service.schemas import ArtifactPublic, ProgressPublic
 from service.webhooks import AllowList, check_webhook_url, new_secret
 
 __all__ = [

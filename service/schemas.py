@@ -1,4 +1,7 @@
-"""The HTTP contract: request and response bodies (``XCreate`` / ``XPublic`` / ``XsPublic``)."""
+"""The HTTP contract: request and response bodies (``XCreate`` / ``XPublic`` / ``XsPublic``).
+
+The schedules' bodies are in :mod:`service.schedule_schemas`.
+"""
 
 from __future__ import annotations
 
@@ -30,24 +33,13 @@ __all__ = [
     "EvaluationCreate",
     "EvaluationOptions",
     "EvaluationPublic",
-    "EvaluationTemplate",
     "EvaluationsPublic",
     "Problem",
-    "Produce",
     "ProgressPublic",
     "RangingCreate",
     "RangingOptions",
-    "ScheduleCreate",
-    "SchedulePatch",
-    "SchedulePublic",
-    "ScheduleRunPublic",
-    "ScheduleRunsPublic",
-    "ScheduleWithSecret",
-    "SchedulesPublic",
-    "Selection",
     "SourceRef",
     "SummaryRow",
-    "TemplateSource",
     "UploadPublic",
 ]
 
@@ -457,161 +449,4 @@ class EvaluationsPublic(BaseModel):
     """A page of evaluations, newest first (without the result documents)."""
 
     items: list[EvaluationPublic]
-    count: int
-
-
-# --- schedules ---------------------------------------------------------------------------
-
-
-class TemplateSource(_Strict):
-    """A trajectory in each selected recording: the selector and the name in the report."""
-
-    dataset_id: _Id | None = Field(
-        default=None,
-        description="a fixed dataset used for every recording instead of the recording "
-        "itself, e.g. a control-point survey as the reference",
-    )
-    selector: Annotated[str, Field(min_length=1, max_length=500)] | None = Field(
-        default=None, examples=["/amcl_pose", "tf:map:base_link"]
-    )
-    name: Annotated[str, Field(min_length=1, max_length=120)] | None = None
-
-
-class EvaluationTemplate(_Strict):
-    """How each selected recording is evaluated (as ``POST /evaluations``, without ids)."""
-
-    reference: TemplateSource
-    estimates: Annotated[list[TemplateSource], Field(min_length=1, max_length=20)]
-    options: EvaluationOptions = Field(default_factory=EvaluationOptions)
-
-
-class Selection(_Strict):
-    """Which recordings a run covers; every given condition must hold."""
-
-    tags: Annotated[
-        list[Annotated[str, Field(min_length=1, max_length=50)]], Field(max_length=20)
-    ] = Field(default_factory=list, description="the recording has all of these tags")
-    name_pattern: Annotated[str, Field(min_length=1, max_length=200)] | None = Field(
-        default=None, description="shell pattern on the name, e.g. 'level2-*'"
-    )
-    uploaded_within_days: Annotated[float, Field(gt=0, le=3660)] | None = Field(
-        default=None, description="uploaded within this many days before the run"
-    )
-
-
-_SummaryName = Literal["summary.html", "summary.pdf"]
-
-
-def _both_summaries() -> list[_SummaryName]:
-    return ["summary.html", "summary.pdf"]
-
-
-class Produce(_Strict):
-    """What a run writes."""
-
-    summary_formats: Annotated[list[_SummaryName], Field(min_length=1, max_length=2)] = Field(
-        default_factory=_both_summaries
-    )
-    per_run_artifacts: bool = Field(
-        default=False, description="also write every evaluation's report and CAD files"
-    )
-
-
-_Url = Annotated[str, Field(max_length=2000, pattern=r"^https?://[^\s]+$")]
-
-
-class ScheduleCreate(_Strict):
-    """A recurring summary report."""
-
-    name: Annotated[str, Field(min_length=1, max_length=200), _Printable]
-    cron: Annotated[str, Field(min_length=1, max_length=200, examples=["0 7 * * mon"])]
-    timezone: Annotated[str, Field(min_length=1, max_length=64, examples=["Europe/Berlin"])] = "UTC"
-    selection: Selection = Field(default_factory=Selection)
-    template: EvaluationTemplate
-    produce: Produce = Field(default_factory=Produce)
-    webhook_url: _Url | None = Field(
-        default=None,
-        description="receives a signed JSON summary; a public address unless the "
-        "administrator allows it (LOCEVAL_WEBHOOK_ALLOW)",
-    )
-    paused: bool = False
-
-
-class SchedulePatch(_Strict):
-    """Changes to a schedule; absent fields stay as they are."""
-
-    name: Annotated[str, Field(min_length=1, max_length=200), _Printable] | None = None
-    cron: Annotated[str, Field(min_length=1, max_length=200)] | None = None
-    timezone: Annotated[str, Field(min_length=1, max_length=64)] | None = None
-    selection: Selection | None = None
-    template: EvaluationTemplate | None = None
-    produce: Produce | None = None
-    webhook_url: _Url | None = None
-    paused: bool | None = None
-
-
-class SchedulePublic(BaseModel):
-    """A schedule and when it fires next."""
-
-    id: str
-    name: str
-    cron: str
-    timezone: str
-    paused: bool
-    selection: dict[str, Any]
-    template: dict[str, Any]
-    produce: dict[str, Any]
-    webhook_url: str | None
-    next_fire_at: dt.datetime | None
-    last_fired_at: dt.datetime | None
-    created_at: dt.datetime
-    updated_at: dt.datetime
-
-
-class ScheduleWithSecret(SchedulePublic):
-    """A schedule with its webhook signing secret: answered once, on create and on rotate."""
-
-    webhook_secret: str = Field(
-        description="the key of each delivery's X-Loceval-Signature (HMAC-SHA256 over "
-        "'<X-Loceval-Timestamp>.<body>'); shown only now, so store it"
-    )
-
-
-class SchedulesPublic(BaseModel):
-    """The project's schedules."""
-
-    items: list[SchedulePublic]
-    count: int
-
-
-class ScheduleRunPublic(BaseModel):
-    """One run of a schedule: its recordings, the summary report and the webhook's fate."""
-
-    id: str
-    schedule_id: str
-    trigger: Literal["cron", "missed", "manual"]
-    due_at: dt.datetime
-    status: Literal["queued", "running", "succeeded", "failed"]
-    progress: ProgressPublic
-    note: str | None
-    rows: list[dict[str, Any]] | None = Field(
-        default=None,
-        description=(
-            "per recording: dataset, status, error, evaluation_id, summary "
-            "(and evaluation_deleted: true once that evaluation was deleted)"
-        ),
-    )
-    error: Problem | None = None
-    artifacts: list[ArtifactPublic] | None = None
-    webhook: dict[str, Any] | None = None
-    attempts: int
-    created_at: dt.datetime
-    started_at: dt.datetime | None
-    finished_at: dt.datetime | None
-
-
-class ScheduleRunsPublic(BaseModel):
-    """A schedule's runs, newest first."""
-
-    items: list[ScheduleRunPublic]
     count: int

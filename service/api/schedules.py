@@ -12,13 +12,7 @@ from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Schedule, get_owned
 from service.links import api_url, public_base
-from service.schedules import (
-    SUMMARY_ARTIFACTS,
-    run_public,
-    schedule_public,
-    schedule_with_secret,
-)
-from service.schemas import (
+from service.schedule_schemas import (
     ScheduleCreate,
     SchedulePatch,
     SchedulePublic,
@@ -26,6 +20,12 @@ from service.schemas import (
     ScheduleRunsPublic,
     SchedulesPublic,
     ScheduleWithSecret,
+)
+from service.schedules import (
+    SUMMARY_ARTIFACTS,
+    run_public,
+    schedule_public,
+    schedule_with_secret,
 )
 
 __all__ = ["router"]

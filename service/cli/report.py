@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     import argparse
 
     from loceval.evaluation import EvaluationConfig
-    from service.schemas import EvaluationTemplate, TemplateSource
+    from service.schedule_schemas import EvaluationTemplate, TemplateSource
 
 __all__ = ["run_report"]
 
@@ -92,7 +92,7 @@ def _api_words(err: LocevalError) -> str:
 def _read_template(path: Path) -> EvaluationTemplate:
     from pydantic import ValidationError  # noqa: PLC0415
 
-    from service.schemas import EvaluationTemplate  # noqa: PLC0415
+    from service.schedule_schemas import EvaluationTemplate  # noqa: PLC0415
 
     try:
         text = path.read_text(encoding="utf-8")

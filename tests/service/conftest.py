@@ -262,7 +262,9 @@ def start_server(
         args: more ``serve`` options (``--no-consumer``).
     """
     port = free_port()
-    full_env = service_env(data_dir, env)
+    # links (Location, artifact URLs) are built from the configured public address
+    public = {"LOCEVAL_PUBLIC_URL": f"http://127.0.0.1:{port}"}
+    full_env = service_env(data_dir, {**public, **(env or {})})
     service = ServiceProcess.start(
         [sys.executable, "-m", "service.cli", "serve", "--port", str(port), *args], full_env
     )

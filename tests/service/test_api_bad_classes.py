@@ -22,7 +22,8 @@ from tests.service._api_fixtures import Api, assert_no_server_paths, assert_prob
 from tests.service.test_cli_bad_classes import EUROC_HEADER, ZIP_CASES, hostile_zips
 
 CHEAP = {"formats": ["result.json"]}
-HOSTILE_NAME = "evil\x1b[31m\x00\u202e<script>alert(1)</script>"
+HOSTILE_NAME = "evil\x1b[31m\x07\u202e<script>alert(1)</script>"
+"""ESC, BEL, a bidi override and markup (a NUL is refused at the door: see below)."""
 
 
 @pytest.fixture(scope="module")
@@ -173,18 +174,29 @@ def test_rpe_delta_below_one_step(
 # --- 6. names shown as text -------------------------------------------------------------
 
 
+def test_a_nul_in_a_name_is_refused(api: Api, datasets: tuple[str, str]) -> None:
+    """A NUL cannot be stored (PostgreSQL refuses it): 422 naming the field, nothing queued."""
+    body = _body(datasets, formats=["result.json"])
+    body["estimates"][0]["name"] = "evil\x00name"
+    answer = api.client.post("/api/v1/evaluations", json=body, headers=api.headers)
+    assert answer.status_code == 422
+    assert answer.headers["content-type"].startswith("application/problem+json")
+    assert "estimates.0.name" in answer.json()["detail"]
+    assert "NUL" in answer.json()["detail"]
+
+
 def test_hostile_names_reach_no_file_raw(api: Api, datasets: tuple[str, str]) -> None:
-    """ESC, NUL, a bidi override and <script> in an estimate's name: none raw in report.html."""
+    """ESC, BEL, a bidi override and <script> in an estimate's name: none raw in report.html."""
     body = _body(datasets, formats=["report.html", "paths.dxf", "result.json"])
     body["estimates"][0]["name"] = HOSTILE_NAME
     evaluation = api.evaluate(body).json()
     assert evaluation["status"] == "succeeded", evaluation
     url = f"/api/v1/evaluations/{evaluation['id']}/artifacts"
     html = api.client.get(f"{url}/report.html", headers=api.headers).text
-    for raw in ("\x1b", "\x00", "\u202e", "<script>alert"):
+    for raw in ("\x1b", "\x07", "\u202e", "<script>alert"):
         assert raw not in html, raw
     assert "evil\ufffd[31m\ufffd\ufffd&lt;script&gt;" in html
     dxf = api.client.get(f"{url}/paths.dxf", headers=api.headers).content
     assert b"\x1b" not in dxf
-    assert b"\x00" not in dxf
+    assert b"\x07" not in dxf
     assert "\u202e".encode() not in dxf
