@@ -9,8 +9,8 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, cast
 
-from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError
+from loceval.evaluation import EvaluationResult
 from loceval.readers import TrajectoryFormat, parse_source
 from service.options import (
     EvaluationValues,
@@ -77,14 +77,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
     result = run_job(job, args.out)
     if args.json:
         print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
-    elif isinstance(result, CheckpointEvaluation):
-        from service.cli.tables import format_checkpoint_tables  # noqa: PLC0415
-
-        print(format_checkpoint_tables(result))  # noqa: T201
-    else:
+    elif isinstance(result, EvaluationResult):
         from service.cli.tables import format_tables  # noqa: PLC0415
 
         print(format_tables(result))  # noqa: T201
+    else:
+        from service.cli.tables import format_checkpoint_tables  # noqa: PLC0415
+
+        print(format_checkpoint_tables(result))  # noqa: T201
     if not args.json and args.out is not None:
         print(f"\nArtifacts written to {args.out}")  # noqa: T201
     return 0
