@@ -256,10 +256,12 @@ def compare_estimates(
         The comparisons (pairs (0, 1), (0, 2), ..., (1, 2), ...; ATE then RPE per pair) and
         sentences about pairs that could not be compared (too few common stamps).
     """
-    from loceval.comparison import ComparedMetric, compare_errors  # noqa: PLC0415
-
     out: list[Comparison] = []
     notes: list[str] = []
+    if len(named) < 2:
+        return out, notes
+    from loceval.comparison import ComparedMetric, compare_errors  # noqa: PLC0415
+
     for i, (name_a, ate_a, rpe_a) in enumerate(named):
         for name_b, ate_b, rpe_b in named[i + 1 :]:
             for metric, sa, sb in (
