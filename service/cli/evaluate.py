@@ -7,6 +7,8 @@ builders as the API's options (:mod:`service.options`).
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator, Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING, cast
 
 from loceval.errors import InputError
@@ -29,6 +31,7 @@ if TYPE_CHECKING:
     import argparse
 
     from loceval.geometry import SimilarityTransform
+    from loceval.readers import SourceSpec
 
 __all__ = ["run_demo", "run_evaluate"]
 
@@ -57,24 +60,31 @@ def run_evaluate(args: argparse.Namespace) -> int:
     ref_spec = parse_source(args.reference, default_format=default_format)
     est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
     names = args.name or unique_names([default_name(s) for s in est_specs])
-    job = Job(
-        reference=JobSource(
-            ref_spec,
-            args.reference_name or default_name(ref_spec),
-            file_provenance("reference", ref_spec),
-        ),
-        estimates=[
-            JobSource(spec, name, file_provenance("estimate", spec))
-            for spec, name in zip(est_specs, names, strict=True)
-        ],
-        config=config,
-        stamp=args.stamp,
-        export=export,
-        formats=artifact_names(args.formats),
-        visits=_visits_source(args.visits),
-        checkpoints=checkpoints_from_options(cast("EvaluationValues", args)),
-    )
-    result = run_job(job, args.out)
+    # The checksums are computed in a thread while the files are read (hashlib and file
+    # reads release the GIL); the evaluation reads the records after the files.
+    with ThreadPoolExecutor(max_workers=1) as hashing:
+
+        def provenance(role: str, spec: SourceSpec) -> Mapping[str, object]:
+            return _PendingProvenance(hashing.submit(file_provenance, role, spec))
+
+        job = Job(
+            reference=JobSource(
+                ref_spec,
+                args.reference_name or default_name(ref_spec),
+                provenance("reference", ref_spec),
+            ),
+            estimates=[
+                JobSource(spec, name, provenance("estimate", spec))
+                for spec, name in zip(est_specs, names, strict=True)
+            ],
+            config=config,
+            stamp=args.stamp,
+            export=export,
+            formats=artifact_names(args.formats),
+            visits=_visits_source(args.visits),
+            checkpoints=checkpoints_from_options(cast("EvaluationValues", args)),
+        )
+        result = run_job(job, args.out)
     if args.json:
         print(json.dumps(result.to_dict(), indent=2, allow_nan=False))  # noqa: T201
     elif isinstance(result, EvaluationResult):
@@ -88,6 +98,25 @@ def run_evaluate(args: argparse.Namespace) -> int:
     if not args.json and args.out is not None:
         print(f"\nArtifacts written to {args.out}")  # noqa: T201
     return 0
+
+
+class _PendingProvenance(Mapping[str, object]):
+    """A source's input record whose checksum is still being computed in a thread.
+
+    Reading it waits for the record (and raises what computing it raised).
+    """
+
+    def __init__(self, future: Future[dict[str, object]]) -> None:
+        self._future = future
+
+    def __getitem__(self, key: str) -> object:
+        return self._future.result()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._future.result())
+
+    def __len__(self) -> int:
+        return len(self._future.result())
 
 
 def _visits_source(visits: str) -> JobSource | None:
