@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from loceval._quantiles import median
 from loceval._typing import BoolArray, FloatArray, IntArray
 from loceval.geometry import compose_quat, conjugate_quat
 from loceval.rotation import Rotation
@@ -241,7 +242,7 @@ def make_pairs(
     t_s = (stamps - sampler.origin_ns + offset_ns).astype(np.float64) / NS_PER_S
     ok = sampler.valid(t_s, margin_s=margin_s)
     window_ns = round(window_s * NS_PER_S)
-    dt_ns = float(np.median(np.diff(stamps))) if n > 1 else float(window_ns)
+    dt_ns = median(np.diff(stamps)) if n > 1 else float(window_ns)
     k = max(1, round(window_ns / max(dt_ns, 1.0)))
     i = np.flatnonzero((np.arange(n) // k) % 2 == 0)
     j = i + k

@@ -15,7 +15,8 @@ every headline figure, from the cores :mod:`loceval.uncertainty`,
 
 It imports scipy (through the cores), so :mod:`loceval.evaluation` imports it only when an
 evaluation needs it: an evaluation without intervals, covariances or a reference error
-loads no scipy.
+loads no scipy. The comparison, consistency and reference-error cores are imported in the
+functions that use them, so an evaluation that only needs intervals loads none of them.
 """
 
 from __future__ import annotations
@@ -24,15 +25,9 @@ import os
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from loceval.comparison import ComparedMetric, Comparison, compare_errors
-from loceval.consistency import Consistency, check_consistency, rotation_errors_rotvec
 from loceval.errors import InputError, MetricError
-from loceval.metrics import ErrorSeries
-from loceval.reference_error import ReferenceErrorCheck, check_reference_error
-from loceval.trajectory import Trajectory
 from loceval.uncertainty import (
     DEFAULT_RESAMPLES,
     DEFAULT_SEED,
@@ -41,6 +36,14 @@ from loceval.uncertainty import (
     interval_stats,
     tolerance_verdict,
 )
+
+if TYPE_CHECKING:  # the cores below load when an evaluation needs them
+    from loceval._typing import FloatArray
+    from loceval.comparison import Comparison
+    from loceval.consistency import Consistency
+    from loceval.metrics import ErrorSeries
+    from loceval.reference_error import ReferenceErrorCheck
+    from loceval.trajectory import Trajectory
 
 __all__ = [
     "SERIES",
@@ -181,8 +184,10 @@ def _consistency(
     cov = aligned.cov6
     if cov is None:
         return None
+    from loceval.consistency import check_consistency, rotation_errors_rotvec  # noqa: PLC0415
+
     errors = aligned.positions_xyz - reference.positions_xyz
-    rotation: tuple[np.ndarray, np.ndarray] | None = None
+    rotation: tuple[FloatArray, FloatArray] | None = None
     if aligned.quat_xyzw is not None and reference.quat_xyzw is not None:
         rotation = (rotation_errors_rotvec(reference.quat_xyzw, aligned.quat_xyzw), cov[:, 3:, 3:])
     try:
@@ -218,6 +223,8 @@ def _reference_checks(
         if full_reference is None or full_reference.cov6 is None:
             return {}
         reference_cov = full_reference.cov6[:, :3, :3]
+    from loceval.reference_error import check_reference_error  # noqa: PLC0415
+
     checks: dict[str, ReferenceErrorCheck] = {}
     for key, name, poses in (("ate", "ate_translation", 1), ("rpe", "rpe_translation", 2)):
         errors = series.get(name)
@@ -251,6 +258,10 @@ def compare_estimates(
     """
     out: list[Comparison] = []
     notes: list[str] = []
+    if len(named) < 2:
+        return out, notes
+    from loceval.comparison import ComparedMetric, compare_errors  # noqa: PLC0415
+
     for i, (name_a, ate_a, rpe_a) in enumerate(named):
         for name_b, ate_b, rpe_b in named[i + 1 :]:
             for metric, sa, sb in (

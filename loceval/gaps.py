@@ -27,6 +27,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from loceval._quantiles import median
 from loceval._typing import BoolArray, IntArray, StampsNs
 
 __all__ = [
@@ -54,7 +55,7 @@ def gap_threshold_ns(stamps_ns: StampsNs, *, min_gap_ns: int) -> int:
     """
     if stamps_ns.shape[0] < 2:
         return int(min_gap_ns)
-    median_ns = float(np.median(np.diff(stamps_ns)))
+    median_ns = median(np.diff(stamps_ns))
     return max(int(min_gap_ns), round(GAP_RATE_FACTOR * median_ns))
 
 

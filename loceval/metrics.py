@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from loceval._quantiles import median as median_of
 from loceval._typing import FloatArray, IntArray, StampsNs
 from loceval.errors import MetricError
 from loceval.geometry import compose_quat, conjugate_quat, relative_angle_deg
@@ -71,7 +72,7 @@ class ErrorStats:
         return cls(
             rmse=float(np.sqrt(sse / values.size)),
             mean=mean,
-            median=float(np.median(values)),
+            median=median_of(values),
             std=float(np.sqrt(var)),
             var=var,
             min=float(values.min()),

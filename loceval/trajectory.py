@@ -6,6 +6,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from loceval._quantiles import median
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.display import display_text
 from loceval.errors import TrajectoryError
@@ -173,7 +174,7 @@ class Trajectory:
         """Median pose rate in Hz (0 when it cannot be told)."""
         if len(self) < 2:
             return 0.0
-        median_dt_ns = float(np.median(np.diff(self.stamps_ns)))
+        median_dt_ns = median(np.diff(self.stamps_ns))
         return _NS_PER_S / median_dt_ns if median_dt_ns > 0 else 0.0
 
     def step_lengths_m(self) -> FloatArray:

@@ -35,6 +35,7 @@ from enum import StrEnum
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from loceval._quantiles import median, quantiles
 from loceval._typing import BoolArray, FloatArray, IntArray
 from loceval.errors import InputError
 
@@ -312,7 +313,7 @@ class BlockBootstrap:
             return out
 
         f_star = self.means((x <= order[half - 1]).astype(np.float64))
-        q_lo, q_hi = np.quantile(f_star, [_ALPHA / 2, 1 - _ALPHA / 2])
+        q_lo, q_hi = quantiles(f_star, [_ALPHA / 2, 1 - _ALPHA / 2])
         f_m = float(np.count_nonzero(x <= order[half - 1])) / n
         guess = n * (0.5 + f_m - np.array([q_hi, q_lo]))
         margin = max(16.0, n * float(q_hi - q_lo) / 4.0)
@@ -332,7 +333,7 @@ class BlockBootstrap:
 
 def percentile_interval(samples: FloatArray) -> tuple[float, float]:
     """Return the 2.5 % and 97.5 % percentiles of bootstrap samples."""
-    lo, hi = np.quantile(samples, [_ALPHA / 2, 1 - _ALPHA / 2])
+    lo, hi = quantiles(samples, [_ALPHA / 2, 1 - _ALPHA / 2])
     return float(lo), float(hi)
 
 
@@ -404,7 +405,7 @@ def interval_stats(
     thresholds = [float(t) for t in thresholds_m]
     indicators = (x[None, :] <= np.asarray(thresholds)[:, None]).astype(np.float64)
     squared = x * x
-    median_indicator = (x <= np.median(x)).astype(np.float64)
+    median_indicator = (x <= median(x)).astype(np.float64)
     keys = ["rmse", "mean", "median", *(f"{t:g}" for t in thresholds)]
     rows = np.vstack([squared, x, median_indicator, indicators])
     rhos = dict(zip(keys, _autocorrelations(rows), strict=True))

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from loceval.alignment import AlignMethod, AlignWindow
 from loceval.association import AssociationMethod
-from loceval.checkpoint_evaluation import CheckpointConfig
+from loceval.checkpoint_config import CheckpointConfig
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, Tolerance, parse_offset
 from loceval.geometry import SimilarityTransform

@@ -12,12 +12,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from loceval.checkpoint_evaluation import (
-    CheckpointConfig,
-    CheckpointEvaluation,
-    evaluate_control_points,
-)
-from loceval.controlpoints import ControlPoints, Visits
+from loceval.checkpoint_config import CheckpointConfig
 from loceval.errors import InputError, LocevalError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, ProgressCallback, evaluate
 from loceval.options import choice_default
@@ -26,6 +21,8 @@ from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from exporters.options import ExportOptions
+    from loceval.checkpoint_evaluation import CheckpointEvaluation
+    from loceval.controlpoints import ControlPoints, Visits
     from loceval.radio import RangingConfig
     from loceval.readers.radio import Ranges
 
@@ -242,6 +239,7 @@ def _run_checkpoints(
     job: Job, out_dir: Path | None, report: ProgressCallback
 ) -> CheckpointEvaluation:
     """Read the survey, the visits and the estimates; score; write the artifacts."""
+    from loceval.checkpoint_evaluation import evaluate_control_points  # noqa: PLC0415
     from loceval.readers.points import read_control_points  # noqa: PLC0415
 
     report(f"reading {job.reference.name}", 0.0)

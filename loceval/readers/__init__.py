@@ -9,19 +9,22 @@ does not import rosbags.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 from loceval.errors import InputError, ReaderError
 from loceval.readers.csv import CSV_KEYS, read_csv
-from loceval.readers.euroc import read_euroc
-from loceval.readers.kitti import read_kitti
-from loceval.readers.motive import read_motive
 from loceval.readers.sniff import sniff_format
 from loceval.readers.source import SourceSpec, TrajectoryFormat, parse_source, refuse_special_file
 from loceval.readers.tum import read_tum
 from loceval.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from loceval.readers.euroc import read_euroc
+    from loceval.readers.kitti import read_kitti
+    from loceval.readers.motive import read_motive
 
 __all__ = [
     "SourceSpec",
@@ -35,6 +38,22 @@ __all__ = [
     "read_tum",
     "sniff_format",
 ]
+
+_LAZY: Final[Mapping[str, str]] = {
+    "read_euroc": "loceval.readers.euroc",
+    "read_kitti": "loceval.readers.kitti",
+    "read_motive": "loceval.readers.motive",
+}
+"""Readers imported on first use, so reading a TUM file does not load them."""
+
+
+def __getattr__(name: str) -> object:
+    """Return a reader of :data:`_LAZY`, importing its module on first use."""
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    msg = f"module {__name__!r} has no attribute {name!r}"
+    raise AttributeError(msg)
+
 
 _STAMP_SOURCES: Final = ("header", "receive")
 _OPTIONS: Final[Mapping[TrajectoryFormat, tuple[str, ...]]] = {
@@ -101,6 +120,8 @@ def read_trajectory(
     if fmt is TrajectoryFormat.BAG:
         return _read_bag(spec, name=name, stamp=stamp)
     if fmt is TrajectoryFormat.MOTIVE:
+        from loceval.readers.motive import read_motive  # noqa: PLC0415
+
         return read_motive(
             spec.path, rigid_body=spec.selector, up_axis=spec.options.get("up"), name=name
         )
@@ -113,8 +134,12 @@ def read_trajectory(
     if fmt is TrajectoryFormat.TUM:
         return read_tum(spec.path, name=name)
     if fmt is TrajectoryFormat.EUROC:
+        from loceval.readers.euroc import read_euroc  # noqa: PLC0415
+
         return read_euroc(spec.path, name=name)
     if fmt is TrajectoryFormat.KITTI:
+        from loceval.readers.kitti import read_kitti  # noqa: PLC0415
+
         times = spec.options.get("times")
         return read_kitti(
             spec.path, times=_times_path(times, spec.path) if times else None, name=name

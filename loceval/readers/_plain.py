@@ -25,9 +25,11 @@ and never raises, so every error message stays that parser's.
 
 from __future__ import annotations
 
+import os
 import sys
 from collections.abc import Sequence
-from typing import Final, NamedTuple
+from concurrent.futures import ThreadPoolExecutor
+from typing import Final, NamedTuple, cast
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -76,19 +78,15 @@ def parse_plain(
         return None
     if not data.isascii():
         return None
+    parsed = _parse_chunks(data, delim=delim, want_ints=int_first)
+    if parsed is None:
+        return None
     parts: list[_Chunk] = []
     line = 0
-    lo = 0
-    while lo < len(data):  # chunks of whole lines: small temporaries, reused memory
-        cut = data.find(b"\n", lo + _CHUNK_BYTES)
-        hi = len(data) if cut < 0 else cut + 1
-        part = _parse_chunk(data[lo:hi], delim=delim, want_ints=int_first)
-        if part is None:
-            return None
+    for part in parsed:
         if part.values.size:
             parts.append(part._replace(lines=part.lines + line))
         line += part.newlines
-        lo = hi
     if not parts or any(p.width != parts[0].width for p in parts):
         return None
     width = parts[0].width
@@ -107,6 +105,40 @@ def parse_plain(
 
 
 _CHUNK_BYTES: Final = 1 << 20
+_THREADS_FROM: Final = 4
+"""Tables of at least this many chunks are parsed in threads: NumPy releases the GIL in
+its array operations, so the chunks overlap on several cores (the values and line numbers
+do not depend on it)."""
+
+
+def _parse_chunks(data: bytes, *, delim: bytes, want_ints: bool) -> list[_Chunk] | None:
+    """Parse the table in chunks of whole lines, in order; None if one holds anything else.
+
+    Chunks keep the temporaries small; many chunks are parsed in threads.
+    """
+    bounds = []
+    lo = 0
+    while lo < len(data):
+        cut = data.find(b"\n", lo + _CHUNK_BYTES)
+        hi = len(data) if cut < 0 else cut + 1
+        bounds.append((lo, hi))
+        lo = hi
+
+    def parse(bound: tuple[int, int]) -> _Chunk | None:
+        return _parse_chunk(data[bound[0] : bound[1]], delim=delim, want_ints=want_ints)
+
+    workers = min(os.cpu_count() or 1, len(bounds) // 2)
+    if len(bounds) < _THREADS_FROM or workers < 2:
+        out = []
+        for bound in bounds:
+            part = parse(bound)
+            if part is None:
+                return None
+            out.append(part)
+        return out
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        results = list(pool.map(parse, bounds))
+    return None if any(part is None for part in results) else cast("list[_Chunk]", results)
 
 
 class _Chunk(NamedTuple):

@@ -6,10 +6,12 @@ builders as the API's options (:mod:`service.options`).
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING, cast
 
-from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError
+from loceval.evaluation import EvaluationResult
 from loceval.readers import TrajectoryFormat, parse_source
 from service.cli.output import emit
 from service.options import (
@@ -29,6 +31,7 @@ if TYPE_CHECKING:
     import argparse
 
     from loceval.geometry import SimilarityTransform
+    from loceval.readers import SourceSpec
 
 __all__ = ["run_demo", "run_evaluate"]
 
@@ -57,39 +60,65 @@ def run_evaluate(args: argparse.Namespace) -> int:
     ref_spec = parse_source(args.reference, default_format=default_format)
     est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
     names = args.name or unique_names([default_name(s) for s in est_specs])
-    job = Job(
-        reference=JobSource(
-            ref_spec,
-            args.reference_name or default_name(ref_spec),
-            file_provenance("reference", ref_spec),
-        ),
-        estimates=[
-            JobSource(spec, name, file_provenance("estimate", spec))
-            for spec, name in zip(est_specs, names, strict=True)
-        ],
-        config=config,
-        stamp=args.stamp,
-        export=export,
-        formats=artifact_names(args.formats),
-        visits=_visits_source(args.visits),
-        checkpoints=checkpoints_from_options(cast("EvaluationValues", args)),
-    )
-    result = run_job(job, args.out)
+    # The checksums are computed in a thread while the files are read (hashlib and file
+    # reads release the GIL); the evaluation reads the records after the files.
+    with ThreadPoolExecutor(max_workers=1) as hashing:
+
+        def provenance(role: str, spec: SourceSpec) -> Mapping[str, object]:
+            return _PendingProvenance(hashing.submit(file_provenance, role, spec))
+
+        job = Job(
+            reference=JobSource(
+                ref_spec,
+                args.reference_name or default_name(ref_spec),
+                provenance("reference", ref_spec),
+            ),
+            estimates=[
+                JobSource(spec, name, provenance("estimate", spec))
+                for spec, name in zip(est_specs, names, strict=True)
+            ],
+            config=config,
+            stamp=args.stamp,
+            export=export,
+            formats=artifact_names(args.formats),
+            visits=_visits_source(args.visits),
+            checkpoints=checkpoints_from_options(cast("EvaluationValues", args)),
+        )
+        result = run_job(job, args.out)
     if args.json:
         from exporters.jsondoc import finite_json  # noqa: PLC0415
 
         print(finite_json(result.to_dict()))  # noqa: T201
-    elif isinstance(result, CheckpointEvaluation):
-        from service.cli.tables import format_checkpoint_tables  # noqa: PLC0415
-
-        emit(format_checkpoint_tables(result))
-    else:
+    elif isinstance(result, EvaluationResult):
         from service.cli.tables import format_tables  # noqa: PLC0415
 
         emit(format_tables(result))
+    else:
+        from service.cli.tables import format_checkpoint_tables  # noqa: PLC0415
+
+        emit(format_checkpoint_tables(result))
     if not args.json and args.out is not None:
         emit(f"\nArtifacts written to {args.out}")
     return 0
+
+
+class _PendingProvenance(Mapping[str, object]):
+    """A source's input record whose checksum is still being computed in a thread.
+
+    Reading it waits for the record (and raises what computing it raised).
+    """
+
+    def __init__(self, future: Future[dict[str, object]]) -> None:
+        self._future = future
+
+    def __getitem__(self, key: str) -> object:
+        return self._future.result()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._future.result())
+
+    def __len__(self) -> int:
+        return len(self._future.result())
 
 
 def _visits_source(visits: str) -> JobSource | None:

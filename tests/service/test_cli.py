@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import subprocess
@@ -41,6 +42,21 @@ def test_json_contract(demo: dict[str, Path], capsys: pytest.CaptureFixture[str]
     assert isaac["verdict"]["required_share"] == pytest.approx(0.95)
     assert doc["inputs"][0]["sha256"]
     assert doc["options"]["association"] == "interpolate"
+
+
+def test_input_records_hash_every_file(
+    demo: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The checksums (computed while the files are read) are each file's SHA-256."""
+    files = [demo["reference"], demo["RTAB-Map"], demo["ISAAC"]]
+    code, out, _ = _run(capsys, "evaluate", *map(str, files), "--json", "--no-ci")
+    assert code == 0
+    inputs = json.loads(out)["inputs"]
+    assert [i["role"] for i in inputs] == ["reference", "estimate", "estimate"]
+    assert [i["sha256"] for i in inputs] == [
+        hashlib.sha256(f.read_bytes()).hexdigest() for f in files
+    ]
+    assert [i["bytes"] for i in inputs] == [f.stat().st_size for f in files]
 
 
 def test_no_ci_and_reference_sigma(

@@ -92,3 +92,28 @@ def test_exact_integer_first_column() -> None:
 )
 def test_declines_what_it_does_not_read(text: bytes, delimiter: str | None) -> None:
     assert parse_plain(text, delimiter=delimiter) is None
+
+
+def test_threaded_chunks_give_the_serial_result(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_plain, "_CHUNK_BYTES", 64)
+    monkeypatch.setattr(_plain.os, "cpu_count", lambda: 2)
+    lines = [f"{1_700_000_000_000 + 7 * k},{k * 0.25}" for k in range(300)]
+    lines.insert(150, "")  # a blank line halfway: later rows keep their line numbers
+    data = ("\n".join(lines) + "\n").encode()
+    threaded = parse_plain(data, delimiter=",", int_first=True)
+    monkeypatch.setattr(_plain, "_THREADS_FROM", 10**9)
+    serial = parse_plain(data, delimiter=",", int_first=True)
+    assert threaded is not None
+    assert serial is not None
+    assert (threaded[0].view(np.int64) == serial[0].view(np.int64)).all()
+    assert threaded[1].tolist() == serial[1].tolist() == [*range(150), *range(151, 301)]
+    assert threaded[2] is not None
+    assert serial[2] is not None
+    assert threaded[2].tolist() == serial[2].tolist()
+
+
+def test_threaded_chunks_decline_a_bad_late_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_plain, "_CHUNK_BYTES", 64)
+    monkeypatch.setattr(_plain.os, "cpu_count", lambda: 2)
+    data = "".join(f"{k} {k}.5\n" for k in range(300)).encode() + b"7 nan\n"
+    assert parse_plain(data, delimiter=None) is None
