@@ -268,10 +268,20 @@ def check_webhook_url(
             is internal and not allowed (the message says which kind, and what to do).
     """
     https, host, port, target = _split(url)
+    by_name = allow.allows_host(host)
+    if _is_localhost(host) and not by_name:  # loopback by definition, whatever DNS says
+        msg = (
+            f"{_FIELD}: the host {host!r} is a loopback address, which webhooks may not "
+            f"reach; {_WHAT_TO_DO}"
+        )
+        raise WebhookRefusedError(msg)
     if addresses is None:
         try:
             addresses = resolve_addresses(host, port)
         except (OSError, UnicodeError, ValueError):
+            if _is_localhost(host):  # allowed by name: RFC 6761's loopback, with no hosts file
+                addresses = ["127.0.0.1"]
+                return WebhookTarget(url, https, host, port, target, tuple(addresses))
             msg = (
                 f"{_FIELD}: the host {host!r} does not resolve; check the name, or use a "
                 "public address."
@@ -280,7 +290,6 @@ def check_webhook_url(
     if not addresses:
         msg = f"{_FIELD}: the host {host!r} resolves to no address; check the name."
         raise WebhookUnresolvedError(msg)
-    by_name = allow.allows_host(host)
     literal = _is_literal(host)
     for text in addresses:
         address = ipaddress.ip_address(text)
@@ -291,6 +300,12 @@ def check_webhook_url(
         msg = f"{_FIELD}: {where} {kind}, which webhooks may not reach; {_WHAT_TO_DO}"
         raise WebhookRefusedError(msg)
     return WebhookTarget(url, https, host, port, target, tuple(addresses))
+
+
+def _is_localhost(host: str) -> bool:
+    """Return whether a name is ``localhost`` or under it (RFC 6761: always loopback)."""
+    name = host.lower().rstrip(".")
+    return name == "localhost" or name.endswith(".localhost")
 
 
 def _is_literal(host: str) -> bool:

@@ -58,6 +58,8 @@ def _schedule_body(**overrides: Any) -> dict[str, Any]:
         "cron": "0 3 * * *",
         "selection": {"tags": ["none"]},
         "template": {"reference": {"selector": "/gt"}, "estimates": [{"selector": "/est"}]},
+        # the HTML summary only: a webhook test needs no PDF (nor pango to lay one out)
+        "produce": {"summary_formats": ["summary.html"]},
     }
     body.update(overrides)
     return body
@@ -188,6 +190,25 @@ def test_the_allow_list_lets_named_internal_targets_through(make_client, receive
     by_name = make_client("localhost")
     url = f"http://localhost:{receiver.port}/hook"
     assert by_name.post("/api/v1/schedules", json=_schedule_body(webhook_url=url)).is_success
+
+
+def test_localhost_names_are_loopback_whatever_dns_says(
+    make_client: Callable[[str], TestClient], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """RFC 6761: localhost and names under it are loopback, even where no hosts file says so."""
+
+    def no_resolver(host: str, _port: int) -> list[str]:
+        raise OSError(f"{host} does not resolve")
+
+    monkeypatch.setattr(webhooks, "resolve_addresses", no_resolver)
+    client = make_client("")
+    for url in ("http://localhost/hook", "http://LOCALHOST./hook", "http://api.localhost/h"):
+        problem = client.post("/api/v1/schedules", json=_schedule_body(webhook_url=url)).json()
+        assert problem["status"] == 422, problem
+        assert "loopback" in problem["detail"], problem
+    allowed = make_client("localhost")
+    url = "http://localhost:8080/hook"
+    assert allowed.post("/api/v1/schedules", json=_schedule_body(webhook_url=url)).is_success
 
 
 @pytest.mark.parametrize(
