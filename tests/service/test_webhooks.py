@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import hmac
 import shutil
+import socket
 import ssl
 import subprocess
 import threading
@@ -198,7 +199,7 @@ def test_localhost_names_are_loopback_whatever_dns_says(
     """RFC 6761: localhost and names under it are loopback, even where no hosts file says so."""
 
     def no_resolver(host: str, _port: int) -> list[str]:
-        raise OSError(f"{host} does not resolve")
+        raise socket.gaierror(socket.EAI_NONAME, host)
 
     monkeypatch.setattr(webhooks, "resolve_addresses", no_resolver)
     client = make_client("")
