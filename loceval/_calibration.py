@@ -56,6 +56,11 @@ class PoseSampler:
         # gaps_before[i]: how many gaps lie between pose 0 and pose i.
         self._gaps_before = np.concatenate(([0], np.cumsum(dt_ns > max_gap_ns)))
 
+    @classmethod
+    def from_start(cls, trajectory: Trajectory, *, max_gap_ns: int) -> PoseSampler:
+        """Return the sampler whose times count from the trajectory's first stamp."""
+        return cls(trajectory, origin_ns=int(trajectory.stamps_ns[0]), max_gap_ns=max_gap_ns)
+
     def valid(self, times_s: FloatArray, *, margin_s: float = 0.0) -> BoolArray:
         """Whether every time within ``margin_s`` of each of ``times_s`` is bridged."""
         t = self.times_s
