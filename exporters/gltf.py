@@ -34,7 +34,6 @@ Either way it gets the same base point and Z-up -> Y-up matrix.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
 
@@ -43,7 +42,7 @@ import pygltflib
 from numpy.typing import NDArray
 
 from exporters.building import read_building
-from exporters.errors import ExportError
+from exporters.gltf_scene import Z_UP_TO_Y_UP, GlbScene, linear_rgba, node_matrix
 from exporters.options import ExportOptions
 from exporters.placement import ATERun, Marker, Placement, place_evaluation
 from loceval._typing import FloatArray
@@ -51,22 +50,7 @@ from loceval.evaluation import EvaluationResult
 
 __all__ = ["Z_UP_TO_Y_UP", "export_glb", "node_matrix"]
 
-Z_UP_TO_Y_UP: Final = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-"""(3, 3) rotation -90° about X: REP 103 / CAD Z-up to glTF Y-up, (x, y, z) -> (x, z, -y)."""
-_UNLIT: Final = "KHR_materials_unlit"  # lines have no normals: draw them in flat colour
 _BUILDING_RGBA: Final = (0.75, 0.75, 0.75, 0.35)
-
-
-def node_matrix(base_point_m: FloatArray) -> list[float]:
-    """Return a node matrix (column-major, 16 numbers): Z-up -> Y-up, then the base point.
-
-    Args:
-        base_point_m: (3,) model coordinates (Z up, metres) of the local origin.
-    """
-    m = np.eye(4)
-    m[:3, :3] = Z_UP_TO_Y_UP
-    m[:3, 3] = Z_UP_TO_Y_UP @ np.asarray(base_point_m, dtype=np.float64)
-    return [float(v) for v in m.T.reshape(-1)]  # glTF stores matrices column by column
 
 
 def export_glb(
@@ -92,7 +76,7 @@ def export_glb(
     per_metre = placement.units.per_metre
     ate_nodes = []
     bins = placement.ate_bins()
-    bin_rgb = np.array([_linear_rgba(b.color_rgb)[:3] for b in bins], dtype=np.float32)
+    bin_rgb = np.array([linear_rgba(b.color_rgb)[:3] for b in bins], dtype=np.float32)
     for path in placement.paths:
         pieces = [
             (path.local_vertices[a:b] / per_metre).astype(np.float32)
@@ -100,7 +84,7 @@ def export_glb(
             if b - a >= 2
         ]
         extras = {**path.metadata(), "units": "m", "output_units": placement.units.value}
-        scene.add_lines(path.name, pieces, _linear_rgba(path.color_rgb), extras)
+        scene.add_lines(path.name, pieces, linear_rgba(path.color_rgb), extras)
         runs = placement.ate_runs(path)
         if runs:
             ate_nodes.append((path, runs))
@@ -132,11 +116,7 @@ def export_glb(
     )
     if plan_only and options.building is not None:  # a 2D drawing has no mesh for the scene
         meta["building_note"] = f"{options.building.name} is a 2D floor plan, not in the scene"
-    try:
-        return b"".join(scene.build(meta).save_to_bytes())
-    except (ValueError, TypeError) as err:
-        msg = f"pygltflib could not serialize the glTF scene ({err}); please report this."
-        raise ExportError(msg) from err
+    return scene.to_glb(meta)
 
 
 def _ate_strips(
@@ -159,46 +139,11 @@ def _ate_strips(
     return strips, colours
 
 
-def _linear_rgba(rgb: tuple[int, int, int]) -> list[float]:
-    """Convert 0-255 sRGB to linear RGBA (glTF's baseColorFactor is linear)."""
-    c = np.asarray(rgb, dtype=np.float64) / 255.0
-    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-    return [*(round(float(v), 6) for v in linear), 1.0]
-
-
-@dataclass
-class _SceneBuilder:
+class _SceneBuilder(GlbScene):
     """Collects nodes, meshes, materials and one binary buffer."""
 
-    matrix: list[float]
-    gltf: pygltflib.GLTF2 = field(default_factory=pygltflib.GLTF2)
-    blob: bytearray = field(default_factory=bytearray)
-    roots: list[int] = field(default_factory=list)
-
-    def _view(self, data: bytes, target: int) -> int:
-        self.blob.extend(b"\0" * (-len(self.blob) % 4))  # 4-byte alignment of every view
-        view = pygltflib.BufferView(
-            buffer=0, byteOffset=len(self.blob), byteLength=len(data), target=target
-        )
-        self.blob.extend(data)
-        self.gltf.bufferViews.append(view)
-        return len(self.gltf.bufferViews) - 1
-
-    def _positions(self, positions: NDArray[np.float32]) -> int:
-        view = self._view(positions.tobytes(), pygltflib.ARRAY_BUFFER)
-        accessor = pygltflib.Accessor(
-            bufferView=view,
-            componentType=pygltflib.FLOAT,
-            count=len(positions),
-            type=pygltflib.VEC3,
-            min=[float(v) for v in positions.min(axis=0)],  # the validator checks both
-            max=[float(v) for v in positions.max(axis=0)],
-        )
-        self.gltf.accessors.append(accessor)
-        return len(self.gltf.accessors) - 1
-
     def _colours(self, colours: NDArray[np.float32]) -> int:
-        view = self._view(colours.tobytes(), pygltflib.ARRAY_BUFFER)
+        view = self.view(colours.tobytes(), pygltflib.ARRAY_BUFFER)
         accessor = pygltflib.Accessor(
             bufferView=view, componentType=pygltflib.FLOAT, count=len(colours), type=pygltflib.VEC3
         )
@@ -223,24 +168,16 @@ class _SceneBuilder:
         colours: list[NDArray[np.float32]] | None = None,
     ) -> None:
         """Add a path: a LINE_STRIP per piece (vertex colours if given), material, node."""
-        self.gltf.materials.append(
-            pygltflib.Material(
-                name=name,
-                pbrMetallicRoughness=pygltflib.PbrMetallicRoughness(
-                    baseColorFactor=rgba, metallicFactor=0.0, roughnessFactor=1.0
-                ),
-                extensions={_UNLIT: {}},
-            )
-        )
+        material = self.unlit_material(name, rgba)
         primitives = []
         for k, positions in enumerate(pieces):  # one primitive per continuous piece
-            attributes = pygltflib.Attributes(POSITION=self._positions(positions))
+            attributes = pygltflib.Attributes(POSITION=self.positions(positions))
             if colours is not None:
                 attributes.COLOR_0 = self._colours(colours[k])
             primitives.append(
                 pygltflib.Primitive(
                     attributes=attributes,
-                    material=len(self.gltf.materials) - 1,
+                    material=material,
                     mode=pygltflib.LINE_STRIP,
                 )
             )
@@ -284,7 +221,7 @@ class _SceneBuilder:
                 doubleSided=True,
             )
         )
-        indices = self._view(faces.reshape(-1).tobytes(), pygltflib.ELEMENT_ARRAY_BUFFER)
+        indices = self.view(faces.reshape(-1).tobytes(), pygltflib.ELEMENT_ARRAY_BUFFER)
         self.gltf.accessors.append(
             pygltflib.Accessor(
                 bufferView=indices,
@@ -295,28 +232,10 @@ class _SceneBuilder:
         )
         index_accessor = len(self.gltf.accessors) - 1
         primitive = pygltflib.Primitive(
-            attributes=pygltflib.Attributes(POSITION=self._positions(positions)),
+            attributes=pygltflib.Attributes(POSITION=self.positions(positions)),
             indices=index_accessor,
             material=len(self.gltf.materials) - 1,
             mode=pygltflib.TRIANGLES,
         )
         extras: dict[str, object] = {"kind": "building", "source": source.name}
         self._node("building", pygltflib.Mesh(name="building", primitives=[primitive]), extras)
-
-    def build(self, metadata: dict[str, object]) -> pygltflib.GLTF2:
-        """Return the finished glTF with its one scene and buffer."""
-        gltf = self.gltf
-        gltf.asset = pygltflib.Asset(version="2.0", generator=str(metadata["generator"]))
-        gltf.extensionsUsed = [_UNLIT]
-        gltf.scenes = [
-            pygltflib.Scene(
-                name=str(metadata["title"]),
-                nodes=list(self.roots),
-                extras=metadata,
-            )
-        ]
-        gltf.scene = 0
-        self.blob.extend(b"\0" * (-len(self.blob) % 4))
-        gltf.buffers = [pygltflib.Buffer(byteLength=len(self.blob))]
-        gltf.set_binary_blob(bytes(self.blob))
-        return gltf

@@ -22,8 +22,7 @@ import pygltflib
 from numpy.typing import NDArray
 
 from exporters.colours import RGB
-from exporters.errors import ExportError
-from exporters.gltf import _UNLIT, _linear_rgba, node_matrix
+from exporters.gltf_scene import GlbScene, linear_rgba, node_matrix
 from exporters.options import ExportOptions
 from exporters.points_placement import (
     ALIGNMENT_RGB,
@@ -69,71 +68,20 @@ def export_points_glb(evaluation: CheckpointEvaluation, options: ExportOptions) 
         "base_point": placed.base_point_m.tolist(),
         "gltf_convention": "metres, Y up; node matrix = base point ∘ (Z-up -> Y-up)",
     }
-    gltf = scene.gltf
-    gltf.asset = pygltflib.Asset(version="2.0", generator=str(metadata["generator"]))
-    gltf.extensionsUsed = [_UNLIT]
-    gltf.scenes = [pygltflib.Scene(name=str(metadata["title"]), nodes=scene.roots, extras=metadata)]
-    gltf.scene = 0
-    scene.blob.extend(b"\0" * (-len(scene.blob) % 4))
-    gltf.buffers = [pygltflib.Buffer(byteLength=len(scene.blob))]
-    gltf.set_binary_blob(bytes(scene.blob))
-    try:
-        return b"".join(gltf.save_to_bytes())
-    except (ValueError, TypeError) as err:
-        msg = f"pygltflib could not serialize the glTF scene ({err}); please report this."
-        raise ExportError(msg) from err
+    return scene.to_glb(metadata)
 
 
-class _Scene:
+class _Scene(GlbScene):
     """Collects the nodes, meshes, materials and the binary buffer of the GLB."""
 
     def __init__(self, placed: PlacedControlPoints) -> None:
-        self.gltf = pygltflib.GLTF2()
-        self.blob = bytearray()
-        self.roots: list[int] = []
-        self.matrix = node_matrix(placed.base_point_m)
+        super().__init__(node_matrix(placed.base_point_m))
         self.per_metre = placed.units.per_metre
         self.base_m = placed.base_point_m
 
     def _local(self, model: FloatArray) -> NDArray[np.float32]:
         """Model coordinates (output units) -> float32 metres relative to the base point."""
         return (model / self.per_metre - self.base_m).astype(np.float32)
-
-    def _positions(self, positions: NDArray[np.float32]) -> int:
-        self.blob.extend(b"\0" * (-len(self.blob) % 4))
-        data = positions.tobytes()
-        self.gltf.bufferViews.append(
-            pygltflib.BufferView(
-                buffer=0,
-                byteOffset=len(self.blob),
-                byteLength=len(data),
-                target=pygltflib.ARRAY_BUFFER,
-            )
-        )
-        self.blob.extend(data)
-        self.gltf.accessors.append(
-            pygltflib.Accessor(
-                bufferView=len(self.gltf.bufferViews) - 1,
-                componentType=pygltflib.FLOAT,
-                count=len(positions),
-                type=pygltflib.VEC3,
-                min=[float(v) for v in positions.min(axis=0)],
-                max=[float(v) for v in positions.max(axis=0)],
-            )
-        )
-        return len(self.gltf.accessors) - 1
-
-    def _material(self, name: str, rgb: RGB) -> int:
-        self.gltf.materials.append(
-            pygltflib.Material(
-                name=name,
-                pbrMetallicRoughness=pygltflib.PbrMetallicRoughness(
-                    baseColorFactor=_linear_rgba(rgb), metallicFactor=0.0, roughnessFactor=1.0
-                ),
-                extensions={_UNLIT: {}},
-            )
-        )
-        return len(self.gltf.materials) - 1
 
     def add(
         self,
@@ -150,8 +98,8 @@ class _Scene:
         """
         primitives = [
             pygltflib.Primitive(
-                attributes=pygltflib.Attributes(POSITION=self._positions(self._local(model))),
-                material=self._material(f"{name} {k}" if k else name, rgb),
+                attributes=pygltflib.Attributes(POSITION=self.positions(self._local(model))),
+                material=self.unlit_material(f"{name} {k}" if k else name, linear_rgba(rgb)),
                 mode=mode,
             )
             for k, (model, rgb) in enumerate(groups)

@@ -17,7 +17,7 @@ import numpy as np
 
 from loceval._quantiles import median
 from loceval._typing import BoolArray, FloatArray, IntArray
-from loceval.geometry import compose_quat, conjugate_quat
+from loceval.geometry import compose_quat, conjugate_quat, skew
 from loceval.rotation import Rotation
 from loceval.trajectory import Trajectory
 
@@ -55,6 +55,11 @@ class PoseSampler:
         dt_ns = np.diff(trajectory.stamps_ns)
         # gaps_before[i]: how many gaps lie between pose 0 and pose i.
         self._gaps_before = np.concatenate(([0], np.cumsum(dt_ns > max_gap_ns)))
+
+    @classmethod
+    def from_start(cls, trajectory: Trajectory, *, max_gap_ns: int) -> PoseSampler:
+        """Return the sampler whose times count from the trajectory's first stamp."""
+        return cls(trajectory, origin_ns=int(trajectory.stamps_ns[0]), max_gap_ns=max_gap_ns)
 
     def valid(self, times_s: FloatArray, *, margin_s: float = 0.0) -> BoolArray:
         """Whether every time within ``margin_s`` of each of ``times_s`` is bridged."""
@@ -388,7 +393,7 @@ class _RelativeProblem:
             travel = self._travel(full, mx)
             w_x_t = np.cross(anchor.w, full[4:7])
             jac[:, 3:, 0] = (np.einsum("nij,nj->ni", ra, w_x_t) + anchor.v) / sc[1]
-            jac[:, 3:, 1:4] = s * _skew(travel) / sc[1]
+            jac[:, 3:, 1:4] = s * skew(travel) / sc[1]
             jac[:, 3:, 4:7] = (ra - np.eye(3)) / sc[1]
             jac[:, 3:, 7] = -s * travel / sc[1]
             jac[:, 3:, 8:11] = (s / sc[1]) * self.dt_s[:, None, None] * (mx @ self.b_inv)
@@ -504,15 +509,6 @@ def _free_parameters(options: FitOptions) -> BoolArray:
     free[7] = options.fit_scale and options.fit_translation
     free[8:11] = options.fit_drift and options.fit_translation
     return free
-
-
-def _skew(v: FloatArray) -> FloatArray:
-    """(N, 3, 3) cross-product matrices ``[v]x`` of (N, 3) vectors."""
-    out = np.zeros((*v.shape[:-1], 3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
-    return out
 
 
 def quat_matrices(quat_xyzw: FloatArray) -> FloatArray:

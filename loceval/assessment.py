@@ -260,7 +260,7 @@ def compare_estimates(
     notes: list[str] = []
     if len(named) < 2:
         return out, notes
-    from loceval.comparison import ComparedMetric, compare_errors  # noqa: PLC0415
+    from loceval.comparison import ComparedMetric, compare_error_series  # noqa: PLC0415
 
     for i, (name_a, ate_a, rpe_a) in enumerate(named):
         for name_b, ate_b, rpe_b in named[i + 1 :]:
@@ -271,18 +271,7 @@ def compare_estimates(
                 if sa.unit != sb.unit:
                     continue
                 try:
-                    out.append(
-                        compare_errors(
-                            sa.stamps_ns,
-                            sa.values,
-                            sb.stamps_ns,
-                            sb.values,
-                            a=name_a,
-                            b=name_b,
-                            metric=metric,
-                            unit=sa.unit,
-                        )
-                    )
+                    out.append(compare_error_series(sa, sb, a=name_a, b=name_b, metric=metric))
                 except (InputError, MetricError) as err:
                     notes.append(f"{metric.label} of {name_a} and {name_b} not compared: {err}")
     return out, notes

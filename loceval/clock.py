@@ -299,7 +299,7 @@ def motion_signal(
     Returns:
         (G,) values and (G,) mask.
     """
-    sampler = PoseSampler(trajectory, origin_ns=int(trajectory.stamps_ns[0]), max_gap_ns=max_gap_ns)
+    sampler = PoseSampler.from_start(trajectory, max_gap_ns=max_gap_ns)
     g = int(np.floor(trajectory.duration_s / dt_s)) + 1
     t = np.arange(g, dtype=np.float64) * np.float64(dt_s)
     ok = sampler.valid(t)
@@ -451,7 +451,7 @@ def _refine_rotation(
     step_s: float,
 ) -> tuple[float, float]:
     """Least squares of the relative rotations with the device rotation; (offset, sigma)."""
-    sampler = PoseSampler(reference, origin_ns=int(reference.stamps_ns[0]), max_gap_ns=max_gap_ns)
+    sampler = PoseSampler.from_start(reference, max_gap_ns=max_gap_ns)
     offset_ns = round(start_s * NS_PER_S)
     pairs = make_pairs(
         estimate,
@@ -518,7 +518,7 @@ def _refine_positions(
     """Least squares of the positions with the alignment profiled out; (offset, sigma)."""
     from scipy.optimize import minimize_scalar  # noqa: PLC0415  (scipy loads only when needed)
 
-    sampler = PoseSampler(reference, origin_ns=int(reference.stamps_ns[0]), max_gap_ns=max_gap_ns)
+    sampler = PoseSampler.from_start(reference, max_gap_ns=max_gap_ns)
     offset_ns = round(start_s * NS_PER_S)
     t_s = (estimate.stamps_ns - sampler.origin_ns + offset_ns).astype(np.float64) / NS_PER_S
     ok = np.flatnonzero(sampler.valid(t_s, margin_s=2.0 * step_s))

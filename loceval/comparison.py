@@ -34,6 +34,7 @@ __all__ = [
     "ComparedMetric",
     "Comparison",
     "ComparisonVerdict",
+    "compare_error_series",
     "compare_errors",
     "compare_runs",
     "compare_series",
@@ -149,6 +150,35 @@ def _verdict(lo: float, hi: float) -> ComparisonVerdict:
     return ComparisonVerdict.WITHIN_NOISE
 
 
+def _from_bootstrap(
+    diffs: FloatArray,
+    value_a: float,
+    value_b: float,
+    *,
+    a: str,
+    b: str,
+    metric: ComparedMetric,
+    n_common: int,
+    unit: str,
+    block: int,
+) -> Comparison:
+    """Return the comparison of A's and B's figures from the resampled differences A* - B*."""
+    lo, hi = percentile_interval(diffs)
+    return Comparison(
+        a=a,
+        b=b,
+        metric=metric,
+        difference=value_a - value_b,
+        ci95=(lo, hi),
+        verdict=_verdict(lo, hi),
+        rmse_a=value_a,
+        rmse_b=value_b,
+        n_common=n_common,
+        unit=unit,
+        block_length=block,
+    )
+
+
 def compare_errors(
     stamps_a_ns: StampsNs,
     errors_a: FloatArray,
@@ -220,20 +250,58 @@ def compare_errors(
     means = boot.means(np.vstack([sq_a, sq_b]))
     diffs = np.sqrt(means[0]) - np.sqrt(means[1])
     rmse_a, rmse_b = math.sqrt(float(sq_a.mean())), math.sqrt(float(sq_b.mean()))
-    lo, hi = percentile_interval(diffs)
-    verdict = _verdict(lo, hi)
-    return Comparison(
+    return _from_bootstrap(
+        diffs,
+        rmse_a,
+        rmse_b,
         a=a,
         b=b,
         metric=metric,
-        difference=rmse_a - rmse_b,
-        ci95=(lo, hi),
-        verdict=verdict,
-        rmse_a=rmse_a,
-        rmse_b=rmse_b,
         n_common=int(common.size),
         unit=unit,
-        block_length=boot.block,
+        block=boot.block,
+    )
+
+
+def compare_error_series(
+    series_a: ErrorSeries,
+    series_b: ErrorSeries,
+    *,
+    a: str,
+    b: str,
+    metric: ComparedMetric,
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_SEED,
+) -> Comparison:
+    """Compare two error series (in the unit of ``series_a``) with :func:`compare_errors`.
+
+    Args:
+        series_a: A's errors.
+        series_b: B's errors, against the same reference.
+        a: A's name in sentences.
+        b: B's name in sentences.
+        metric: which RMSE the series give.
+        resamples: bootstrap resamples (≥ 100).
+        seed: bootstrap seed.
+
+    Returns:
+        The difference A - B, its interval and the verdict.
+
+    Raises:
+        InputError: see :func:`compare_errors`.
+        MetricError: see :func:`compare_errors`.
+    """
+    return compare_errors(
+        series_a.stamps_ns,
+        series_a.values,
+        series_b.stamps_ns,
+        series_b.values,
+        a=a,
+        b=b,
+        metric=metric,
+        unit=series_a.unit,
+        resamples=resamples,
+        seed=seed,
     )
 
 
@@ -265,18 +333,7 @@ def compare_series(
         msg = f"Comparisons need errors in one unit, got {sorted(units)!r}; use one RPE unit."
         raise InputError(msg, option="rpe_unit")
     return [
-        compare_errors(
-            sa.stamps_ns,
-            sa.values,
-            sb.stamps_ns,
-            sb.values,
-            a=na,
-            b=nb,
-            metric=metric,
-            unit=sa.unit,
-            resamples=resamples,
-            seed=seed,
-        )
+        compare_error_series(sa, sb, a=na, b=nb, metric=metric, resamples=resamples, seed=seed)
         for i, (na, sa) in enumerate(named)
         for nb, sb in named[i + 1 :]
     ]
@@ -334,19 +391,14 @@ def compare_runs(
         )
         arrays.append(x)
     diffs = boots[0].means(arrays[0]) - boots[1].means(arrays[1])
-    mean_a, mean_b = float(arrays[0].mean()), float(arrays[1].mean())
-    lo, hi = percentile_interval(diffs)
-    verdict = _verdict(lo, hi)
-    return Comparison(
+    return _from_bootstrap(
+        diffs,
+        float(arrays[0].mean()),
+        float(arrays[1].mean()),
         a=a,
         b=b,
         metric=metric,
-        difference=mean_a - mean_b,
-        ci95=(lo, hi),
-        verdict=verdict,
-        rmse_a=mean_a,
-        rmse_b=mean_b,
         n_common=0,
         unit="m",
-        block_length=max(boot.block for boot in boots),
+        block=max(boot.block for boot in boots),
     )

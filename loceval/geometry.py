@@ -18,6 +18,7 @@ __all__ = [
     "compose_quat",
     "conjugate_quat",
     "relative_angle_deg",
+    "skew",
     "slerp_pairs",
 ]
 
@@ -173,4 +174,13 @@ def relative_angle_deg(q_a_xyzw: FloatArray, q_b_xyzw: FloatArray) -> FloatArray
     """
     delta = Rotation.from_quat(compose_quat(conjugate_quat(q_a_xyzw), q_b_xyzw))
     out: FloatArray = np.degrees(delta.magnitude())
+    return out
+
+
+def skew(v: FloatArray) -> FloatArray:
+    """Return the (N, 3, 3) cross-product matrices ``[v]×`` of (N, 3) vectors."""
+    out = np.zeros((*v.shape[:-1], 3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
     return out

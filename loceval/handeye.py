@@ -185,7 +185,7 @@ def estimate_device_offset(
         msg = f"The longest bridged interval must be positive seconds, got {max_gap_s!r}."
         raise InputError(msg, option="max_gap_s")
     max_gap_ns = round(max_gap_s * NS_PER_S)
-    sampler = PoseSampler(reference, origin_ns=int(reference.stamps_ns[0]), max_gap_ns=max_gap_ns)
+    sampler = PoseSampler.from_start(reference, max_gap_ns=max_gap_ns)
     offset_ns = round(time_offset_s * NS_PER_S)
     pairs = make_pairs(
         estimate,

@@ -20,8 +20,9 @@ of CPU on 200,000 reference against 50,000 estimate poses). scipy is imported on
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, TypeVar
 
 from loceval.errors import LocevalError
 
@@ -41,6 +42,7 @@ ESTIMATE_MAX_PAIRS = 3_000
 DeviceSource = Literal["given", "urdf"]
 """Where a given device offset comes from: typed numbers, or a URDF / a bag's ``/tf_static``."""
 
+_T = TypeVar("_T")
 _APPLIED_NOTE = "Time offset estimated and applied:"
 _CHECK_ERRORS = (LocevalError, ValueError, ArithmeticError)
 """What a mere check turns into a warning (numerical trouble included: never fail for it)."""
@@ -138,20 +140,19 @@ def check_offsets(
 
     auto_time = time_offset_s is None
     notes: list[str] = []
-    clock: TimeOffsetEstimate | None = None
-    try:
-        clock = estimate_time_offset(
+    clock = _estimated(
+        lambda: estimate_time_offset(
             reference,
             estimate,
             given_offset_s=time_offset_s,
             max_gap_s=max_gap_s,
             with_scale=with_scale,
             max_pairs=ESTIMATE_MAX_PAIRS if auto_time else CHECK_MAX_PAIRS,
-        )
-    except _CHECK_ERRORS as err:
-        if auto_time:
-            raise
-        notes.append(f"The time offset could not be checked against the motion: {err}")
+        ),
+        applied=auto_time,
+        what="time offset",
+        notes=notes,
+    )
     applied_s = clock.value_s if clock is not None else float(time_offset_s or 0.0)
     if clock is not None:
         notes.extend(clock.warnings)
@@ -231,8 +232,8 @@ def _device(
     """Estimate the device offset; None (and a note) when a mere check cannot run."""
     from loceval.handeye import estimate_device_offset  # noqa: PLC0415
 
-    try:
-        return estimate_device_offset(
+    return _estimated(
+        lambda: estimate_device_offset(
             reference,
             estimate,
             time_offset_s=time_offset_s,
@@ -240,11 +241,26 @@ def _device(
             with_scale=with_scale,
             max_gap_s=max_gap_s,
             max_pairs=ESTIMATE_MAX_PAIRS if auto_device else CHECK_MAX_PAIRS,
-        )
+        ),
+        applied=auto_device,
+        what="device offset",
+        notes=notes,
+    )
+
+
+def _estimated(
+    estimate: Callable[[], _T], *, applied: bool, what: str, notes: list[str]
+) -> _T | None:
+    """Return ``estimate()``; if it fails and would only check a given value, None and a note.
+
+    An estimate that is to be applied (``auto``) raises its error instead.
+    """
+    try:
+        return estimate()
     except _CHECK_ERRORS as err:
-        if auto_device:
+        if applied:
             raise
-        notes.append(f"The device offset could not be checked against the motion: {err}")
+        notes.append(f"The {what} could not be checked against the motion: {err}")
         return None
 
 

@@ -54,7 +54,9 @@ class StampSource(StrEnum):
     """Which stamps a bag's poses take: the message header's or the bag's receive time."""
 
     HEADER = "header"
+    """``header.stamp`` of the message (of the transform, for tf): when it was measured."""
     RECEIVE = "receive"
+    """The bag's receive (log) time: when the recorder got it."""
 
 
 class UpAxis(StrEnum):

@@ -11,7 +11,7 @@ from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.display import display_text
 from loceval.errors import TrajectoryError
 from loceval.gaps import tracking_losses
-from loceval.geometry import SimilarityTransform
+from loceval.geometry import SimilarityTransform, skew
 from loceval.rotation import Rotation
 
 __all__ = ["MAX_COORDINATE_M", "MAX_OFFSET_M", "MAX_SPAN_S", "MIN_POSES", "Trajectory"]
@@ -280,7 +280,7 @@ class Trajectory:
             # A rotation error δθ about fixed axes moves the offset point by δθ × lever:
             # δp' = δp - [lever]× δθ, and δθ' = δθ.
             jac = np.broadcast_to(np.eye(6), (len(self), 6, 6)).copy()
-            jac[:, :3, 3:] = -_skew(lever_m)
+            jac[:, :3, 3:] = -skew(lever_m)
             cov = jac @ self.cov6 @ jac.transpose(0, 2, 1)
         return replace(self, positions_xyz=positions, quat_xyzw=quat, cov6=cov)
 
@@ -291,12 +291,3 @@ class Trajectory:
     def without_orientation(self) -> Trajectory:
         """Return the positions only (a covariance stays: its position block still holds)."""
         return replace(self, quat_xyzw=None)
-
-
-def _skew(v: FloatArray) -> FloatArray:
-    """Return the (N, 3, 3) cross-product matrices ``[v]×`` of (N, 3) vectors."""
-    out = np.zeros((*v.shape[:-1], 3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
-    return out

@@ -14,7 +14,7 @@ from typing import Any, Final
 from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 from sqlalchemy import func, select
-from sqlalchemy.orm import defer
+from sqlalchemy.orm import Session, defer
 
 from exporters import ARTIFACTS
 from loceval.errors import InputError
@@ -86,15 +86,7 @@ def create_evaluation(
             wanted.add(options.visits.strip())
         if options.building is not None:
             wanted.add(options.building)
-        datasets = {
-            d.id: d
-            for d in session.scalars(
-                select(Dataset).where(Dataset.project_id == project_id, Dataset.id.in_(wanted))
-            )
-        }
-        for dataset_id in sorted(wanted - set(datasets)):
-            msg = f"No dataset {dataset_id!r} in this project; upload it first (POST /datasets)."
-            raise NotFoundError(msg)
+        datasets = _datasets(session, project_id, wanted)
         for role, ref in [("reference", body.reference)] + [
             ("estimate", e) for e in body.estimates
         ]:
@@ -130,15 +122,7 @@ def create_ranging(runtime: Runtime, project_id: str, body: RangingCreate) -> Ev
     ranges = body.ranges_ref
     with runtime.sessions() as session:
         wanted = {body.reference.dataset_id, body.anchors, ranges.dataset_id}
-        datasets = {
-            d.id: d
-            for d in session.scalars(
-                select(Dataset).where(Dataset.project_id == project_id, Dataset.id.in_(wanted))
-            )
-        }
-        for dataset_id in sorted(wanted - set(datasets)):
-            msg = f"No dataset {dataset_id!r} in this project; upload it first (POST /datasets)."
-            raise NotFoundError(msg)
+        datasets = _datasets(session, project_id, wanted)
         _check_selector(datasets[body.reference.dataset_id], body.reference, "reference")
         _check_radio(datasets[body.anchors], datasets[ranges.dataset_id], ranges)
         check_ranging_options(options)
@@ -156,6 +140,24 @@ def create_ranging(runtime: Runtime, project_id: str, body: RangingCreate) -> Ev
         session.add(evaluation)
         session.commit()
     return _queued(runtime, project_id, evaluation, enqueue=True)
+
+
+def _datasets(session: Session, project_id: str, wanted: set[str]) -> dict[str, Dataset]:
+    """Return the project's datasets ``wanted`` by id.
+
+    Raises:
+        NotFoundError: one is not in the project (the first by id).
+    """
+    datasets = {
+        d.id: d
+        for d in session.scalars(
+            select(Dataset).where(Dataset.project_id == project_id, Dataset.id.in_(wanted))
+        )
+    }
+    for dataset_id in sorted(wanted - set(datasets)):
+        msg = f"No dataset {dataset_id!r} in this project; upload it first (POST /datasets)."
+        raise NotFoundError(msg)
+    return datasets
 
 
 def check_ranging_options(options: EvaluationOptions) -> None:

@@ -7,14 +7,12 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, Field
 
+from service.schema_base import Id, Printable, Strict
 from service.schemas import (
     ArtifactPublic,
     EvaluationOptions,
     Problem,
     ProgressPublic,
-    _Id,
-    _Printable,
-    _Strict,
 )
 
 __all__ = [
@@ -32,10 +30,10 @@ __all__ = [
 ]
 
 
-class TemplateSource(_Strict):
+class TemplateSource(Strict):
     """A trajectory in each selected recording: the selector and the name in the report."""
 
-    dataset_id: _Id | None = Field(
+    dataset_id: Id | None = Field(
         default=None,
         description="a fixed dataset used for every recording instead of the recording "
         "itself, e.g. a control-point survey as the reference",
@@ -46,7 +44,7 @@ class TemplateSource(_Strict):
     name: Annotated[str, Field(min_length=1, max_length=120)] | None = None
 
 
-class EvaluationTemplate(_Strict):
+class EvaluationTemplate(Strict):
     """How each selected recording is evaluated (as ``POST /evaluations``, without ids)."""
 
     reference: TemplateSource
@@ -54,7 +52,7 @@ class EvaluationTemplate(_Strict):
     options: EvaluationOptions = Field(default_factory=EvaluationOptions)
 
 
-class Selection(_Strict):
+class Selection(Strict):
     """Which recordings a run covers; every given condition must hold."""
 
     tags: Annotated[
@@ -75,7 +73,7 @@ def _both_summaries() -> list[_SummaryName]:
     return ["summary.html", "summary.pdf"]
 
 
-class Produce(_Strict):
+class Produce(Strict):
     """What a run writes."""
 
     summary_formats: Annotated[list[_SummaryName], Field(min_length=1, max_length=2)] = Field(
@@ -89,10 +87,10 @@ class Produce(_Strict):
 _Url = Annotated[str, Field(max_length=2000, pattern=r"^https?://[^\s]+$")]
 
 
-class ScheduleCreate(_Strict):
+class ScheduleCreate(Strict):
     """A recurring summary report."""
 
-    name: Annotated[str, Field(min_length=1, max_length=200), _Printable]
+    name: Annotated[str, Field(min_length=1, max_length=200), Printable]
     cron: Annotated[str, Field(min_length=1, max_length=200, examples=["0 7 * * mon"])]
     timezone: Annotated[str, Field(min_length=1, max_length=64, examples=["Europe/Berlin"])] = "UTC"
     selection: Selection = Field(default_factory=Selection)
@@ -106,10 +104,10 @@ class ScheduleCreate(_Strict):
     paused: bool = False
 
 
-class SchedulePatch(_Strict):
+class SchedulePatch(Strict):
     """Changes to a schedule; absent fields stay as they are."""
 
-    name: Annotated[str, Field(min_length=1, max_length=200), _Printable] | None = None
+    name: Annotated[str, Field(min_length=1, max_length=200), Printable] | None = None
     cron: Annotated[str, Field(min_length=1, max_length=200)] | None = None
     timezone: Annotated[str, Field(min_length=1, max_length=64)] | None = None
     selection: Selection | None = None

@@ -9,7 +9,6 @@ import datetime as dt
 from typing import Annotated, Any, Final, Literal
 
 from pydantic import (
-    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -17,11 +16,12 @@ from pydantic import (
     ValidationError,
     field_validator,
 )
-from pydantic_core import PydanticCustomError, core_schema
+from pydantic_core import core_schema
 
 from exporters import ARTIFACT_ALIASES, ARTIFACTS, artifact_name
 from exporters.errors import ExportOptionsError
 from loceval.options import AUTO, OptionKind, option
+from service.schema_base import Id, Printable, Strict
 
 __all__ = [
     "ArtifactPublic",
@@ -43,36 +43,7 @@ __all__ = [
     "UploadPublic",
 ]
 
-_Id = Annotated[str, Field(min_length=1, max_length=64, examples=["0b8e6c1e-..."])]
 _Finite = Annotated[float, Field(allow_inf_nan=False)]
-
-
-def _holds_nul(value: object) -> bool:
-    if isinstance(value, str):
-        return "\x00" in value
-    if isinstance(value, list | tuple):
-        return any(_holds_nul(v) for v in value)
-    if isinstance(value, dict):
-        return any(_holds_nul(k) or _holds_nul(v) for k, v in value.items())
-    return False
-
-
-class _Strict(BaseModel):
-    """A request body: unknown fields and NUL characters in any text are refused.
-
-    No text a client sends is meant to hold NUL, and PostgreSQL cannot store one (the
-    request would fail with a 500 at the database instead of a 422 naming the field).
-    """
-
-    model_config = ConfigDict(extra="forbid")
-
-    @field_validator("*", mode="after")
-    @classmethod
-    def _no_nul(cls, value: Any) -> Any:  # noqa: ANN401  (every field's type)
-        if _holds_nul(value):
-            msg = "holds a NUL character (\\u0000); remove it"
-            raise PydanticCustomError("nul_character", msg)  # noqa: EM101  (the error type)
-        return value
 
 
 class Problem(BaseModel):
@@ -86,10 +57,10 @@ class Problem(BaseModel):
     detail: str = Field(examples=["run.mcap: no topic '/odom'; the bag has /amcl_pose, /tf."])
 
 
-class SourceRef(_Strict):
+class SourceRef(Strict):
     """A trajectory in an uploaded dataset."""
 
-    dataset_id: _Id
+    dataset_id: Id
     selector: Annotated[str, Field(min_length=1, max_length=500)] | None = Field(
         default=None,
         description="topic, tf:PARENT:CHILD or rigid body; null for a plain trajectory file",
@@ -100,10 +71,10 @@ class SourceRef(_Strict):
     )
 
 
-class DeviceOffset(_Strict):
+class DeviceOffset(Strict):
     """The rigid body -> sensor offset read from an uploaded URDF or bag (``/tf_static``)."""
 
-    dataset_id: _Id
+    dataset_id: Id
     from_link: Annotated[str, Field(min_length=1, max_length=200)]
     to_link: Annotated[str, Field(min_length=1, max_length=200)]
 
@@ -208,7 +179,7 @@ _Matrix4 = Annotated[
 _Artifact = Annotated[str, Field(max_length=40, json_schema_extra={"enum": list(ARTIFACTS)})]
 
 
-class EvaluationOptions(_Strict):
+class EvaluationOptions(Strict):
     """The evaluation options, as ``POST /evaluations`` takes them.
 
     Every field's default, bounds, choices and help come from :data:`loceval.options.OPTIONS`
@@ -270,7 +241,7 @@ class EvaluationOptions(_Strict):
         return list(dict.fromkeys(names))
 
 
-class EvaluationCreate(_Strict):
+class EvaluationCreate(Strict):
     """A new evaluation: a reference, the estimates, and options."""
 
     reference: SourceRef
@@ -300,12 +271,12 @@ class RangingOptions(EvaluationOptions):
     distance_bin_m: float = _field("distance_bin_m")
 
 
-class RangingCreate(_Strict):
+class RangingCreate(Strict):
     """A new ranging evaluation: a reference, the anchors and the ranges (uploaded datasets)."""
 
     reference: SourceRef
-    anchors: _Id = Field(description="the dataset of the anchors table (id,x,y,z)")
-    ranges: _Id | SourceRef = Field(
+    anchors: Id = Field(description="the dataset of the anchors table (id,x,y,z)")
+    ranges: Id | SourceRef = Field(
         description=(
             "the dataset of the ranges table (t,anchor_id,range_m), or {dataset_id, selector} "
             "for a bag's sensor_msgs/msg/Range topic"
@@ -342,23 +313,12 @@ MAX_TAG: Final = 50
 MAX_TAGS: Final = 20
 
 
-def _printable(value: str) -> str:
-    """Refuse control characters (a database may not store them, a page cannot show them)."""
-    if any(ord(c) < 0x20 or ord(c) == 0x7F for c in value):
-        msg = "holds control characters (tab, newline, NUL, ...); remove them"
-        raise PydanticCustomError("control_characters", msg)  # noqa: EM101  (the error type)
-    return value
-
-
-_Printable = AfterValidator(_printable)
-
-
-class DatasetFields(_Strict):
+class DatasetFields(Strict):
     """The text fields of ``POST /datasets``: checked, never cut to fit."""
 
-    name: Annotated[str, Field(min_length=1, max_length=MAX_DATASET_NAME), _Printable] | None = None
+    name: Annotated[str, Field(min_length=1, max_length=MAX_DATASET_NAME), Printable] | None = None
     tags: Annotated[
-        list[Annotated[str, Field(min_length=1, max_length=MAX_TAG), _Printable]],
+        list[Annotated[str, Field(min_length=1, max_length=MAX_TAG), Printable]],
         Field(max_length=MAX_TAGS),
     ] = Field(default_factory=list)
 

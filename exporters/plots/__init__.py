@@ -10,15 +10,8 @@ from __future__ import annotations
 
 from exporters.plots.figure import (
     DEFAULT_MAX_POINTS,
-    ESTIMATE_COLOURS,
     MAX_SPAN_MARKERS,
-    MIN_GAP_WIDTH_SHARE,
-    PNG_DPI,
-    RASTER_DPI,
-    RASTER_MIN_POINTS,
     REFERENCE_COLOUR,
-    SIDE_VIEW_MIN_Z_SPAN_M,
-    TOLERANCE_COLOUR,
     ImageFormat,
     Plot,
     decimate_minmax,
@@ -43,15 +36,8 @@ from exporters.plots.series import (
 
 __all__ = [
     "DEFAULT_MAX_POINTS",
-    "ESTIMATE_COLOURS",
     "MAX_SPAN_MARKERS",
-    "MIN_GAP_WIDTH_SHARE",
-    "PNG_DPI",
-    "RASTER_DPI",
-    "RASTER_MIN_POINTS",
     "REFERENCE_COLOUR",
-    "SIDE_VIEW_MIN_Z_SPAN_M",
-    "TOLERANCE_COLOUR",
     "ImageFormat",
     "Plot",
     "decimate_minmax",

@@ -14,7 +14,14 @@ from collections.abc import Sequence
 import numpy as np
 from matplotlib.axes import Axes
 
-from exporters.plots.figure import ImageFormat, Plot, _new_figure, _plot, _style, estimate_colour
+from exporters.plots.figure import (
+    ImageFormat,
+    Plot,
+    encode_plot,
+    estimate_colour,
+    new_figure,
+    style_axes,
+)
 from exporters.plots.underlay import draw_floor_plan, floor_plan_note
 from loceval._typing import FloatArray
 from loceval.checkpoint_evaluation import CheckpointEvaluation
@@ -70,9 +77,9 @@ def plot_checkpoint_plan(
     entry = evaluation.estimates[index]
     points = evaluation.points
     scale = error_vector_scale(evaluation)
-    fig = _new_figure(5.0)
+    fig = new_figure(5.0)
     ax = fig.add_subplot()
-    _style(ax)
+    style_axes(ax)
     draw_floor_plan(ax, floor_plan)
     xy = points.positions_xyz[:, :2]
     ax.scatter(xy[:, 0], xy[:, 1], s=14, marker="+", color="#212121", label="control point")
@@ -102,7 +109,7 @@ def plot_checkpoint_plan(
     ax.set_ylabel("y [m]")
     ax.legend(loc="upper right", fontsize=7, frameon=False)
     name = entry.name or f"estimate {index + 1}"
-    return _plot(
+    return encode_plot(
         fig,
         formats,
         key=f"checkpoints-{index}",

@@ -10,12 +10,12 @@ from exporters.plots.figure import (
     DEFAULT_MAX_POINTS,
     ImageFormat,
     Plot,
-    _legend_above,
-    _new_figure,
-    _plot,
-    _style,
     decimate_minmax,
+    encode_plot,
     estimate_colour,
+    legend_above,
+    new_figure,
+    style_axes,
 )
 from loceval.evaluation import EvaluationResult
 
@@ -48,7 +48,7 @@ def plot_clock_correlation(
     ]
     if not checked:
         return None
-    fig = _new_figure(5.0)
+    fig = new_figure(5.0)
     full, zoom = fig.subplots(2, 1)
     for k, clock in checked:
         colour = estimate_colour(k)
@@ -73,14 +73,14 @@ def plot_clock_correlation(
     zoom.set_xlabel("time offset minus the one found [ms]")
     for ax in (full, zoom):
         ax.set_ylabel("correlation")
-        _style(ax)
-    _legend_above(fig, full)
+        style_axes(ax)
+    legend_above(fig, full)
     caption = (
         "Correlation of the motion signals (angular speed, or speed for position-only "
         "systems) at every time offset where the recordings overlap; dotted lines mark the "
         f"offsets that fit (more than one when the motion repeats). Below: ±{ZOOM_S:g} s "
         "around the one found, whose refined value is at 0."
     )
-    return _plot(
+    return encode_plot(
         fig, formats, key="clock_correlation", title="Clock check: correlation", caption=caption
     )

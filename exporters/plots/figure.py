@@ -10,8 +10,9 @@ Colours follow the framework paper's Fig. 5: ground truth cyan, the first estima
 magenta (RTAB-Map there), the second green (ISAAC there), further estimates in other
 distinct colours.
 
-The underscored helpers are shared by the plot modules of this package and the summary
-report's (:mod:`exporters.summary.plots`); they are not part of the public API.
+The drawing helpers (:func:`new_figure`, :func:`style_axes`, :func:`encode_plot`, ...) are
+shared by the plot modules of this package and the summary report's
+(:mod:`exporters.summary.plots`); the package itself re-exports only what its callers use.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from __future__ import annotations
 import base64
 import io
 import re
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Literal, TypeAlias
 
@@ -36,18 +37,34 @@ __all__ = [
     "DEFAULT_MAX_POINTS",
     "ESTIMATE_COLOURS",
     "MAX_SPAN_MARKERS",
+    "MIN_ERROR_AXIS",
     "MIN_GAP_WIDTH_SHARE",
+    "NS_PER_S",
     "PNG_DPI",
     "RASTER_DPI",
     "RASTER_MIN_POINTS",
     "REFERENCE_COLOUR",
     "SIDE_VIEW_MIN_Z_SPAN_M",
     "TOLERANCE_COLOUR",
+    "WIDTH_IN",
+    "FigureView",
     "ImageFormat",
     "Plot",
+    "breaks_between",
     "decimate_minmax",
     "decimate_uniform",
+    "encode_plot",
     "estimate_colour",
+    "is_dense",
+    "keep_every_vertex",
+    "legend_above",
+    "new_figure",
+    "number_figures",
+    "path_jumps",
+    "reference_losses",
+    "seconds_since",
+    "style_axes",
+    "with_nan_breaks",
 ]
 
 
@@ -92,9 +109,12 @@ PNG_DPI = 200
 ImageFormat: TypeAlias = Literal["svg", "png"]
 """How a plot is encoded: SVG for the HTML, PNG for the PDF (WeasyPrint draws SVG slowly)."""
 
-_NS_PER_S = 1_000_000_000
-_MIN_ERROR_AXIS = 0.01
-_WIDTH_IN = 7.0
+NS_PER_S = 1_000_000_000
+"""Nanoseconds per second."""
+MIN_ERROR_AXIS = 0.01
+"""Smallest upper limit of an error axis, in the error's unit."""
+WIDTH_IN = 7.0
+"""Width of every figure, inches."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,6 +147,26 @@ class Plot:
             raise ValueError(msg)
         media = "image/svg+xml" if image_format == "svg" else "image/png"
         return f"data:{media};base64," + base64.b64encode(data).decode("ascii")
+
+    def as_figure(self, number: int, image_format: ImageFormat = "svg") -> FigureView:
+        """Return the plot as figure ``number`` of a report, embedded as ``image_format``."""
+        return FigureView(number, self.key, self.title, self.caption, self.data_uri(image_format))
+
+
+@dataclass(frozen=True, slots=True)
+class FigureView:
+    """A numbered figure as the report templates show it; ``src`` is a ``data:`` URI."""
+
+    number: int
+    key: str
+    title: str
+    caption: str
+    src: str
+
+
+def number_figures(plots: Iterable[Plot], image_format: ImageFormat) -> tuple[FigureView, ...]:
+    """Return the plots as figures numbered from 1, embedded as ``image_format``."""
+    return tuple(p.as_figure(n, image_format) for n, p in enumerate(plots, start=1))
 
 
 def estimate_colour(index: int) -> str:
@@ -169,11 +209,11 @@ def decimate_minmax(values: FloatArray, max_points: int) -> IntArray:
     return np.unique(keep[keep < n]).astype(np.intp, copy=False)
 
 
-def _breaks(jump: BoolArray, kept: IntArray) -> BoolArray:
+def breaks_between(jump: BoolArray, kept: IntArray) -> BoolArray:
     """Return, per kept sample but the last, whether a break lies before the next one.
 
     Args:
-        jump: (N - 1,) True after each sample that ends a piece (:func:`_path_jumps`).
+        jump: (N - 1,) True after each sample that ends a piece (:func:`path_jumps`).
         kept: increasing indices of the samples drawn.
     """
     before = np.concatenate(([0], np.cumsum(jump, dtype=np.int64)))
@@ -181,37 +221,39 @@ def _breaks(jump: BoolArray, kept: IntArray) -> BoolArray:
     return out
 
 
-def _with_nan_breaks(
+def with_nan_breaks(
     columns: Sequence[FloatArray], jump: BoolArray, kept: IntArray
 ) -> list[FloatArray]:
     """Pick ``kept`` samples of each column and insert NaN where a break lies between two."""
     picked = [np.asarray(c, dtype=np.float64)[kept] for c in columns]
     if kept.size < 2:
         return picked
-    where = np.flatnonzero(_breaks(jump, kept)) + 1
+    where = np.flatnonzero(breaks_between(jump, kept)) + 1
     return [np.insert(c, where, np.nan) for c in picked]
 
 
-def _seconds(stamps_ns: StampsNs, t0_ns: int) -> FloatArray:
-    out: FloatArray = (stamps_ns - np.int64(t0_ns)).astype(np.float64) / _NS_PER_S
+def seconds_since(stamps_ns: StampsNs, t0_ns: int) -> FloatArray:
+    """Return the stamps as float seconds after ``t0_ns``."""
+    out: FloatArray = (stamps_ns - np.int64(t0_ns)).astype(np.float64) / NS_PER_S
     return out
 
 
 def _min_gap_ns(result: EvaluationResult) -> int:
-    return round(result.config.max_gap_s * _NS_PER_S)
+    return round(result.config.max_gap_s * NS_PER_S)
 
 
-def _reference_losses(result: EvaluationResult) -> list[tuple[int, int]]:
+def reference_losses(result: EvaluationResult) -> list[tuple[int, int]]:
     """Return the reference's tracking losses (:mod:`loceval.gaps`), as the result reports."""
     return result.reference.tracking_losses(_min_gap_ns(result))
 
 
-def _path_jumps(result: EvaluationResult, stamps_ns: StampsNs) -> BoolArray:
+def path_jumps(result: EvaluationResult, stamps_ns: StampsNs) -> BoolArray:
     """Return (N - 1,) where a line through these stamps breaks (own or reference loss)."""
-    return path_breaks(stamps_ns, min_gap_ns=_min_gap_ns(result), losses=_reference_losses(result))
+    return path_breaks(stamps_ns, min_gap_ns=_min_gap_ns(result), losses=reference_losses(result))
 
 
-def _dense(vertices: FloatArray | IntArray) -> bool:
+def is_dense(vertices: FloatArray | IntArray) -> bool:
+    """Whether a line of these vertices is drawn rasterized (more than RASTER_MIN_POINTS)."""
     return int(vertices.shape[0]) > RASTER_MIN_POINTS
 
 
@@ -233,7 +275,7 @@ def _png(fig: Figure) -> bytes:
     return buf.getvalue()
 
 
-def _plot(
+def encode_plot(
     fig: Figure, formats: Sequence[ImageFormat], *, key: str, title: str, caption: str
 ) -> Plot:
     """Encode a finished figure in the requested formats (drawn once per format)."""
@@ -248,7 +290,7 @@ def _plot(
     return Plot(key=key, title=title, caption=caption, svg=svg, png=png)
 
 
-def _keep_every_vertex(lines: Sequence[Line2D]) -> None:
+def keep_every_vertex(lines: Sequence[Line2D]) -> None:
     """Switch off matplotlib's path simplification for these lines.
 
     A line is already decimated to ``max_points`` vertices; simplification would further
@@ -258,18 +300,21 @@ def _keep_every_vertex(lines: Sequence[Line2D]) -> None:
         line.get_path().should_simplify = False
 
 
-def _new_figure(height_in: float) -> Figure:
-    return Figure(figsize=(_WIDTH_IN, height_in), dpi=150, layout="constrained")
+def new_figure(height_in: float) -> Figure:
+    """Return an empty figure of the report's width, ``height_in`` inches high."""
+    return Figure(figsize=(WIDTH_IN, height_in), dpi=150, layout="constrained")
 
 
-def _style(ax: Axes) -> None:
+def style_axes(ax: Axes) -> None:
+    """Give the axes the report's light grid and no top or right spine."""
     ax.grid(visible=True, color="#e0e0e0", linewidth=0.6)
     ax.set_axisbelow(True)
     for side in ("top", "right"):
         ax.spines[side].set_visible(False)
 
 
-def _legend_above(fig: Figure, ax: Axes) -> None:
+def legend_above(fig: Figure, ax: Axes) -> None:
+    """Put the legend of ``ax`` above the figure, in one row if it fits, else two."""
     handles, labels = ax.get_legend_handles_labels()
     # One row when it fits the figure's width (about 95 characters at 8 pt), else two.
     ncols = len(labels) if sum(len(t) + 6 for t in labels) <= 95 else -(-len(labels) // 2)

@@ -11,30 +11,31 @@ from matplotlib.colors import BoundaryNorm, ListedColormap
 
 from exporters.placement import ate_bins, ate_edges_m
 from exporters.plots.figure import (
-    _WIDTH_IN,
     DEFAULT_MAX_POINTS,
     MAX_SPAN_MARKERS,
     REFERENCE_COLOUR,
     SIDE_VIEW_MIN_Z_SPAN_M,
     TOLERANCE_COLOUR,
+    WIDTH_IN,
     ImageFormat,
     Plot,
-    _breaks,
-    _dense,
-    _keep_every_vertex,
-    _legend_above,
-    _new_figure,
-    _path_jumps,
-    _plot,
-    _style,
-    _with_nan_breaks,
+    breaks_between,
     decimate_minmax,
     decimate_uniform,
+    encode_plot,
     estimate_colour,
+    is_dense,
+    keep_every_vertex,
+    legend_above,
+    new_figure,
+    path_jumps,
+    style_axes,
+    with_nan_breaks,
 )
 from exporters.plots.underlay import draw_floor_plan, floor_plan_note
 from loceval._typing import FloatArray
 from loceval.evaluation import EstimateResult, EvaluationResult
+from loceval.trajectory import Trajectory
 
 __all__ = [
     "failing_span_markers",
@@ -81,13 +82,7 @@ def _draw_reference_xy(
     *,
     on_top: bool = False,
 ) -> None:
-    ref = result.reference
-    kept = decimate_uniform(len(ref), max_points)
-    a, b = _with_nan_breaks(
-        [ref.positions_xyz[:, axes_ij[0]], ref.positions_xyz[:, axes_ij[1]]],
-        _path_jumps(result, ref.stamps_ns),
-        kept,
-    )
+    a, b = _drawn_axes(result, result.reference, axes_ij, max_points)
     # Under an error-coloured path the truth is a wide band; over noisy estimates it is
     # drawn last and thinner, so it stays visible.
     lines = ax.plot(
@@ -98,7 +93,19 @@ def _draw_reference_xy(
         zorder=4 if on_top else 2,
         label=_reference_label(result),
     )
-    _keep_every_vertex(lines)
+    keep_every_vertex(lines)
+
+
+def _drawn_axes(
+    result: EvaluationResult, path: Trajectory, axes_ij: tuple[int, int], max_points: int
+) -> list[FloatArray]:
+    """Return the path's two coordinates ``axes_ij``, decimated, NaN where the path breaks."""
+    kept = decimate_uniform(len(path), max_points)
+    return with_nan_breaks(
+        [path.positions_xyz[:, axes_ij[0]], path.positions_xyz[:, axes_ij[1]]],
+        path_jumps(result, path.stamps_ns),
+        kept,
+    )
 
 
 def _reference_label(result: EvaluationResult) -> str:
@@ -114,13 +121,7 @@ def _draw_estimate(
     axes_ij: tuple[int, int] = (0, 1),
 ) -> None:
     e = result.estimates[k]
-    aligned = e.aligned
-    kept = decimate_uniform(len(aligned), max_points)
-    a, b = _with_nan_breaks(
-        [aligned.positions_xyz[:, axes_ij[0]], aligned.positions_xyz[:, axes_ij[1]]],
-        _path_jumps(result, aligned.stamps_ns),
-        kept,
-    )
+    a, b = _drawn_axes(result, e.aligned, axes_ij, max_points)
     lines = ax.plot(
         a,
         b,
@@ -129,7 +130,7 @@ def _draw_estimate(
         alpha=0.85,
         label=e.name or f"estimate {k + 1}",
     )
-    _keep_every_vertex(lines)
+    keep_every_vertex(lines)
 
 
 def _mark_start(ax: Axes, result: EvaluationResult) -> None:
@@ -159,7 +160,7 @@ def plot_overlay_xy(
     ``floor_plan`` (see :func:`exporters.plots.underlay.floor_plan_segments`) is drawn
     under the paths in light grey.
     """
-    fig = _new_figure(_xy_figure_height(result, plot_width_in=_WIDTH_IN - 0.8))
+    fig = new_figure(_xy_figure_height(result, plot_width_in=WIDTH_IN - 0.8))
     ax = fig.add_subplot()
     draw_floor_plan(ax, floor_plan)
     _draw_reference_xy(ax, result, max_points, on_top=True)
@@ -169,10 +170,10 @@ def plot_overlay_xy(
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    _style(ax)
-    _legend_above(fig, ax)
+    style_axes(ax)
+    legend_above(fig, ax)
     names = ", ".join(e.name or f"estimate {k + 1}" for k, e in enumerate(result.estimates))
-    return _plot(
+    return encode_plot(
         fig,
         formats,
         key="overlay_xy",
@@ -203,7 +204,7 @@ def plot_ate_path(
     kept = decimate_minmax(ate, max_points)
     xy = e.aligned.positions_xyz[kept, :2]
     segments = np.stack([xy[:-1], xy[1:]], axis=1)
-    keep_segment = ~_breaks(_path_jumps(result, e.aligned.stamps_ns), kept)
+    keep_segment = ~breaks_between(path_jumps(result, e.aligned.stamps_ns), kept)
     # Each drawn segment takes the larger error of its two ends, so a peak shows.
     seg_err = np.maximum(ate[kept][:-1], ate[kept][1:])
     # The one ATE colour scale of every output (DXF, .3dm, GLB): the evaluation's bins.
@@ -215,7 +216,7 @@ def plot_ate_path(
     cmap = ListedColormap([tuple(c / 255.0 for c in b.color_rgb) for b in bins])
     norm = BoundaryNorm(bounds, cmap.N)
     tolerance = e.verdict.tolerance.distance_m if e.verdict is not None else None
-    fig = _new_figure(_xy_figure_height(result, plot_width_in=_WIDTH_IN - 1.8))
+    fig = new_figure(_xy_figure_height(result, plot_width_in=WIDTH_IN - 1.8))
     ax = fig.add_subplot()
     draw_floor_plan(ax, floor_plan)
     _draw_reference_xy(ax, result, max_points)
@@ -226,7 +227,7 @@ def plot_ate_path(
         linewidths=1.8,
         capstyle="round",
         zorder=3,
-        rasterized=_dense(segments),
+        rasterized=is_dense(segments),
     )
     collection.set_array(seg_err[keep_segment])
     ax.add_collection(collection)
@@ -263,7 +264,7 @@ def plot_ate_path(
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    _style(ax)
+    style_axes(ax)
     caption = (
         f"{name}'s aligned path coloured by its absolute trajectory error (ATE) at each "
         "pose, over the ground truth in cyan."
@@ -274,7 +275,7 @@ def plot_ate_path(
             "(see the verdict)."
         )
     caption += floor_plan_note(floor_plan)
-    return _plot(
+    return encode_plot(
         fig,
         formats,
         key=f"ate_path_{index}",
@@ -290,7 +291,7 @@ def plot_side_views(
     formats: Sequence[ImageFormat] = ("svg",),
 ) -> Plot:
     """Side views (x-z and y-z) of the reference and every aligned estimate."""
-    fig = _new_figure(5.2)
+    fig = new_figure(5.2)
     axes = fig.subplots(2, 1)
     for ax, (i, label) in zip(axes, ((0, "x"), (1, "y")), strict=True):
         _draw_reference_xy(ax, result, max_points, axes_ij=(i, 2), on_top=True)
@@ -298,9 +299,9 @@ def plot_side_views(
             _draw_estimate(ax, result, k, max_points, axes_ij=(i, 2))
         ax.set_xlabel(f"{label} [m]")
         ax.set_ylabel("z [m]")
-        _style(ax)
-    _legend_above(fig, axes[0])
-    return _plot(
+        style_axes(ax)
+    legend_above(fig, axes[0])
+    return encode_plot(
         fig,
         formats,
         key="side_views",

@@ -17,11 +17,11 @@ from exporters.plots.figure import (
     TOLERANCE_COLOUR,
     ImageFormat,
     Plot,
-    _new_figure,
-    _plot,
-    _seconds,
-    _style,
     decimate_uniform,
+    encode_plot,
+    new_figure,
+    seconds_since,
+    style_axes,
 )
 from loceval.evaluation import EvaluationResult
 
@@ -64,7 +64,7 @@ def _threshold_lines(ax: Axes, ranging: RangingResult) -> None:
 def _error_vs_distance(
     ranging: RangingResult, *, max_points: int, formats: Sequence[ImageFormat]
 ) -> Plot:
-    fig = _new_figure(3.6)
+    fig = new_figure(3.6)
     ax = fig.add_subplot()
     errors = ranging.errors.values
     kept = decimate_uniform(errors.size, max_points)
@@ -95,10 +95,10 @@ def _error_vs_distance(
     _threshold_lines(ax, ranging)
     ax.set_xlabel("true distance [m]")
     ax.set_ylabel("range error [m]")
-    _style(ax)
+    style_axes(ax)
     ax.legend(loc="upper left", fontsize=8, frameon=True, framealpha=0.9)
     width = bins[0].end_m - bins[0].start_m if bins else 0.0
-    return _plot(
+    return encode_plot(
         fig,
         formats,
         key="ranging_distance",
@@ -118,11 +118,11 @@ def _error_over_time(
     max_points: int,
     formats: Sequence[ImageFormat],
 ) -> Plot:
-    fig = _new_figure(3.2)
+    fig = new_figure(3.2)
     ax = fig.add_subplot()
     errors = ranging.errors
     kept = decimate_uniform(errors.values.size, max_points)
-    t_s = _seconds(errors.stamps_ns[kept], int(result.reference.stamps_ns[0]))
+    t_s = seconds_since(errors.stamps_ns[kept], int(result.reference.stamps_ns[0]))
     ax.plot(
         t_s,
         errors.values[kept],
@@ -136,8 +136,8 @@ def _error_over_time(
     _threshold_lines(ax, ranging)
     ax.set_xlabel("time since the reference's first pose [s]")
     ax.set_ylabel("range error [m]")
-    _style(ax)
-    return _plot(
+    style_axes(ax)
+    return encode_plot(
         fig,
         formats,
         key="ranging_time",
@@ -154,7 +154,7 @@ def _anchors_on_plan(
     max_points: int,
     formats: Sequence[ImageFormat],
 ) -> Plot:
-    fig = _new_figure(4.5)
+    fig = new_figure(4.5)
     ax = fig.add_subplot()
     xy = result.reference.positions_xyz[:, :2]
     kept = decimate_uniform(xy.shape[0], max_points)
@@ -176,10 +176,12 @@ def _anchors_on_plan(
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    _style(ax)
+    style_axes(ax)
     ax.legend(loc="best", fontsize=8, frameon=True, framealpha=0.9)
     unused = ", ".join(ranging.unused_anchors)
     caption = "The path from above and the anchors heard, coloured by their range RMSE."
     if unused:
         caption += f" Never heard (not drawn): {unused}."
-    return _plot(fig, formats, key="ranging_plan", title="Anchors on the plan", caption=caption)
+    return encode_plot(
+        fig, formats, key="ranging_plan", title="Anchors on the plan", caption=caption
+    )

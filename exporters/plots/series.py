@@ -10,26 +10,26 @@ from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
 from exporters.plots.figure import (
-    _MIN_ERROR_AXIS,
-    _NS_PER_S,
     DEFAULT_MAX_POINTS,
     ENVELOPE_DIVISOR,
     GAP_COLOUR,
+    MIN_ERROR_AXIS,
     MIN_GAP_WIDTH_SHARE,
+    NS_PER_S,
     TOLERANCE_COLOUR,
     ImageFormat,
     Plot,
-    _keep_every_vertex,
-    _legend_above,
-    _new_figure,
-    _path_jumps,
-    _plot,
-    _reference_losses,
-    _seconds,
-    _style,
-    _with_nan_breaks,
     decimate_uniform,
+    encode_plot,
     estimate_colour,
+    keep_every_vertex,
+    legend_above,
+    new_figure,
+    path_jumps,
+    reference_losses,
+    seconds_since,
+    style_axes,
+    with_nan_breaks,
 )
 from loceval._typing import BoolArray, FloatArray
 from loceval.evaluation import EvaluationConfig, EvaluationResult
@@ -45,12 +45,12 @@ __all__ = [
 
 
 def _shade_gaps(ax: Axes, result: EvaluationResult, t0_ns: int) -> None:
-    gaps = _reference_losses(result)
+    gaps = reference_losses(result)
     if not gaps:
         return
     spans = np.asarray(gaps, dtype=np.int64)
-    starts = _seconds(spans[:, 0], t0_ns)
-    ends = _seconds(spans[:, 1], t0_ns)
+    starts = seconds_since(spans[:, 0], t0_ns)
+    ends = seconds_since(spans[:, 1], t0_ns)
     # A 2 s gap in a 3 h recording is narrower than a pixel: draw every gap at least
     # 0.3 % of the time axis wide so it shows.
     total_s = float(result.reference.duration_s)
@@ -131,14 +131,14 @@ def _draw_series(
 ) -> None:
     name = result.estimates[k].name or f"estimate {k + 1}"
     colour = estimate_colour(k)
-    times = _seconds(series.stamps_ns, t0_ns)
+    times = seconds_since(series.stamps_ns, t0_ns)
     if len(series) <= max_points:
-        t, v = _with_nan_breaks(
+        t, v = with_nan_breaks(
             [times, series.values],
-            _path_jumps(result, series.stamps_ns),
+            path_jumps(result, series.stamps_ns),
             np.arange(len(series), dtype=np.intp),
         )
-        _keep_every_vertex(ax.plot(t, v, color=colour, linewidth=0.8, label=name))
+        keep_every_vertex(ax.plot(t, v, color=colour, linewidth=0.8, label=name))
         return
     # Too many samples to draw one by one: a light band between each bucket's smallest and
     # largest error (every peak survives) under a line of the bucket means. At print
@@ -147,7 +147,7 @@ def _draw_series(
     t, lo, hi, mean = envelope(
         times,
         series.values,
-        _path_jumps(result, series.stamps_ns),
+        path_jumps(result, series.stamps_ns),
         buckets=max_points // ENVELOPE_DIVISOR,
     )
     ax.fill_between(t, lo, hi, color=colour, alpha=0.3, linewidth=0.0)
@@ -162,7 +162,7 @@ def _time_plot(
     max_points: int,
 ) -> Figure:
     t0_ns = int(result.reference.stamps_ns[0])
-    fig = _new_figure(1.2 + 1.45 * len(rows))
+    fig = new_figure(1.2 + 1.45 * len(rows))
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     for r, (label, series_list) in enumerate(rows):
         ax = axes[r]
@@ -181,10 +181,10 @@ def _time_plot(
             )
         ax.set_ylabel(label)
         # A floor on the axis range: rounding noise (1e-14 °) must not look like an error.
-        ax.set_ylim(0.0, max(ax.get_ylim()[1], _MIN_ERROR_AXIS))
-        _style(ax)
+        ax.set_ylim(0.0, max(ax.get_ylim()[1], MIN_ERROR_AXIS))
+        style_axes(ax)
         if r == 0:
-            _legend_above(fig, ax)
+            legend_above(fig, ax)
     axes[-1].set_xlabel("time since the start of the reference [s]")
     return fig
 
@@ -196,17 +196,17 @@ def _time_plot_notes(
 ) -> str:
     """The caption's explanation of what is drawn, only for what is in the figure."""
     notes = ""
-    gaps = _reference_losses(result)
+    gaps = reference_losses(result)
     if gaps:
         notes += " Grey bands are tracking loss of the reference (not evaluated)"
-        min_width_ns = MIN_GAP_WIDTH_SHARE * result.reference.duration_s * _NS_PER_S
+        min_width_ns = MIN_GAP_WIDTH_SHARE * result.reference.duration_s * NS_PER_S
         notes += (
             "; short ones are drawn wider so they show."
             if any(b - a < min_width_ns for a, b in gaps)
             else "."
         )
     series = [s for _, row in rows for s in row if s is not None]
-    if any(bool(_path_jumps(result, s.stamps_ns).any()) for s in series):
+    if any(bool(path_jumps(result, s.stamps_ns).any()) for s in series):
         notes += (
             " A break in a line is a stretch without evaluated poses (tracking loss of the "
             "reference, or of the estimate: longer than five of its own median intervals "
@@ -233,7 +233,7 @@ def plot_ate_over_time(
     if any(e.ate_rotation is not None for e in result.estimates):
         rows.append(("ATE rotation [°]", [e.ate_rotation for e in result.estimates]))
     fig = _time_plot(result, rows, tolerance_row=0, max_points=max_points)
-    return _plot(
+    return encode_plot(
         fig,
         formats,
         key="ate_time",
@@ -259,7 +259,7 @@ def plot_rpe_over_time(
         rows.append(("RPE rotation [°]", [e.rpe_rotation for e in result.estimates]))
     fig = _time_plot(result, rows, tolerance_row=None, max_points=max_points)
     cfg = result.config
-    return _plot(
+    return encode_plot(
         fig,
         formats,
         key="rpe_time",
@@ -278,7 +278,7 @@ def plot_error_cdf(
     formats: Sequence[ImageFormat] = ("svg",),
 ) -> Plot:
     """Cumulative distribution of ATE with the thresholds (the reference-system paper's Fig. 7)."""
-    fig = _new_figure(4.0)
+    fig = new_figure(4.0)
     ax = fig.add_subplot()
     thresholds = result.config.thresholds_m
     for k, e in enumerate(result.estimates):
@@ -320,7 +320,7 @@ def plot_error_cdf(
     _label_thresholds(ax, thresholds)
     ax.set_xlabel("ATE [m]")
     ax.set_ylabel("poses with error ≤ x [%]")
-    _style(ax)
+    style_axes(ax)
     ax.legend(loc="lower right", fontsize=8, frameon=True, framealpha=0.9)
     caption = (
         "Share of poses whose error is at most the value on the x-axis; dotted lines are the "
@@ -328,7 +328,7 @@ def plot_error_cdf(
     )
     if tol is not None:
         caption += " An estimate meets the tolerance when its curve passes above the red cross."
-    return _plot(
+    return encode_plot(
         fig,
         formats,
         key="error_cdf",

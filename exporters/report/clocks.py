@@ -6,7 +6,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from exporters.plots.clock import plot_clock_correlation
-from exporters.plots.figure import DEFAULT_MAX_POINTS, ImageFormat
+from exporters.plots.figure import DEFAULT_MAX_POINTS, FigureView, ImageFormat
 from loceval.evaluation import EstimateResult, EvaluationConfig, EvaluationResult
 from loceval.offsets import OffsetCheck
 
@@ -15,15 +15,8 @@ __all__ = ["ClockFigure", "ClockSection", "build_clock_section", "time_offset_te
 _NONE = "–"
 
 
-@dataclass(frozen=True, slots=True)
-class ClockFigure:
-    """The section's numbered plot."""
-
-    number: int
-    key: str
-    title: str
-    caption: str
-    src: str
+ClockFigure = FigureView
+"""The section's numbered plot."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,9 +149,5 @@ def build_clock_section(
     columns = [_column(result, e) for e in result.estimates]
     rows = tuple((label, tuple(column[i] for column in columns)) for i, label in enumerate(_LABELS))
     plot = plot_clock_correlation(result, max_points=max_points, formats=(image_format,))
-    figure = (
-        None
-        if plot is None
-        else ClockFigure(number, plot.key, plot.title, plot.caption, plot.data_uri(image_format))
-    )
+    figure = None if plot is None else plot.as_figure(number, image_format)
     return ClockSection(rows=rows, figure=figure)

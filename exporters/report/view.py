@@ -23,6 +23,7 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
+from exporters.plots.figure import FigureView, number_figures
 from exporters.plots.underlay import floor_plan_segments
 from exporters.report.clocks import ClockSection, build_clock_section
 from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
@@ -134,17 +135,6 @@ class WorstTable:
     name: str
     rows: tuple[WorstRow, ...]
     error_unit: str = "m"
-
-
-@dataclass(frozen=True, slots=True)
-class FigureView:
-    """A numbered figure."""
-
-    number: int
-    key: str
-    title: str
-    caption: str
-    src: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -454,16 +444,7 @@ def build_report_view(
             floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
         )
     )
-    figures = tuple(
-        FigureView(
-            number=n,
-            key=p.key,
-            title=p.title,
-            caption=p.caption,
-            src=p.data_uri(image_format),
-        )
-        for n, p in enumerate(rendered, start=1)
-    )
+    figures = number_figures(rendered, image_format)
     figure_of = {f.key: f.number for f in figures}
     estimates = result.estimates
     cfg = result.config

@@ -18,12 +18,12 @@ from exporters.plots.figure import (
     TOLERANCE_COLOUR,
     ImageFormat,
     Plot,
-    _legend_above,
-    _new_figure,
-    _plot,
-    _style,
     decimate_uniform,
+    encode_plot,
     estimate_colour,
+    legend_above,
+    new_figure,
+    style_axes,
 )
 from exporters.summary.model import (
     UTC,
@@ -89,7 +89,7 @@ def plot_trend(
     ):
         return None
     many = len(runs) > 20
-    fig = _new_figure(1.3 + 1.75 * len(rows))
+    fig = new_figure(1.3 + 1.75 * len(rows))
     axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     failed_at = [r.recorded_at for r in runs if r.status == "failed"]
     tops = dict.fromkeys((attr for _, attr in rows), 0.0)
@@ -136,10 +136,10 @@ def plot_trend(
         # Head room over the highest point and the tolerance line, so neither sits on the edge.
         top = max(tops[attr], tolerance_m or 0.0 if attr == "ate_rmse_m" else 0.0, 0.01 / 1.15)
         ax.set_ylim(0.0, 1.15 * top)
-        _style(ax)
+        style_axes(ax)
     _date_axis(axes[-1], [r.recorded_at for r in runs])
     axes[-1].set_xlabel("recorded (UTC)")
-    _legend_above(fig, axes[0])
+    legend_above(fig, axes[0])
     caption = (
         "Each system's RMSE per run against the run's recording date: the absolute error "
         "after alignment (top) and the error of the motion per step (bottom)."
@@ -154,7 +154,7 @@ def plot_trend(
         caption += " Grey crosses on the time axis are runs that failed."
     if len(runs) == 1:
         caption += " With one run each system is a single point."
-    return _plot(fig, formats, key="trend", title="Errors over the runs", caption=caption)
+    return encode_plot(fig, formats, key="trend", title="Errors over the runs", caption=caption)
 
 
 def plot_paths(
@@ -176,7 +176,7 @@ def plot_paths(
     every = np.concatenate([xy[:, :2] for _, xy in paths])
     span = np.ptp(every, axis=0)
     ratio = 1.0 if span[0] <= 0 else float(span[1] / span[0])
-    fig = _new_figure(float(np.clip(6.2 * ratio, 2.6, 7.0)) + 1.2)
+    fig = new_figure(float(np.clip(6.2 * ratio, 2.6, 7.0)) + 1.2)
     ax = fig.add_subplot()
     named = len(paths) <= PATH_LEGEND_MAX
     later_colour = "#3b4cc0"
@@ -217,9 +217,9 @@ def plot_paths(
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    _style(ax)
-    _legend_above(fig, ax)
-    return _plot(
+    style_axes(ax)
+    legend_above(fig, ax)
+    return encode_plot(
         fig,
         formats,
         key="paths_xy",

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Final, Literal
 
 from exporters.plots import ImageFormat, Plot, estimate_colour
+from exporters.plots.figure import FigureView, number_figures
 from exporters.report import BEST_MARK
 from exporters.summary.comparisons import across_runs
 from exporters.summary.model import (
@@ -103,15 +104,8 @@ class RepeatabilityView:
     duration_diff_s: str
 
 
-@dataclass(frozen=True, slots=True)
-class SummaryFigure:
-    """A numbered figure of the summary."""
-
-    number: int
-    key: str
-    title: str
-    caption: str
-    src: str
+SummaryFigure = FigureView
+"""A numbered figure of the summary (the same view as the evaluation report's figures)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -381,16 +375,7 @@ def build_summary_view(
         if plots is not None
         else render_summary_plots(summary, formats=(image_format,))
     )
-    figures = tuple(
-        SummaryFigure(
-            number=n,
-            key=p.key,
-            title=p.title,
-            caption=p.caption,
-            src=p.data_uri(image_format),
-        )
-        for n, p in enumerate(rendered, start=1)
-    )
+    figures = number_figures(rendered, image_format)
     figure_of = {f.key: f.number for f in figures}
     empty = not runs
     return SummaryView(

@@ -20,7 +20,7 @@ from loceval._typing import FloatArray
 from loceval.controlpoints import ControlPoints, Visits
 from loceval.errors import InputError, ReaderError
 from loceval.readers._common import seconds_to_ns
-from loceval.readers.text import csv_rows, load_text
+from loceval.readers.text import SURVEY_DELIMITERS, load_text, split_line
 from loceval.trajectory import MAX_COORDINATE_M, MAX_SPAN_S
 
 __all__ = [
@@ -73,10 +73,8 @@ def _split(line: str, *, where: str = "The table") -> list[str]:
     Raises:
         ReaderError: not CSV the csv module can split (a huge cell, a stray line break).
     """
-    delimiter = next((d for d in (",", ";", "\t") if d in line), None)
-    if delimiter is None:
-        return line.split()
-    return [cell.strip() for cell in csv_rows([line], delimiter, where=where)[0]]
+    delimiter = next((d for d in SURVEY_DELIMITERS if d in line), None)
+    return [cell.strip() for cell in split_line(line, delimiter, where=where)]
 
 
 def looks_like_control_points(first_line: str) -> bool:

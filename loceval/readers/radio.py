@@ -31,7 +31,7 @@ import numpy as np
 from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import InputError, ReaderError
 from loceval.readers.csv import TIME_UNITS
-from loceval.readers.text import csv_rows, load_text
+from loceval.readers.text import SURVEY_DELIMITERS, csv_rows, load_text, split_line
 from loceval.trajectory import MAX_COORDINATE_M
 
 __all__ = [
@@ -48,7 +48,6 @@ __all__ = [
 MIN_ANCHORS: Final = 3
 """Fewest anchors an anchors file may hold: positioning in 2D needs three."""
 
-_DELIMITERS: Final = (",", ";", "\t")
 _UNIT_RE: Final = re.compile(r"^(?P<name>.*?)\s*[\[(](?P<unit>[^\])]*)[\])]$")
 _ANCHOR_NAMES: Final = {
     "id": ("id", "anchor", "anchor_id", "name"),
@@ -215,9 +214,9 @@ def sniff_radio_table(path: Path) -> str | None:
         line = raw.strip()
         if not line or (line.startswith("#") and _is_comment(line)):
             continue
-        delimiter = max(_DELIMITERS, key=line.count)
+        delimiter = max(SURVEY_DELIMITERS, key=line.count)
         try:
-            cells = _split(line.lstrip("#"), delimiter if line.count(delimiter) else None)
+            cells = split_line(line.lstrip("#"), delimiter if line.count(delimiter) else None)
         except ReaderError:  # not CSV the csv module splits: no radio table
             return None
         names = {_normalize(c)[0] for c in cells}
@@ -460,9 +459,9 @@ def _read_rows(
         msg = f"{where}: the {kind} file is empty; it needs a header row and one row per entry."
         raise ReaderError(msg)
     header_line, header_text = header
-    delimiter = max(_DELIMITERS, key=header_text.count)
+    delimiter = max(SURVEY_DELIMITERS, key=header_text.count)
     sep = delimiter if header_text.count(delimiter) else None
-    headers = [c.strip() for c in _split(header_text.lstrip("#"), sep, where=where)]
+    headers = [c.strip() for c in split_line(header_text.lstrip("#"), sep, where=where)]
     if sum(_is_number(c) for c in headers) >= 2:  # no header has two numbers as names
         expected = "id,x,y,z" if kind == "anchors" else "t,anchor_id,range_m"
         msg = (
@@ -495,17 +494,6 @@ def _is_comment(line: str) -> bool:
         base, sep, suffix = name.rpartition("_")
         known += name in wanted or bool(sep and suffix in _UNIT_SPELLINGS and base in wanted)
     return known < 2
-
-
-def _split(line: str, delimiter: str | None, *, where: str = "The table") -> list[str]:
-    """Split a line at ``delimiter`` (CSV quoting), or at whitespace without one.
-
-    Raises:
-        ReaderError: not CSV the csv module can split (a huge cell, a stray line break).
-    """
-    if delimiter is None:
-        return line.split()
-    return csv_rows([line], delimiter, where=where)[0]
 
 
 def _is_number(cell: str) -> bool:

@@ -30,15 +30,19 @@ from loceval.readers.source import missing_file_error
 
 __all__ = [
     "NS_PER_S",
+    "SURVEY_DELIMITERS",
     "NumericTable",
     "csv_rows",
     "load_text",
     "parse_table",
     "positions_and_quat",
+    "split_line",
     "stamps_from_values",
 ]
 
 NS_PER_S: Final = 1_000_000_000
+SURVEY_DELIMITERS: Final = (",", ";", "\t")
+"""The cell delimiters of the small survey tables (anchors, control points, visits, ranges)."""
 _INT64_MAX: Final = float(np.iinfo(np.int64).max)
 _NAN_SPELLINGS: Final = ("nan", "NaN", "NAN", "Nan")
 
@@ -128,6 +132,17 @@ def csv_rows(lines: Sequence[str], delimiter: str, *, where: str) -> list[list[s
             "with one row per line and cells of ordinary length."
         )
         raise ReaderError(msg) from err
+
+
+def split_line(line: str, delimiter: str | None, *, where: str = "The table") -> list[str]:
+    """Split a line at ``delimiter`` (CSV quoting), or at whitespace without one.
+
+    Raises:
+        ReaderError: not CSV the csv module can split (a huge cell, a stray line break).
+    """
+    if delimiter is None:
+        return line.split()
+    return csv_rows([line], delimiter, where=where)[0]
 
 
 def parse_table(

@@ -15,6 +15,7 @@ from service.api.responses import problems
 from service.db import Evaluation, get_owned
 from service.links import api_url, public_base
 from service.metrics import count_upload
+from service.runtime import Runtime
 from service.schemas import EvaluationCreate, EvaluationPublic, EvaluationsPublic, RangingCreate
 from service.uploads import receive_multipart
 
@@ -27,6 +28,14 @@ _MAX_ESTIMATES = 20
 _ONE_SHOT_FIELDS = frozenset(
     {"reference_selector", "estimate_selector", "estimate_name", "options"}
 )
+
+
+def _accepted(evaluation: Evaluation, response: Response, runtime: Runtime) -> EvaluationPublic:
+    """The 202 answer to a queued evaluation: its ``Location`` and its body (no result yet)."""
+    response.headers["Location"] = api_url(runtime.settings, "evaluations", evaluation.id)
+    return evaluations.evaluation_public(
+        evaluation, base_url=public_base(runtime.settings), with_result=False
+    )
 
 
 @router.post(
@@ -43,10 +52,7 @@ def create_evaluation_job(
 ) -> EvaluationPublic:
     """Queue an evaluation of uploaded datasets; poll ``GET /evaluations/{id}`` for it."""
     evaluation = evaluations.create_evaluation(runtime, project_id, body)
-    response.headers["Location"] = api_url(runtime.settings, "evaluations", evaluation.id)
-    return evaluations.evaluation_public(
-        evaluation, base_url=public_base(runtime.settings), with_result=False
-    )
+    return _accepted(evaluation, response, runtime)
 
 
 @router.post(
@@ -68,10 +74,7 @@ def create_ranging_job(
     ``GET /evaluations/{id}``; its result holds the ``ranging`` object.
     """
     evaluation = evaluations.create_ranging(runtime, project_id, body)
-    response.headers["Location"] = api_url(runtime.settings, "evaluations", evaluation.id)
-    return evaluations.evaluation_public(
-        evaluation, base_url=public_base(runtime.settings), with_result=False
-    )
+    return _accepted(evaluation, response, runtime)
 
 
 @router.get("/evaluations", response_model=EvaluationsPublic, responses=problems())
@@ -203,7 +206,4 @@ async def evaluate_upload(
     finally:
         form.discard()
     count_upload(request, form)
-    response.headers["Location"] = api_url(runtime.settings, "evaluations", evaluation.id)
-    return evaluations.evaluation_public(
-        evaluation, base_url=public_base(runtime.settings), with_result=False
-    )
+    return _accepted(evaluation, response, runtime)

@@ -30,10 +30,25 @@ from service.runner import Job, JobSource, default_name, file_provenance, run_jo
 if TYPE_CHECKING:
     import argparse
 
+    from exporters.options import ExportOptions
     from loceval.geometry import SimilarityTransform
     from loceval.readers import SourceSpec
 
-__all__ = ["run_demo", "run_evaluate"]
+__all__ = ["export_options", "run_demo", "run_evaluate"]
+
+
+def export_options(args: argparse.Namespace) -> ExportOptions | None:
+    """Return the export options of a command writing into ``--out`` (None without it).
+
+    The folder's name is the evaluation id the artifacts carry.
+    """
+    if args.out is None:
+        return None
+    return export_from_options(
+        cast("ExportValues", args),
+        evaluation_id=args.out.resolve().name,
+        building=args.building,
+    )
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
@@ -50,13 +65,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"{len(args.name)} names."
         )
         raise InputError(msg)
-    export = None
-    if args.out is not None:
-        export = export_from_options(
-            cast("ExportValues", args),
-            evaluation_id=args.out.resolve().name,
-            building=args.building,
-        )
+    export = export_options(args)
     ref_spec = parse_source(args.reference, default_format=default_format)
     est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
     names = args.name or unique_names([default_name(s) for s in est_specs])

@@ -193,9 +193,16 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
     for spec in OPTIONS:
         if spec.cli and spec.group != "ranging":
             add_option(ev, spec)
-    ev.add_argument("--json", action="store_true", help="print the result as JSON")
-    ev.add_argument("--out", type=_folder, default=None, metavar="DIR", help="write artifacts here")
+    _add_result_flags(ev)
     ev.set_defaults(handler="service.cli.evaluate:run_evaluate")
+
+
+def _add_result_flags(parser: argparse.ArgumentParser) -> None:
+    """Add ``--json`` and ``--out`` of the commands that evaluate (evaluate, ranging)."""
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
+    parser.add_argument(
+        "--out", type=_folder, default=None, metavar="DIR", help="write artifacts here"
+    )
 
 
 RANGING_SKIPPED: Final = frozenset({"offset", "device"})
@@ -236,8 +243,7 @@ def _add_ranging(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpars
             spec = replace(spec, default="none")  # noqa: PLW2901
         if spec.cli and spec.key not in RANGING_SKIPPED:
             add_option(rg, spec)
-    rg.add_argument("--json", action="store_true", help="print the result as JSON")
-    rg.add_argument("--out", type=_folder, default=None, metavar="DIR", help="write artifacts here")
+    _add_result_flags(rg)
     # The options it does not take keep their defaults, so the option builders see every key.
     skipped = {spec.key: spec.default for spec in OPTIONS if spec.key in RANGING_SKIPPED}
     rg.set_defaults(handler="service.cli.ranging:run_ranging", **skipped)

@@ -12,14 +12,13 @@ from typing import TYPE_CHECKING, cast
 
 from loceval.evaluation import EvaluationResult
 from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
+from service.cli.evaluate import export_options
 from service.cli.output import emit
 from service.options import (
     EvaluationValues,
-    ExportValues,
     RangingValues,
     artifact_names,
     config_from_options,
-    export_from_options,
     ranging_from_options,
 )
 from service.runner import Job, JobSource, RangingSources, default_name, file_provenance, run_job
@@ -36,13 +35,7 @@ def run_ranging(args: argparse.Namespace) -> int:
     """Evaluate the ranges and the solvers' positions; print tables or JSON; write artifacts."""
     ranging = ranging_from_options(cast("RangingValues", args))
     config = config_from_options(cast("EvaluationValues", args))
-    export = None
-    if args.out is not None:
-        export = export_from_options(
-            cast("ExportValues", args),
-            evaluation_id=args.out.resolve().name,
-            building=args.building,
-        )
+    export = export_options(args)
     default_format = TrajectoryFormat(args.format) if args.format else None
     ref_spec = parse_source(args.reference, default_format=default_format)
     ranges_spec = parse_source(args.ranges)

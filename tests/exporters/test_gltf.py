@@ -18,7 +18,7 @@ from tests.exporters.conftest import Validator
 
 pygltflib = pytest.importorskip("pygltflib")
 trimesh = pytest.importorskip("trimesh")
-from exporters import gltf  # noqa: E402  (after the importorskip of its libraries)
+from exporters import gltf, gltf_scene  # noqa: E402  (after the importorskip of its libraries)
 
 FAR_SITE = "512340.25 5403210.5 112.3 37.5"
 NEAR_SITE = "20.5 -15.25 0.5 30"
@@ -232,7 +232,7 @@ def test_ate_vertex_colours(two_estimates: EvaluationResult):
     """Each estimate's ATE node carries COLOR_0 in the linear bin colours, one per vertex."""
     model = load(gltf.export_glb(two_estimates, ExportOptions()))
     bins = ate_bins(ate_edges_m(two_estimates))
-    linear = {tuple(np.round(gltf._linear_rgba(b.color_rgb)[:3], 5)) for b in bins}
+    linear = {tuple(np.round(gltf_scene.linear_rgba(b.color_rgb)[:3], 5)) for b in bins}
     edges = np.array([b.high_m for b in bins[:-1]])
     for k, est in enumerate(two_estimates.estimates):
         node = next(n for n in model.nodes if n.name == f"{est.name} ATE")
@@ -243,7 +243,9 @@ def test_ate_vertex_colours(two_estimates: EvaluationResult):
         assert len(colours) == len(positions) > 2
         assert {tuple(np.round(c, 5)) for c in colours.astype(np.float64)} <= linear
         first = bins[int(np.searchsorted(edges, est.ate_translation.values[0], side="left"))]
-        np.testing.assert_allclose(colours[0], gltf._linear_rgba(first.color_rgb)[:3], atol=1e-6)
+        np.testing.assert_allclose(
+            colours[0], gltf_scene.linear_rgba(first.color_rgb)[:3], atol=1e-6
+        )
         assert model.nodes[k + 1].name == est.name
 
 

@@ -18,7 +18,7 @@ from loceval.controlpoints import ControlPoints, Visits
 from loceval.errors import InputError, ReaderError
 from loceval.readers.rosbag.bagfile import deserialize, normalize_msgtype, open_bag, raw_messages
 from loceval.readers.rosbag.messages import HeaderLike, StampSource
-from loceval.readers.rosbag.topics import _match_topic
+from loceval.readers.rosbag.topics import match_topic
 
 __all__ = ["ARRIVAL_MSGTYPES", "read_bag_arrivals"]
 
@@ -62,7 +62,7 @@ def read_bag_arrivals(
             it has no message, or a message names a point that is not surveyed.
     """
     with open_bag(path) as bag:
-        name = _match_topic(bag, topic)
+        name = match_topic(bag, topic)
         conns = [c for c in bag.reader.connections if c.topic == name]
         msgtype = normalize_msgtype(conns[0].msgtype)
         if msgtype not in ARRIVAL_MSGTYPES:

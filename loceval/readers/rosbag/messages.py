@@ -13,6 +13,7 @@ from enum import StrEnum
 from types import MappingProxyType
 from typing import Final, Protocol
 
+from loceval.optionspec import StampSource
 from loceval.tftree import TfBuffer
 
 __all__ = [
@@ -38,15 +39,6 @@ __all__ = [
 
 NS: Final = 1_000_000_000
 """Nanoseconds per second."""
-
-
-class StampSource(StrEnum):
-    """Which time stamps a pose gets."""
-
-    HEADER = "header"
-    """``header.stamp`` of the message (of the transform, for tf): when it was measured."""
-    RECEIVE = "receive"
-    """The bag's receive (log) time: when the recorder got it."""
 
 
 class PoseKind(StrEnum):

@@ -38,10 +38,15 @@ from loceval.readers.rosbag.messages import (
 from loceval.readers.rosbag.tf import read_tf
 from loceval.trajectory import MIN_POSES, Trajectory
 
-__all__ = ["pose_topic_overview", "read_topic_trajectory"]
+__all__ = ["match_topic", "pose_topic_overview", "read_topic_trajectory"]
 
 
-def _match_topic(bag: Bag, topic: str) -> str:
+def match_topic(bag: Bag, topic: str) -> str:
+    """Return the bag's topic named ``topic`` (a leading ``/`` may differ).
+
+    Raises:
+        ReaderError: no topic, or more than one, matches; the message lists the bag's topics.
+    """
     topics = bag.reader.topics
     if topic in topics:
         return topic
@@ -58,7 +63,7 @@ def _match_topic(bag: Bag, topic: str) -> str:
 
 def read_topic_trajectory(bag: Bag, selector: str, *, stamp: StampSource, name: str) -> Trajectory:
     """Read the trajectory of one pose topic."""
-    topic = _match_topic(bag, selector)
+    topic = match_topic(bag, selector)
     conns = [c for c in bag.reader.connections if c.topic == topic]
     msgtypes = sorted({normalize_msgtype(c.msgtype) for c in conns})
     where = f"{bag.label}@{selector}"
