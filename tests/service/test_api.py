@@ -14,6 +14,7 @@ import pytest
 from service.db import Evaluation, EvaluationStatus
 from tests import bagfactory
 from tests.factories import (
+    ROVER_URDF,
     make_trajectory,
     perturb,
     write_csv,
@@ -26,18 +27,6 @@ from tests.service._api_fixtures import Api, api_routes, assert_problem, open_ap
 
 CHEAP = {"formats": ["result.json"]}
 """Options that skip the reports and CAD files (the full set is tested once)."""
-
-URDF = b"""<?xml version="1.0"?>
-<robot name="rover">
-  <link name="rigid_body"/>
-  <link name="camera_link"/>
-  <joint name="mount" type="fixed">
-    <parent link="rigid_body"/>
-    <child link="camera_link"/>
-    <origin xyz="0.1 0.0 0.25" rpy="0 0 0"/>
-  </joint>
-</robot>
-"""
 
 
 @pytest.fixture
@@ -158,7 +147,7 @@ def test_upload_bags(
 
 def test_upload_urdf(api: Api) -> None:
     """A URDF is stored as a device file with its links (and no trajectory source)."""
-    dataset = api.dataset("rover.urdf", URDF)
+    dataset = api.dataset("rover.urdf", ROVER_URDF.encode())
     assert dataset["kind"] == "urdf"
     assert dataset["inspection"]["links"] == ["rigid_body", "camera_link"]
     assert dataset["inspection"]["sources"] == []
@@ -401,7 +390,7 @@ def test_failed_evaluation_carries_its_problem(api: Api, datasets: tuple[str, st
 
 def test_device_offset_from_urdf(api: Api, datasets: tuple[str, str]) -> None:
     """A URDF dataset gives the rigid body -> sensor offset by its link names."""
-    urdf = api.dataset("rover.urdf", URDF)
+    urdf = api.dataset("rover.urdf", ROVER_URDF.encode())
     device = {"dataset_id": urdf["id"], "from_link": "rigid_body", "to_link": "camera_link"}
     evaluation = api.evaluate(evaluation_body(*datasets, options={**CHEAP, "device": device}))
     assert evaluation.status_code == 202
@@ -480,7 +469,7 @@ def test_selectors_are_checked_before_queueing(
         fmt="rosbag1",
     )
     bag_id = api.dataset("b.bag", bag.read_bytes())["id"]
-    urdf_id = api.dataset("rover.urdf", URDF)["id"]
+    urdf_id = api.dataset("rover.urdf", ROVER_URDF.encode())["id"]
     cases = [
         (
             {"dataset_id": reference, "selector": "/odom"},

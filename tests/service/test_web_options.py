@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from tests.factories import ROVER_URDF
 from tests.service.conftest import upload
 from tests.service.test_web_browser import (
     ESTIMATE,
@@ -28,17 +29,6 @@ __all__ = ["browser", "page"]  # the fixtures, used by name
 
 pytestmark = [pytest.mark.slow, pytest.mark.public_data]
 
-URDF = """<?xml version="1.0"?>
-<robot name="rover">
-  <link name="rigid_body"/>
-  <link name="camera_link"/>
-  <joint name="mount" type="fixed">
-    <parent link="rigid_body"/>
-    <child link="camera_link"/>
-    <origin xyz="0.1 0.0 0.25" rpy="0 0 0"/>
-  </joint>
-</robot>
-"""
 KEPT_FILES = ["result.json", "errors.csv", "report.html", "paths.dxf"]
 
 
@@ -56,7 +46,7 @@ def _open(page: Any, server: Any) -> None:
 def uploaded(live_server: Any, public_data: Path, tmp_path: Path) -> dict[str, str]:
     """The TUM pair and a URDF uploaded through the API; their dataset ids by file name."""
     urdf = tmp_path / "rover.urdf"
-    urdf.write_text(URDF, encoding="utf-8")
+    urdf.write_text(ROVER_URDF, encoding="utf-8")
     with live_server.client() as client:
         return {
             path.name: upload(client, path)["id"]
