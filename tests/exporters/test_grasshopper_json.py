@@ -11,23 +11,15 @@ import pytest
 
 from exporters.options import ExportOptions, Units
 from exporters.placement import parse_site
-from loceval.evaluation import EvaluationResult, evaluate
+from loceval.evaluation import EvaluationResult
 from loceval.polyline import polyline_distances
+from tests.exporters.conftest import curve_vertices, expected_paths, with_reference_loss
 
 rhino3dm = pytest.importorskip("rhino3dm")
 from exporters import rhino  # noqa: E402  (after the importorskip of its library)
 
 SCRIPT = Path(__file__).resolve().parents[2] / "exporters" / "grasshopper" / "loceval_paths.py"
 SITE = "512340.25 5403210.5 112.3 37.5"
-
-
-def expected_paths(result: EvaluationResult, options: ExportOptions) -> list[np.ndarray]:
-    """Reference then aligned estimates after the site transform and unit scale."""
-    trajectories = [result.reference, *(e.aligned for e in result.estimates)]
-    return [
-        options.site.apply_positions(t.positions_xyz) * options.units.per_metre
-        for t in trajectories
-    ]
 
 
 def decode(entry: dict) -> np.ndarray:
@@ -39,8 +31,7 @@ def decode_curve(encoded: dict) -> np.ndarray:
     """Decode one encoded PolylineCurve and return its vertices."""
     curve = rhino3dm.CommonObject.Decode(encoded)
     assert isinstance(curve, rhino3dm.PolylineCurve)
-    points = [curve.Point(k) for k in range(curve.PointCount)]
-    return np.array([[p.X, p.Y, p.Z] for p in points])
+    return curve_vertices(curve)
 
 
 @pytest.fixture
@@ -124,19 +115,12 @@ def test_same_curves_as_the_3dm(
     }
     for entry in document["paths"]:
         curve = curves[entry["name"]]
-        points = [curve.Point(k) for k in range(curve.PointCount)]
-        np.testing.assert_array_equal(decode(entry), [[p.X, p.Y, p.Z] for p in points])
+        np.testing.assert_array_equal(decode(entry), curve_vertices(curve))
 
 
 def test_pieces_at_a_tracking_loss(two_estimates: EvaluationResult):
     """A 3 s reference loss splits every path into two curves and gives one loss marker."""
-    ref = two_estimates.reference
-    times = ref.times_s()
-    gapped = evaluate(
-        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
-        [e.estimate for e in two_estimates.estimates],
-        two_estimates.config,
-    )
+    gapped = with_reference_loss(two_estimates)
     document = json.loads(rhino.export_3dm_json(gapped, ExportOptions(title="Gap run")))
     for entry in document["paths"]:
         first, second = (decode_curve(c) for c in entry["curves"])
