@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -23,17 +22,10 @@ from tests.factories import (
     write_motive,
     write_tum,
 )
-from tests.service._api_fixtures import Api, api_routes, assert_problem, open_api, tum_pair
+from tests.service._api_fixtures import Api, api_routes, assert_problem, tum_pair
 
 CHEAP = {"formats": ["result.json"]}
 """Options that skip the reports and CAD files (the full set is tested once)."""
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of two projects."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 @pytest.fixture

@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import io
 import math
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.factories import make_trajectory, write_tum
-from tests.service._api_fixtures import Api, assert_problem, open_api
+from tests.service._api_fixtures import Api, assert_problem
 
 ezdxf = pytest.importorskip("ezdxf")
 pytest.importorskip("ifcopenshell")
@@ -25,13 +24,6 @@ CONVERSION = {  # the room placed on a national grid, 30 degrees turned, in mill
     "XAxisOrdinate": math.sin(math.radians(30.0)),
     "Scale": 0.001,
 }
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs)."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 def _pair(tmp_path: Path, rng: np.random.Generator) -> tuple[bytes, bytes]:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -21,16 +20,9 @@ from loceval.checkpoints import evaluate_checkpoints
 from loceval.readers.points import read_visits
 from tests.checkpoint_factory import NS, StopAndGo, grid_points, stop_and_go, write_points
 from tests.checkpoint_factory import write_visits as write_true_visits
-from tests.service._api_fixtures import Api, assert_problem, open_api
+from tests.service._api_fixtures import Api, assert_problem
 
 FORMATS = ["result.json", "errors.csv"]
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of two projects."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 @pytest.fixture
