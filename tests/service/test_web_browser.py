@@ -147,16 +147,12 @@ def _upload_both(page: Any, public_data: Path) -> None:
     expect(datasets.filter(has_text=ESTIMATE)).to_contain_text("poses")
 
 
-def _evaluate(page: Any) -> str:
-    """Fill the form, start, wait for the end; return the evaluation's id."""
-    from playwright.sync_api import expect
+def wait_until_succeeded(page: Any) -> str | None:
+    """Wait until the current evaluation's card shows it finished; it must have succeeded.
 
-    _choose(page.locator("#reference-select"), GROUNDTRUTH)
-    _choose(page.locator(".estimate-select").first, ESTIMATE)
-    page.locator(".estimate-name").first.fill(ESTIMATE_NAME)
-    page.select_option("#opt-align", "se3")
-    page.fill("#opt-tolerance", "0.10@95")
-    page.click("#start-button")
+    Returns the card's evaluation id (the error the page shows is the assertion's message).
+    """
+    from playwright.sync_api import expect
 
     card = page.locator("#current-card")
     expect(card).to_be_visible()
@@ -164,7 +160,19 @@ def _evaluate(page: Any) -> str:
         "data-status", re.compile("succeeded|failed"), timeout=EVALUATION_TIMEOUT_MS
     )
     assert card.get_attribute("data-status") == "succeeded", page.inner_text("#current-error")
-    evaluation_id = card.get_attribute("data-evaluation-id")
+    evaluation_id: str | None = card.get_attribute("data-evaluation-id")
+    return evaluation_id
+
+
+def _evaluate(page: Any) -> str:
+    """Fill the form, start, wait for the end; return the evaluation's id."""
+    _choose(page.locator("#reference-select"), GROUNDTRUTH)
+    _choose(page.locator(".estimate-select").first, ESTIMATE)
+    page.locator(".estimate-name").first.fill(ESTIMATE_NAME)
+    page.select_option("#opt-align", "se3")
+    page.fill("#opt-tolerance", "0.10@95")
+    page.click("#start-button")
+    evaluation_id = wait_until_succeeded(page)
     assert evaluation_id
     return str(evaluation_id)
 

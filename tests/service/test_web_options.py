@@ -24,6 +24,7 @@ from tests.service.test_web_browser import (
     browser,
     page,
     refuse_option,
+    wait_until_succeeded,
 )
 
 __all__ = ["browser", "page"]  # the fixtures, used by name
@@ -95,14 +96,7 @@ def test_every_api_option_is_sent(
     page.screenshot(path=str(tmp_path / "options.png"), full_page=True)
 
     page.click("#start-button")
-    card = page.locator("#current-card")
-    expect(card).to_have_attribute(
-        "data-status", re.compile("succeeded|failed"), timeout=EVALUATION_TIMEOUT_MS
-    )
-    assert card.get_attribute("data-status") == "succeeded", page.inner_text("#current-error")
-    evaluation = _api(
-        live_server, "GET", f"/evaluations/{card.get_attribute('data-evaluation-id')}"
-    )
+    evaluation = _api(live_server, "GET", f"/evaluations/{wait_until_succeeded(page)}")
     options = evaluation["options"]
     assert options["tolerance"] == "0.10@95"
     assert options["thresholds_m"] == [0.05, 0.2]

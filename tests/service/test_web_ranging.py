@@ -27,13 +27,13 @@ from tests.radio_factory import (
 )
 from tests.service.conftest import upload
 from tests.service.test_web_browser import (
-    EVALUATION_TIMEOUT_MS,
     _choose,
     _enter_key,
     browser,
     open_report,
     page,
     refuse_option,
+    wait_until_succeeded,
 )
 
 __all__ = ["browser", "page"]  # the fixtures, used by name
@@ -91,8 +91,6 @@ def _upload(page: Any, files: dict[str, Path]) -> None:
 
 def _start(page: Any, server: Any) -> Any:
     """Fill the ranging form, start, wait for the end; return the evaluation (with result)."""
-    from playwright.sync_api import expect
-
     _choose(page.locator("#ranging-reference-select"), "truth.txt")
     _choose(page.locator("#ranging-anchors-select"), "anchors.csv (13 anchors)")
     _choose(page.locator("#ranging-ranges-select"), "ranges.csv")
@@ -103,14 +101,7 @@ def _start(page: Any, server: Any) -> Any:
     page.fill("#ranging-outlier", "1.5")
     page.fill("#ranging-tag-offset", "0, 0,  0")
     page.click("#ranging-start-button")
-
-    card = page.locator("#current-card")
-    expect(card).to_be_visible()
-    expect(card).to_have_attribute(
-        "data-status", re.compile("succeeded|failed"), timeout=EVALUATION_TIMEOUT_MS
-    )
-    assert card.get_attribute("data-status") == "succeeded", page.inner_text("#current-error")
-    return _api(server, "GET", f"/evaluations/{card.get_attribute('data-evaluation-id')}")
+    return _api(server, "GET", f"/evaluations/{wait_until_succeeded(page)}")
 
 
 def _check_result(evaluation: Any, recording: RadioRecording) -> None:
