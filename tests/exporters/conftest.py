@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import json
 import subprocess
 from collections.abc import Callable
@@ -18,6 +19,9 @@ from loceval.trajectory import Trajectory
 from tests.conftest import require_tool
 
 VALIDATOR_DIR = Path(__file__).resolve().parent / "gltf_validator"
+GRASSHOPPER_SCRIPT = (
+    Path(__file__).resolve().parents[2] / "exporters" / "grasshopper" / "loceval_paths.py"
+)
 Validator = Callable[[bytes], dict]
 
 
@@ -96,6 +100,18 @@ def curve_vertices(curve: Any) -> np.ndarray:
     """Return a rhino3dm PolylineCurve's vertices as an (N, 3) array."""
     points = [curve.Point(k) for k in range(curve.PointCount)]
     return np.array([[p.X, p.Y, p.Z] for p in points])
+
+
+def grasshopper_script_keys() -> set[str]:
+    """Return the string keys the Grasshopper script subscripts (``x["key"]``)."""
+    tree = ast.parse(GRASSHOPPER_SCRIPT.read_text(encoding="utf-8"))
+    return {
+        node.slice.value
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Subscript)
+        and isinstance(node.slice, ast.Constant)
+        and isinstance(node.slice.value, str)
+    }
 
 
 @pytest.fixture(scope="session")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import ast
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,12 +12,17 @@ from exporters.options import ExportOptions, Units
 from exporters.placement import parse_site
 from loceval.evaluation import EvaluationResult
 from loceval.polyline import polyline_distances
-from tests.exporters.conftest import curve_vertices, expected_paths, with_reference_loss
+from tests.exporters.conftest import (
+    GRASSHOPPER_SCRIPT,
+    curve_vertices,
+    expected_paths,
+    grasshopper_script_keys,
+    with_reference_loss,
+)
 
 rhino3dm = pytest.importorskip("rhino3dm")
 from exporters import rhino  # noqa: E402  (after the importorskip of its library)
 
-SCRIPT = Path(__file__).resolve().parents[2] / "exporters" / "grasshopper" / "loceval_paths.py"
 SITE = "512340.25 5403210.5 112.3 37.5"
 
 
@@ -141,14 +145,7 @@ def test_units_scale(two_estimates: EvaluationResult):
 
 def test_script_reads_only_fields_the_document_has(document: dict):
     """Every key the Grasshopper script looks up exists in the document it reads."""
-    tree = ast.parse(SCRIPT.read_text(encoding="utf-8"))
-    keys = {
-        node.slice.value
-        for node in ast.walk(tree)
-        if isinstance(node, ast.Subscript)
-        and isinstance(node.slice, ast.Constant)
-        and isinstance(node.slice.value, str)
-    }
+    keys = grasshopper_script_keys()
     available = set(document) | set(document["metadata"]) | set(document["paths"][1])
     available |= set(document["markers"][0]) | set(document["paths"][1]["ate"][0])
     available |= set(document["ate_bins"][0])
@@ -159,15 +156,15 @@ def test_script_reads_only_fields_the_document_has(document: dict):
 
 def test_script_is_short_and_compiles():
     """The script is valid Python 3 and short enough to review by eye."""
-    source = SCRIPT.read_text(encoding="utf-8")
-    compile(source, str(SCRIPT), "exec")
+    source = GRASSHOPPER_SCRIPT.read_text(encoding="utf-8")
+    compile(source, str(GRASSHOPPER_SCRIPT), "exec")
     assert len(source.splitlines()) <= 140
     assert "CommonObject.FromJSON" in source
 
 
 def test_script_uses_only_python_2_7_syntax():
     """Rhino 7's GhPython is IronPython 2.7: no f-strings, annotations, pathlib or walrus."""
-    source = SCRIPT.read_text(encoding="utf-8")
+    source = GRASSHOPPER_SCRIPT.read_text(encoding="utf-8")
     tree = ast.parse(source)
     python3_only = (ast.JoinedStr, ast.AnnAssign, ast.NamedExpr, ast.Nonlocal, ast.YieldFrom)
     assert not [type(n).__name__ for n in ast.walk(tree) if isinstance(n, python3_only)]
