@@ -26,8 +26,6 @@ from exporters.report import render_report  # noqa: E402
 from exporters.report.checkpoints import build_checkpoint_view  # noqa: E402
 from tests.exporters.ifcfactory import GRID_CONVERSION, ROOM_X_M, ROOM_Y_M, WALL_M, write_room  # noqa: E402
 
-"""The room's map conversion (as in test_building.py): EPSG:25832, 30° yaw, millimetres."""
-
 
 def floor_plan_paths(svg: bytes) -> list[str]:
     """Return the ``d`` attributes of the paths in the SVG's floor-plan group."""
