@@ -87,6 +87,15 @@ def stop_and_go(
     )
 
 
+def estimate_tum_rows(recording: StopAndGo) -> list[str]:
+    """The estimate's positions as position-only TUM rows ``t x y z`` (t in seconds)."""
+    estimate = recording.estimate
+    return [
+        f"{t / NS:.9f} {x!r} {y!r} {z!r}"
+        for t, (x, y, z) in zip(estimate.stamps_ns, estimate.positions_xyz.tolist(), strict=True)
+    ]
+
+
 def write_points(path: Path, points: ControlPoints, *, header: str = "id,x,y,z,sigma_m") -> Path:
     """Write a survey CSV."""
     rows = [header]

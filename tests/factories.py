@@ -19,6 +19,19 @@ from loceval.trajectory import Trajectory
 T0_NS = 1_700_000_000 * 10**9
 """A plausible epoch start (2023-11-14) for synthetic stamps."""
 
+ROVER_URDF = """<?xml version="1.0"?>
+<robot name="rover">
+  <link name="rigid_body"/>
+  <link name="camera_link"/>
+  <joint name="mount" type="fixed">
+    <parent link="rigid_body"/>
+    <child link="camera_link"/>
+    <origin xyz="0.1 0.0 0.25" rpy="0 0 0"/>
+  </joint>
+</robot>
+"""
+"""A device file: the rigid body and a camera 0.1 m ahead of it and 0.25 m up (no rotation)."""
+
 MOTIVE_START = "2019-09-18 04.30.02.695 PM"
 """A Capture Start Time as Motive writes it."""
 

@@ -2,20 +2,26 @@
 
 from __future__ import annotations
 
+import ast
 import json
 import subprocess
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from exporters.options import ExportOptions
 from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
 from loceval.trajectory import Trajectory
 from tests.conftest import require_tool
 
 VALIDATOR_DIR = Path(__file__).resolve().parent / "gltf_validator"
+GRASSHOPPER_SCRIPT = (
+    Path(__file__).resolve().parents[2] / "exporters" / "grasshopper" / "loceval_paths.py"
+)
 Validator = Callable[[bytes], dict]
 
 
@@ -65,6 +71,47 @@ def two_estimates(rng: np.random.Generator) -> EvaluationResult:
     a = noisy(rng, truth, every=3, sigma=0.02, drift=0.25, name="RTAB-Map")
     b = noisy(rng, truth, every=4, sigma=0.05, drift=0.05, name="ISAAC")
     return evaluate(truth, [a, b], EvaluationConfig(tolerance=Tolerance(0.10, 0.95)))
+
+
+def with_reference_loss(result: EvaluationResult) -> EvaluationResult:
+    """Evaluate ``result``'s estimates again after a 3 s tracking loss of the reference.
+
+    The reference loses its poses after 20 s up to and including 23 s (``times_s()``).
+    """
+    ref = result.reference
+    times = ref.times_s()
+    return evaluate(
+        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
+        [e.estimate for e in result.estimates],
+        result.config,
+    )
+
+
+def expected_paths(result: EvaluationResult, options: ExportOptions) -> list[np.ndarray]:
+    """Reference then aligned estimates after the site transform and unit scale."""
+    trajectories = [result.reference, *(e.aligned for e in result.estimates)]
+    return [
+        options.site.apply_positions(t.positions_xyz) * options.units.per_metre
+        for t in trajectories
+    ]
+
+
+def curve_vertices(curve: Any) -> np.ndarray:
+    """Return a rhino3dm PolylineCurve's vertices as an (N, 3) array."""
+    points = [curve.Point(k) for k in range(curve.PointCount)]
+    return np.array([[p.X, p.Y, p.Z] for p in points])
+
+
+def grasshopper_script_keys() -> set[str]:
+    """Return the string keys the Grasshopper script subscripts (``x["key"]``)."""
+    tree = ast.parse(GRASSHOPPER_SCRIPT.read_text(encoding="utf-8"))
+    return {
+        node.slice.value
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Subscript)
+        and isinstance(node.slice, ast.Constant)
+        and isinstance(node.slice.value, str)
+    }
 
 
 @pytest.fixture(scope="session")

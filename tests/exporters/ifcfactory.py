@@ -23,6 +23,17 @@ ROOM_Y_M = 4.0
 DOOR_X_M = (2.5, 3.5)
 """The door in the south wall (y = 0 .. -0.2) spans these x, metres."""
 WALL_M = 0.2
+GRID_YAW_DEG = 30.0
+"""How far ``GRID_CONVERSION`` turns the room, degrees."""
+GRID_CONVERSION: dict[str, float] = {
+    "Eastings": 512340.0,
+    "Northings": 5403210.5,
+    "OrthogonalHeight": 112.3,
+    "XAxisAbscissa": math.cos(math.radians(GRID_YAW_DEG)),
+    "XAxisOrdinate": math.sin(math.radians(GRID_YAW_DEG)),
+    "Scale": 0.001,  # the IFC is in millimetres, the map in metres
+}
+"""A ``map_conversion`` for :func:`write_room`: the room on a national grid, turned 30 degrees."""
 
 
 def write_room(

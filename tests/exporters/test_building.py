@@ -19,24 +19,14 @@ ezdxf = pytest.importorskip("ezdxf")
 ifcopenshell = pytest.importorskip("ifcopenshell")
 
 from exporters import building, dxf, gltf, ifc  # noqa: E402  (after the importorskip of its libraries)
-from tests.exporters.ifcfactory import DOOR_X_M, write_room  # noqa: E402
+from tests.exporters.ifcfactory import DOOR_X_M, GRID_CONVERSION, GRID_YAW_DEG, write_room  # noqa: E402
 from tests.exporters.test_ifc import NAMES, assert_same_as_dxf  # noqa: E402
-
-YAW_DEG = 30.0
-CONVERSION = {
-    "Eastings": 512340.0,
-    "Northings": 5403210.5,
-    "OrthogonalHeight": 112.3,
-    "XAxisAbscissa": math.cos(math.radians(YAW_DEG)),
-    "XAxisOrdinate": math.sin(math.radians(YAW_DEG)),
-    "Scale": 0.001,  # the IFC is in millimetres, the map in metres
-}
 
 
 @pytest.fixture
 def room(tmp_path: Path) -> Path:
     """Return a georeferenced IFC of one room with a door."""
-    return write_room(tmp_path / "room.ifc", map_conversion=CONVERSION)
+    return write_room(tmp_path / "room.ifc", map_conversion=GRID_CONVERSION)
 
 
 def on_line(segments: np.ndarray, axis: int, value: float) -> np.ndarray:
@@ -52,7 +42,7 @@ def test_ifc_gives_mesh_site_and_crs(room: Path) -> None:
     np.testing.assert_allclose(model.site.translation, [512340.0, 5403210.5, 112.3])
     assert model.site.scale == pytest.approx(1.0)  # 0.001 map metres per project millimetre
     yaw = math.degrees(math.atan2(model.site.rotation[1, 0], model.site.rotation[0, 0]))
-    assert yaw == pytest.approx(YAW_DEG)
+    assert yaw == pytest.approx(GRID_YAW_DEG)
     # the room's south-west outer corner (-0.2, -0.2, 0) in the IFC's own metres, mapped
     corner = model.site.apply_positions(np.array([[-0.2, -0.2, 0.0]]))[0]
     assert np.min(np.linalg.norm(model.vertices_m - corner, axis=1)) < 1e-6

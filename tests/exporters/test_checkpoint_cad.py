@@ -7,7 +7,6 @@ the same points, measured positions, error lines and labels on the same layers, 
 
 from __future__ import annotations
 
-import ast
 import json
 from pathlib import Path
 
@@ -26,13 +25,12 @@ from loceval.checkpoint_evaluation import (
 )
 from loceval.evaluation import EvaluationConfig
 from tests.checkpoint_factory import grid_points, stop_and_go
-from tests.exporters.conftest import Validator
+from tests.exporters.conftest import GRASSHOPPER_SCRIPT, Validator, grasshopper_script_keys
 
 rhino3dm = pytest.importorskip("rhino3dm")
 pygltflib = pytest.importorskip("pygltflib")
 
 FAR_SITE = "512340.25 5403210.5 112.3 37.5"
-SCRIPT = Path(__file__).resolve().parents[2] / "exporters" / "grasshopper" / "loceval_paths.py"
 ROOT = "loceval::survey vs est"
 R = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])  # Z up -> Y up
 TOL_MM = 1.0
@@ -164,18 +162,11 @@ def test_json_matches_the_dxf(out: Path) -> None:
 def test_grasshopper_script_reads_the_control_points_document(out: Path) -> None:
     """Every key the Grasshopper script subscripts exists in the control-point document."""
     doc = json.loads((out / "paths.3dm.json").read_text())
-    tree = ast.parse(SCRIPT.read_text(encoding="utf-8"))
-    keys = {
-        node.slice.value
-        for node in ast.walk(tree)
-        if isinstance(node, ast.Subscript)
-        and isinstance(node.slice, ast.Constant)
-        and isinstance(node.slice.value, str)
-    }
+    keys = grasshopper_script_keys()
     available = set(doc) | set(doc["metadata"]) | set(doc["paths"][0]) | set(doc["markers"][0])
     available |= set(doc["points"][0])
     assert keys - {"bin", "curve"} <= available, keys - available  # ATE runs: none here
-    assert 'document.get("points", [])' in SCRIPT.read_text(encoding="utf-8")
+    assert 'document.get("points", [])' in GRASSHOPPER_SCRIPT.read_text(encoding="utf-8")
 
 
 def glb_world(model: pygltflib.GLTF2, node: pygltflib.Node, primitive: int = 0) -> np.ndarray:

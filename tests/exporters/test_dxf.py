@@ -17,9 +17,10 @@ import pytest
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
 from exporters.placement import ate_bins, ate_edges_m, parse_site
-from loceval.evaluation import EvaluationResult, evaluate
+from loceval.evaluation import EvaluationResult
 from loceval.polyline import polyline_distances
 from tests.conftest import require_tool
+from tests.exporters.conftest import expected_paths, with_reference_loss
 
 ezdxf = pytest.importorskip("ezdxf")
 from exporters import dxf  # noqa: E402  (after the importorskip of its library)
@@ -31,15 +32,6 @@ NAMES = ["OptiTrack", "RTAB-Map", "ISAAC"]
 def read(data: bytes) -> ezdxf.document.Drawing:
     """Parse DXF bytes with ezdxf."""
     return ezdxf.read(io.StringIO(data.decode("utf-8")))
-
-
-def expected_paths(result: EvaluationResult, options: ExportOptions) -> list[np.ndarray]:
-    """Reference then aligned estimates after the site transform and unit scale."""
-    trajectories = [result.reference, *(e.aligned for e in result.estimates)]
-    return [
-        options.site.apply_positions(t.positions_xyz) * options.units.per_metre
-        for t in trajectories
-    ]
 
 
 @pytest.fixture
@@ -184,11 +176,7 @@ def test_markers_at_worst_errors_and_gaps(two_estimates: EvaluationResult):
     """POINT and label at the greatest errors and at a tracking loss of the reference."""
     ref = two_estimates.reference
     times = ref.times_s()
-    gapped = evaluate(
-        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
-        [e.estimate for e in two_estimates.estimates],
-        two_estimates.config,
-    )
+    gapped = with_reference_loss(two_estimates)
     doc = read(dxf.export_dxf(gapped, ExportOptions(units=Units.M)))
     msp = doc.modelspace()
     # one marker for the one loss, on its own layer, not repeated per estimate

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import base64
-import math
 import re
 from pathlib import Path
 
@@ -25,17 +24,7 @@ from exporters.plots import render_plots  # noqa: E402  (after the importorskip 
 from exporters.plots.underlay import FLOOR_PLAN_GID, floor_plan_segments  # noqa: E402
 from exporters.report import render_report  # noqa: E402
 from exporters.report.checkpoints import build_checkpoint_view  # noqa: E402
-from tests.exporters.ifcfactory import ROOM_X_M, ROOM_Y_M, WALL_M, write_room  # noqa: E402
-
-CONVERSION = {
-    "Eastings": 512340.0,
-    "Northings": 5403210.5,
-    "OrthogonalHeight": 112.3,
-    "XAxisAbscissa": math.cos(math.radians(30.0)),
-    "XAxisOrdinate": math.sin(math.radians(30.0)),
-    "Scale": 0.001,
-}
-"""The room's map conversion (as in test_building.py): EPSG:25832, 30° yaw, millimetres."""
+from tests.exporters.ifcfactory import GRID_CONVERSION, ROOM_X_M, ROOM_Y_M, WALL_M, write_room  # noqa: E402
 
 
 def floor_plan_paths(svg: bytes) -> list[str]:
@@ -51,7 +40,7 @@ def test_ifc_room_is_the_floor_plan_of_the_paths(
     tmp_path: Path, two_estimates: EvaluationResult
 ) -> None:
     """A georeferenced IFC room, cut at the walk's median height, lies under Fig. 1 and 2."""
-    room = write_room(tmp_path / "room.ifc", map_conversion=CONVERSION)
+    room = write_room(tmp_path / "room.ifc", map_conversion=GRID_CONVERSION)
     options = ExportOptions(building=room)
     segments = floor_plan_segments(two_estimates.reference.positions_xyz[:, 2], options)
     assert segments is not None
@@ -86,7 +75,7 @@ def test_report_pdf_and_html_carry_the_floor_plan(
     tmp_path: Path, two_estimates: EvaluationResult
 ) -> None:
     """The report (HTML and PDF) is rendered over the IFC room given as the building."""
-    room = write_room(tmp_path / "room.ifc", map_conversion=CONVERSION)
+    room = write_room(tmp_path / "room.ifc", map_conversion=GRID_CONVERSION)
     html, pdf = render_report(two_estimates, options=ExportOptions(building=room))
     assert pdf.startswith(b"%PDF")
     (tmp_path / "report.pdf").write_bytes(pdf)

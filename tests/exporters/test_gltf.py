@@ -12,9 +12,9 @@ import pytest
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
 from exporters.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
-from loceval.evaluation import EvaluationResult, evaluate
+from loceval.evaluation import EvaluationResult
 from loceval.polyline import polyline_distances
-from tests.exporters.conftest import Validator
+from tests.exporters.conftest import Validator, with_reference_loss
 
 pygltflib = pytest.importorskip("pygltflib")
 trimesh = pytest.importorskip("trimesh")
@@ -255,11 +255,7 @@ def test_tracking_loss_breaks_and_marker_nodes(
     """A 3 s reference loss: two strips per path, one loss node at the last pose before it."""
     ref = two_estimates.reference
     times = ref.times_s()
-    gapped = evaluate(
-        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
-        [e.estimate for e in two_estimates.estimates],
-        two_estimates.config,
-    )
+    gapped = with_reference_loss(two_estimates)
     options = ExportOptions(site=parse_site(NEAR_SITE))
     data = gltf.export_glb(gapped, options)
     model = load(data)

@@ -4,30 +4,26 @@ from __future__ import annotations
 
 import ast
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from exporters.options import ExportOptions, Units
 from exporters.placement import parse_site
-from loceval.evaluation import EvaluationResult, evaluate
+from loceval.evaluation import EvaluationResult
 from loceval.polyline import polyline_distances
+from tests.exporters.conftest import (
+    GRASSHOPPER_SCRIPT,
+    curve_vertices,
+    expected_paths,
+    grasshopper_script_keys,
+    with_reference_loss,
+)
 
 rhino3dm = pytest.importorskip("rhino3dm")
 from exporters import rhino  # noqa: E402  (after the importorskip of its library)
 
-SCRIPT = Path(__file__).resolve().parents[2] / "exporters" / "grasshopper" / "loceval_paths.py"
 SITE = "512340.25 5403210.5 112.3 37.5"
-
-
-def expected_paths(result: EvaluationResult, options: ExportOptions) -> list[np.ndarray]:
-    """Reference then aligned estimates after the site transform and unit scale."""
-    trajectories = [result.reference, *(e.aligned for e in result.estimates)]
-    return [
-        options.site.apply_positions(t.positions_xyz) * options.units.per_metre
-        for t in trajectories
-    ]
 
 
 def decode(entry: dict) -> np.ndarray:
@@ -39,8 +35,7 @@ def decode_curve(encoded: dict) -> np.ndarray:
     """Decode one encoded PolylineCurve and return its vertices."""
     curve = rhino3dm.CommonObject.Decode(encoded)
     assert isinstance(curve, rhino3dm.PolylineCurve)
-    points = [curve.Point(k) for k in range(curve.PointCount)]
-    return np.array([[p.X, p.Y, p.Z] for p in points])
+    return curve_vertices(curve)
 
 
 @pytest.fixture
@@ -124,19 +119,12 @@ def test_same_curves_as_the_3dm(
     }
     for entry in document["paths"]:
         curve = curves[entry["name"]]
-        points = [curve.Point(k) for k in range(curve.PointCount)]
-        np.testing.assert_array_equal(decode(entry), [[p.X, p.Y, p.Z] for p in points])
+        np.testing.assert_array_equal(decode(entry), curve_vertices(curve))
 
 
 def test_pieces_at_a_tracking_loss(two_estimates: EvaluationResult):
     """A 3 s reference loss splits every path into two curves and gives one loss marker."""
-    ref = two_estimates.reference
-    times = ref.times_s()
-    gapped = evaluate(
-        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
-        [e.estimate for e in two_estimates.estimates],
-        two_estimates.config,
-    )
+    gapped = with_reference_loss(two_estimates)
     document = json.loads(rhino.export_3dm_json(gapped, ExportOptions(title="Gap run")))
     for entry in document["paths"]:
         first, second = (decode_curve(c) for c in entry["curves"])
@@ -157,14 +145,7 @@ def test_units_scale(two_estimates: EvaluationResult):
 
 def test_script_reads_only_fields_the_document_has(document: dict):
     """Every key the Grasshopper script looks up exists in the document it reads."""
-    tree = ast.parse(SCRIPT.read_text(encoding="utf-8"))
-    keys = {
-        node.slice.value
-        for node in ast.walk(tree)
-        if isinstance(node, ast.Subscript)
-        and isinstance(node.slice, ast.Constant)
-        and isinstance(node.slice.value, str)
-    }
+    keys = grasshopper_script_keys()
     available = set(document) | set(document["metadata"]) | set(document["paths"][1])
     available |= set(document["markers"][0]) | set(document["paths"][1]["ate"][0])
     available |= set(document["ate_bins"][0])
@@ -175,15 +156,15 @@ def test_script_reads_only_fields_the_document_has(document: dict):
 
 def test_script_is_short_and_compiles():
     """The script is valid Python 3 and short enough to review by eye."""
-    source = SCRIPT.read_text(encoding="utf-8")
-    compile(source, str(SCRIPT), "exec")
+    source = GRASSHOPPER_SCRIPT.read_text(encoding="utf-8")
+    compile(source, str(GRASSHOPPER_SCRIPT), "exec")
     assert len(source.splitlines()) <= 140
     assert "CommonObject.FromJSON" in source
 
 
 def test_script_uses_only_python_2_7_syntax():
     """Rhino 7's GhPython is IronPython 2.7: no f-strings, annotations, pathlib or walrus."""
-    source = SCRIPT.read_text(encoding="utf-8")
+    source = GRASSHOPPER_SCRIPT.read_text(encoding="utf-8")
     tree = ast.parse(source)
     python3_only = (ast.JoinedStr, ast.AnnAssign, ast.NamedExpr, ast.Nonlocal, ast.YieldFrom)
     assert not [type(n).__name__ for n in ast.walk(tree) if isinstance(n, python3_only)]

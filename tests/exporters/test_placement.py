@@ -24,9 +24,10 @@ from exporters.placement import (
     place_evaluation,
     read_site_matrix,
 )
-from loceval.evaluation import EvaluationResult, evaluate
+from loceval.evaluation import EvaluationResult
 from loceval.geometry import SimilarityTransform
 from loceval.polyline import polyline_distances
+from tests.exporters.conftest import with_reference_loss
 
 SITE = "512340.25 5403210.5 112.3 37.5"
 
@@ -249,12 +250,7 @@ class TestPlaceEvaluation:
         """Greatest errors get markers 2 s apart or more; a reference gap gets a marker."""
         ref = two_estimates.reference
         times = ref.times_s()
-        keep = (times < 20.0) | (times > 23.0)
-        gapped = evaluate(
-            ref.select(np.flatnonzero(keep)),
-            [e.estimate for e in two_estimates.estimates],
-            two_estimates.config,
-        )
+        gapped = with_reference_loss(two_estimates)
         placement = place_evaluation(gapped, ExportOptions(site=parse_site(SITE), units=Units.M))
         markers = placement.markers()
         gaps = [m for m in markers if m.kind == "gap" and m.path == "OptiTrack"]

@@ -6,7 +6,6 @@ import base64
 import io
 import re
 import xml.etree.ElementTree as ET
-from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +37,7 @@ from exporters.report import (
 from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
 from loceval.gaps import path_breaks
 from loceval.trajectory import Trajectory
+from tests.exporters._html_tables import html_tables
 from tests.exporters.conftest import noisy, walk
 
 TITLE = "Lab run 1: RTAB-Map vs ISAAC"
@@ -83,58 +83,6 @@ def rendered(result: EvaluationResult) -> tuple[str, bytes]:
     """Return the report as (HTML text, PDF bytes), rendered once for the module."""
     html, pdf = render_report(result, options=ExportOptions(title=TITLE, evaluation_id="ev-1"))
     return html.decode("utf-8"), pdf
-
-
-class _Tables(HTMLParser):
-    """Collect every table's caption and visible cell texts (aria-hidden text skipped)."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.tables: dict[str, list[list[str]]] = {}
-        self._caption: list[str] | None = None
-        self._rows: list[list[str]] = []
-        self._cell: list[str] | None = None
-        self._name = ""
-        self._hidden = 0
-
-    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
-        if self._hidden or ("aria-hidden", "true") in attrs:
-            self._hidden += 1
-        if tag == "table":
-            self._rows, self._name = [], f"table{len(self.tables)}"
-        elif tag == "caption":
-            self._caption = []
-        elif tag == "tr":
-            self._rows.append([])
-        elif tag in {"td", "th"}:
-            self._cell = []
-
-    def handle_endtag(self, tag: str) -> None:
-        if self._hidden:
-            self._hidden -= 1
-            return
-        if tag == "caption" and self._caption is not None:
-            self._name = " ".join("".join(self._caption).split())
-            self._caption = None
-        elif tag in {"td", "th"} and self._cell is not None:
-            self._rows[-1].append(" ".join("".join(self._cell).split()))
-            self._cell = None
-        elif tag == "table":
-            self.tables[self._name] = self._rows
-
-    def handle_data(self, data: str) -> None:
-        if self._hidden:
-            return
-        if self._caption is not None:
-            self._caption.append(data)
-        if self._cell is not None:
-            self._cell.append(data)
-
-
-def _tables(html: str) -> dict[str, list[list[str]]]:
-    parser = _Tables()
-    parser.feed(html)
-    return parser.tables
 
 
 def _stat_rows(table: list[list[str]]) -> dict[str, list[str]]:
@@ -252,7 +200,7 @@ def test_no_tolerance_says_so_and_shows_shares(rng: np.random.Generator) -> None
     assert view.verdicts[0].status == "none"
     assert "No application tolerance was given" in html
     assert "--tolerance 0.10@95" in html
-    shares = _tables(html)["Share of poses within each distance of the ground truth (ATE)"]
+    shares = html_tables(html)["Share of poses within each distance of the ground truth (ATE)"]
     e = res.estimates[0]
     assert shares[1:] == [[f"≤ {t:g} m", f"{e.within[t] * 100:.1f} %"] for t in e.within]
 
@@ -291,7 +239,7 @@ def test_warnings_are_listed(rng: np.random.Generator) -> None:
     html = render_view_html(
         build_report_view(res, ExportOptions(), plots=()), templates_dir=DEFAULT_TEMPLATES_DIR
     ).decode()
-    warnings = _tables(html)["table" + str(len(_tables(html)) - 1)]
+    warnings = html_tables(html)["table" + str(len(html_tables(html)) - 1)]
     text = " ".join(" ".join(row) for row in warnings)
     assert "OptiTrack (reference)" in text
     assert "gaps longer than 0.1 s" in text
@@ -440,7 +388,7 @@ def test_html_header_names_inputs_and_options(
     assert f"<h1>{TITLE}</h1>" in html
     assert result.created_at in html
     assert f"loceval {result.loceval_version}" in html
-    tables = _tables(html)
+    tables = html_tables(html)
     files = tables["Input files"]
     assert files[1:] == [
         ["reference", "gt.tum", "tum", "", "123.5 kB"],
@@ -470,7 +418,7 @@ def test_html_tables_equal_the_statistics(
 ) -> None:
     """Table 1 and Table 2 in the HTML carry the result's numbers and the best marks."""
     html, _ = rendered
-    tables = _tables(html)
+    tables = html_tables(html)
     ate = _stat_rows(tables["Table 1 Absolute Trajectory Error (ATE)"])
     rpe = _stat_rows(tables["Table 2 Relative Pose Error (RPE)"])
     for label in ("RMSE", "MEAN", "MEDIAN", "STD", "MIN", "MAX"):

@@ -10,8 +10,9 @@ import pytest
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
 from exporters.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
-from loceval.evaluation import EvaluationResult, evaluate
+from loceval.evaluation import EvaluationResult
 from loceval.polyline import polyline_distances
+from tests.exporters.conftest import curve_vertices, expected_paths, with_reference_loss
 
 rhino3dm = pytest.importorskip("rhino3dm")
 from exporters import rhino  # noqa: E402  (after the importorskip of its library)
@@ -19,21 +20,6 @@ from exporters import rhino  # noqa: E402  (after the importorskip of its librar
 SITE = "512340.25 5403210.5 112.3 37.5"
 NAMES = ["OptiTrack", "RTAB-Map", "ISAAC"]
 COLOURS = [(0, 255, 255), (255, 0, 255), (0, 200, 0)]
-
-
-def expected_paths(result: EvaluationResult, options: ExportOptions) -> list[np.ndarray]:
-    """Reference then aligned estimates after the site transform and unit scale."""
-    trajectories = [result.reference, *(e.aligned for e in result.estimates)]
-    return [
-        options.site.apply_positions(t.positions_xyz) * options.units.per_metre
-        for t in trajectories
-    ]
-
-
-def curve_vertices(curve: object) -> np.ndarray:
-    """Return a PolylineCurve's vertices as an (N, 3) array."""
-    points = [curve.Point(k) for k in range(curve.PointCount)]
-    return np.array([[p.X, p.Y, p.Z] for p in points])
 
 
 @pytest.fixture
@@ -170,13 +156,7 @@ def test_ate_coloured_curves_and_dots(model_file: Path, two_estimates: Evaluatio
 
 def test_tracking_loss_breaks_curves_once_marked(two_estimates: EvaluationResult):
     """A 3 s reference loss: two curves per trajectory and one dot on the loss layer."""
-    ref = two_estimates.reference
-    times = ref.times_s()
-    gapped = evaluate(
-        ref.select(np.flatnonzero((times < 20.0) | (times > 23.0))),
-        [e.estimate for e in two_estimates.estimates],
-        two_estimates.config,
-    )
+    gapped = with_reference_loss(two_estimates)
     model = rhino3dm.File3dm.FromByteArray(
         rhino.export_3dm(gapped, ExportOptions(units=Units.M, title="Gap run"))
     )

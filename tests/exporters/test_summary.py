@@ -8,7 +8,6 @@ import json
 import math
 import re
 import time
-from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +31,7 @@ from exporters.summary import (
 from loceval.evaluation import EvaluationConfig, Tolerance, evaluate
 from loceval.polyline import PolylineIndex, path_distances, polyline_distances
 from service.cli import main as cli_main
+from tests.exporters._html_tables import html_tables
 from tests.exporters.conftest import noisy, walk
 from tests.factories import make_trajectory, perturb, write_tum
 
@@ -133,48 +133,6 @@ def rendered(week: SummaryInput) -> tuple[str, bytes]:
     """Return the week's summary as (HTML text, PDF bytes), rendered once for the module."""
     html, pdf = render_summary(week, templates_dir=TEMPLATES)
     return html.decode("utf-8"), pdf
-
-
-class _Tables(HTMLParser):
-    """Collect each table's rows of visible cell texts, keyed by the table's class."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.tables: dict[str, list[list[str]]] = {}
-        self._rows: list[list[str]] = []
-        self._cell: list[str] | None = None
-        self._name = ""
-        self._hidden = 0
-
-    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
-        if self._hidden or ("aria-hidden", "true") in attrs:
-            self._hidden += 1
-        if tag == "table":
-            self._rows, self._name = [], dict(attrs).get("class") or ""
-        elif tag == "tr":
-            self._rows.append([])
-        elif tag in {"td", "th"}:
-            self._cell = []
-
-    def handle_endtag(self, tag: str) -> None:
-        if self._hidden:
-            self._hidden -= 1
-            return
-        if tag in {"td", "th"} and self._cell is not None:
-            self._rows[-1].append(" ".join("".join(self._cell).split()))
-            self._cell = None
-        elif tag == "table":
-            self.tables[self._name] = self._rows
-
-    def handle_data(self, data: str) -> None:
-        if not self._hidden and self._cell is not None:
-            self._cell.append(data)
-
-
-def _tables(html: str) -> dict[str, list[list[str]]]:
-    parser = _Tables()
-    parser.feed(html)
-    return parser.tables
 
 
 def _pdf_text(pdf: bytes) -> str:
@@ -321,7 +279,7 @@ def test_best_system_is_marked_and_stated() -> None:
     )
     html = render_summary_html(_summary(runs, tolerance=None), templates_dir=TEMPLATES).decode()
     assert view.best_sentence in html
-    stats_rows = _tables(html)["data stats summary-stats"]
+    stats_rows = html_tables(html, key="class")["data stats summary-stats"]
     assert stats_rows[-1][2].startswith(f"{b.mean():.3f}")
     assert "★" in stats_rows[-1][2]
     assert "★" not in stats_rows[-2][2]
@@ -435,7 +393,7 @@ def test_path_distances_fast_for_long_paths(rng: np.random.Generator) -> None:
 def test_table_values_equal_the_inputs(week: SummaryInput, rendered: tuple[str, bytes]) -> None:
     """Every run's row shows its date, dataset and each system's RMSEs and verdict."""
     html, _ = rendered
-    rows = _tables(html)["data summary-runs"][2:]
+    rows = html_tables(html, key="class")["data summary-runs"][2:]
     runs = sorted(week.runs, key=lambda r: r.recorded_at)
     assert len(rows) == len(runs)
     for row, run in zip(rows, runs, strict=True):
@@ -456,7 +414,7 @@ def test_no_tolerance_shows_a_dash_for_the_verdict() -> None:
     """Without a verdict the cell shows a dash, and the header says there is no tolerance."""
     runs = [_run(0, {"A": SystemFigures(0.04, 0.01, 100, None)})]
     html = render_summary_html(_summary(runs, tolerance=None), templates_dir=TEMPLATES).decode()
-    row = _tables(html)["data summary-runs"][2]
+    row = html_tables(html, key="class")["data summary-runs"][2]
     assert row[2:] == ["0.040", "0.010", "—"]
     assert "none given" in html
 
@@ -507,7 +465,7 @@ def test_html_shows_header_trend_and_repeatability(
         assert text in html
     assert 'data-plot="trend"' in html
     assert 'data-plot="paths_xy"' in html
-    rows = _tables(html)["data summary-repeatability"][2:]
+    rows = html_tables(html, key="class")["data summary-repeatability"][2:]
     expected = repeatability(week.runs)
     assert len(rows) == len(expected) == 7
     assert rows[0][3] == "baseline (the first run)"

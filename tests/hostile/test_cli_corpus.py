@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from service.cli import main
+from tests.cli_contract import ERROR_PREFIX, error_line
 from tests.hostile.bases import write_companions
 from tests.hostile.corpus import CASES, Case
 from tests.hostile.run import assert_clean_text, cli_commands, params
@@ -45,8 +46,8 @@ def test_cli_hostile_input(
         assert_clean_text(err, tmp_path)
         assert "\x1b" not in err, shown
         if code == 1:
-            errors = [line for line in err.splitlines() if line.startswith("loceval: error: ")]
-            assert len(errors) == 1, shown
-            assert len(errors[0]) > len("loceval: error: ") + 10, shown
+            line = error_line(code, err, shown=shown)
+            assert line.startswith(ERROR_PREFIX), shown
+            assert len(line) > len(ERROR_PREFIX) + 10, shown
         else:
             assert out.strip(), shown

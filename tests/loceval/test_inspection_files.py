@@ -20,6 +20,7 @@ from loceval.inspection import (
 )
 from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
 from tests.factories import (
+    ROVER_URDF,
     make_trajectory,
     write_csv,
     write_euroc,
@@ -39,18 +40,6 @@ SUMMARY_KEYS = {
     "orientation",
 }
 """The keys ``loceval inspect --json`` printed for text files before the one inspection."""
-
-URDF = """<?xml version="1.0"?>
-<robot name="rover">
-  <link name="rigid_body"/>
-  <link name="camera_link"/>
-  <joint name="mount" type="fixed">
-    <parent link="rigid_body"/>
-    <child link="camera_link"/>
-    <origin xyz="0.1 0.0 0.25" rpy="0 0 0"/>
-  </joint>
-</robot>
-"""
 
 
 def _writers(tmp_path: Path):
@@ -171,7 +160,7 @@ def test_public_motive_take_lists_three_bodies(public_data):
 def test_urdf_lists_links_and_joints(tmp_path):
     """A URDF: robot name, links in file order, joints, no sources."""
     path = tmp_path / "device.urdf"
-    path.write_text(URDF)
+    path.write_text(ROVER_URDF)
     insp = inspect(path)
     assert (insp.kind, insp.format, insp.robot) == ("urdf", "urdf", "rover")
     assert insp.links == ("rigid_body", "camera_link")
@@ -189,7 +178,7 @@ def test_urdf_lists_links_and_joints(tmp_path):
 def test_urdf_by_kind_and_refused_when_not_urdf(tmp_path):
     """kind='urdf' inspects any name as URDF; other XML is refused as not a URDF."""
     path = tmp_path / "blob.bin"
-    path.write_text(URDF)
+    path.write_text(ROVER_URDF)
     assert inspect(path, kind="urdf").links == ("rigid_body", "camera_link")
     html = tmp_path / "page.xml"
     html.write_text("<html><body/></html>")

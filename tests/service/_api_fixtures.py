@@ -1,4 +1,4 @@
-"""Helpers of the HTTP API tests: an app with two projects' keys, uploads, problem checks.
+"""Helpers of the HTTP API tests: an app with two projects' keys, uploads, problems, schedules.
 
 Each test module builds its fixtures from :func:`open_api`, so every test gets its own data
 folder and database (``queue_url="immediate"``: a job runs inside the request that queues it).
@@ -242,3 +242,23 @@ def tum_pair(rng: np.random.Generator, folder: Path, *, n: int = 200) -> tuple[b
     reference = write_tum(folder / "reference.txt", truth)
     estimate = write_tum(folder / "estimate.txt", perturb(truth, rng))
     return reference.read_bytes(), estimate.read_bytes()
+
+
+def schedule_body(**overrides: Any) -> dict[str, Any]:
+    """Return a POST /schedules body: weekly, the level-2 recordings' /gt against /est.
+
+    ``overrides`` replace top-level fields.
+    """
+    body: dict[str, Any] = {
+        "name": "Weekly level 2",
+        "cron": "0 7 * * mon",
+        "timezone": "Europe/Berlin",
+        "selection": {"tags": ["level2"]},
+        "template": {
+            "reference": {"selector": "/gt", "name": "OptiTrack"},
+            "estimates": [{"selector": "/est", "name": "AMCL"}],
+            "options": {"tolerance": "0.10@95", "association": "nearest", "max_dt_s": 0.005},
+        },
+    }
+    body.update(overrides)
+    return body

@@ -4,6 +4,8 @@
 ``python -m service.cli serve`` with an empty data folder, read the first API key from its
 output and wait for ``/readyz``. :func:`start_server` and :func:`start_worker` are the
 building blocks for tests that restart, kill or scale out the service.
+
+``api`` is the in-process app of the HTTP API tests (:func:`tests.service._api_fixtures.open_api`).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import httpx2
 import pytest
 
 from service.logs import reset_logging
+from tests.service._api_fixtures import Api, open_api
 
 REPO = Path(__file__).resolve().parents[2]
 READY_TIMEOUT_S = 30.0
@@ -40,6 +43,16 @@ def _reset_logging() -> Iterator[None]:
     """Undo ``configure_logging`` (an app's start-up calls it) after every test."""
     yield
     reset_logging()
+
+
+@pytest.fixture
+def api(tmp_path: Path) -> Iterator[Api]:
+    """A fresh app in-process (immediate jobs) with keys of projects ``site-a`` and ``site-b``.
+
+    For the HTTP API tests; a module that needs other settings defines its own ``api``.
+    """
+    with open_api(tmp_path) as api:
+        yield api
 
 
 def free_port() -> int:

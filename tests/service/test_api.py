@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +13,7 @@ import pytest
 from service.db import Evaluation, EvaluationStatus
 from tests import bagfactory
 from tests.factories import (
+    ROVER_URDF,
     make_trajectory,
     perturb,
     write_csv,
@@ -22,29 +22,10 @@ from tests.factories import (
     write_motive,
     write_tum,
 )
-from tests.service._api_fixtures import Api, api_routes, assert_problem, open_api, tum_pair
+from tests.service._api_fixtures import Api, api_routes, assert_problem, tum_pair
 
 CHEAP = {"formats": ["result.json"]}
 """Options that skip the reports and CAD files (the full set is tested once)."""
-
-URDF = b"""<?xml version="1.0"?>
-<robot name="rover">
-  <link name="rigid_body"/>
-  <link name="camera_link"/>
-  <joint name="mount" type="fixed">
-    <parent link="rigid_body"/>
-    <child link="camera_link"/>
-    <origin xyz="0.1 0.0 0.25" rpy="0 0 0"/>
-  </joint>
-</robot>
-"""
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of two projects."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 @pytest.fixture
@@ -158,7 +139,7 @@ def test_upload_bags(
 
 def test_upload_urdf(api: Api) -> None:
     """A URDF is stored as a device file with its links (and no trajectory source)."""
-    dataset = api.dataset("rover.urdf", URDF)
+    dataset = api.dataset("rover.urdf", ROVER_URDF.encode())
     assert dataset["kind"] == "urdf"
     assert dataset["inspection"]["links"] == ["rigid_body", "camera_link"]
     assert dataset["inspection"]["sources"] == []
@@ -401,7 +382,7 @@ def test_failed_evaluation_carries_its_problem(api: Api, datasets: tuple[str, st
 
 def test_device_offset_from_urdf(api: Api, datasets: tuple[str, str]) -> None:
     """A URDF dataset gives the rigid body -> sensor offset by its link names."""
-    urdf = api.dataset("rover.urdf", URDF)
+    urdf = api.dataset("rover.urdf", ROVER_URDF.encode())
     device = {"dataset_id": urdf["id"], "from_link": "rigid_body", "to_link": "camera_link"}
     evaluation = api.evaluate(evaluation_body(*datasets, options={**CHEAP, "device": device}))
     assert evaluation.status_code == 202
@@ -480,7 +461,7 @@ def test_selectors_are_checked_before_queueing(
         fmt="rosbag1",
     )
     bag_id = api.dataset("b.bag", bag.read_bytes())["id"]
-    urdf_id = api.dataset("rover.urdf", URDF)["id"]
+    urdf_id = api.dataset("rover.urdf", ROVER_URDF.encode())["id"]
     cases = [
         (
             {"dataset_id": reference, "selector": "/odom"},

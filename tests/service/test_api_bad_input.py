@@ -110,13 +110,6 @@ class World:
         return self.api.stored(), self.api.evaluation_count()
 
 
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of two projects."""
-    with open_api(tmp_path) as api:
-        yield api
-
-
 @pytest.fixture(scope="module")
 def world(tmp_path_factory: pytest.TempPathFactory) -> Iterator[World]:
     """Datasets and a succeeded evaluation of project site-a, shared by the module.

@@ -3,35 +3,17 @@
 from __future__ import annotations
 
 import io
-import math
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.factories import make_trajectory, write_tum
-from tests.service._api_fixtures import Api, assert_problem, open_api
+from tests.service._api_fixtures import Api, assert_problem
 
 ezdxf = pytest.importorskip("ezdxf")
 pytest.importorskip("ifcopenshell")
-from tests.exporters.ifcfactory import write_room  # noqa: E402  (needs ifcopenshell)
-
-CONVERSION = {  # the room placed on a national grid, 30 degrees turned, in millimetres
-    "Eastings": 512340.0,
-    "Northings": 5403210.5,
-    "OrthogonalHeight": 112.3,
-    "XAxisAbscissa": math.cos(math.radians(30.0)),
-    "XAxisOrdinate": math.sin(math.radians(30.0)),
-    "Scale": 0.001,
-}
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs)."""
-    with open_api(tmp_path) as api:
-        yield api
+from tests.exporters.ifcfactory import GRID_CONVERSION, write_room  # noqa: E402  (needs ifcopenshell)
 
 
 def _pair(tmp_path: Path, rng: np.random.Generator) -> tuple[bytes, bytes]:
@@ -42,7 +24,7 @@ def _pair(tmp_path: Path, rng: np.random.Generator) -> tuple[bytes, bytes]:
 
 def test_ifc_upload_is_a_georeferenced_building(api: Api, tmp_path: Path) -> None:
     """An IFC upload is kind building, with its CRS and no trajectory sources."""
-    room = write_room(tmp_path / "room.ifc", map_conversion=CONVERSION)
+    room = write_room(tmp_path / "room.ifc", map_conversion=GRID_CONVERSION)
     dataset = api.dataset("room.ifc", room.read_bytes())
     assert dataset["kind"] == "building"
     inspection = dataset["inspection"]
@@ -65,7 +47,7 @@ def test_evaluation_places_paths_by_the_ifc_georeference(
 ) -> None:
     """With options.building an IFC, the DXF lands on the IFC's map coordinates."""
     room = api.dataset(
-        "room.ifc", write_room(tmp_path / "r.ifc", map_conversion=CONVERSION).read_bytes()
+        "room.ifc", write_room(tmp_path / "r.ifc", map_conversion=GRID_CONVERSION).read_bytes()
     )
     ref, est = _pair(tmp_path, rng)
     ref_id = api.dataset("ref.txt", ref)["id"]
@@ -87,8 +69,8 @@ def test_evaluation_places_paths_by_the_ifc_georeference(
         [v.dxf.location.xyz for p in doc.modelspace().query("POLYLINE") for v in p.vertices]
     )
     # the trajectory is a few metres across: placed, it sits by the IFC's map origin
-    assert np.abs(xyz[:, 0] - CONVERSION["Eastings"]).max() < 100.0
-    assert np.abs(xyz[:, 1] - CONVERSION["Northings"]).max() < 100.0
+    assert np.abs(xyz[:, 0] - GRID_CONVERSION["Eastings"]).max() < 100.0
+    assert np.abs(xyz[:, 1] - GRID_CONVERSION["Northings"]).max() < 100.0
 
 
 def test_building_option_must_name_a_building(

@@ -10,7 +10,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -19,18 +18,17 @@ import pytest
 
 from loceval.checkpoints import evaluate_checkpoints
 from loceval.readers.points import read_visits
-from tests.checkpoint_factory import NS, StopAndGo, grid_points, stop_and_go, write_points
+from tests.checkpoint_factory import (
+    StopAndGo,
+    estimate_tum_rows,
+    grid_points,
+    stop_and_go,
+    write_points,
+)
 from tests.checkpoint_factory import write_visits as write_true_visits
-from tests.service._api_fixtures import Api, assert_problem, open_api
+from tests.service._api_fixtures import Api, assert_problem
 
 FORMATS = ["result.json", "errors.csv"]
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of two projects."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 @pytest.fixture
@@ -40,12 +38,7 @@ def recording(rng: np.random.Generator, tmp_path: Path) -> StopAndGo:
     folder.mkdir()
     rec = stop_and_go(rng, grid_points(3, 4), passes=2)
     write_points(folder / "survey.csv", rec.points)
-    rows = [
-        f"{t / NS:.9f} {x!r} {y!r} {z!r}"
-        for t, (x, y, z) in zip(
-            rec.estimate.stamps_ns, rec.estimate.positions_xyz.tolist(), strict=True
-        )
-    ]
+    rows = estimate_tum_rows(rec)
     (folder / "est.txt").write_text("\n".join(rows) + "\n")
     write_true_visits(folder / "visits.csv", rec)
     return rec
@@ -158,12 +151,7 @@ def test_a_schedule_evaluates_each_recording_against_a_fixed_survey(
     expected = {}
     for k in range(2):
         rec = stop_and_go(rng, points, passes=1, bias_xyz=(0.01 * (k + 1), 0.0, 0.0))
-        rows = [
-            f"{t / NS:.9f} {x!r} {y!r} {z!r}"
-            for t, (x, y, z) in zip(
-                rec.estimate.stamps_ns, rec.estimate.positions_xyz.tolist(), strict=True
-            )
-        ]
+        rows = estimate_tum_rows(rec)
         name = f"run{k}.txt"
         (folder / name).write_text("\n".join(rows) + "\n")
         api.dataset(name, (folder / name).read_bytes(), tags="floor")

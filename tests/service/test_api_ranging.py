@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,16 +17,9 @@ from tests.radio_factory import (
     write_anchors_csv,
     write_ranges_csv,
 )
-from tests.service._api_fixtures import Api, assert_problem, open_api
+from tests.service._api_fixtures import Api, assert_problem
 
 CHEAP = {"formats": ["result.json"]}
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of two projects."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 @pytest.fixture

@@ -10,10 +10,8 @@ with terminal escapes. The contract is that of ``test_cli_bad_input``: exit 1, o
 from __future__ import annotations
 
 import io
-import os
 import re
 import subprocess
-import sys
 import warnings
 import zipfile
 from pathlib import Path
@@ -22,31 +20,17 @@ import ezdxf
 import numpy as np
 import pytest
 
-import service
 from tests import bagfactory as bf
+from tests.cli_contract import cli_error_line, run_cli
 from tests.factories import make_trajectory, perturb, write_motive, write_tum
 
-ROOT = Path(service.__file__).resolve().parents[1]
 HOSTILE_NAME = "evil\x1b[31m\u202e<script>alert(1)</script>"
 """A name with a terminal escape, a right-to-left override and HTML (NUL cannot be an argv)."""
 
 
 def _cli(*argv: str | Path, timeout: float = 180) -> subprocess.CompletedProcess[str]:
-    """Run ``python -m service.cli ARGV`` from the project root."""
-    return subprocess.run(
-        [sys.executable, "-m", "service.cli", *map(str, argv)],
-        capture_output=True, text=True, check=False, timeout=timeout, cwd=ROOT,
-        env={**os.environ, "PYTHONPATH": str(ROOT)},
-    )  # fmt: skip
-
-
-def _error_line(proc: subprocess.CompletedProcess[str]) -> str:
-    """Assert the input-error contract (exit 1, no traceback, one error line); return it."""
-    assert "Traceback" not in proc.stderr, proc.stderr
-    assert proc.returncode == 1, proc.stderr
-    lines = [line for line in proc.stderr.splitlines() if "error:" in line]
-    assert len(lines) == 1, proc.stderr
-    return lines[0]
+    """Run ``python -m service.cli ARGV`` from the project root (up to 180 s unless told)."""
+    return run_cli(*argv, timeout=timeout)
 
 
 @pytest.fixture(scope="module")
@@ -135,7 +119,7 @@ def test_zipped_bag_errors_name_members_not_server_folders(
     archive = tmp_path / "rec.zip"
     archive.write_bytes(content)
     for argv in (("inspect", archive), ("evaluate", f"{archive}@/pose", pair[1])):
-        line = _error_line(_cli(*argv))
+        line = cli_error_line(_cli(*argv))
         assert "/tmp/" not in line, line  # noqa: S108  (no temporary folder is shown)
         assert "loceval-zip" not in line, line
         assert str(tmp_path) not in line, line
@@ -171,7 +155,7 @@ def test_empty_and_header_only_files(
     """A file without data rows is refused with a sentence, for every reader (was exit 2)."""
     path = tmp_path / "run.csv"
     path.write_text(content)
-    line = _error_line(_cli("evaluate", f"{fmt}:{path}", pair[1], "--formats", "result.json"))
+    line = cli_error_line(_cli("evaluate", f"{fmt}:{path}", pair[1], "--formats", "result.json"))
     assert re.search(detail, line), line
 
 
@@ -180,7 +164,7 @@ def test_empty_file_without_prefix_is_called_empty(tmp_path: Path, content: str)
     """The sniffer calls an empty file empty instead of asking for a format prefix."""
     path = tmp_path / "run.txt"
     path.write_text(content)
-    line = _error_line(_cli("inspect", path))
+    line = cli_error_line(_cli("inspect", path))
     assert "is empty" in line, line
 
 
@@ -188,7 +172,7 @@ def test_euroc_header_only_upload_without_prefix(tmp_path: Path) -> None:
     """The hostile corpus' case: a EuRoC CSV with its header and no rows, sniffed (was exit 2)."""
     path = tmp_path / "data.csv"
     path.write_text(EUROC_HEADER + "\n")
-    line = _error_line(_cli("inspect", path))
+    line = cli_error_line(_cli("inspect", path))
     assert "no data rows" in line, line
 
 
@@ -198,7 +182,7 @@ def test_motive_header_only(tmp_path: Path) -> None:
     take = write_motive(tmp_path / "take.csv", {"Body": truth})
     lines = take.read_bytes().split(b"\r\n")
     take.write_bytes(b"\r\n".join(lines[:7]) + b"\r\n")
-    line = _error_line(_cli("inspect", f"motive:{take}@Body"))
+    line = cli_error_line(_cli("inspect", f"motive:{take}@Body"))
     assert "holds no poses" in line, line
 
 
@@ -226,7 +210,7 @@ def test_radio_files_without_rows(
         "ranging", pair[0], "--anchors", tmp_path / "anchors.csv",
         "--ranges", tmp_path / "ranges.csv", "--formats", "result.json",
     )  # fmt: skip
-    line = _error_line(proc)
+    line = cli_error_line(proc)
     assert re.search(detail, line), line
 
 
@@ -246,7 +230,7 @@ def test_site_beyond_any_coordinate(
 ) -> None:
     """A site of 1e308 m no longer reaches the JSON writer as inf (was exit 2)."""
     proc = _cli("evaluate", *pair, "--site", site, "--out", tmp_path / "out")
-    line = _error_line(proc)
+    line = cli_error_line(proc)
     assert re.search(detail, line), line
     assert not (tmp_path / "out").exists()
 
@@ -260,14 +244,16 @@ def test_site_matrix_beyond_any_coordinate(tmp_path: Path, pair: tuple[Path, Pat
         path = tmp_path / "site.txt"
         path.write_text(matrix)
         out = tmp_path / "out"
-        line = _error_line(_cli("evaluate", *pair, "--site-matrix", path, "--out", out))
+        line = cli_error_line(_cli("evaluate", *pair, "--site-matrix", path, "--out", out))
         assert line.startswith("loceval: error: --site-matrix:"), line
         assert detail in line, line
 
 
 def test_device_offset_beyond_a_lever_arm(pair: tuple[Path, Path]) -> None:
     """A device offset of 1e308 m is refused where it is parsed, naming the option."""
-    line = _error_line(_cli("evaluate", *pair, "--offset", "1e308 0 0", "--formats", "result.json"))
+    line = cli_error_line(
+        _cli("evaluate", *pair, "--offset", "1e308 0 0", "--formats", "result.json")
+    )
     assert "--offset: The device offset's x y z [1e+308, 0.0, 0.0] exceed ±1000 m" in line, line
 
 
@@ -284,7 +270,7 @@ def test_euroc_without_orientation_is_refused_with_the_fix(
         f"{round(r[0] * 1e9)},{r[1]:.6f},{r[2]:.6f},{r[3]:.6f}" for r in rows
     )  # fmt: skip
     path.write_text("#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m]\n" + body + "\n")
-    line = _error_line(_cli("evaluate", path, pair[1], "--formats", "result.json"))
+    line = cli_error_line(_cli("evaluate", path, pair[1], "--formats", "result.json"))
     assert "no orientation columns (q_RS_w, q_RS_x, q_RS_y, q_RS_z)" in line, line
     assert f"csv:{path}" in line, line
     # The explicit choice reads it as position-only.
@@ -310,7 +296,7 @@ def test_rpe_delta_below_one_step(
     """A delta of 1e-12 s or 1e-300 m is refused at once (it made the pair search endless)."""
     extra = ["--rpe-all-pairs"] if all_pairs else []
     argv = ["evaluate", *pair, "--rpe-delta", delta, "--rpe-unit", unit, *extra]
-    line = _error_line(_cli(*argv, "--formats", "result.json", timeout=60))
+    line = cli_error_line(_cli(*argv, "--formats", "result.json", timeout=60))
     assert line.startswith("loceval: error: --rpe-delta:"), line
     assert re.search(detail, line), line
     suggested = line.rsplit("Use --rpe-delta ", 1)[1].rstrip(".")
@@ -352,7 +338,7 @@ def test_error_messages_show_no_escapes(tmp_path: Path) -> None:
         path = tmp_path / name
         path.write_text("")
         proc = _cli("inspect", path)
-        line = _error_line(proc)
+        line = cli_error_line(proc)
         assert "\x1b" not in proc.stderr
         assert "\u202e" not in proc.stderr
         assert "is empty" in line, line

@@ -10,36 +10,19 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-import service
 from tests import bagfactory as bf
-
-ROOT = Path(service.__file__).resolve().parents[1]
+from tests.cli_contract import cli_error_line, run_cli
 
 
 def _cli(*argv: str | Path) -> subprocess.CompletedProcess[str]:
-    """Run ``python -m service.cli ARGV`` from the project root."""
-    return subprocess.run(
-        [sys.executable, "-m", "service.cli", *map(str, argv)],
-        capture_output=True, text=True, check=False, timeout=120, cwd=ROOT,
-        env={**os.environ, "PYTHONPATH": str(ROOT)},
-    )  # fmt: skip
-
-
-def _error_line(proc: subprocess.CompletedProcess[str]) -> str:
-    """Assert the input-error contract (exit 1, no traceback, one error line); return it."""
-    assert "Traceback" not in proc.stderr, proc.stderr
-    assert proc.returncode == 1, proc.stderr
-    lines = [line for line in proc.stderr.splitlines() if "error:" in line]
-    assert len(lines) == 1, proc.stderr
-    return lines[0]
+    """Run ``python -m service.cli ARGV`` from the project root (up to 120 s)."""
+    return run_cli(*argv, timeout=120)
 
 
 def _circle(n: int, *, rate_hz: float = 100.0, t0: float = 1000.0) -> np.ndarray:
@@ -79,7 +62,7 @@ def test_euroc_stamps_in_seconds_are_not_collapsed_silently(tmp_path: Path) -> N
     if proc.returncode == 0:
         assert json.loads(proc.stdout)["poses"] == 2000, proc.stdout
     else:
-        line = _error_line(proc).replace(str(path), "FILE")
+        line = cli_error_line(proc).replace(str(path), "FILE")
         assert "second" in line, line
 
 
@@ -89,7 +72,7 @@ def test_tum_nanosecond_stamps_message_gives_a_possible_fix(tmp_path: Path) -> N
     lines = [f"{round(r[0] * 1e9)} " + " ".join(f"{v:.6f}" for v in r[1:]) for r in rows]
     path = tmp_path / "ns.txt"
     path.write_text("\n".join(lines) + "\n")
-    line = _error_line(_cli("inspect", path)).replace(str(path), "FILE")
+    line = cli_error_line(_cli("inspect", path)).replace(str(path), "FILE")
     assert "nanosecond" in line, line
 
 
@@ -114,7 +97,7 @@ def test_zero_header_stamps_message_suggests_stamp_receive(tmp_path: Path, fmt: 
     ]  # fmt: skip
     bag = bf.write_bag(bf.bag_path(tmp_path, fmt), records, fmt=fmt)
     assert _cli("evaluate", f"{bag}@/gt", f"{bag}@/est", "--stamp", "receive").returncode == 0
-    line = _error_line(_cli("evaluate", f"{bag}@/gt", f"{bag}@/est"))
+    line = cli_error_line(_cli("evaluate", f"{bag}@/gt", f"{bag}@/est"))
     assert "--stamp receive" in line, line
 
 
@@ -142,7 +125,7 @@ def test_damaged_bag_metadata_message_is_one_line(tmp_path: Path) -> None:
     bf.write_bag(folder, bf.pose_records("/gt", bf.POSE, _poses()), fmt="sqlite3")
     (folder / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n")
     proc = _cli("inspect", folder)
-    _error_line(proc)
+    cli_error_line(proc)
     assert len([line for line in proc.stderr.splitlines() if line.strip()]) == 1, proc.stderr
 
 
@@ -168,7 +151,7 @@ def test_option_errors_name_the_option(
     pair: tuple[Path, Path], argv: list[str], option: str
 ) -> None:
     """Option errors name the option to fix, not an internal field."""
-    line = _error_line(_cli("evaluate", *pair, *argv))
+    line = cli_error_line(_cli("evaluate", *pair, *argv))
     assert option in line, line
 
 
@@ -180,5 +163,5 @@ def test_negative_option_value_message_says_how_to_pass_it(
     pair: tuple[Path, Path], option: str, value: str
 ) -> None:
     """A value that starts with '-' given apart from its option: say to write OPTION=VALUE."""
-    line = _error_line(_cli("evaluate", *pair, option, value))
+    line = cli_error_line(_cli("evaluate", *pair, option, value))
     assert f"{option}=" in line, line

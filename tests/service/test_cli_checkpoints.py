@@ -23,7 +23,14 @@ from loceval.controlpoints import Visits
 from loceval.readers.points import read_visits
 from service.cli import main
 from tests import bagfactory as bf
-from tests.checkpoint_factory import NS, StopAndGo, grid_points, stop_and_go, write_points
+from tests.checkpoint_factory import (
+    NS,
+    StopAndGo,
+    estimate_tum_rows,
+    grid_points,
+    stop_and_go,
+    write_points,
+)
 from tests.checkpoint_factory import write_visits as write_true_visits
 
 
@@ -32,12 +39,7 @@ def recording(rng: np.random.Generator, tmp_path: Path) -> StopAndGo:
     """The 5 x 9 grid visited three times; survey, TUM and CSV estimate under tmp_path."""
     rec = stop_and_go(rng, grid_points())
     write_points(tmp_path / "survey.csv", rec.points)
-    rows = [
-        f"{t / NS:.9f} {x!r} {y!r} {z!r}"
-        for t, (x, y, z) in zip(
-            rec.estimate.stamps_ns, rec.estimate.positions_xyz.tolist(), strict=True
-        )
-    ]
+    rows = estimate_tum_rows(rec)
     (tmp_path / "est.txt").write_text("\n".join(rows) + "\n")
     (tmp_path / "est.csv").write_text("t,x,y,z\n" + "\n".join(r.replace(" ", ",") for r in rows))
     write_true_visits(tmp_path / "visits.csv", rec)

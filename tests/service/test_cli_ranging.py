@@ -9,18 +9,15 @@ from __future__ import annotations
 
 import csv
 import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-import service
 from service.cli import main
 from tests import bagfactory as bf
+from tests.cli_contract import cli_error_line, run_cli
 from tests.factories import write_tum
 from tests.radio_factory import (
     make_anchors,
@@ -29,8 +26,6 @@ from tests.radio_factory import (
     write_anchors_csv,
     write_ranges_csv,
 )
-
-ROOT = Path(service.__file__).resolve().parents[1]
 
 
 def _inputs(
@@ -231,17 +226,9 @@ def test_bad_options_name_their_flag(
 def test_bad_input_contract_as_a_subprocess(tmp_path: Path, rng: np.random.Generator) -> None:
     """As a user runs it: a missing anchors file exits 1 with one error line."""
     reference, _, ranges = _inputs(tmp_path, rng)
-    proc = subprocess.run(
-        [sys.executable, "-m", "service.cli", "ranging", str(reference),
-         "--anchors", str(tmp_path / "missing.csv"), "--ranges", str(ranges)],
-        capture_output=True, text=True, check=False, timeout=120, cwd=ROOT,
-        env={**os.environ, "PYTHONPATH": str(ROOT)},
-    )  # fmt: skip
-    assert proc.returncode == 1, proc.stderr
-    assert "Traceback" not in proc.stderr
-    lines = [line for line in proc.stderr.splitlines() if "error:" in line]
-    assert len(lines) == 1, proc.stderr
-    assert "missing.csv" in lines[0]
+    missing = tmp_path / "missing.csv"
+    proc = run_cli("ranging", reference, "--anchors", missing, "--ranges", ranges, timeout=120)
+    assert "missing.csv" in cli_error_line(proc)
 
 
 def test_ranges_from_a_bag_topic(

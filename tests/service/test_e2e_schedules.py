@@ -19,6 +19,7 @@ from sqlalchemy.orm import Session
 
 from service.db import Schedule
 from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
+from tests.service._api_fixtures import schedule_body
 from tests.service.conftest import running_server, upload
 
 pytestmark = pytest.mark.slow
@@ -32,17 +33,7 @@ def _bag(tmp_path: Path, rng, name: str, *, noise: float) -> Path:
     return write_bag(tmp_path / f"{name}.bag", records, fmt="rosbag1")
 
 
-SCHEDULE = {
-    "name": "Weekly level 2",
-    "cron": "0 7 * * mon",
-    "timezone": "Europe/Berlin",
-    "selection": {"tags": ["level2"]},
-    "template": {
-        "reference": {"selector": "/gt", "name": "OptiTrack"},
-        "estimates": [{"selector": "/est", "name": "AMCL"}],
-        "options": {"association": "nearest", "max_dt_s": 0.005, "tolerance": "0.10@95"},
-    },
-}
+SCHEDULE = schedule_body()
 
 
 def _wait_for_run(client: httpx2.Client, schedule_id: str, timeout: float = 180) -> dict[str, Any]:

@@ -4,26 +4,18 @@ from __future__ import annotations
 
 import io
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from tests.service._api_fixtures import Api, bearer, open_api, tum_pair
+from tests.service._api_fixtures import Api, bearer, tum_pair
 
 ezdxf = pytest.importorskip("ezdxf")
 rhino3dm = pytest.importorskip("rhino3dm")
 
 FORMATS = {"formats": ["paths.3dm.json", "paths.dxf"]}
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of two projects."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 @pytest.fixture

@@ -8,12 +8,13 @@ from pathlib import Path
 
 import pytest
 
-from service.db import Evaluation, Project, Schedule, ScheduleRun, utcnow
+from service.db import Evaluation, ScheduleRun, utcnow
 from service.jobs import JOB_KINDS, create_runtime
 from service.runtime import Runtime
 from service.schedule_runs import WEBHOOK
 from service.settings import Settings
 from service.storage import EVALUATIONS, RUNS
+from tests.service._job_rows import add_schedule_run
 from tests.service.test_schedules_api import _Hook
 
 
@@ -37,35 +38,15 @@ def test_each_kind_has_its_table_folder_and_a_stable_task_name() -> None:
 
 def _finished_run(rt: Runtime, webhook_url: str) -> str:
     """Record a succeeded schedule run whose schedule posts to ``webhook_url``."""
-    now = utcnow()
-    with rt.sessions() as session:
-        project = Project(name="site")
-        session.add(project)
-        session.flush()
-        schedule = Schedule(
-            project_id=project.id,
-            name="weekly",
-            cron="0 7 * * mon",
-            timezone="UTC",
-            selection={},
-            template={},
-            produce={},
-            webhook_url=webhook_url,
-        )
-        session.add(schedule)
-        session.flush()
-        run = ScheduleRun(
-            schedule_id=schedule.id,
-            project_id=project.id,
-            trigger="manual",
-            due_at=now,
-            status="succeeded",
-            rows=[],
-            finished_at=now,
-        )
-        session.add(run)
-        session.commit()
-        return run.id
+    return add_schedule_run(
+        rt,
+        project_name="site",
+        webhook_url=webhook_url,
+        trigger="manual",
+        status="succeeded",
+        rows=[],
+        finished_at=utcnow(),
+    )
 
 
 def test_a_failed_webhook_is_retried_by_the_queue_not_by_sleeping(runtime: Runtime) -> None:

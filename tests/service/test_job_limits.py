@@ -27,7 +27,7 @@ from loceval.errors import AssociationError, InputError, LocevalError
 from service import jobs
 from service.cli import OUT_OF_MEMORY
 from service.cli import main as cli_main
-from service.db import Dataset, Evaluation, Project
+from service.db import Evaluation, Project
 from service.errors import problem_for
 from service.jobs import Runtime, create_runtime, execute_evaluation
 from service.limits import JobMemoryError, JobProcessError, Limits, run_limited
@@ -36,6 +36,7 @@ from service.settings import Settings
 from tests.factories import make_trajectory, write_tum
 from tests.service import _job_hooks as hooks
 from tests.service._api_fixtures import open_api
+from tests.service._job_rows import add_dataset
 
 REPO = Path(__file__).resolve().parents[2]
 FINISHED = {"succeeded", "failed"}
@@ -63,7 +64,7 @@ def project(files: tuple[Path, Path]) -> Any:
             session.add(project)
             session.commit()
             project_id = project.id
-        ids = [_dataset(rt, project_id, path) for path in files]
+        ids = [add_dataset(rt, project_id, path) for path in files]
         with rt.sessions() as session:
             evaluation = Evaluation(
                 project_id=project_id,
@@ -79,32 +80,6 @@ def project(files: tuple[Path, Path]) -> Any:
             return evaluation.id
 
     return add
-
-
-def _dataset(rt: Runtime, project_id: str, path: Path) -> str:
-    """Store a TUM file as a dataset row (as an upload would); return its id."""
-    with rt.sessions() as session:
-        existing = session.query(Dataset).filter_by(filename=path.name).first()
-        if existing is not None:
-            return existing.id
-    target = rt.store.datasets / path.stem / path.name
-    target.parent.mkdir(parents=True)
-    target.write_bytes(path.read_bytes())
-    with rt.sessions() as session:
-        dataset = Dataset(
-            project_id=project_id,
-            name=path.name,
-            filename=path.name,
-            kind="tum",
-            size_bytes=target.stat().st_size,
-            sha256=path.stem.ljust(64, "0"),
-            tags=[],
-            inspection={"kind": "tum", "format": "tum", "sources": []},
-            storage_path=str(target.relative_to(rt.store.root)),
-        )
-        session.add(dataset)
-        session.commit()
-        return dataset.id
 
 
 def _row(rt: Runtime, evaluation_id: str) -> Evaluation:

@@ -13,11 +13,12 @@ from alembic.migration import MigrationContext
 from sqlalchemy import inspect, select
 
 from service import jobs
-from service.db import Base, Dataset, Evaluation, Project, Schedule, ScheduleRun, utcnow
+from service.db import Base, Evaluation, Project, ScheduleRun, utcnow
 from service.jobs import Runtime, create_runtime, execute_evaluation, recover
 from service.settings import Settings
 from tests.factories import make_trajectory, write_tum
 from tests.service import _job_hooks as hooks
+from tests.service._job_rows import add_dataset, add_schedule_run
 
 
 @pytest.fixture
@@ -26,29 +27,6 @@ def runtime(tmp_path: Path):
     rt = create_runtime(Settings(data_dir=tmp_path / "data", job_lease_s=30, job_attempts=3))
     yield rt
     rt.close()
-
-
-def _dataset(rt: Runtime, project_id: str, path: Path) -> str:
-    """Store a TUM file as a dataset row (as an upload would) and return its id."""
-    folder = rt.store.datasets / path.stem
-    folder.mkdir(parents=True)
-    target = folder / path.name
-    target.write_bytes(path.read_bytes())
-    with rt.sessions() as session:
-        dataset = Dataset(
-            project_id=project_id,
-            name=path.name,
-            filename=path.name,
-            kind="tum",
-            size_bytes=target.stat().st_size,
-            sha256=path.stem.ljust(64, "0"),
-            tags=[],
-            inspection={"kind": "tum", "format": "tum", "sources": []},
-            storage_path=str(target.relative_to(rt.store.root)),
-        )
-        session.add(dataset)
-        session.commit()
-        return dataset.id
 
 
 @pytest.fixture
@@ -61,8 +39,8 @@ def evaluation_id(runtime: Runtime, tmp_path: Path, rng) -> str:
         project = Project(name="site")
         session.add(project)
         session.commit()
-    ref_id = _dataset(runtime, project.id, gt)
-    est_id = _dataset(runtime, project.id, est)
+    ref_id = add_dataset(runtime, project.id, gt)
+    est_id = add_dataset(runtime, project.id, est)
     with runtime.sessions() as session:
         evaluation = Evaluation(
             project_id=project.id,
@@ -246,35 +224,15 @@ def test_release_leaves_other_workers_jobs(runtime: Runtime, evaluation_id: str)
 
 def _running_run(rt: Runtime, *, worker: str, attempts: int, beat_age_s: float) -> str:
     """A schedule run left running (the same job columns as an evaluation)."""
-    now = utcnow()
-    with rt.sessions() as session:
-        project = Project(name=f"runs-{worker}")
-        session.add(project)
-        session.flush()
-        schedule = Schedule(
-            project_id=project.id,
-            name="weekly",
-            cron="0 7 * * mon",
-            timezone="UTC",
-            selection={},
-            template={},
-            produce={},
-        )
-        session.add(schedule)
-        session.flush()
-        run = ScheduleRun(
-            schedule_id=schedule.id,
-            project_id=project.id,
-            trigger="cron",
-            due_at=now,
-            status="running",
-            worker=worker,
-            attempts=attempts,
-            heartbeat_at=now - dt.timedelta(seconds=beat_age_s),
-        )
-        session.add(run)
-        session.commit()
-        return run.id
+    return add_schedule_run(
+        rt,
+        project_name=f"runs-{worker}",
+        trigger="cron",
+        status="running",
+        worker=worker,
+        attempts=attempts,
+        heartbeat_at=utcnow() - dt.timedelta(seconds=beat_age_s),
+    )
 
 
 def test_recover_handles_schedule_runs_like_evaluations(runtime: Runtime):

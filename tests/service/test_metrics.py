@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -29,13 +28,6 @@ from tests.service.test_e2e_scaleout import postgres_url  # noqa: F401  (a fixtu
 CHEAP = {"formats": ["result.json"]}
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
 UNKNOWN_ID = "0b7c5cf0-1111-4222-8333-feedfacecafe"
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of the projects ``site-a`` and ``site-b``."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 @pytest.fixture

@@ -23,6 +23,7 @@ from service.auth import create_key
 from service.main import create_app
 from service.settings import Settings
 from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
+from tests.service._api_fixtures import schedule_body
 
 
 @pytest.fixture
@@ -60,22 +61,6 @@ def _upload(client: TestClient, path: Path, tags: str) -> dict[str, Any]:
     return response.json()
 
 
-def _schedule_body(**overrides: Any) -> dict[str, Any]:
-    body: dict[str, Any] = {
-        "name": "Weekly level 2",
-        "cron": "0 7 * * mon",
-        "timezone": "Europe/Berlin",
-        "selection": {"tags": ["level2"]},
-        "template": {
-            "reference": {"selector": "/gt", "name": "OptiTrack"},
-            "estimates": [{"selector": "/est", "name": "AMCL"}],
-            "options": {"tolerance": "0.10@95", "association": "nearest", "max_dt_s": 0.005},
-        },
-    }
-    body.update(overrides)
-    return body
-
-
 @pytest.fixture
 def recordings(client: TestClient, tmp_path: Path, rng) -> list[dict[str, Any]]:
     """Three runs of level 2, one recording without the estimate, one of another level."""
@@ -101,7 +86,7 @@ def _pdf_text(data: bytes) -> str:
 @pytest.mark.pdf
 def test_a_run_reports_every_recording_and_its_table_matches(client: TestClient, recordings):
     """Trigger a run: each selected recording is evaluated; the summary PDF shows their figures."""
-    created = client.post("/api/v1/schedules", json=_schedule_body())
+    created = client.post("/api/v1/schedules", json=schedule_body())
     assert created.status_code == 201, created.text
     schedule = created.json()
     assert schedule["next_fire_at"].startswith("2026-")
@@ -137,7 +122,7 @@ def test_a_run_reports_every_recording_and_its_table_matches(client: TestClient,
 def test_an_empty_selection_gives_a_report_that_says_so(client: TestClient, recordings):
     """A selection matching nothing still succeeds, with a report saying nothing matched."""
     del recordings
-    body = _schedule_body(selection={"tags": ["nowhere"]})
+    body = schedule_body(selection={"tags": ["nowhere"]})
     schedule = client.post("/api/v1/schedules", json=body).json()
     run = client.post(f"/api/v1/schedules/{schedule['id']}/run").json()
     assert run["status"] == "succeeded"
@@ -161,7 +146,7 @@ def test_an_empty_selection_gives_a_report_that_says_so(client: TestClient, reco
 )
 def test_bad_schedules_are_refused(client: TestClient, change, status, match):
     """Invalid cron, unknown zone, bad webhook or fields: 422 problem, nothing stored."""
-    response = client.post("/api/v1/schedules", json=_schedule_body(**change))
+    response = client.post("/api/v1/schedules", json=schedule_body(**change))
     assert response.status_code == status
     assert response.headers["content-type"] == "application/problem+json"
     assert match in response.text
@@ -170,7 +155,7 @@ def test_bad_schedules_are_refused(client: TestClient, change, status, match):
 
 def test_bad_template_options_are_refused(client: TestClient):
     """The template's options are checked like POST /evaluations' (CLI messages)."""
-    body = _schedule_body()
+    body = schedule_body()
     body["template"]["options"]["tolerance"] = "ten centimetres"
     response = client.post("/api/v1/schedules", json=body)
     assert response.status_code == 422
@@ -179,7 +164,7 @@ def test_bad_template_options_are_refused(client: TestClient):
 
 def test_pause_resume_change_and_delete(client: TestClient):
     """PATCH pauses, resumes (next fire from now) and changes the cron; DELETE removes it."""
-    schedule = client.post("/api/v1/schedules", json=_schedule_body()).json()
+    schedule = client.post("/api/v1/schedules", json=schedule_body()).json()
     url = f"/api/v1/schedules/{schedule['id']}"
     paused = client.patch(url, json={"paused": True}).json()
     assert paused["paused"] is True
@@ -195,7 +180,7 @@ def test_pause_resume_change_and_delete(client: TestClient):
 
 def test_other_projects_see_nothing(client: TestClient):
     """Another project's key gets 404 for the schedule, its runs and its reports."""
-    schedule = client.post("/api/v1/schedules", json=_schedule_body(selection={})).json()
+    schedule = client.post("/api/v1/schedules", json=schedule_body(selection={})).json()
     run = client.post(f"/api/v1/schedules/{schedule['id']}/run").json()
     runtime = client.app.state.runtime  # type: ignore[attr-defined]
     with runtime.sessions() as session:
@@ -258,7 +243,7 @@ def test_the_webhook_receives_the_summary(client: TestClient, recordings):
     del recordings
     hook = _Hook(204)
     try:
-        body = _schedule_body(webhook_url=hook.url)
+        body = schedule_body(webhook_url=hook.url)
         schedule = client.post("/api/v1/schedules", json=body).json()
         run = client.post(f"/api/v1/schedules/{schedule['id']}/run").json()
     finally:
@@ -280,7 +265,7 @@ def test_a_failing_webhook_is_retried_and_recorded(client: TestClient):
     """A webhook answering 500 is tried three times; the run still succeeds."""
     hook = _Hook(500)
     try:
-        body = _schedule_body(webhook_url=hook.url, selection={"tags": ["none"]})
+        body = schedule_body(webhook_url=hook.url, selection={"tags": ["none"]})
         schedule = client.post("/api/v1/schedules", json=body).json()
         run = client.post(f"/api/v1/schedules/{schedule['id']}/run").json()
     finally:
@@ -296,7 +281,7 @@ def test_a_failing_webhook_is_retried_and_recorded(client: TestClient):
 @pytest.mark.usefixtures("no_backoff")
 def test_an_unreachable_webhook_does_not_fail_the_run(client: TestClient):
     """A webhook nobody listens on is recorded as undelivered; the run is not affected."""
-    body = _schedule_body(webhook_url="http://127.0.0.1:9/hook", selection={"tags": ["none"]})
+    body = schedule_body(webhook_url="http://127.0.0.1:9/hook", selection={"tags": ["none"]})
     schedule = client.post("/api/v1/schedules", json=body).json()
     run = client.post(f"/api/v1/schedules/{schedule['id']}/run").json()
     assert run["status"] == "succeeded"

@@ -5,21 +5,12 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import httpx2
-import pytest
 
-from tests.service._api_fixtures import Api, assert_problem, open_api
+from tests.service._api_fixtures import Api, assert_problem
 from tests.service.conftest import ServiceProcess, free_port, service_env, wait_ready
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of two projects."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 def test_docs_page_and_its_assets_come_from_the_service(api: Api) -> None:

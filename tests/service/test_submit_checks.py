@@ -6,23 +6,15 @@ is not in the take is a 422 at once, and nothing is queued (before, the job fail
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests import bagfactory
-from tests.service._api_fixtures import Api, assert_problem, open_api, tum_pair
+from tests.service._api_fixtures import Api, assert_problem, tum_pair
 
 CHEAP = {"formats": ["result.json"]}
-
-
-@pytest.fixture
-def api(tmp_path: Path) -> Iterator[Api]:
-    """A fresh app (immediate jobs) with keys of two projects."""
-    with open_api(tmp_path) as api:
-        yield api
 
 
 @pytest.fixture

@@ -92,6 +92,24 @@ def _choose(select: Any, label_part: str) -> None:
     select.select_option(value=option.get_attribute("value"))
 
 
+def refuse_option(
+    page: Any, field: str, value: str, *, start: str, error: Any, option: str, says: list[str]
+) -> None:
+    """Enter ``value`` in ``field`` and press ``start``: the option is refused on the page.
+
+    The ``error`` element says each of ``says`` and never ``options.`` (it names the page's
+    field, not the API's ``options.KEY``), and the ``option`` field is marked invalid.
+    """
+    from playwright.sync_api import expect
+
+    page.fill(field, value)
+    page.click(start)
+    for text in says:
+        expect(error).to_contain_text(text)
+    expect(error).not_to_contain_text("options.")
+    expect(page.locator(f"[data-option='{option}']")).to_have_class(re.compile("invalid"))
+
+
 def _api(server: Any, path: str) -> Any:
     response = httpx.get(
         f"{server.url}/api/v1{path}",
@@ -129,16 +147,12 @@ def _upload_both(page: Any, public_data: Path) -> None:
     expect(datasets.filter(has_text=ESTIMATE)).to_contain_text("poses")
 
 
-def _evaluate(page: Any) -> str:
-    """Fill the form, start, wait for the end; return the evaluation's id."""
-    from playwright.sync_api import expect
+def wait_until_succeeded(page: Any) -> str | None:
+    """Wait until the current evaluation's card shows it finished; it must have succeeded.
 
-    _choose(page.locator("#reference-select"), GROUNDTRUTH)
-    _choose(page.locator(".estimate-select").first, ESTIMATE)
-    page.locator(".estimate-name").first.fill(ESTIMATE_NAME)
-    page.select_option("#opt-align", "se3")
-    page.fill("#opt-tolerance", "0.10@95")
-    page.click("#start-button")
+    Returns the card's evaluation id (the error the page shows is the assertion's message).
+    """
+    from playwright.sync_api import expect
 
     card = page.locator("#current-card")
     expect(card).to_be_visible()
@@ -146,7 +160,19 @@ def _evaluate(page: Any) -> str:
         "data-status", re.compile("succeeded|failed"), timeout=EVALUATION_TIMEOUT_MS
     )
     assert card.get_attribute("data-status") == "succeeded", page.inner_text("#current-error")
-    evaluation_id = card.get_attribute("data-evaluation-id")
+    evaluation_id: str | None = card.get_attribute("data-evaluation-id")
+    return evaluation_id
+
+
+def _evaluate(page: Any) -> str:
+    """Fill the form, start, wait for the end; return the evaluation's id."""
+    _choose(page.locator("#reference-select"), GROUNDTRUTH)
+    _choose(page.locator(".estimate-select").first, ESTIMATE)
+    page.locator(".estimate-name").first.fill(ESTIMATE_NAME)
+    page.select_option("#opt-align", "se3")
+    page.fill("#opt-tolerance", "0.10@95")
+    page.click("#start-button")
+    evaluation_id = wait_until_succeeded(page)
     assert evaluation_id
     return str(evaluation_id)
 
@@ -172,22 +198,29 @@ def _check_summary(page: Any, evaluation: Any) -> str:
     return shown
 
 
-def _check_artifacts(page: Any, evaluation: Any, tmp_path: Path) -> None:
-    """One button per artifact; the report opens in a tab, the others download."""
+def open_report(page: Any, evaluation: Any) -> str:
+    """Check there is one button per artifact; open the report and return its HTML.
+
+    The report opens in a new tab from a blob (the API needs the key, a link could not).
+    """
     names = sorted(a["name"] for a in evaluation["artifacts"])
     buttons = page.locator("#artifact-list button[data-artifact]")
     assert sorted(buttons.evaluate_all("bs => bs.map(b => b.dataset.artifact)")) == names
-
-    # The report opens in a new tab from a blob (the API needs the key, a link could not).
     with page.expect_popup() as popup_info:
         page.click("#artifact-list button[data-artifact='report.html']")
     report = popup_info.value
     report.wait_for_url(re.compile(r"^blob:"), timeout=30_000)
     report.wait_for_load_state()
-    html = report.content()
+    html: str = report.content()
+    report.close()
+    return html
+
+
+def _check_artifacts(page: Any, evaluation: Any, tmp_path: Path) -> None:
+    """One button per artifact; the report opens in a tab, the others download."""
+    html = open_report(page, evaluation)
     assert ESTIMATE_NAME in html
     assert "ATE" in html
-    report.close()
 
     # Other artifacts download under their own names.
     with page.expect_download() as download_info:

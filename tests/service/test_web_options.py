@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from tests.factories import ROVER_URDF
 from tests.service.conftest import upload
 from tests.service.test_web_browser import (
     ESTIMATE,
@@ -22,23 +23,14 @@ from tests.service.test_web_browser import (
     _enter_key,
     browser,
     page,
+    refuse_option,
+    wait_until_succeeded,
 )
 
 __all__ = ["browser", "page"]  # the fixtures, used by name
 
 pytestmark = [pytest.mark.slow, pytest.mark.public_data]
 
-URDF = """<?xml version="1.0"?>
-<robot name="rover">
-  <link name="rigid_body"/>
-  <link name="camera_link"/>
-  <joint name="mount" type="fixed">
-    <parent link="rigid_body"/>
-    <child link="camera_link"/>
-    <origin xyz="0.1 0.0 0.25" rpy="0 0 0"/>
-  </joint>
-</robot>
-"""
 KEPT_FILES = ["result.json", "errors.csv", "report.html", "paths.dxf"]
 
 
@@ -56,7 +48,7 @@ def _open(page: Any, server: Any) -> None:
 def uploaded(live_server: Any, public_data: Path, tmp_path: Path) -> dict[str, str]:
     """The TUM pair and a URDF uploaded through the API; their dataset ids by file name."""
     urdf = tmp_path / "rover.urdf"
-    urdf.write_text(URDF, encoding="utf-8")
+    urdf.write_text(ROVER_URDF, encoding="utf-8")
     with live_server.client() as client:
         return {
             path.name: upload(client, path)["id"]
@@ -104,14 +96,7 @@ def test_every_api_option_is_sent(
     page.screenshot(path=str(tmp_path / "options.png"), full_page=True)
 
     page.click("#start-button")
-    card = page.locator("#current-card")
-    expect(card).to_have_attribute(
-        "data-status", re.compile("succeeded|failed"), timeout=EVALUATION_TIMEOUT_MS
-    )
-    assert card.get_attribute("data-status") == "succeeded", page.inner_text("#current-error")
-    evaluation = _api(
-        live_server, "GET", f"/evaluations/{card.get_attribute('data-evaluation-id')}"
-    )
+    evaluation = _api(live_server, "GET", f"/evaluations/{wait_until_succeeded(page)}")
     options = evaluation["options"]
     assert options["tolerance"] == "0.10@95"
     assert options["thresholds_m"] == [0.05, 0.2]
@@ -139,23 +124,24 @@ def test_messages_name_the_pages_fields(page: Any, live_server: Any, tmp_path: P
     _choose(page.locator("#reference-select"), GROUNDTRUTH)
     _choose(page.locator(".estimate-select").first, ESTIMATE)
     error = page.locator("#eval-form-error")
+    form = {"start": "#start-button", "error": error}
 
     # The server's bounds (pydantic): the time offset is at most 1e9 s.
     page.click(".more-options > summary >> text=More options")
-    page.fill("#opt-time-offset", "1e12")
-    page.click("#start-button")
-    expect(error).to_contain_text("“Time offset”")
-    expect(error).not_to_contain_text("options.")
-    expect(page.locator("[data-option='time_offset_s']")).to_have_class(re.compile("invalid"))
+    refuse_option(
+        page, "#opt-time-offset", "1e12", **form, option="time_offset_s", says=["“Time offset”"]
+    )
     page.fill("#opt-time-offset", "")
 
     # The core's check (a problem with "option": "options.tolerance").
-    page.fill("#opt-tolerance", "0.10@200")
-    page.click("#start-button")
-    expect(error).to_contain_text("“Tolerance”")
-    expect(error).to_contain_text("percent")
-    expect(error).not_to_contain_text("options.")
-    expect(page.locator("[data-option='tolerance']")).to_have_class(re.compile("invalid"))
+    refuse_option(
+        page,
+        "#opt-tolerance",
+        "0.10@200",
+        **form,
+        option="tolerance",
+        says=["“Tolerance”", "percent"],
+    )
     page.locator("#evaluate-card").screenshot(path=str(tmp_path / "field_error.png"))
     page.fill("#opt-tolerance", "")
 

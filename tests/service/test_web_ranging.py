@@ -27,11 +27,13 @@ from tests.radio_factory import (
 )
 from tests.service.conftest import upload
 from tests.service.test_web_browser import (
-    EVALUATION_TIMEOUT_MS,
     _choose,
     _enter_key,
     browser,
+    open_report,
     page,
+    refuse_option,
+    wait_until_succeeded,
 )
 
 __all__ = ["browser", "page"]  # the fixtures, used by name
@@ -89,8 +91,6 @@ def _upload(page: Any, files: dict[str, Path]) -> None:
 
 def _start(page: Any, server: Any) -> Any:
     """Fill the ranging form, start, wait for the end; return the evaluation (with result)."""
-    from playwright.sync_api import expect
-
     _choose(page.locator("#ranging-reference-select"), "truth.txt")
     _choose(page.locator("#ranging-anchors-select"), "anchors.csv (13 anchors)")
     _choose(page.locator("#ranging-ranges-select"), "ranges.csv")
@@ -101,14 +101,7 @@ def _start(page: Any, server: Any) -> Any:
     page.fill("#ranging-outlier", "1.5")
     page.fill("#ranging-tag-offset", "0, 0,  0")
     page.click("#ranging-start-button")
-
-    card = page.locator("#current-card")
-    expect(card).to_be_visible()
-    expect(card).to_have_attribute(
-        "data-status", re.compile("succeeded|failed"), timeout=EVALUATION_TIMEOUT_MS
-    )
-    assert card.get_attribute("data-status") == "succeeded", page.inner_text("#current-error")
-    return _api(server, "GET", f"/evaluations/{card.get_attribute('data-evaluation-id')}")
+    return _api(server, "GET", f"/evaluations/{wait_until_succeeded(page)}")
 
 
 def _check_result(evaluation: Any, recording: RadioRecording) -> None:
@@ -164,18 +157,9 @@ def _check_page(page: Any, evaluation: Any) -> None:
 
 def _check_report(page: Any, evaluation: Any) -> None:
     """One button per artifact; the report opens as for any evaluation."""
-    names = sorted(a["name"] for a in evaluation["artifacts"])
-    buttons = page.locator("#artifact-list button[data-artifact]")
-    assert sorted(buttons.evaluate_all("bs => bs.map(b => b.dataset.artifact)")) == names
-    with page.expect_popup() as popup_info:
-        page.click("#artifact-list button[data-artifact='report.html']")
-    report = popup_info.value
-    report.wait_for_url(re.compile(r"^blob:"), timeout=30_000)
-    report.wait_for_load_state()
-    html = report.content()
+    html = open_report(page, evaluation)
     assert "minmax" in html
     assert "A12" in html  # the per-anchor table of the ranging section
-    report.close()
 
 
 @pytest.mark.pdf
@@ -227,6 +211,7 @@ def test_ranging_form_names_its_fields(
     expect(ranges.filter(has_text="uwb.bag @ /uwb/range")).to_have_count(1)
     expect(ranges.filter(has_text="ranges.csv")).to_have_count(1)
     error = page.locator("#ranging-form-error")
+    form = {"start": "#ranging-start-button", "error": error}
 
     # Checked on the page before anything is sent.
     page.click("#ranging-start-button")
@@ -242,20 +227,14 @@ def test_ranging_form_names_its_fields(
     page.check("#ranging-card input[value=minmax]")
 
     # The server's bounds (pydantic): an epoch is at most 3600 s.
-    page.fill("#ranging-epoch", "1e9")
-    page.click("#ranging-start-button")
-    expect(error).to_contain_text("“Epoch”")
-    expect(error).not_to_contain_text("options.")
-    expect(page.locator("[data-option='epoch_s']")).to_have_class(re.compile("invalid"))
+    refuse_option(page, "#ranging-epoch", "1e9", **form, option="epoch_s", says=["“Epoch”"])
     expect(page.locator("[data-option='solve']")).not_to_have_class(re.compile("invalid"))
     page.fill("#ranging-epoch", "")
 
     # The core's check (a problem with "option": "options.tag_offset_xyz").
-    page.fill("#ranging-tag-offset", "1 2")
-    page.click("#ranging-start-button")
-    expect(error).to_contain_text("three numbers")
-    expect(error).not_to_contain_text("options.")
-    expect(page.locator("[data-option='tag_offset_xyz']")).to_have_class(re.compile("invalid"))
+    refuse_option(
+        page, "#ranging-tag-offset", "1 2", **form, option="tag_offset_xyz", says=["three numbers"]
+    )
 
     # 3D: the tag height does not apply, so its field is off.
     page.select_option("#ranging-dims", "3")

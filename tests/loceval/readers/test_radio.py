@@ -73,25 +73,19 @@ def test_bad_rows_are_dropped_and_counted_per_reason(tmp_path):
 
 def test_no_usable_row_is_an_error(tmp_path):
     """A ranges file whose rows all refer to unknown anchors is refused."""
-    path = tmp_path / "ranges.csv"
-    path.write_text("t,anchor_id,range_m\n0,X,1\n1,Y,2\n", encoding="utf-8")
     with pytest.raises(ReaderError, match="none of the 2 range rows is usable"):
-        read_ranges(path, read_anchors(_anchors(tmp_path)))
+        _read_ranges_text(tmp_path, "t,anchor_id,range_m\n0,X,1\n1,Y,2\n")
 
 
 def test_header_only_is_an_error(tmp_path):
     """A ranges file with a header and no rows is refused."""
-    path = tmp_path / "ranges.csv"
-    path.write_text("t,anchor_id,range_m\n\n", encoding="utf-8")
     with pytest.raises(ReaderError, match="a header but no range rows"):
-        read_ranges(path, read_anchors(_anchors(tmp_path)))
+        _read_ranges_text(tmp_path, "t,anchor_id,range_m\n\n")
 
 
 def test_unsorted_ranges_are_sorted(tmp_path):
     """Rows out of time order come back sorted (stable within a stamp)."""
-    path = tmp_path / "ranges.csv"
-    path.write_text("t,anchor_id,range_m\n2,A1,1\n1,A2,2\n1,A3,3\n", encoding="utf-8")
-    ranges = read_ranges(path, read_anchors(_anchors(tmp_path)))
+    ranges = _read_ranges_text(tmp_path, "t,anchor_id,range_m\n2,A1,1\n1,A2,2\n1,A3,3\n")
     assert ranges.stamps_ns.tolist() == [10**9, 10**9, 2 * 10**9]
     assert ranges.anchor_index.tolist() == [1, 2, 0]
 
@@ -140,18 +134,14 @@ def test_missing_file_is_a_reader_error(tmp_path):
 
 def test_ranges_missing_a_column(tmp_path):
     """A ranges header without a range column names what is missing."""
-    path = tmp_path / "ranges.csv"
-    path.write_text("t,anchor_id,rssi\n0,A1,-70\n", encoding="utf-8")
     with pytest.raises(ReaderError, match="no column for 'range_m'"):
-        read_ranges(path, read_anchors(_anchors(tmp_path)))
+        _read_ranges_text(tmp_path, "t,anchor_id,rssi\n0,A1,-70\n")
 
 
 def test_unknown_time_unit(tmp_path):
     """A time column in an unknown unit is refused with the units that work."""
-    path = tmp_path / "ranges.csv"
-    path.write_text("time [h],anchor_id,range_m\n0,A1,1\n", encoding="utf-8")
     with pytest.raises(ReaderError, match="unknown time unit 'h'"):
-        read_ranges(path, read_anchors(_anchors(tmp_path)))
+        _read_ranges_text(tmp_path, "time [h],anchor_id,range_m\n0,A1,1\n")
 
 
 def test_value_types_check_their_arrays():
@@ -177,3 +167,10 @@ def _anchors(tmp_path):
     path = tmp_path / "anchors.csv"
     path.write_text(ANCHORS_CSV, encoding="utf-8")
     return path
+
+
+def _read_ranges_text(tmp_path, text):
+    """Write ``text`` as ranges.csv and read it against the three anchors of ANCHORS_CSV."""
+    path = tmp_path / "ranges.csv"
+    path.write_text(text, encoding="utf-8")
+    return read_ranges(path, read_anchors(_anchors(tmp_path)))
