@@ -103,7 +103,7 @@ def _autocorrelations(rows: FloatArray) -> FloatArray:
     """Return the (m, n) autocorrelations of (m, n) series, all in one 2-D FFT."""
     n = rows.shape[1]
     centred = rows - rows.mean(axis=1, keepdims=True)
-    size = 1 << (2 * n - 1).bit_length()  # a power of two >= 2n - 1: no circular overlap
+    size = _fast_size(2 * n - 1)  # >= 2n - 1: no circular overlap
     spectrum = np.fft.rfft(centred, size, axis=1)  # numpy's FFT: scipy.fft costs its import
     acov = np.fft.irfft(spectrum.real**2 + spectrum.imag**2, size, axis=1)[:, :n] / n
     out = np.zeros(rows.shape)
@@ -112,6 +112,24 @@ def _autocorrelations(rows: FloatArray) -> FloatArray:
     live = acov[:, 0] > 1e-300 * scale
     out[live, 1:] = acov[live, 1:] / acov[live, :1]
     return out
+
+
+def _fast_size(least: int) -> int:
+    """Return the smallest ``2**a 3**b 5**c`` at least ``least``: a quick FFT length.
+
+    NumPy's FFT is as quick per point on these lengths as on powers of two, and they come
+    closer: 100,000 points for 50,000 errors instead of 131,072 (measured: 15 rows in
+    25 ms instead of 40 ms).
+    """
+    best = 1 << (least - 1).bit_length()
+    odd5 = 1
+    while odd5 < best:  # a few dozen candidates at most: the loop is over exponents
+        odd = odd5
+        while odd < best:
+            best = min(best, odd << max(0, (-(-least // odd) - 1).bit_length()))
+            odd *= 3
+        odd5 *= 5
+    return best
 
 
 def integrated_autocorrelation_time(values: FloatArray) -> float:

@@ -104,7 +104,9 @@ def parse_plain(
     return table, lines, first_int
 
 
-_CHUNK_BYTES: Final = 1 << 20
+_CHUNK_BYTES: Final = 1 << 19
+"""Bytes per chunk: a chunk's temporaries stay in a core's L2 cache (measured on 21 MB of
+TUM: 0.17 s in 512 KiB chunks, 0.18 s in 1 MiB, 0.20 s in 2 MiB, on one thread)."""
 _THREADS_FROM: Final = 4
 """Tables of at least this many chunks are parsed in threads: NumPy releases the GIL in
 its array operations, so the chunks overlap on several cores (the values and line numbers

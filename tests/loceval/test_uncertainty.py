@@ -10,6 +10,8 @@ from loceval.errors import InputError
 from loceval.uncertainty import (
     BlockBootstrap,
     ToleranceOutcome,
+    _autocorrelation,
+    _fast_size,
     block_length,
     format_length_m,
     integrated_autocorrelation_time,
@@ -195,3 +197,32 @@ def test_format_length():
     """Lengths below a metre read in centimetres."""
     assert format_length_m(0.062) == "6.2 cm"
     assert format_length_m(1.5) == "1.50 m"
+
+
+@pytest.mark.parametrize("n", [8, 9, 97, 1_000, 4_099, 50_000])
+def test_autocorrelation_equals_its_definition(rng, n):
+    """The FFT autocorrelation (on a 2-3-5 smooth length) is the direct sum, every lag.
+
+    ρ_k = Σ_{t<n-k} (x_t - x̄)(x_{t+k} - x̄) / Σ_t (x_t - x̄)², computed here with
+    ``np.correlate`` (no FFT): any circular overlap from too short a length would show.
+    """
+    x = ar1(rng, n, 0.7, 1.0, dims=1)[:, 0]
+    c = x - x.mean()
+    direct = np.correlate(c, c, mode="full")[n - 1 :] / np.dot(c, c)
+    np.testing.assert_allclose(_autocorrelation(x), direct, rtol=0, atol=1e-12)
+
+
+def test_fast_fft_lengths_are_the_smallest_2_3_5_smooth_ones():
+    """Each length is 2**a 3**b 5**c, at least the one asked for, and none smaller is."""
+
+    def smooth(k: int) -> bool:
+        for p in (2, 3, 5):
+            while k % p == 0:
+                k //= p
+        return k == 1
+
+    for least in [*range(1, 2_000), 99_999, 131_073, 1_000_001]:
+        size = _fast_size(least)
+        assert size >= least
+        assert smooth(size)
+        assert not any(smooth(k) for k in range(least, size))
