@@ -1,7 +1,7 @@
 """Time the whole ``loceval evaluate --json`` process on generated TUM files.
 
 Run by hand: ``.venv/bin/python -m benchmarks.core [--workdir DIR] [--repeat N]
-[--case small|large|all] [--breakdown]``.
+[--case small|large|all] [--breakdown] [--evo BIN]``.
 
 Targets on a 2-core machine (read + associate + align + ATE + RPE, process start included):
 
@@ -14,6 +14,10 @@ Wall time on a shared machine moves with the other users' load, so every row als
 the process's CPU time (user + system), the steadier figure. ``--breakdown`` times the
 phases inside one process: interpreter start, importing the CLI, reading each file and
 the evaluation (``python -X importtime -c "import service.cli"`` itemizes the imports).
+``--evo BIN`` also times ``BIN/evo_ape tum REF EST -a`` + ``BIN/evo_rpe tum REF EST -a`` on
+the small case, alternating with loceval, and prints the ratio: the fair comparison on any
+machine. evo is GPL and never a dependency: install it in a scratch virtual environment
+(``python3 -m venv /tmp/evo && /tmp/evo/bin/pip install evo``) and pass ``/tmp/evo/bin``.
 A figure independent of the load is the instruction count of one run:
 ``valgrind --tool=callgrind .venv/bin/loceval evaluate REF EST --json`` (about a minute).
 """
@@ -109,6 +113,23 @@ def breakdown(ref: Path, est: Path, repeat: int) -> None:
         print(f"{phase:>18} {statistics.median(run[phase] for run in runs):7.3f} s")
 
 
+def compare_with_evo(evo_bin: Path, cli: str, ref: Path, est: Path, repeat: int) -> None:
+    """Time evo_ape + evo_rpe and ``loceval evaluate --json`` in turn; print the ratio."""
+    evo_s, ours_s = [], []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        for tool in ("evo_ape", "evo_rpe"):
+            subprocess.run(
+                [str(evo_bin / tool), "tum", str(ref), str(est), "-a"],
+                capture_output=True,
+                check=True,
+            )
+        evo_s.append(time.perf_counter() - start)
+        ours_s.append(time_run([cli, "evaluate", str(ref), str(est), "--json"])[0])
+    evo, ours = statistics.median(evo_s), statistics.median(ours_s)
+    print(f"evo_ape + evo_rpe {evo:.2f} s, loceval {ours:.3f} s: {evo / ours:.1f}x (target 10x)")
+
+
 def main() -> int:
     """Generate the files, time each case, print a table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -116,6 +137,7 @@ def main() -> int:
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--case", choices=[*CASES, "all"], default="all")
     parser.add_argument("--breakdown", action="store_true", help="time the phases (small case)")
+    parser.add_argument("--evo", type=Path, help="folder of evo_ape and evo_rpe: time them too")
     opts = parser.parse_args()
     opts.workdir.mkdir(parents=True, exist_ok=True)
     cli = str(Path(sys.executable).with_name("loceval"))
@@ -138,6 +160,8 @@ def main() -> int:
                   f"< {target:.2f} s {verdict}")  # fmt: skip
     peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     print(f"peak RSS of the largest run: {peak_mb:.0f} MB")
+    if opts.evo is not None:
+        compare_with_evo(opts.evo, cli, *write_pair(opts.workdir, *CASES["small"][:2]), opts.repeat)
     if opts.breakdown:
         print(f"phases of one evaluation of {CASES['small'][0]:,} / {CASES['small'][1]:,} poses:")
         breakdown(*write_pair(opts.workdir, *CASES["small"][:2]), opts.repeat)
