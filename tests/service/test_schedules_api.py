@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import json
+import sys
 import threading
 from collections.abc import Iterator
 from http.server import BaseHTTPRequestHandler, HTTPServer
@@ -18,6 +19,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from exporters.report import render as report_render
 from service import schedule_runs
 from service.auth import create_key
 from service.main import create_app
@@ -131,6 +133,27 @@ def test_an_empty_selection_gives_a_report_that_says_so(client: TestClient, reco
     assert "No recordings matched" in html
     pdf = client.get(run["artifacts"][1]["url"]).content
     assert "No recordings matched" in _pdf_text(pdf)
+
+
+def test_an_html_only_schedule_runs_without_weasyprint(
+    client: TestClient, recordings, monkeypatch: pytest.MonkeyPatch
+):
+    """Asked for summary.html only, a run lays out no PDF: it succeeds where pango is missing."""
+    del recordings
+    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
+    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
+    body = _schedule_body(produce={"summary_formats": ["summary.html"]})
+    schedule = client.post("/api/v1/schedules", json=body).json()
+    run = client.post(f"/api/v1/schedules/{schedule['id']}/run").json()
+    assert run["status"] == "succeeded", run
+    assert [a["name"] for a in run["artifacts"]] == ["summary.html"]
+    html = client.get(run["artifacts"][0]["url"]).text
+    assert "level2-run0.bag" in html
+    assert "data:image/svg+xml" in html  # the HTML's own plots, not the PDF's PNGs
+    both = client.post("/api/v1/schedules", json=_schedule_body()).json()
+    failed = client.post(f"/api/v1/schedules/{both['id']}/run").json()
+    assert failed["status"] == "failed"
+    assert "pango" in json.dumps(failed["error"]), failed
 
 
 @pytest.mark.parametrize(

@@ -236,6 +236,7 @@ def _check_artifacts(page: Any, evaluation: Any, tmp_path: Path) -> None:
 
 
 @pytest.mark.public_data
+@pytest.mark.pdf  # the page asks for every artifact by default, report.pdf among them
 def test_upload_evaluate_and_open_the_report(
     page: Any, live_server: Any, public_data: Path, tmp_path: Path
 ) -> None:

@@ -162,6 +162,7 @@ def test_messages_name_the_pages_fields(page: Any, live_server: Any, tmp_path: P
     assert _api(live_server, "GET", "/evaluations")["count"] == 0
 
 
+@pytest.mark.pdf  # a schedule made on the page writes both summaries, summary.pdf among them
 def test_schedules_view(page: Any, live_server: Any, public_data: Path, tmp_path: Path) -> None:
     """Create a schedule on the page, pause and resume it, run it now, open its summary."""
     from playwright.sync_api import expect
