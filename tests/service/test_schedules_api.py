@@ -142,7 +142,7 @@ def test_an_html_only_schedule_runs_without_weasyprint(
     del recordings
     monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
     monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
-    body = _schedule_body(produce={"summary_formats": ["summary.html"]})
+    body = schedule_body(produce={"summary_formats": ["summary.html"]})
     schedule = client.post("/api/v1/schedules", json=body).json()
     run = client.post(f"/api/v1/schedules/{schedule['id']}/run").json()
     assert run["status"] == "succeeded", run
@@ -150,7 +150,7 @@ def test_an_html_only_schedule_runs_without_weasyprint(
     html = client.get(run["artifacts"][0]["url"]).text
     assert "level2-run0.bag" in html
     assert "data:image/svg+xml" in html  # the HTML's own plots, not the PDF's PNGs
-    both = client.post("/api/v1/schedules", json=_schedule_body()).json()
+    both = client.post("/api/v1/schedules", json=schedule_body()).json()
     failed = client.post(f"/api/v1/schedules/{both['id']}/run").json()
     assert failed["status"] == "failed"
     assert "pango" in json.dumps(failed["error"]), failed
