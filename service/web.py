@@ -15,6 +15,7 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import HTMLResponse, Response
 from jinja2 import Environment, FileSystemLoader
 
+from exporters.report import pdf_available
 from loceval import __version__
 from loceval.display import shown_text
 
@@ -54,10 +55,12 @@ def index(request: Request) -> HTMLResponse:
         request: The incoming request; its app's settings name the templates folder.
 
     Returns:
-        The rendered page, never cached without a check.
+        The rendered page, never cached without a check. ``<body data-pdf-reports>`` says
+        whether this server can write PDFs (WeasyPrint and pango load; checked once per
+        process): when it cannot, the page asks for no ``report.pdf`` or ``summary.pdf``.
     """
     template = _environment(_templates_dir(request)).get_template(_PAGE)
-    html = template.render(version=__version__)
+    html = template.render(version=__version__, pdf_reports=pdf_available())
     return HTMLResponse(
         html, headers={**_HEADERS, "X-Frame-Options": "DENY"}, media_type="text/html"
     )

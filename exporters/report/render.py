@@ -24,6 +24,7 @@ __all__ = [
     "TEMPLATE_NAME",
     "check_templates",
     "html_to_pdf",
+    "pdf_available",
     "render_report",
     "render_report_html",
     "render_report_pdf",
@@ -140,6 +141,22 @@ def _weasyprint() -> tuple[ModuleType, type[Exception]]:
     if isinstance(loaded, str):
         raise ExportUnavailableError(loaded)
     return loaded
+
+
+def pdf_available() -> bool:
+    """Tell whether this process can write PDFs (WeasyPrint and pango load).
+
+    Uses the same once-per-process import as the PDF render, so the first call may take
+    about half a second and later calls none.
+
+    Returns:
+        False when WeasyPrint or its system libraries are missing, True otherwise.
+    """
+    try:
+        _weasyprint()
+    except ExportUnavailableError:
+        return False
+    return True
 
 
 def html_to_pdf(html: bytes) -> bytes:

@@ -16,6 +16,9 @@
     "paths.dxf", "paths.3dm", "paths.3dm.json", "paths.glb",
   ];
   const OPENED_IN_TAB = new Set(["report.html", "report.pdf"]);
+  // The server renders whether it can write PDFs (WeasyPrint and pango): without, the page
+  // asks for no report.pdf and its schedules for summary.html only.
+  const PDF_REPORTS = document.body.dataset.pdfReports !== "no";
 
   const state = {
     key: null,
@@ -824,8 +827,10 @@
     const holder = $("format-boxes");
     holder.replaceChildren(...ALL_ARTIFACTS.map((name) => el("label", {},
       el("input", {
-        type: "checkbox", value: name, checked: true,
-        disabled: name === "result.json", // always written: the figures of the evaluation
+        type: "checkbox", value: name,
+        checked: name !== "report.pdf" || PDF_REPORTS,
+        // result.json: always written (the figures); report.pdf: this server cannot write PDFs
+        disabled: name === "result.json" || (name === "report.pdf" && !PDF_REPORTS),
       }),
       el("span", { text: name }))));
   }
@@ -1550,6 +1555,8 @@
         estimates: [{ selector: estimate || null, name: estimateName || null }],
         options: readOptions(),
       },
+      // the API's default is both summaries; summary.pdf needs pango on the server
+      ...(PDF_REPORTS ? {} : { produce: { summary_formats: ["summary.html"] } }),
     };
   }
 

@@ -9,7 +9,7 @@ from types import ModuleType
 import pytest
 
 from exporters.errors import ExportUnavailableError
-from exporters.report import html_to_pdf
+from exporters.report import html_to_pdf, pdf_available
 from exporters.report import render as report_render
 
 
@@ -24,6 +24,26 @@ def test_missing_weasyprint_is_an_unavailable_export_every_time(
             html_to_pdf(b"<p>x</p>")
         assert "\n" not in str(caught.value)
     assert isinstance(report_render._weasyprint_loaded, str)
+
+
+def test_pdf_available_is_false_without_weasyprint(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Without WeasyPrint the check says False (never raises) and keeps the outcome."""
+    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
+    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
+    assert pdf_available() is False
+    assert pdf_available() is False
+    assert isinstance(report_render._weasyprint_loaded, str)  # the same cached outcome
+    with pytest.raises(ExportUnavailableError, match=r"libpango-1\.0-0"):
+        html_to_pdf(b"<p>x</p>")
+
+
+@pytest.mark.pdf
+def test_pdf_available_is_true_with_weasyprint(monkeypatch: pytest.MonkeyPatch) -> None:
+    """With WeasyPrint and pango the check says True and keeps the loaded module."""
+    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
+    assert pdf_available() is True
+    assert isinstance(report_render._weasyprint_loaded, tuple)
+    assert pdf_available() is True
 
 
 @pytest.mark.pdf
