@@ -22,6 +22,7 @@ from loceval.evaluation import EvaluationResult
 __all__ = [
     "DEFAULT_TEMPLATES_DIR",
     "TEMPLATE_NAME",
+    "check_pdf",
     "check_templates",
     "html_to_pdf",
     "render_report",
@@ -140,6 +141,15 @@ def _weasyprint() -> tuple[ModuleType, type[Exception]]:
     if isinstance(loaded, str):
         raise ExportUnavailableError(loaded)
     return loaded
+
+
+def check_pdf() -> None:
+    """Check that PDFs can be laid out here, before any work whose end is a PDF.
+
+    Raises:
+        ExportUnavailableError: WeasyPrint or its system libraries (pango) are missing.
+    """
+    _weasyprint()
 
 
 def html_to_pdf(html: bytes) -> bytes:
