@@ -253,12 +253,7 @@ def _render(
     staging: Path,
     templates_dir: Path,
 ) -> None:
-    from exporters.summary import (  # noqa: PLC0415  (heavy)
-        SummaryInput,
-        render_summary,
-        render_summary_html,
-        render_summary_pdf,
-    )
+    from exporters.summary import SummaryInput, render_summary_files  # noqa: PLC0415  (heavy)
 
     tolerance = EvaluationTemplate.model_validate(schedule.template).options.tolerance
     summary = SummaryInput(
@@ -274,14 +269,7 @@ def _render(
     wanted = Produce.model_validate(schedule.produce).summary_formats
     # Only what the schedule asks for is rendered: an HTML-only schedule never lays out a
     # PDF, so it runs where WeasyPrint's system libraries (pango) are missing.
-    files: dict[str, bytes]
-    if "summary.pdf" not in wanted:
-        files = {"summary.html": render_summary_html(summary, templates_dir=templates_dir)}
-    elif "summary.html" not in wanted:
-        files = {"summary.pdf": render_summary_pdf(summary, templates_dir=templates_dir)}
-    else:  # both: each plot is drawn once for the two formats
-        html, pdf = render_summary(summary, templates_dir=templates_dir)
-        files = {"summary.html": html, "summary.pdf": pdf}
+    files = render_summary_files(summary, wanted, templates_dir=templates_dir)
     staging.mkdir(parents=True, exist_ok=True)
     for name, data in files.items():
         (staging / name).write_bytes(data)

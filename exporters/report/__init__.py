@@ -17,6 +17,7 @@ from __future__ import annotations
 from exporters.report.render import (
     DEFAULT_TEMPLATES_DIR,
     TEMPLATE_NAME,
+    check_pdf,
     check_templates,
     html_to_pdf,
     pdf_available,
@@ -34,6 +35,7 @@ __all__ = [
     "TEMPLATE_NAME",
     "ReportView",
     "build_report_view",
+    "check_pdf",
     "check_templates",
     "html_to_pdf",
     "pdf_available",

@@ -22,6 +22,7 @@ from loceval.evaluation import EvaluationResult
 __all__ = [
     "DEFAULT_TEMPLATES_DIR",
     "TEMPLATE_NAME",
+    "check_pdf",
     "check_templates",
     "html_to_pdf",
     "pdf_available",
@@ -143,6 +144,15 @@ def _weasyprint() -> tuple[ModuleType, type[Exception]]:
     return loaded
 
 
+def check_pdf() -> None:
+    """Check that PDFs can be laid out here, before any work whose end is a PDF.
+
+    Raises:
+        ExportUnavailableError: WeasyPrint or its system libraries (pango) are missing.
+    """
+    _weasyprint()
+
+
 def pdf_available() -> bool:
     """Tell whether this process can write PDFs (WeasyPrint and pango load).
 
@@ -153,7 +163,7 @@ def pdf_available() -> bool:
         False when WeasyPrint or its system libraries are missing, True otherwise.
     """
     try:
-        _weasyprint()
+        check_pdf()
     except ExportUnavailableError:
         return False
     return True

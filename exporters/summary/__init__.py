@@ -36,15 +36,19 @@ from exporters.summary.model import (
 )
 from exporters.summary.plots import plot_paths, plot_trend, render_summary_plots
 from exporters.summary.render import (
+    SUMMARY_FORMATS,
     SUMMARY_TEMPLATE_NAME,
     render_summary,
+    render_summary_files,
     render_summary_html,
     render_summary_pdf,
     render_summary_view_html,
+    summary_formats,
 )
 from exporters.summary.view import SummaryFigure, SummaryView, build_summary_view
 
 __all__ = [
+    "SUMMARY_FORMATS",
     "SUMMARY_TEMPLATE_NAME",
     "RepeatabilityRow",
     "SummaryFigure",
@@ -58,10 +62,12 @@ __all__ = [
     "plot_paths",
     "plot_trend",
     "render_summary",
+    "render_summary_files",
     "render_summary_html",
     "render_summary_pdf",
     "render_summary_plots",
     "render_summary_view_html",
     "repeatability",
+    "summary_formats",
     "system_stats",
 ]

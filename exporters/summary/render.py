@@ -6,23 +6,33 @@ Jinja2 render and template check (:mod:`exporters.report`).
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
+from exporters.errors import ExportOptionsError
 from exporters.report import DEFAULT_TEMPLATES_DIR, check_templates, html_to_pdf, render_template
 from exporters.summary.model import SummaryInput, repeatability
 from exporters.summary.plots import render_summary_plots
 from exporters.summary.view import SummaryView, build_summary_view
 
+if TYPE_CHECKING:
+    from collections.abc import Collection
+    from pathlib import Path
+
 __all__ = [
+    "SUMMARY_FORMATS",
     "SUMMARY_TEMPLATE_NAME",
     "render_summary",
+    "render_summary_files",
     "render_summary_html",
     "render_summary_pdf",
     "render_summary_view_html",
+    "summary_formats",
 ]
 
 SUMMARY_TEMPLATE_NAME: Final = "summary.html.j2"
+
+SUMMARY_FORMATS: Final = ("summary.html", "summary.pdf")
+"""The files a summary report can be written as, in the order they are written."""
 
 
 def _templates(templates_dir: Path | None) -> Path:
@@ -96,3 +106,60 @@ def render_summary(summary: SummaryInput, *, templates_dir: Path) -> tuple[bytes
         templates_dir=folder,
     )
     return html, html_to_pdf(printable)
+
+
+def summary_formats(names: Collection[str] | None) -> tuple[str, ...]:
+    """Return the summary files that ``names`` ask for, in :data:`SUMMARY_FORMATS` order.
+
+    ``None`` asks for every format. A name is a file name or its suffix (``summary.pdf``,
+    ``pdf``, ``.PDF``); case and surrounding spaces do not matter.
+
+    Raises:
+        ExportOptionsError: a name that is no summary format, or no name at all.
+    """
+    if names is None:
+        return SUMMARY_FORMATS
+    by_name = {f: f for f in SUMMARY_FORMATS} | {f.rpartition(".")[2]: f for f in SUMMARY_FORMATS}
+    wanted: set[str] = set()
+    for text in names:
+        key = text.strip().lower()
+        found = by_name.get(key) or by_name.get(key.removeprefix("."))
+        if found is None:
+            msg = f"No summary format named {text!r}; choose from {', '.join(SUMMARY_FORMATS)}."
+            raise ExportOptionsError(msg, option="formats")
+        wanted.add(found)
+    if not wanted:
+        msg = f"Name at least one summary format: {', '.join(SUMMARY_FORMATS)}."
+        raise ExportOptionsError(msg, option="formats")
+    return tuple(f for f in SUMMARY_FORMATS if f in wanted)
+
+
+def render_summary_files(
+    summary: SummaryInput, formats: Collection[str] | None, *, templates_dir: Path
+) -> dict[str, bytes]:
+    """Render the summary as the files ``formats`` ask for (all when None), and no other.
+
+    An HTML-only summary never lays out a PDF, so it renders where WeasyPrint's system
+    libraries (pango) are missing; both formats draw each plot once (:func:`render_summary`).
+
+    Args:
+        summary: the runs and what they are.
+        formats: file names as :func:`summary_formats` takes them.
+        templates_dir: the template folder (the repository's ``templates/``).
+
+    Returns:
+        File name (``summary.html``, ``summary.pdf``) to content, in :data:`SUMMARY_FORMATS`
+        order.
+
+    Raises:
+        ExportOptionsError: a format that is no summary format.
+        ExportUnavailableError: Jinja2, matplotlib or (for the PDF) WeasyPrint is missing.
+        ExportError: the templates are missing or the layout failed.
+    """
+    wanted = summary_formats(formats)
+    if wanted == SUMMARY_FORMATS:
+        html, pdf = render_summary(summary, templates_dir=templates_dir)
+        return {"summary.html": html, "summary.pdf": pdf}
+    if wanted == ("summary.html",):
+        return {"summary.html": render_summary_html(summary, templates_dir=templates_dir)}
+    return {"summary.pdf": render_summary_pdf(summary, templates_dir=templates_dir)}

@@ -255,8 +255,9 @@ def _add_report(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparse
         help="one summary report over many recordings (as a schedule run makes it)",
         description=(
             "Evaluate each recording with the same template and write one summary report "
-            "(summary.html, summary.pdf): a row per recording, a trend per system, the "
-            "systems side by side, and the repeatability of the reference paths."
+            "(summary.html and summary.pdf, or the files --formats names): a row per "
+            "recording, a trend per system, the systems side by side, and the repeatability "
+            "of the reference paths."
         ),
     )
     report.add_argument(
@@ -271,6 +272,14 @@ def _add_report(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparse
     )
     report.add_argument("--out", required=True, type=_folder, metavar="DIR")
     report.add_argument("--title", default="Summary report", help="the report's title")
+    report.add_argument(
+        "--formats",
+        type=names,
+        default=None,
+        metavar="NAME,...",
+        help="summary files to write: summary.html, summary.pdf (default: both; the PDF needs "
+        "WeasyPrint's system libraries, pango)",
+    )
     report.set_defaults(handler="service.cli.report:run_report")
 
 

@@ -27,10 +27,23 @@ __all__ = ["run_report"]
 
 
 def run_report(args: argparse.Namespace) -> int:
-    """Evaluate each recording with the template and write summary.html and summary.pdf."""
-    from exporters.summary import SummaryInput, SummaryRun, render_summary  # noqa: PLC0415
+    """Evaluate each recording with the template and write the summary files asked for.
+
+    ``--formats`` picks summary.html, summary.pdf or both (the default). A PDF is checked for
+    before any recording is evaluated: without WeasyPrint's system libraries (pango) the
+    command stops at once and says how to write the HTML alone.
+    """
+    from exporters.summary import (  # noqa: PLC0415
+        SummaryInput,
+        SummaryRun,
+        render_summary_files,
+        summary_formats,
+    )
     from loceval.evaluation import Tolerance  # noqa: PLC0415
 
+    formats = summary_formats(args.formats)
+    if "summary.pdf" in formats:
+        _check_pdf()
     template = _read_template(args.template)
     options = template.options
     try:
@@ -72,8 +85,8 @@ def run_report(args: argparse.Namespace) -> int:
     )
     from service.settings import Settings  # noqa: PLC0415
 
-    html, pdf = render_summary(summary, templates_dir=Settings().templates_dir)
-    _write_all(args.out, {"summary.html": html, "summary.pdf": pdf})
+    files = render_summary_files(summary, formats, templates_dir=Settings().templates_dir)
+    _write_all(args.out, files)
     for run in runs:
         figures = ", ".join(
             f"{name} ATE {fig.ate_rmse_m:.3f} m" if fig.ate_rmse_m is not None else name
@@ -82,6 +95,18 @@ def run_report(args: argparse.Namespace) -> int:
         emit(f"{run.dataset}: {run.status}" + (f" ({run.error})" if run.error else f", {figures}"))
     emit(f"\nSummary written to {args.out}")
     return 0
+
+
+def _check_pdf() -> None:
+    """Stop before the evaluations if no PDF can be laid out, naming the HTML-only way out."""
+    from exporters.errors import ExportUnavailableError  # noqa: PLC0415
+    from exporters.report import check_pdf  # noqa: PLC0415
+
+    try:
+        check_pdf()
+    except ExportUnavailableError as err:
+        # the CLI shows it as "--formats: ... Use --formats summary.html."
+        raise ExportUnavailableError(str(err), option="formats", suggest="summary.html") from err
 
 
 def _api_words(err: LocevalError) -> str:

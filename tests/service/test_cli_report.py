@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
 
+from exporters.report import render as report_render
 from service.cli import main
 from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
 
@@ -34,6 +36,13 @@ def template(tmp_path: Path) -> Path:
         )
     )
     return path
+
+
+@pytest.fixture
+def no_weasyprint(monkeypatch: pytest.MonkeyPatch) -> None:
+    """WeasyPrint cannot be loaded, as where its system libraries (pango) are missing."""
+    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
+    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
 
 
 @pytest.mark.pdf
@@ -77,3 +86,63 @@ def test_report_with_a_bad_template_exits_1(tmp_path: Path, capsys, content: str
     assert match in err
     assert "Traceback" not in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("formats", ["summary.html", " HTML"])
+@pytest.mark.usefixtures("no_weasyprint")
+def test_an_html_only_report_runs_without_weasyprint(
+    tmp_path: Path, rng, template: Path, formats: str
+):
+    """``--formats summary.html`` lays out no PDF: it writes the HTML where pango is missing."""
+    bag = _bag(tmp_path, rng, "run0", noise=0.02)
+    out = tmp_path / "weekly"
+    argv = ["report", "--datasets", str(bag), "--template", str(template), "--out", str(out)]
+    assert main([*argv, "--title", "Level 2", "--formats", formats]) == 0
+    assert [p.name for p in out.iterdir()] == ["summary.html"]
+    html = (out / "summary.html").read_text()
+    assert "Level 2" in html
+    assert "run0.bag" in html
+    assert "data:image/svg+xml" in html  # the HTML's own plots, not the PDF's PNGs
+
+
+@pytest.mark.usefixtures("no_weasyprint")
+def test_the_default_report_without_weasyprint_exits_1_naming_the_html_only_way(
+    tmp_path: Path, rng, template: Path, capsys
+):
+    """Both files by default: without pango it stops before evaluating, writing nothing."""
+    bag = _bag(tmp_path, rng, "run0", noise=0.02)
+    out = tmp_path / "weekly"
+    argv = ["report", "--datasets", str(bag), "--template", str(template), "--out", str(out)]
+    assert main(argv) == 1
+    captured = capsys.readouterr()
+    assert "pango" in captured.err
+    assert "--formats summary.html" in captured.err
+    assert "Traceback" not in captured.err
+    assert "run0.bag" not in captured.out  # nothing was evaluated
+    assert not out.exists()
+
+
+def test_report_with_an_unknown_format_exits_1_naming_the_choices(
+    tmp_path: Path, template: Path, capsys
+):
+    """An unknown name in --formats exits 1 naming the valid ones, as ``evaluate`` does."""
+    out = tmp_path / "o"
+    argv = ["report", "--datasets", "x.bag", "--template", str(template), "--out", str(out)]
+    assert main([*argv, "--formats", "summary.html,summary.docx"]) == 1
+    err = capsys.readouterr().err
+    assert "--formats" in err
+    assert "'summary.docx'" in err
+    assert "summary.html, summary.pdf" in err
+    assert "Traceback" not in err
+    assert not out.exists()
+
+
+@pytest.mark.pdf
+def test_a_pdf_only_report_writes_only_the_pdf(tmp_path: Path, rng, template: Path):
+    """``--formats summary.pdf`` writes the PDF alone."""
+    bag = _bag(tmp_path, rng, "run0", noise=0.02)
+    out = tmp_path / "weekly"
+    argv = ["report", "--datasets", str(bag), "--template", str(template), "--out", str(out)]
+    assert main([*argv, "--formats", "summary.pdf"]) == 0
+    assert [p.name for p in out.iterdir()] == ["summary.pdf"]
+    assert (out / "summary.pdf").read_bytes().startswith(b"%PDF")
