@@ -29,9 +29,10 @@ __all__ = ["run_report"]
 def run_report(args: argparse.Namespace) -> int:
     """Evaluate each recording with the template and write the summary files asked for.
 
-    ``--formats`` picks summary.html, summary.pdf or both (the default). A PDF is checked for
-    before any recording is evaluated: without WeasyPrint's system libraries (pango) the
-    command stops at once and says how to write the HTML alone.
+    ``--formats`` picks summary.html, summary.pdf or both (the default). The formats and the
+    template are checked first; then, before any recording is evaluated, whether a PDF can
+    be laid out: without WeasyPrint's system libraries (pango) the command stops there and
+    says how to write the HTML alone.
     """
     from exporters.summary import (  # noqa: PLC0415
         SummaryInput,
@@ -42,8 +43,6 @@ def run_report(args: argparse.Namespace) -> int:
     from loceval.evaluation import Tolerance  # noqa: PLC0415
 
     formats = summary_formats(args.formats)
-    if "summary.pdf" in formats:
-        _check_pdf()
     template = _read_template(args.template)
     options = template.options
     try:
@@ -51,6 +50,8 @@ def run_report(args: argparse.Namespace) -> int:
     except LocevalError as err:
         msg = f"The template {str(args.template)!r}: {_api_words(err)}"
         raise InputError(msg) from err
+    if "summary.pdf" in formats:  # after the user's input is checked, before the work
+        _check_pdf()
     runs = []
     for path in args.datasets:
         recorded = (

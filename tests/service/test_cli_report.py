@@ -76,8 +76,16 @@ def test_report_writes_the_summary_with_each_recordings_figures(
         ('{"reference": {}, "estimates": [{}], "options": {"align": "best"}}', "align"),
     ],
 )
-def test_report_with_a_bad_template_exits_1(tmp_path: Path, capsys, content: str, match: str):
-    """A template that is not valid JSON or misses fields exits 1 and names the problem."""
+@pytest.mark.parametrize("pdf", ["loads", "missing"])
+def test_report_with_a_bad_template_exits_1(
+    tmp_path: Path, capsys, *, request: pytest.FixtureRequest, content: str, match: str, pdf: str
+):
+    """A template that is not valid JSON or misses fields exits 1 and names the problem.
+
+    Also where no PDF can be made: the user's own input is checked before the machine's.
+    """
+    if pdf == "missing":
+        request.getfixturevalue("no_weasyprint")
     path = tmp_path / "template.json"
     path.write_text(content)
     argv = ["report", "--datasets", "x.bag", "--template", str(path), "--out", str(tmp_path / "o")]
