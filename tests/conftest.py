@@ -40,6 +40,19 @@ def skip_or_fail(reason: str) -> None:
 
 
 @pytest.fixture
+def no_weasyprint(monkeypatch: pytest.MonkeyPatch) -> None:
+    """WeasyPrint cannot be loaded, as where its system libraries (pango) are missing.
+
+    The cached outcome of :func:`exporters.report.render._weasyprint` is cleared, so the
+    next PDF (or :func:`exporters.report.pdf_available`) looks again and finds none.
+    """
+    from exporters.report import render as report_render
+
+    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
+    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
+
+
+@pytest.fixture
 def rng() -> np.random.Generator:
     """Return the one seeded random generator tests use."""
     return np.random.default_rng(20240601)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 import threading
 from types import ModuleType
 
@@ -13,12 +12,9 @@ from exporters.report import html_to_pdf, pdf_available
 from exporters.report import render as report_render
 
 
-def test_missing_weasyprint_is_an_unavailable_export_every_time(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
+@pytest.mark.usefixtures("no_weasyprint")
+def test_missing_weasyprint_is_an_unavailable_export_every_time() -> None:
     """Without WeasyPrint every report says what to install, once looked for (not per call)."""
-    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
-    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
     for _ in range(2):
         with pytest.raises(ExportUnavailableError, match=r"libpango-1\.0-0") as caught:
             html_to_pdf(b"<p>x</p>")
@@ -26,10 +22,9 @@ def test_missing_weasyprint_is_an_unavailable_export_every_time(
     assert isinstance(report_render._weasyprint_loaded, str)
 
 
-def test_pdf_available_is_false_without_weasyprint(monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.usefixtures("no_weasyprint")
+def test_pdf_available_is_false_without_weasyprint() -> None:
     """Without WeasyPrint the check says False (never raises) and keeps the outcome."""
-    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
-    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
     assert pdf_available() is False
     assert pdf_available() is False
     assert isinstance(report_render._weasyprint_loaded, str)  # the same cached outcome

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
-from exporters.report import render as report_render
 from service.cli import main
 from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
 
@@ -36,13 +34,6 @@ def template(tmp_path: Path) -> Path:
         )
     )
     return path
-
-
-@pytest.fixture
-def no_weasyprint(monkeypatch: pytest.MonkeyPatch) -> None:
-    """WeasyPrint cannot be loaded, as where its system libraries (pango) are missing."""
-    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
-    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
 
 
 @pytest.mark.pdf

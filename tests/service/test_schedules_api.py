@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import io
 import json
-import sys
 import threading
 from collections.abc import Iterator
 from http.server import BaseHTTPRequestHandler, HTTPServer
@@ -19,7 +18,6 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from exporters.report import render as report_render
 from service import schedule_runs
 from service.auth import create_key
 from service.main import create_app
@@ -135,13 +133,10 @@ def test_an_empty_selection_gives_a_report_that_says_so(client: TestClient, reco
     assert "No recordings matched" in _pdf_text(pdf)
 
 
-def test_an_html_only_schedule_runs_without_weasyprint(
-    client: TestClient, recordings, monkeypatch: pytest.MonkeyPatch
-):
+@pytest.mark.usefixtures("no_weasyprint")
+def test_an_html_only_schedule_runs_without_weasyprint(client: TestClient, recordings):
     """Asked for summary.html only, a run lays out no PDF: it succeeds where pango is missing."""
     del recordings
-    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
-    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
     body = schedule_body(produce={"summary_formats": ["summary.html"]})
     schedule = client.post("/api/v1/schedules", json=body).json()
     run = client.post(f"/api/v1/schedules/{schedule['id']}/run").json()

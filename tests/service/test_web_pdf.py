@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import re
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -67,10 +66,9 @@ def test_the_page_says_pdfs_can_be_written(api: Api, monkeypatch: pytest.MonkeyP
     assert 'id="pdf-note"' not in response.text
 
 
-def test_the_page_says_pdfs_cannot_be_written(api: Api, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.usefixtures("no_weasyprint")
+def test_the_page_says_pdfs_cannot_be_written(api: Api) -> None:
     """Without WeasyPrint: the flag says no, and the note names the packages to install."""
-    monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
-    monkeypatch.setitem(sys.modules, "weasyprint", None)  # `import weasyprint` raises
     response = api.client.get("/")
     assert response.status_code == 200
     assert 'data-pdf-reports="no"' in _body(response.text)
