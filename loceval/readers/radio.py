@@ -214,9 +214,8 @@ def sniff_radio_table(path: Path) -> str | None:
         line = raw.strip()
         if not line or (line.startswith("#") and _is_comment(line)):
             continue
-        delimiter = max(SURVEY_DELIMITERS, key=line.count)
         try:
-            cells = split_line(line.lstrip("#"), delimiter if line.count(delimiter) else None)
+            cells = split_line(line.lstrip("#"), _delimiter_of(line))
         except ReaderError:  # not CSV the csv module splits: no radio table
             return None
         names = {_normalize(c)[0] for c in cells}
@@ -459,8 +458,7 @@ def _read_rows(
         msg = f"{where}: the {kind} file is empty; it needs a header row and one row per entry."
         raise ReaderError(msg)
     header_line, header_text = header
-    delimiter = max(SURVEY_DELIMITERS, key=header_text.count)
-    sep = delimiter if header_text.count(delimiter) else None
+    sep = _delimiter_of(header_text)
     headers = [c.strip() for c in split_line(header_text.lstrip("#"), sep, where=where)]
     if sum(_is_number(c) for c in headers) >= 2:  # no header has two numbers as names
         expected = "id,x,y,z" if kind == "anchors" else "t,anchor_id,range_m"
@@ -494,6 +492,12 @@ def _is_comment(line: str) -> bool:
         base, sep, suffix = name.rpartition("_")
         known += name in wanted or bool(sep and suffix in _UNIT_SPELLINGS and base in wanted)
     return known < 2
+
+
+def _delimiter_of(header: str) -> str | None:
+    """Return the survey delimiter the header line holds most of, or None (whitespace)."""
+    delimiter = max(SURVEY_DELIMITERS, key=header.count)
+    return delimiter if header.count(delimiter) else None
 
 
 def _is_number(cell: str) -> bool:
