@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
 from typing import Final
 
@@ -16,11 +17,22 @@ from loceval.display import display_text
 from loceval.geometry import SimilarityTransform
 from loceval.options import Units, UpAxis, choice_default, number_default
 
-__all__ = ["ExportOptions", "Units", "UpAxis"]
+__all__ = ["ExportOptions", "FrontDoor", "Units", "UpAxis"]
 
 _CRS_NAME: Final = re.compile(r"[A-Za-z][A-Za-z0-9_.-]*:[A-Za-z0-9_.-]+")
 
 _DEFAULT_UNITS = Units(choice_default("units"))
+
+
+class FrontDoor(StrEnum):
+    """Which front door made the files: the report names an option the way it does.
+
+    ``cli``: ``loceval evaluate`` (flags such as ``--tolerance``); ``service``: the web page
+    and the HTTP API (the page's fields and the API's ``options.*`` keys).
+    """
+
+    CLI = "cli"
+    SERVICE = "service"
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,6 +53,7 @@ class ExportOptions:
         crs: the projected coordinate reference system the site transform places the
             evaluation in (``"EPSG:25832"``), if any; the IFC then carries the site
             transform as its map conversion.
+        front_door: the front door that made the files (how the report names options).
     """
 
     units: Units = _DEFAULT_UNITS
@@ -52,6 +65,7 @@ class ExportOptions:
     templates_dir: Path | None = None
     crs: str | None = None
     building_up: UpAxis = UpAxis.Z
+    front_door: FrontDoor = FrontDoor.CLI
 
     def __post_init__(self) -> None:
         """Make the title plain one-line text; check that the CRS reads ``AUTHORITY:CODE``.

@@ -28,22 +28,15 @@ from loceval.metrics import (
     share_within,
 )
 from loceval.offsets import DeviceSource, OffsetCheck, check_offsets
-from loceval.options import (
-    DEFAULT_THRESHOLDS_M,
-    check_option,
-    choice_default,
-    number_default,
-)
+from loceval.options import DEFAULT_THRESHOLDS_M, check_option, choice_default, number_default
 from loceval.trajectory import MAX_OFFSET_M, Trajectory
 from loceval.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
 
 if TYPE_CHECKING:
     from loceval.assessment import Assessment
     from loceval.comparison import Comparison
-    from loceval.uncertainty import IntervalStats
-
-if TYPE_CHECKING:
     from loceval.ranging import RangingResult
+    from loceval.uncertainty import IntervalStats
 
 __all__ = [
     "EstimateResult",
@@ -239,6 +232,8 @@ class EvaluationResult:
     inputs: tuple[Mapping[str, object], ...] = ()
     comparisons: tuple[Comparison, ...] | None = None
     """Every two estimates' ATE and RPE RMSE compared; None when intervals are off."""
+    comparison_notes: tuple[str, ...] = ()
+    """Why two estimates were not compared (too few shared stamps): about the pair."""
     ranging: RangingResult | None = None
     ranging_options: Mapping[str, object] = field(default_factory=dict)
 
@@ -269,12 +264,14 @@ class EvaluationResult:
                     for a, b in ref.tracking_losses(round(self.config.max_gap_s * _NS_PER_S))
                 ],
                 "warnings": list(self.reference_warnings),
+                "notes": list(ref.notes),
             },
             **ranging,
             "estimates": [_estimate_dict(e, self.config) for e in self.estimates],
             "comparisons": None
             if self.comparisons is None
             else [c.to_dict() for c in self.comparisons],
+            "comparison_notes": list(self.comparison_notes),
         }
 
 
@@ -349,14 +346,14 @@ def evaluate(
         ref_notes.append(
             f"The reference has {len(gaps)} {'gap' if len(gaps) == 1 else 'gaps'} longer than "
             f"{ref_gap_s:g} s "
-            f"(tracking loss; longest {longest:.3f} s); estimate poses in them are not "
+            f"({reference.loss_words}; longest {longest:.3f} s); estimate poses in them are not "
             "evaluated."
         )
     results = []
     for k, estimate in enumerate(estimates):
         report(f"evaluating {estimate.name or k}", k / len(estimates))
         results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
-    comparisons = None
+    comparisons, comparison_notes = None, ()
     if not config.no_ci:
         from loceval.assessment import compare_estimates  # noqa: PLC0415  (scipy)
 
@@ -366,8 +363,7 @@ def evaluate(
                 for k, e in enumerate(results)
             ]
         )
-        comparisons = tuple(found)
-        ref_notes.extend(notes)
+        comparisons, comparison_notes = tuple(found), tuple(notes)
     report("done", 1.0)
     return EvaluationResult(
         reference=reference,
@@ -377,6 +373,7 @@ def evaluate(
         created_at=datetime.now(UTC).isoformat(timespec="seconds"),
         inputs=tuple(inputs),
         comparisons=comparisons,
+        comparison_notes=comparison_notes,
     )
 
 
@@ -405,17 +402,18 @@ def _evaluate_one(
         max_gap_ns=round(config.max_gap_s * _NS_PER_S),
         offset_ns=round(offsets.time_offset_s * _NS_PER_S),
     )
-    notes.extend(_association_notes(matched, len(estimate)))
+    notes.extend(_association_notes(matched, len(estimate), reference.loss_words))
     min_gap_ns = round(config.max_gap_s * _NS_PER_S)
     own_gaps = estimate.tracking_losses(min_gap_ns)
     if own_gaps:
         start, end = max(own_gaps, key=lambda gap: gap[1] - gap[0])
         after_s = (start - int(reference.stamps_ns[0])) / _NS_PER_S
         own_gap_s = gap_threshold_ns(estimate.stamps_ns, min_gap_ns=min_gap_ns) / _NS_PER_S
+        own_loss = estimate.loss_words.replace("tracking loss", "its own tracking loss")
         notes.append(
             f"The estimate itself has {len(own_gaps)} {'gap' if len(own_gaps) == 1 else 'gaps'} "
             f"longer than {own_gap_s:g} s "
-            f"(its own tracking loss; the longest, {(end - start) / _NS_PER_S:.2f} s, starts "
+            f"({own_loss}; the longest, {(end - start) / _NS_PER_S:.2f} s, starts "
             f"{abs(after_s):.2f} s {'after' if after_s >= 0 else 'before'} the reference's "
             "first pose)."
         )
@@ -497,7 +495,7 @@ def _assess(
     )
 
 
-def _association_notes(matched: Association, total: int) -> list[str]:
+def _association_notes(matched: Association, total: int, loss: str) -> list[str]:
     notes = []
     if matched.dropped_outside:
         notes.append(
@@ -507,7 +505,7 @@ def _association_notes(matched: Association, total: int) -> list[str]:
     if matched.dropped_gap:
         note = (
             f"{matched.dropped_gap} of {total} estimate poses fall in reference gaps longer "
-            f"than {matched.max_gap_ns / _NS_PER_S:g} s (tracking loss) and were not evaluated."
+            f"than {matched.max_gap_ns / _NS_PER_S:g} s ({loss}) and were not evaluated."
         )
         if matched.dropped_gap > total // 2:
             note += (
@@ -586,6 +584,7 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig) -> dict[str, obj
         "consistency": _assessed(e, "consistency"),
         "reference_error": _assessed(e, "reference_error"),
         "warnings": list(e.warnings),
+        "notes": list(e.estimate.notes),
     }
 
 

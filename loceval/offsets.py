@@ -106,6 +106,38 @@ def _quat_of(transform: SimilarityTransform) -> list[float]:
     return [float(v) for v in Rotation.from_matrix(transform.rotation).as_quat()]
 
 
+def _unstamped(
+    names: list[str],
+    time_offset_s: float | None,
+    device: SimilarityTransform | None,
+    device_source: DeviceSource,
+) -> OffsetCheck:
+    """The check of a pair one of which has pose numbers for stamps: nothing to check.
+
+    Raises:
+        InputError: the time offset was asked to be estimated (``auto``).
+    """
+    which = " and ".join(repr(n) for n in names)
+    if time_offset_s is None:
+        msg = (
+            f"{which} has no times (poses are numbered, as a KITTI file without its times "
+            "file), so no time offset can be estimated; give the times file "
+            "(kitti:PATH@times=TIMES) or a time offset of 0."
+        )
+        raise InputError(msg, option="time_offset_s")
+    note = (
+        f"{which} has no times (poses are numbered, as a KITTI file without its times file): "
+        "poses are matched by number and the clocks are not checked."
+    )
+    return OffsetCheck(
+        time_offset_s=float(time_offset_s),
+        time_offset=None,
+        device_given=device,
+        device_source=device_source,
+        warnings=(note,),
+    )
+
+
 def check_offsets(
     reference: Trajectory,
     estimate: Trajectory,
@@ -140,6 +172,10 @@ def check_offsets(
 
     auto_time = time_offset_s is None
     notes: list[str] = []
+    pair = ((reference, "the reference"), (estimate, "the estimate"))
+    numbered = [t.name or role for t, role in pair if t.indexed]
+    if numbered:
+        return _unstamped(numbered, time_offset_s, device, device_source)
     clock = _estimated(
         lambda: estimate_time_offset(
             reference,

@@ -51,6 +51,9 @@ class Trajectory:
             rotation block, the rotation about the fixed axes of ``frame_id`` (the
             convention of ``geometry_msgs/PoseWithCovariance``). Symmetric and finite;
             singular blocks are allowed (planar systems report zero z variance).
+        notes: how the reader made it, for information (the tf chain it composed).
+        indexed: the stamps are pose numbers, not times (a KITTI file without its times
+            file: pose i is stamped i seconds), so durations, rates and clocks mean nothing.
     """
 
     stamps_ns: StampsNs
@@ -62,6 +65,8 @@ class Trajectory:
     child_frame_id: str = ""
     warnings: tuple[str, ...] = field(default=())
     cov6: FloatArray | None = None
+    notes: tuple[str, ...] = field(default=())
+    indexed: bool = False
 
     def __post_init__(self) -> None:
         """Copy the arrays, make them read-only and check shape, dtype and values."""
@@ -283,6 +288,11 @@ class Trajectory:
             jac[:, :3, 3:] = -skew(lever_m)
             cov = jac @ self.cov6 @ jac.transpose(0, 2, 1)
         return replace(self, positions_xyz=positions, quat_xyzw=quat, cov6=cov)
+
+    @property
+    def loss_words(self) -> str:
+        """What a gap in this trajectory is: tracking loss, or a tf chain's link without data."""
+        return "a link of its tf chain without data" if "@tf:" in self.source else "tracking loss"
 
     def with_warnings(self, *warnings: str) -> Trajectory:
         """Return the trajectory with ``warnings`` appended."""

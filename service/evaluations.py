@@ -256,7 +256,7 @@ def check_options(options: EvaluationOptions) -> None:
         msg = "Give the device offset either as offset or as device, not both."
         raise InputError(msg)
     config_from_options(options, reference_offset=offset_or_none(options.offset))
-    export_from_options(options)
+    export_from_options(options, front_door="service")
 
 
 def visits_dataset_id(visits: str) -> str | None:

@@ -160,7 +160,9 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
             reference_offset_source="urdf" if isinstance(options.device, DeviceOffset) else "given",
         ),
         stamp=options.stamp,
-        export=export_from_options(options, evaluation_id=evaluation.id, building=building),
+        export=export_from_options(
+            options, front_door="service", evaluation_id=evaluation.id, building=building
+        ),
         formats=options.formats,
         visits=visits,
         checkpoints=checkpoints_from_options(options),
@@ -192,7 +194,7 @@ def _ranging_job_for(session: Session, runtime: Runtime, evaluation: Evaluation)
         estimates=[],
         config=config_from_options(options),
         stamp=options.stamp,
-        export=export_from_options(options, evaluation_id=evaluation.id),
+        export=export_from_options(options, front_door="service", evaluation_id=evaluation.id),
         formats=options.formats,
         ranging=RangingSources(
             anchors=anchors.path,

@@ -287,12 +287,18 @@ def checkpoints_from_options(options: EvaluationValues) -> CheckpointConfig:
 
 
 def export_from_options(
-    options: ExportValues, *, evaluation_id: str = "", building: Path | None = None
+    options: ExportValues,
+    *,
+    front_door: str,
+    evaluation_id: str = "",
+    building: Path | None = None,
 ) -> ExportOptions:
     """Return the artifact options, checked before the evaluation runs so bad ones fail fast.
 
     Args:
         options: the front door's options.
+        front_door: ``cli`` or ``service`` (the page and the API): how the report names
+            an option (:class:`~exporters.options.FrontDoor`).
         evaluation_id: the id named in every file's metadata.
         building: a building mesh for the glTF scene (the CLI only).
 
@@ -300,7 +306,7 @@ def export_from_options(
         InputError: both a site and a site matrix, or an option's value cannot be used.
     """
     from exporters import ExportOptions  # noqa: PLC0415
-    from exporters.options import UpAxis  # noqa: PLC0415
+    from exporters.options import FrontDoor, UpAxis  # noqa: PLC0415
     from exporters.placement import (  # noqa: PLC0415
         check_options,
         parse_site,
@@ -330,6 +336,7 @@ def export_from_options(
         evaluation_id=evaluation_id,
         crs=options.crs,
         building_up=UpAxis(options.building_up),
+        front_door=FrontDoor(front_door),
     )
     check_options(export)
     return export

@@ -67,6 +67,7 @@ class JobSource:
             trajectory,
             source=trajectory.source.replace(path, shown),
             warnings=tuple(w.replace(path, shown) for w in trajectory.warnings),
+            notes=tuple(n.replace(path, shown) for n in trajectory.notes),
         )
 
 

@@ -61,7 +61,8 @@ def _estimated_time(check: OffsetCheck | None) -> str:
 def _candidates(check: OffsetCheck | None) -> str:
     if check is None or check.time_offset is None:
         return _NONE
-    return ", ".join(f"{c:.3f} s" for c in check.time_offset.candidates_s)
+    # In ms like the rows around it: one unit for one quantity down the column.
+    return ", ".join(_ms(c) for c in check.time_offset.candidates_s)
 
 
 def _given_device(result: EvaluationResult, check: OffsetCheck | None) -> str:

@@ -8,7 +8,7 @@ sentence for the verdict section, and the consistency (NEES) of a reported covar
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 from loceval.evaluation import EvaluationResult, Verdict
@@ -66,16 +66,34 @@ def _name(result: EvaluationResult, k: int) -> str:
     return result.estimates[k].name or f"estimate {k + 1}"
 
 
-def build_confidence_view(result: EvaluationResult) -> ConfidenceView:
-    """Return the formatted intervals, comparisons and NEES of an evaluation."""
+def _three_decimals(value: float) -> str:
+    return f"{value:.3f}"
+
+
+Formatter = Callable[[float], str]
+"""Prints a value of a table in that table's unit, without the symbol."""
+
+
+def build_confidence_view(
+    result: EvaluationResult, formats: Mapping[tuple[int, str], Formatter] | None = None
+) -> ConfidenceView:
+    """Return the formatted intervals, comparisons and NEES of an evaluation.
+
+    Args:
+        result: the evaluation.
+        formats: per (table, row group) how its values are printed, so an interval reads
+            in the unit of the value it follows (``6.1 mm (5.9–6.6)``, never metres after
+            millimetres); default three decimals (metres and degrees).
+    """
     intervals: dict[str, tuple[str, ...]] = {}
     for (table, group), series in _TABLES.items():
+        fmt = (formats or {}).get((table, group), _three_decimals)
         for label, key in _ROWS.items():
             texts = []
             for e in result.estimates:
                 found = None if e.assessment is None else e.assessment.intervals.get(series)
                 lo, hi = (None, None) if found is None else found.ci95[key]
-                texts.append("" if lo is None else f" ({lo:.3f}–{hi:.3f})")
+                texts.append("" if lo is None or hi is None else f" ({fmt(lo)}–{fmt(hi)})")
             intervals[f"{table}/{group}/{label}"] = tuple(texts)
     if result.config.no_ci:
         note = "Confidence intervals were turned off for this evaluation."

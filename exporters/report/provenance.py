@@ -20,6 +20,7 @@ from exporters.plots import (
 from exporters.report.clocks import time_offset_text
 from loceval.alignment import AlignWindow
 from loceval.evaluation import EstimateResult, EvaluationResult
+from loceval.trajectory import Trajectory
 from loceval.gaps import GAP_RATE_FACTOR
 
 __all__ = [
@@ -74,6 +75,11 @@ def input_rows(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
     return tuple(rows)
 
 
+def _duration(trajectory: Trajectory) -> str:
+    """The time a trajectory spans, or that it has no times (poses numbered, no stamps)."""
+    return "no times" if trajectory.indexed else f"{trajectory.duration_s:.1f} s"
+
+
 def trajectory_rows(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
     """Return the trajectories as read: poses, duration, length and rate."""
     ref = result.reference
@@ -85,9 +91,9 @@ def trajectory_rows(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
             "source": ref.source,
             "poses": f"{len(ref):,}",
             "matched": "",
-            "duration": f"{ref.duration_s:.1f} s",
+            "duration": _duration(ref),
             "length": f"{ref.length_m:.1f} m",
-            "rate": f"{ref.rate_hz:.1f} Hz",
+            "rate": "—" if ref.indexed else f"{ref.rate_hz:.1f} Hz",
             "orientation": "yes" if ref.has_orientation else "no",
         }
     ]
@@ -101,9 +107,9 @@ def trajectory_rows(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
                 "source": est.source,
                 "poses": f"{len(est):,}",
                 "matched": f"{len(e.association):,}",
-                "duration": f"{est.duration_s:.1f} s",
+                "duration": _duration(est),
                 "length": f"{est.length_m:.1f} m",
-                "rate": f"{est.rate_hz:.1f} Hz",
+                "rate": "—" if est.indexed else f"{est.rate_hz:.1f} Hz",
                 "orientation": "yes" if est.has_orientation else "no",
             }
         )

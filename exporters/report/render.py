@@ -6,6 +6,7 @@ the summary report (:mod:`exporters.summary`).
 
 from __future__ import annotations
 
+import re
 import threading
 from pathlib import Path
 from types import ModuleType
@@ -36,6 +37,39 @@ __all__ = [
 DEFAULT_TEMPLATES_DIR: Final[Path] = Path(__file__).resolve().parents[2] / "templates"
 """The repository's ``templates/`` folder, used when the options name none."""
 TEMPLATE_NAME: Final = "report.html.j2"
+
+
+_SEPARATOR: Final = re.compile(r"(?<=[^\W_])([_/@:.])(?=[^\W_])")
+"""A separator joining two parts of a name (``fr2_desk``, ``map:base_link``, ``data/public``)."""
+
+
+_BREAKABLE_FROM: Final = 12
+"""Words of up to this many characters never break (numbers such as ``0.1`` included)."""
+
+
+def breakable(value: object) -> object:
+    """Jinja filter: a name that may break after its separators and nowhere else.
+
+    Escapes the text and puts ``<wbr>`` after each ``_ / @ : .`` that joins two letters or
+    digits inside a word longer than twelve characters, so ``fr2_desk_groundtruth`` or ``tf:map:base_link`` wraps at a part boundary in
+    a narrow column (the stylesheet forbids breaks inside a word). Text that is not a
+    string (numbers, None) and markup pass unchanged.
+    """
+    if not isinstance(value, str) or hasattr(value, "__html__"):
+        return value
+    from markupsafe import Markup, escape  # noqa: PLC0415  (comes with jinja2: loceval[report])
+
+    def word(text: str) -> Markup:
+        if len(text) <= _BREAKABLE_FROM:
+            return escape(text)
+        parts = _SEPARATOR.split(text)  # the separators at odd positions
+        return Markup("").join(
+            Markup(f"{escape(p)}<wbr>") if k % 2 else escape(p) for k, p in enumerate(parts)
+        )
+
+    # Whitespace (kept as it is) still breaks lines; short words never need to.
+    pieces = re.split(r"(\s+)", str(shown_text(value)))
+    return Markup("").join(word(p) for p in pieces)
 
 
 def check_templates(folder: Path, name: str, *, label: str) -> Path:
@@ -83,6 +117,7 @@ def render_template(
         keep_trailing_newline=True,
         finalize=shown_text,
     )
+    env.filters["breakable"] = breakable
     try:
         html = env.get_template(name).render(**context)
     except jinja2.TemplateError as err:

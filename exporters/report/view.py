@@ -12,7 +12,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
-from exporters.options import ExportOptions
+from exporters.options import ExportOptions, FrontDoor
 from exporters.plots import (
     DEFAULT_MAX_POINTS,
     MAX_SPAN_MARKERS,
@@ -38,6 +38,7 @@ from exporters.report.provenance import (
 from exporters.report.ranging import RangingView, build_ranging_view
 from loceval.evaluation import EvaluationResult
 from loceval.metrics import ErrorSeries, ErrorStats
+from loceval.options import option
 
 __all__ = ["BEST_MARK", "ReportView", "build_report_view"]
 
@@ -54,6 +55,9 @@ _STAT_ROWS: Final = (
     ("MAX", "max"),
 )
 """The framework paper's Tables 1-2 rows (it omits the median; the issue asks for it)."""
+
+
+_TIMES_NOTE: Final = "Times in this report are seconds since the first pose of the reference."
 
 
 @dataclass(frozen=True, slots=True)
@@ -82,6 +86,8 @@ class StatsTable:
     columns: tuple[str, ...]
     groups: tuple[tuple[str, tuple[StatsRow, ...]], ...]
     marks_best: bool
+    length: LengthUnit | None = None
+    """The unit of the translation rows (their intervals are printed in it too)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -182,9 +188,17 @@ class ReportView:
     worst: tuple[WorstTable, ...]
     warnings: tuple[tuple[str, str], ...]
     clocks: ClockSection
+    notes: tuple[tuple[str, str], ...] = ()
+    """How the inputs were read, for information (the tf chain a trajectory composes)."""
     best_mark: str = BEST_MARK
     confidence: ConfidenceView = field(default_factory=ConfidenceView)
     ranging: RangingView | None = None  # the ranging section (exporters.report.ranging)
+    tolerance_example: str = "--tolerance 0.10@95"
+    """How the front door that made the report takes a tolerance (the flag, or the value)."""
+    tolerance_where: str = ""
+    times_note: str = _TIMES_NOTE
+    """What a time in the report counts (pose numbers when the reference has no times)."""
+    """Where that value goes, when the example alone does not say it (page and API)."""
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -275,6 +289,7 @@ def _stats_table(
         columns=columns,
         groups=tuple(groups),
         marks_best=mark,
+        length=unit,
     )
 
 
@@ -395,21 +410,50 @@ def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
     return tuple(tables)
 
 
+def unbroken_arrows(text: str) -> str:
+    """Return ``text`` with each `` -> `` (a tf chain's link) as an arrow no line splits."""
+    return text.replace(" -> ", "\u00a0→\u00a0")
+
+
 def _warnings(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
     ref_name = result.reference.name or "reference"
     out = [(f"{ref_name} (reference)", w) for w in result.reference_warnings]
     for k, e in enumerate(result.estimates):
         out.extend((estimate_name(e, k), w) for w in e.warnings)
-    return tuple(out)
+    # Why two estimates were not compared is about the pair, not about the reference.
+    out.extend(("comparison of estimates", w) for w in result.comparison_notes)
+    return tuple((about, unbroken_arrows(w)) for about, w in out)
+
+
+def _notes(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
+    """Information about how the inputs were read (a tf chain's links): no warnings."""
+    ref_name = result.reference.name or "reference"
+    out = [(f"{ref_name} (reference)", n) for n in result.reference.notes]
+    for k, e in enumerate(result.estimates):
+        out.extend((estimate_name(e, k), n) for n in e.estimate.notes)
+    return tuple((about, unbroken_arrows(n)) for about, n in out)
+
+
+def _tolerance_hint(front_door: FrontDoor) -> tuple[str, str]:
+    """Return how to give a tolerance at ``front_door``: the example and where it goes."""
+    spec = option("tolerance")
+    if front_door is FrontDoor.CLI:
+        return f"{spec.flag} {spec.example}", ""
+    return (
+        str(spec.example),
+        f" in the {spec.words.removeprefix('the ').capitalize()} field of the page "
+        f"(options.{spec.key} in the API)",
+    )
 
 
 def _summary(result: EvaluationResult) -> str:
     ref = result.reference
     names = [estimate_name(e, k) for k, e in enumerate(result.estimates)]
     listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+    span = "no times (poses numbered)" if ref.indexed else f"{ref.duration_s:.1f} s"
     return (
         f"{listed} against {ref.name or 'the reference'} (ground truth): "
-        f"{len(ref):,} reference poses, {ref.duration_s:.1f} s, {ref.length_m:.1f} m of path."
+        f"{len(ref):,} reference poses, {span}, {ref.length_m:.1f} m of path."
     )
 
 
@@ -444,6 +488,7 @@ def build_report_view(
             floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
         )
     )
+    tolerance_example, tolerance_where = _tolerance_hint(options.front_door)
     figures = number_figures(rendered, image_format)
     figure_of = {f.key: f.number for f in figures}
     estimates = result.estimates
@@ -497,9 +542,21 @@ def build_report_view(
         figures=figures,
         worst=_worst(result),
         warnings=_warnings(result),
-        confidence=build_confidence_view(result),
+        notes=_notes(result),
+        confidence=build_confidence_view(
+            result,
+            {(t.number, "translation"): t.length.format for t in tables if t.length is not None},
+        ),
         clocks=build_clock_section(
             result, number=len(figures) + 1, image_format=image_format, max_points=max_points
         ),
         ranging=build_ranging_view(result),
+        tolerance_example=tolerance_example,
+        tolerance_where=tolerance_where,
+        times_note=(
+            "The reference has no times (its poses are numbered, as a KITTI file without "
+            "its times file): a time in this report is the pose's number, not seconds."
+            if result.reference.indexed
+            else _TIMES_NOTE
+        ),
     )

@@ -154,6 +154,7 @@ def trajectory_source(
         rate_hz=trajectory.rate_hz,
         length_m=trajectory.length_m,
         orientation=trajectory.has_orientation,
+        indexed=trajectory.indexed,
     )
 
 

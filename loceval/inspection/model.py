@@ -115,6 +115,7 @@ class SourceInspection:
             the first and last stamp for bag topics (0 when it cannot be told).
         length_m: path length in metres, or None when the poses were not read (bags).
         orientation: whether the poses carry orientations, or None when unknown.
+        indexed: the stamps are pose numbers, not times (KITTI without its times file).
     """
 
     selector: str | None
@@ -126,6 +127,7 @@ class SourceInspection:
     rate_hz: float = 0.0
     length_m: float | None = None
     orientation: bool | None = None
+    indexed: bool = False
 
     @property
     def duration_s(self) -> float:
@@ -147,6 +149,7 @@ class SourceInspection:
             "rate_hz": round(self.rate_hz, 3),
             "length_m": None if self.length_m is None else round(self.length_m, 3),
             "orientation": self.orientation,
+            "indexed": self.indexed,
         }
 
 

@@ -5,22 +5,11 @@ from __future__ import annotations
 import datetime as dt
 from typing import Final
 
-from loceval.inspection.model import NS, Inspection
+from loceval.inspection.model import NS, Inspection, SourceInspection
 
 __all__ = ["render_inspection_text"]
 
 _EPOCH_2000_NS: Final = 946_684_800 * NS
-_SUMMARY_KEYS: Final = (
-    "format",
-    "source",
-    "poses",
-    "start_s",
-    "end_s",
-    "duration_s",
-    "length_m",
-    "rate_hz",
-    "orientation",
-)
 
 
 def render_inspection_text(insp: Inspection) -> str:
@@ -108,12 +97,32 @@ def _file_lines(insp: Inspection) -> list[str]:
             "trajectory sources: none (control points are a reference: points:FILE)",
         ]
     if insp.single is not None:
-        summary = insp.to_dict()
-        lines.extend(f"{key:>14}: {summary[key]}" for key in _SUMMARY_KEYS if key in summary)
-        return lines
+        return lines + [f"{key:>14}: {value}" for key, value in _summary(insp, insp.single)]
     lines += ["", "trajectory sources (type FILE@SELECTOR):"]
     lines.extend(_source_lines(insp))
     return lines
+
+
+def _summary(insp: Inspection, single: SourceInspection) -> list[tuple[str, str]]:
+    """The lines of a file holding one trajectory, as the bag listing words them."""
+    rows = [("format", insp.format), ("source", insp.trajectory_source)]
+    rows.append(("poses", f"{single.pose_count:,}"))
+    if single.indexed:
+        rows.append(
+            ("times", "none: the poses are numbered (give the times file: kitti:FILE@times=TIMES)")
+        )
+    elif single.first_stamp_ns is not None:
+        rows += [
+            ("start", _stamp_text(single.first_stamp_ns)),
+            ("end", _stamp_text(single.last_stamp_ns)),
+            ("duration", f"{single.duration_s:.3f} s"),
+            ("rate", f"{single.rate_hz:.1f} Hz"),
+        ]
+    if single.length_m is not None:
+        rows.append(("path length", f"{single.length_m:.3f} m"))
+    if single.orientation is not None:
+        rows.append(("orientation", str(single.orientation)))
+    return rows
 
 
 def _source_lines(insp: Inspection) -> list[str]:

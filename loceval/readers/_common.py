@@ -33,6 +33,7 @@ def build_trajectory(
     child_frame_id: str = "",
     warnings: tuple[str, ...] = (),
     cov6: FloatArray | None = None,
+    information: tuple[str, ...] = (),
 ) -> Trajectory:
     """Turn raw reader arrays into a :class:`Trajectory`.
 
@@ -51,6 +52,8 @@ def build_trajectory(
         frame_id: frame of the poses.
         child_frame_id: frame whose poses these are.
         warnings: warnings the reader already collected.
+        information: how the reader made it, not a warning (the tf chain it composed);
+            the trajectory's ``notes``.
         cov6: (N, 6, 6) per-pose covariances, or None; sorted and deduplicated with the
             poses.
 
@@ -113,6 +116,7 @@ def build_trajectory(
         child_frame_id=child_frame_id,
         warnings=tuple(notes),
         cov6=cov6,
+        notes=information,
     )
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Final
 
@@ -81,7 +82,7 @@ def read_kitti(path: Path, *, times: Path | None = None, name: str = "") -> Traj
         times = Path(times)
         options["times"] = str(times)
         stamps = _read_kitti_times(times, n, poses_where=where)
-    return build_trajectory(
+    trajectory = build_trajectory(
         stamps,
         positions,
         quat,
@@ -91,6 +92,7 @@ def read_kitti(path: Path, *, times: Path | None = None, name: str = "") -> Traj
         source=str(SourceSpec(TrajectoryFormat.KITTI, path, None, options)),
         warnings=tuple(notes),
     )
+    return replace(trajectory, indexed=True) if times is None else trajectory
 
 
 def _read_kitti_times(times: Path, n_poses: int, *, poses_where: str) -> StampsNs:

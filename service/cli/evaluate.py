@@ -46,6 +46,7 @@ def export_options(args: argparse.Namespace) -> ExportOptions | None:
         return None
     return export_from_options(
         cast("ExportValues", args),
+        front_door="cli",
         evaluation_id=args.out.resolve().name,
         building=args.building,
     )

@@ -47,8 +47,15 @@ def format_tables(result: EvaluationResult) -> str:
             "Comparisons (95 % intervals)",
             *(f"  {c.summary}" for c in result.comparisons),
         ]
-    warnings = [("reference", w) for w in result.reference_warnings] + [
-        (e.name, w) for e in result.estimates for w in e.warnings
+    notes = [("reference", n) for n in result.reference.notes] + [
+        (e.name, n) for e in result.estimates for n in e.estimate.notes
+    ]
+    if notes:
+        lines += ["", "Inputs", *(f"  {who}: {n}" for who, n in notes)]
+    warnings = [
+        *(("reference", w) for w in result.reference_warnings),
+        *((e.name, w) for e in result.estimates for w in e.warnings),
+        *(("comparison", w) for w in result.comparison_notes),
     ]
     if warnings:
         lines += ["", "Warnings", *(f"  {who}: {w}" for who, w in warnings)]

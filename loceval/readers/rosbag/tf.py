@@ -81,7 +81,7 @@ def read_tf_trajectory(
             "check that the links overlap in time, or allow a larger max gap."
         )
         raise ReaderError(msg)
-    notes = [f"{where}: tf chain {describe_chain(steps)}."]
+    notes: list[str] = []
     notes.extend(
         f"{where}: {s.link.invalid_count} samples of tf link {s.link.name} held NaN, inf or "
         "a zero quaternion and were dropped."
@@ -103,6 +103,7 @@ def read_tf_trajectory(
         frame_id=parent,
         child_frame_id=child,
         warnings=tuple(notes),
+        information=(f"{where}: tf chain {describe_chain(steps)}.",),
     )
 
 
