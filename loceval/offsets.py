@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, TypeVar
 
-from loceval.errors import LocevalError
+from loceval.errors import InputError, LocevalError
 
 if TYPE_CHECKING:
     from loceval.clock import TimeOffsetEstimate

@@ -20,8 +20,8 @@ from exporters.plots import (
 from exporters.report.clocks import time_offset_text
 from loceval.alignment import AlignWindow
 from loceval.evaluation import EstimateResult, EvaluationResult
-from loceval.trajectory import Trajectory
 from loceval.gaps import GAP_RATE_FACTOR
+from loceval.trajectory import Trajectory
 
 __all__ = [
     "alignment_rows",
@@ -131,7 +131,12 @@ def option_rows(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
     rows = [
         ("Association", association),
         ("Time offset", time_offset_text(cfg)),
-        ("Alignment", f"{cfg.align.value} (estimated on {_window(cfg.align_first)})"),
+        (
+            "Alignment",
+            "none (the estimates are compared in the reference's frame as they are)"
+            if cfg.align.value == "none"
+            else f"{cfg.align.value} (estimated on {_window(cfg.align_first)})",
+        ),
         (
             "RPE step",
             describe_rpe_step(result.config)
@@ -177,7 +182,9 @@ def alignment_rows(result: EvaluationResult) -> tuple[tuple[str, tuple[str, ...]
         columns.append(
             (
                 a.method.value,
-                f"{a.poses_used:,} (window: {a.window})",
+                "none (no alignment)"
+                if a.method.value == "none"
+                else f"{a.poses_used:,} (window: {a.window})",
                 format_xyz(tf.translation),
                 f"{yaw:.2f}°, {pitch:.2f}°, {roll:.2f}°",
                 f"{tf.scale:.6f}",

@@ -51,9 +51,10 @@ def breakable(value: object) -> object:
     """Jinja filter: a name that may break after its separators and nowhere else.
 
     Escapes the text and puts ``<wbr>`` after each ``_ / @ : .`` that joins two letters or
-    digits inside a word longer than twelve characters, so ``fr2_desk_groundtruth`` or ``tf:map:base_link`` wraps at a part boundary in
-    a narrow column (the stylesheet forbids breaks inside a word). Text that is not a
-    string (numbers, None) and markup pass unchanged.
+    digits inside a word longer than twelve characters, so ``fr2_desk_groundtruth`` or
+    ``tf:map:base_link`` wraps at a part boundary in a narrow column (the stylesheet
+    forbids breaks inside a word). Text that is not a string (numbers, None) and markup
+    pass unchanged.
     """
     if not isinstance(value, str) or hasattr(value, "__html__"):
         return value
@@ -63,9 +64,9 @@ def breakable(value: object) -> object:
         if len(text) <= _BREAKABLE_FROM:
             return escape(text)
         parts = _SEPARATOR.split(text)  # the separators at odd positions
-        return Markup("").join(
-            Markup(f"{escape(p)}<wbr>") if k % 2 else escape(p) for k, p in enumerate(parts)
-        )
+        # Every part is escaped before it joins the markup; <wbr> is the only tag added.
+        wbr = Markup("<wbr>")
+        return Markup("").join(escape(p) + wbr if k % 2 else escape(p) for k, p in enumerate(parts))
 
     # Whitespace (kept as it is) still breaks lines; short words never need to.
     pieces = re.split(r"(\s+)", str(shown_text(value)))

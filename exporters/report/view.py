@@ -439,11 +439,10 @@ def _tolerance_hint(front_door: FrontDoor) -> tuple[str, str]:
     spec = option("tolerance")
     if front_door is FrontDoor.CLI:
         return f"{spec.flag} {spec.example}", ""
-    return (
-        str(spec.example),
-        f" in the {spec.words.removeprefix('the ').capitalize()} field of the page "
-        f"(options.{spec.key} in the API)",
-    )
+    field_name = spec.words.removeprefix("the ").capitalize()
+    return str(
+        spec.example
+    ), f" in the {field_name} field of the page (options.{spec.key} in the API)"
 
 
 def _summary(result: EvaluationResult) -> str:

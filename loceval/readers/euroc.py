@@ -127,7 +127,21 @@ def _check_rows_and_columns(text: str, first: str, *, where: str) -> None:
         raise ReaderError(msg)
     if header is None or first.count(",") + 1 >= 8:
         return
-    names = [cell.strip().lower() for cell in header.lstrip("#").split(",")]
+    header_cells = [cell.strip() for cell in header.lstrip("#").split(",")]
+    width = first.count(",") + 1
+    if len(header_cells) > width:
+        # The header promises columns the rows do not carry: reading the rows as they are
+        # would silently drop what the header says is there (the orientation, usually).
+        missing = ", ".join(header_cells[width:])
+        msg = (
+            f"{where}: the rows do not match the header: the header names "
+            f"{len(header_cells)} columns ({', '.join(header_cells)}) but the first row "
+            f"holds {width} values ({first!r}); missing: {missing}. Export the file again "
+            "with every column, or, if it holds positions only, let the header name only "
+            "those (timestamp, x, y, z)."
+        )
+        raise ReaderError(msg)
+    names = [cell.lower() for cell in header_cells]
     if not any("p_rs_r_" in name for name in names) or any(n.startswith("q") for n in names):
         # A header of its own (timestamp,x,y,z) says position-only on purpose; one with
         # quaternion columns leaves it to the rows' width (too few cells).

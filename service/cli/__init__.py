@@ -5,6 +5,7 @@ traceback); an error about an option is prefixed with the option's flag (``--max
 Running out of memory exits 1 too, with what to do about it.
 The message is scrubbed of loceval's temporary folders (:func:`service.redact.scrub`) and
 printed without control characters (:func:`service.cli.output.emit`).
+A reader that closes the pipe early (``| head``) ends the command quietly (exit 141).
 Anything else is a bug: the traceback is printed and the exit code is 2.
 
 Each command lives in its own module, imported only when that command runs: ``loceval
@@ -14,6 +15,7 @@ Each command lives in its own module, imported only when that command runs: ``lo
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 import traceback
 from collections.abc import Callable, Sequence
@@ -36,6 +38,10 @@ OUT_OF_MEMORY = (
 """The message of a command that ran out of memory (a very small --rpe-delta, say)."""
 
 
+EXIT_BROKEN_PIPE = 141
+"""The shell's code for a command whose reader closed the pipe (128 + SIGPIPE)."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     try:
@@ -46,6 +52,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INPUT
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:  # the reader left (`loceval inspect FILE | head`): no bug
+        # Point stdout at /dev/null so the interpreter's final flush cannot fail again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
     except MemoryError:  # the input, not a bug: say what to do instead of a traceback
         print(f"loceval: error: {OUT_OF_MEMORY}", file=sys.stderr)  # noqa: T201
         return EXIT_INPUT
