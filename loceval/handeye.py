@@ -71,6 +71,11 @@ MIN_ROTATION_DEG = 1.0
 """Windows must rotate the body by this much on average for any device offset."""
 MIN_TRAVEL_M = 0.01
 """RMS travel per window across the only rotation axis that tells the rotation about it."""
+TRAVEL_BLOCKS = 8
+"""Consecutive stretches of the run whose spread gives the travel axis's rotation sigma."""
+TRAVEL_STUDENT = 1.4
+"""Student t over normal for 7 degrees of freedom at 3 sigma (t(0.9987, 7) / 3 = 1.4):
+the standard error of eight block means is itself uncertain."""
 _MIN_PAIRS = 20
 # For each body axis: an Euler sequence that puts a rotation about it first (leftmost).
 _EULER_FIRST: tuple[Literal["XYZ"], Literal["YZX"], Literal["ZXY"]] = ("XYZ", "YZX", "ZXY")
@@ -209,7 +214,7 @@ def estimate_device_offset(
     p_ref[both] = sampler.positions_at(t_s[both])
     q_ref[both] = sampler.quat_at(t_s[both])
     a_q, a_t = relative_motions(p_ref, q_ref, pairs.i, pairs.j)
-    _, b_t = relative_motions(estimate.positions_xyz, estimate.quat_xyzw, pairs.i, pairs.j)
+    b_q, b_t = relative_motions(estimate.positions_xyz, estimate.quat_xyzw, pairs.i, pairs.j)
     alpha = rotvec_of(a_q)
     mean_angle_deg = float(np.degrees(np.linalg.norm(alpha, axis=1).mean()))
     if mean_angle_deg < MIN_ROTATION_DEG:
@@ -224,16 +229,9 @@ def estimate_device_offset(
     trans_weak = weak_axes(_translation_excitation(rot_a), threshold=WEAK_EXCITATION)
     rotation0 = initial_rotation(sampler, estimate, pairs.i, pairs.j, offset_ns=offset_ns)
     free = [k not in trans_weak for k in range(3)]
-    if len(rot_weak) == 1 and _moves_across(b_t @ rotation0.T, rot_weak[0]):
-        # Every rotation is about one axis (a ground robot), so the rotation axes cannot
-        # tell the rotation about it; the direction of travel can (the sensor's travel
-        # seen from the body), when the body moves across that axis.
-        rotation0 = _rotation_from_travel(
-            rot_a, a_t, b_t, rotation0, rot_weak[0], free=free, with_scale=with_scale
-        )
-        rot_weak = []
-    for k in rot_weak:
-        rotation0 = _drop_rotation_about(rotation0, k)
+    rotation0, rot_weak, travel_axis = _rotation_about_weak_axes(
+        (rot_a, a_t, b_t), rotation0, rot_weak, free=free, with_scale=with_scale
+    )
     translation0, scale0 = _initial_translation(
         rot_a, a_t, b_t, rotation0, free=free, with_scale=with_scale
     )
@@ -255,10 +253,20 @@ def estimate_device_offset(
         options=options,
     )
     sd = np.sqrt(np.diag(fit.cov))
+    notes: list[str] = []
+    if travel_axis is not None:
+        sd[1 + travel_axis], note = _travel_axis_sigma(
+            (rot_a, a_t, b_t, b_q),
+            fit.rotation,
+            travel_axis,
+            float(sd[1 + travel_axis]),
+            free=free,
+            with_scale=with_scale,
+        )
+        notes.append(note)
     unobservable = tuple(
         [TRANSLATION_AXES[k] for k in trans_weak] + [ROTATION_AXES[k] for k in rot_weak]
     )
-    notes: list[str] = []
     if unobservable:
         notes.append(
             f"The motion does not excite the device offset's {', '.join(unobservable)} "
@@ -355,6 +363,34 @@ def _translation_excitation(rot_a: FloatArray) -> FloatArray:
     return out
 
 
+def _rotation_about_weak_axes(
+    motions: tuple[FloatArray, FloatArray, FloatArray],
+    rotation0: FloatArray,
+    rot_weak: list[int],
+    *,
+    free: list[bool],
+    with_scale: bool,
+) -> tuple[FloatArray, list[int], int | None]:
+    """The start rotation with its weak axes settled: told by the travel, or dropped.
+
+    Returns:
+        The rotation, the axes left unobservable, and the axis told by the travel (None
+        when none is).
+    """
+    rot_a, a_t, b_t = motions
+    if len(rot_weak) == 1 and _moves_across(b_t @ rotation0.T, rot_weak[0]):
+        # Every rotation is about one axis (a ground robot), so the rotation axes cannot
+        # tell the rotation about it; the direction of travel can (the sensor's travel
+        # seen from the body), when the body moves across that axis.
+        rotation = _rotation_from_travel(
+            rot_a, a_t, b_t, rotation0, rot_weak[0], free=free, with_scale=with_scale
+        )
+        return rotation, [], rot_weak[0]
+    for k in rot_weak:
+        rotation0 = _drop_rotation_about(rotation0, k)
+    return rotation0, rot_weak, None
+
+
 def _moves_across(travel_body: FloatArray, axis: int) -> bool:
     """Whether the windows' travel (body frame) has an RMS of MIN_TRAVEL_M across ``axis``."""
     across = np.delete(travel_body, axis, axis=1)
@@ -395,6 +431,80 @@ def _rotation_from_travel(
     angle = float(np.arctan2(sol[k + 1], sol[k]))
     out: FloatArray = Rotation.from_rotvec(angle * u).as_matrix() @ rotation
     return out
+
+
+def _travel_axis_sigma(
+    motions: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
+    rotation: FloatArray,
+    axis: int,
+    fit_sigma: float,
+    *,
+    free: list[bool],
+    with_scale: bool,
+) -> tuple[float, str]:
+    """The honest 1-sigma (rad) of the rotation about a planar run's only axis, and a note.
+
+    The fit's sigma counts the windows' noise only; the larger of it and the spread along
+    the run (:func:`_travel_axis_spread`) is added in quadrature to half the turn per
+    window that the reference does not make (:func:`_unexplained_turn`).
+    """
+    rot_a, a_t, b_t, b_q = motions
+    spread = _travel_axis_spread(
+        (rot_a, a_t, b_t), rotation, axis, free=free, with_scale=with_scale
+    )
+    turn = _unexplained_turn(rot_a, b_q, rotation, axis)
+    note = (
+        f"Every rotation of the tracked body is about its {'xyz'[axis]} axis, so the device "
+        f"offset's rotation about it ({ROTATION_AXES[axis]}) is told only by the direction "
+        "of travel, which the estimate's heading drift bends: its sigma counts the turn per "
+        f"window that the reference does not make ({np.degrees(turn):.3f} deg) and the "
+        f"spread between {TRAVEL_BLOCKS} stretches of the run."
+    )
+    return float(np.hypot(max(fit_sigma, spread), 0.5 * turn)), note
+
+
+def _unexplained_turn(rot_a: FloatArray, b_q: FloatArray, rotation: FloatArray, axis: int) -> float:
+    """The mean turn per window about the rotation axis that the reference does not make (rad).
+
+    ``A X = X B`` leaves, about the only rotation axis, the estimate's heading drift over
+    a window in the rotation residual (no parameter absorbs it). The sensor's travel is
+    read in the frame at the window's start while the heading turns through the window,
+    so the direction of travel, and the rotation told from it, is off by about half of it.
+    """
+    rot_b = Rotation.from_quat(b_q).as_matrix()
+    residual = Rotation.from_matrix(
+        np.swapaxes(rot_a @ rotation, 1, 2) @ rotation @ rot_b
+    ).as_rotvec()
+    return abs(float(residual.mean(axis=0) @ (rotation.T @ np.eye(3)[axis])))
+
+
+def _travel_axis_spread(
+    motions: tuple[FloatArray, FloatArray, FloatArray],
+    rotation: FloatArray,
+    axis: int,
+    *,
+    free: list[bool],
+    with_scale: bool,
+) -> float:
+    """The 1-sigma of the rotation about the travel axis from its spread along the run (rad).
+
+    The rotation about the only rotation axis rests on the direction of travel, whose
+    errors (the estimate's drift, above all its heading drift) are correlated over the
+    whole run: the fit's sandwich sigma, which counts the windows as independent, claims
+    far too much. Solved again on :data:`TRAVEL_BLOCKS` consecutive stretches, the angles
+    scatter by what those errors do; the standard error of their mean (batch means), times
+    a Student factor for the few blocks, is the honest sigma of the whole.
+    """
+    rot_a, a_t, b_t = motions
+    angles = []
+    u = np.eye(3)[axis]
+    for block in np.array_split(np.arange(rot_a.shape[0]), TRAVEL_BLOCKS):
+        found = _rotation_from_travel(
+            rot_a[block], a_t[block], b_t[block], rotation, axis, free=free, with_scale=with_scale
+        )
+        angles.append(float(Rotation.from_matrix(found @ rotation.T).as_rotvec() @ u))
+    spread = float(np.std(angles, ddof=1)) / np.sqrt(TRAVEL_BLOCKS)
+    return spread * TRAVEL_STUDENT
 
 
 def _drop_rotation_about(rotation: FloatArray, axis: int) -> FloatArray:
