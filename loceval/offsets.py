@@ -118,15 +118,16 @@ def _unstamped(
         InputError: the time offset was asked to be estimated (``auto``).
     """
     which = " and ".join(repr(n) for n in names)
+    have = "has" if len(names) == 1 else "have"
     if time_offset_s is None:
         msg = (
-            f"{which} has no times (poses are numbered, as a KITTI file without its times "
+            f"{which} {have} no times (poses are numbered, as a KITTI file without its times "
             "file), so no time offset can be estimated; give the times file "
             "(kitti:PATH@times=TIMES) or a time offset of 0."
         )
         raise InputError(msg, option="time_offset_s")
     note = (
-        f"{which} has no times (poses are numbered, as a KITTI file without its times file): "
+        f"{which} {have} no times (poses are numbered, as a KITTI file without its times file): "
         "poses are matched by number and the clocks are not checked."
     )
     return OffsetCheck(

@@ -55,9 +55,7 @@ def _precise(rng: np.random.Generator) -> EvaluationResult:
 
 
 @pytest.mark.pdf
-def test_interval_reads_in_the_unit_of_its_value(
-    rng: np.random.Generator, tmp_path: Path
-) -> None:
+def test_interval_reads_in_the_unit_of_its_value(rng: np.random.Generator, tmp_path: Path) -> None:
     """``RMSE 3.0 mm (2.9–3.1)``: the interval in mm like the value, never metres after it."""
     result = _precise(rng)
     e = result.estimates[0]
@@ -196,7 +194,9 @@ def test_service_pdf_has_no_flag(rng: np.random.Generator, tmp_path: Path) -> No
     """The PDF made for the page or the API does not tell its reader to pass a flag."""
     truth = walk(rng, n=1200)
     result = evaluate(truth, [noisy(rng, truth, every=2, sigma=0.03, drift=0.0, name="AMCL")])
-    text = " ".join(" ".join(_pdf_text(_pdf(result, front_door=FrontDoor.SERVICE), tmp_path)).split())
+    text = " ".join(
+        " ".join(_pdf_text(_pdf(result, front_door=FrontDoor.SERVICE), tmp_path)).split()
+    )
     assert "--tolerance" not in text
     assert "options.tolerance in the API" in text
 
