@@ -22,6 +22,7 @@ from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from loceval.readers import parse_source, read_trajectory
 from loceval.trajectory import Trajectory
 from service.options import export_from_options
+from service.schemas import EvaluationOptions
 from tests import bagfactory as bf
 from tests.conftest import require_tool
 from tests.exporters.conftest import noisy, walk
@@ -90,8 +91,8 @@ def test_clock_offsets_read_in_one_unit(rng: np.random.Generator, tmp_path: Path
 def _fragments_are_whole_parts(name: str, tokens: list[str]) -> list[str]:
     """Tokens that are a piece of ``name`` cut anywhere but at a separator."""
     bad = []
-    for token in tokens:
-        token = token.strip("()'\",")
+    for raw in tokens:
+        token = raw.strip("()'\",")
         # A piece cut mid-word holds a separator on one side of the cut (its head);
         # words such as "ground" (from "ground truth") are not pieces of a name.
         if token == name or token not in name or not set(token) & set(SEPARATORS):
@@ -182,8 +183,6 @@ def test_service_report_asks_for_the_tolerance_in_its_own_words(
 
 def test_each_front_door_names_itself() -> None:
     """The service's jobs and the CLI build their export options with their own door."""
-    from service.schemas import EvaluationOptions  # noqa: PLC0415
-
     options = EvaluationOptions()
     assert export_from_options(options, front_door="service").front_door is FrontDoor.SERVICE
     assert export_from_options(options, front_door="cli").front_door is FrontDoor.CLI
