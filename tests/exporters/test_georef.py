@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from exporters.georef import crs_definition, utm_to_lat_lon, utm_zone
+from exporters.cad.georef import crs_definition, utm_to_lat_lon, utm_zone
+from exporters.cad.placement import parse_site, place_evaluation
 from exporters.options import ExportOptions, Units
-from exporters.placement import parse_site, place_evaluation
 from loceval.evaluation import EvaluationResult
 
 ezdxf = pytest.importorskip("ezdxf")
 rhino3dm = pytest.importorskip("rhino3dm")
 
-from exporters import dxf, rhino  # noqa: E402  (after the importorskip of its libraries)
+from exporters.cad import dxf, rhino  # noqa: E402  (after the importorskip of its libraries)
 
 SITE = "512340.0 5403210.5 112.3 30"
 """A site in ETRS89 / UTM zone 32N (Stuttgart area), yaw 30 degrees."""

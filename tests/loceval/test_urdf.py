@@ -1,4 +1,4 @@
-"""Tests for loceval.urdf: device offsets from fixed joints."""
+"""Tests for loceval.readers.urdf: device offsets from fixed joints."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from loceval.errors import ReaderError
-from loceval.urdf import read_urdf, read_urdf_joints, read_urdf_offset
+from loceval.readers.urdf import read_urdf, read_urdf_joints, read_urdf_offset
 
 
 def rx(a: float) -> np.ndarray:
