@@ -277,8 +277,10 @@ def top_modules(root: Path, package: str) -> list[str]:
     return sorted(path.name for path in (root / package).glob("*.py"))
 
 
-def http_leaks(root: Path, packages: Sequence[str]) -> list[str]:
-    """Return ``module:line`` for every import of a web framework or use of its HTTP errors."""
+def http_leaks(
+    root: Path, packages: Sequence[str], frameworks: Collection[str] = HTTP_MODULES
+) -> list[str]:
+    """Return ``module:line`` for every import of a web framework or raise of an HTTP error."""
     hits: list[str] = []
     for name, path in module_files(root, packages).items():
         tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
@@ -288,8 +290,11 @@ def http_leaks(root: Path, packages: Sequence[str]) -> list[str]:
                 imported = [alias.name for alias in node.names]
             elif isinstance(node, ast.ImportFrom) and not node.level:
                 imported = [node.module or ""]
-            used = node.id if isinstance(node, ast.Name) else getattr(node, "attr", None)
-            if any(n.split(".")[0] in HTTP_MODULES for n in imported) or used in HTTP_ERROR_NAMES:
+            raised = ""
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                call = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
+                raised = getattr(call, "id", None) or getattr(call, "attr", "")
+            if any(n.split(".")[0] in frameworks for n in imported) or raised in HTTP_ERROR_NAMES:
                 hits.append(f"{name}:{node.lineno}")
     return hits
 
@@ -308,6 +313,30 @@ def test_core_keeps_few_modules_at_its_top() -> None:
 def test_core_and_exporters_know_no_http() -> None:
     """Nothing under loceval/ or exporters/ imports a web framework or raises HTTP types."""
     assert http_leaks(ROOT, CORE_PACKAGES) == []
+
+
+RESOURCE_MODULES: Final = (
+    "service.datasets",
+    "service.evaluations",
+    "service.schedules",
+    "service.schedule_runs",
+    "service.recordings",
+    "service.jobs",
+    "service.runner",
+)
+"""The service's resource and job modules: below the routes, so they raise domain errors."""
+
+
+def test_resource_modules_raise_no_http_types() -> None:
+    """The service's resources raise domain errors; only the routes and adapters speak HTTP."""
+    files = module_files(ROOT, ("service",))
+    leaks = [
+        hit
+        for hit in http_leaks(ROOT, ("service",), ("fastapi", "starlette", "uvicorn"))
+        if hit.split(":")[0] in RESOURCE_MODULES
+    ]
+    assert set(RESOURCE_MODULES) <= set(files)
+    assert leaks == []
 
 
 def test_no_import_cycle() -> None:
