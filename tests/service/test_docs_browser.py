@@ -54,6 +54,9 @@ def test_vendored_swagger_ui_is_the_pinned_release_unmodified() -> None:
 def _operations(server: Any) -> list[tuple[str, str]]:
     document = httpx.get(f"{server.url}/openapi.json", timeout=10).json()
     assert document["openapi"].startswith("3.1")
+    # the page's introduction names every CAD format the API writes (IFC was left out)
+    for name in ("DXF", "3dm", "glTF", "IFC"):
+        assert name in document["info"]["description"], name
     return [(method.upper(), path) for path, ops in document["paths"].items() for method in ops]
 
 
