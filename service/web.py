@@ -16,10 +16,10 @@ from fastapi.responses import HTMLResponse, Response
 from jinja2 import Environment, FileSystemLoader
 
 from exporters import ARTIFACTS
+from exporters.cad.site import BUILDING_SUFFIXES
 from exporters.report import pdf_available
-from exporters.site import BUILDING_SUFFIXES
 from loceval import __version__
-from loceval.display import shown_text
+from loceval.core.display import shown_text
 from loceval.options import option
 
 __all__ = ["router"]

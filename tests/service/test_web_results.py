@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from exporters import ARTIFACTS
-from exporters.site import BUILDING_SUFFIXES
+from exporters.cad.site import BUILDING_SUFFIXES
 from tests.factories import make_trajectory, write_tum
 from tests.service.conftest import submit, upload, wait_for_evaluation
 from tests.service.test_web_browser import _choose, _enter_key, browser, page, wait_until_succeeded
