@@ -9,7 +9,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEVSTAMP := $(VENV)/.installed-dev
 
-.PHONY: setup setup-dev serve run demo test lint typecheck pytest bench clean lock
+.PHONY: setup setup-dev serve run demo test lint typecheck pytest bench clean lock vendor-swagger-ui
 
 LOCK_PYTHON := 3.11
 PIP_LOCKED := $(BIN)/python -m pip install --quiet --require-hashes --only-binary=:all:
@@ -65,6 +65,25 @@ lock:
 	.lockenv/bin/uv pip compile requirements/build.in --generate-hashes --universal \
 		--python-version $(LOCK_PYTHON) --no-header -o requirements/build.lock
 	rm -rf .lockenv
+
+# Refresh the Swagger UI that /docs serves (templates/web/vendor/swagger-ui; see its README):
+# `make vendor-swagger-ui SWAGGER_UI_VERSION=5.x.y`, then run tests/service/test_docs_browser.py.
+# npm checks the package against the registry's sha512; the files /docs needs, their licences
+# and their SHA-256 sums (checked by the tests) are written; node and npm are needed only here.
+SWAGGER_UI_VERSION ?= 5.35.0
+SWAGGER_UI_DIR := templates/web/vendor/swagger-ui
+SWAGGER_UI_FILES := swagger-ui-bundle.js swagger-ui.css favicon-32x32.png LICENSE NOTICE \
+	swagger-ui-bundle.js.LICENSE.txt
+
+vendor-swagger-ui:
+	rm -rf .swagger-ui && mkdir .swagger-ui
+	cd .swagger-ui && npm pack --silent swagger-ui-dist@$(SWAGGER_UI_VERSION) >/dev/null \
+		&& tar -xzf swagger-ui-dist-$(SWAGGER_UI_VERSION).tgz
+	mkdir -p $(SWAGGER_UI_DIR)
+	cd .swagger-ui/package && cp $(SWAGGER_UI_FILES) $(CURDIR)/$(SWAGGER_UI_DIR)/
+	echo $(SWAGGER_UI_VERSION) > $(SWAGGER_UI_DIR)/VERSION
+	cd $(SWAGGER_UI_DIR) && sha256sum $(SWAGGER_UI_FILES) > SHA256SUMS
+	rm -rf .swagger-ui
 
 clean:
 	rm -rf $(VENV) out var .mypy_cache .ruff_cache

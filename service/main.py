@@ -33,9 +33,10 @@ logger = logging.getLogger(__name__)
 
 _DESCRIPTION = """
 How well does this localization system work in *our* building? Upload recordings (ROS 1/2
-bags, MCAP, zipped bag folders, TUM, EuRoC, KITTI, OptiTrack Motive CSV, generic CSV),
-evaluate an estimate against the ground truth as a background job, and download the
-report (HTML, PDF), the errors (CSV) and the paths for CAD (DXF, Rhino 3dm, 3DM JSON, glTF).
+bags, MCAP, zipped bag folders, TUM, EuRoC, KITTI, OptiTrack Motive CSV, generic CSV) and
+building models (IFC, GLB, OBJ, PLY, STL, DXF floor plans), evaluate an estimate against the
+ground truth as a background job, and download the report (HTML, PDF), the errors (CSV) and
+the paths for CAD (DXF, Rhino 3dm, 3DM JSON, glTF, IFC).
 
 Every `/api/v1` request needs `Authorization: Bearer KEY`; every error is an
 `application/problem+json` document whose `detail` says what to do.

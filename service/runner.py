@@ -186,9 +186,7 @@ def run_job(
         report(f"reading {source.name}", _READ * k / len(sources))
         trajectories.append(source.read(stamp=job.stamp))
 
-    def evaluating(stage: str, fraction: float) -> None:
-        report(stage, _READ + (_EVALUATE - _READ) * fraction)
-
+    evaluating = _evaluating(report)
     if job.ranging is not None:
         from loceval.radio_evaluation import evaluate_radio  # noqa: PLC0415
 
@@ -215,6 +213,7 @@ def run_job(
         def writing(stage: str, fraction: float) -> None:
             report(stage, _EVALUATE + (1.0 - _EVALUATE) * fraction)
 
+        report("preparing the files", _EVALUATE)  # placing the paths comes before any file
         title = f"{result.reference.name} vs {', '.join(e.name for e in result.estimates)}"
         names = None
         if job.formats is not None:
@@ -224,6 +223,20 @@ def run_job(
         )
     report("done", 1.0)
     return result
+
+
+def _evaluating(report: ProgressCallback) -> ProgressCallback:
+    """Return the progress callback of the evaluation step: its share of the bar.
+
+    The evaluation's own last stage, ``done``, is not the job's end (the files are still to
+    be written), so it is not passed on: ``done`` is reported once, at 100 %.
+    """
+
+    def evaluating(stage: str, fraction: float) -> None:
+        if stage != "done":
+            report(stage, _READ + (_EVALUATE - _READ) * fraction)
+
+    return evaluating
 
 
 def is_control_points(spec: SourceSpec) -> bool:
@@ -258,9 +271,7 @@ def _run_checkpoints(
     if job.visits is not None:
         inputs.append(dict(job.visits.provenance))
 
-    def evaluating(stage: str, fraction: float) -> None:
-        report(stage, _READ + (_EVALUATE - _READ) * fraction)
-
+    evaluating = _evaluating(report)
     result = evaluate_control_points(
         points,
         estimates,

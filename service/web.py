@@ -15,9 +15,12 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import HTMLResponse, Response
 from jinja2 import Environment, FileSystemLoader
 
+from exporters import ARTIFACTS
+from exporters.cad.site import BUILDING_SUFFIXES
 from exporters.report import pdf_available
 from loceval import __version__
 from loceval.core.display import shown_text
+from loceval.options import option
 
 __all__ = ["router"]
 
@@ -58,9 +61,19 @@ def index(request: Request) -> HTMLResponse:
         The rendered page, never cached without a check. ``<body data-pdf-reports>`` says
         whether this server can write PDFs (WeasyPrint and pango load; checked once per
         process): when it cannot, the page asks for no ``report.pdf`` or ``summary.pdf``.
+        ``<body data-artifacts>`` lists the files an evaluation can make (the server's
+        :data:`exporters.ARTIFACTS`, in order), the upload hint names the building model
+        formats and the up-axis choice offers the option table's choices, so the page
+        copies none of these by hand.
     """
     template = _environment(_templates_dir(request)).get_template(_PAGE)
-    html = template.render(version=__version__, pdf_reports=pdf_available())
+    html = template.render(
+        version=__version__,
+        pdf_reports=pdf_available(),
+        artifacts=list(ARTIFACTS),
+        building_formats=", ".join(s.lstrip(".").upper() for s in BUILDING_SUFFIXES),
+        building_up=option("building_up"),
+    )
     return HTMLResponse(
         html, headers={**_HEADERS, "X-Frame-Options": "DENY"}, media_type="text/html"
     )

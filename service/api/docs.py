@@ -1,8 +1,10 @@
 """The API's documentation page, ``/docs``, with Swagger UI's files served by the service.
 
 FastAPI's own ``/docs`` loads Swagger UI from a CDN, which a site network without internet
-cannot reach. Here the page and its script, stylesheet and icon come from the
-``swagger-ui-bundle`` package (Apache-2.0), so the documentation works offline.
+cannot reach. Here the page's script, stylesheet and icon are Swagger UI 5 (Apache-2.0),
+vendored in ``templates/web/vendor/swagger-ui/`` at the version its ``VERSION`` file pins
+(``make vendor-swagger-ui`` refreshes it): version 5 renders the OpenAPI 3.1 document FastAPI
+writes, which the 4.x of the ``swagger-ui-bundle`` package could not.
 """
 
 from __future__ import annotations
@@ -14,9 +16,11 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.openapi.docs import get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
 from fastapi.responses import HTMLResponse, Response
 
-__all__ = ["ASSETS_PREFIX", "router"]
+__all__ = ["ASSETS_PREFIX", "SWAGGER_UI_DIR", "router"]
 
 ASSETS_PREFIX: Final = "/docs/assets"
+SWAGGER_UI_DIR: Final = Path("web/vendor/swagger-ui")
+"""Swagger UI's files, relative to the templates folder."""
 _ASSETS: Final = {
     "swagger-ui-bundle.js": "text/javascript; charset=utf-8",
     "swagger-ui.css": "text/css; charset=utf-8",
@@ -27,11 +31,9 @@ _CACHE: Final = {"Cache-Control": "public, max-age=86400", "X-Content-Type-Optio
 router = APIRouter(include_in_schema=False)
 
 
-def _assets_dir() -> Path:
-    """Return the folder of Swagger UI's files in the installed ``swagger-ui-bundle``."""
-    from swagger_ui_bundle import swagger_ui_path  # noqa: PLC0415  (only when /docs is asked)
-
-    return Path(swagger_ui_path)
+def _assets_dir(request: Request) -> Path:
+    """Return the folder of Swagger UI's files in the running app's templates folder."""
+    return Path(request.app.state.settings.templates_dir) / SWAGGER_UI_DIR
 
 
 @router.get("/docs", response_class=HTMLResponse)
@@ -66,25 +68,28 @@ def swagger_ui_redirect() -> HTMLResponse:
 
 
 @router.get(ASSETS_PREFIX + "/{name}")
-def swagger_asset(name: str) -> Response:
+def swagger_asset(request: Request, name: str) -> Response:
     """Return one of Swagger UI's files.
 
     Args:
+        request: The incoming request; its app's settings name the templates folder.
         name: The file's name; only the page's three files are served.
 
     Returns:
         The file with its media type, cacheable for a day.
 
     Raises:
-        HTTPException: 404 for any other name, or when the package is not installed.
+        HTTPException: 404 for any other name, or when the templates folder lacks it.
     """
     media_type = _ASSETS.get(name)
     if media_type is None:
         raise HTTPException(status_code=404, detail=f"{name} is not a file of the docs page")
     try:
-        content = (_assets_dir() / name).read_bytes()
-    except (ImportError, FileNotFoundError) as err:
+        content = (_assets_dir(request) / name).read_bytes()
+    except FileNotFoundError as err:  # a deployment without the templates folder
         raise HTTPException(
-            status_code=404, detail="Swagger UI's files are not installed (swagger-ui-bundle)"
+            status_code=404,
+            detail=f"Swagger UI's {name} is not installed: the service's templates folder "
+            f"lacks {SWAGGER_UI_DIR}/ (LOCEVAL_TEMPLATES_DIR names the folder)",
         ) from err
     return Response(content, media_type=media_type, headers=_CACHE)

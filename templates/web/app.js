@@ -11,10 +11,9 @@
   const UNAUTHORIZED =
     "The server did not accept the API key (401 Unauthorized). " +
     "Paste a valid key for your project in the box at the top of the page.";
-  const ALL_ARTIFACTS = [
-    "report.html", "report.pdf", "result.json", "errors.csv",
-    "paths.dxf", "paths.3dm", "paths.3dm.json", "paths.glb",
-  ];
+  // The files an evaluation can make, in the server's order: rendered into the page by the
+  // server from its list of artifacts, never copied here by hand.
+  const ALL_ARTIFACTS = JSON.parse(document.body.dataset.artifacts || "[]");
   const OPENED_IN_TAB = new Set(["report.html", "report.pdf"]);
   // The server renders whether it can write PDFs (WeasyPrint and pango): without, the page
   // asks for no report.pdf and its schedules for summary.html only.
@@ -507,7 +506,9 @@
   function describeDataset(dataset) {
     const sources = (dataset.inspection && dataset.inspection.sources) || [];
     const kind = dataset.kind ? `${dataset.kind}, ` : "";
-    const table = sources.length ? "" : radioSummary(dataset.inspection || {});
+    const inspection = dataset.inspection || {};
+    if (inspection.kind === "building") return `${buildingSummary(inspection)}.`;
+    const table = sources.length ? "" : radioSummary(inspection);
     return `${kind}${table || plural(sources.length, "trajectory source", "trajectory sources")}.`;
   }
 
@@ -526,6 +527,7 @@
       renderDatasets(page.count);
       renderSourceSelects();
       renderDeviceSelect();
+      renderBuildingSelect();
       renderRadioSelects();
       if (state.history) renderHistory(state.history.items, state.history.count);
     } catch (err) {
@@ -569,7 +571,9 @@
             typeof s.pose_count === "number" ? plural(s.pose_count, "pose", "poses") : null,
             typeof s.duration_s === "number" ? formatSeconds(s.duration_s) : null,
           ].filter(Boolean).join(", ")}` }))))
-        : el("span", { className: "muted", text: dataset.kind === "urdf" ? "No trajectory (device description)" : radioSummary(inspection) || "No trajectory found" });
+        : el("span", { className: "muted", text: dataset.kind === "urdf" ? "No trajectory (device description)"
+          : inspection.kind === "building" ? `No trajectory (${buildingSummary(inspection)})`
+            : radioSummary(inspection) || "No trajectory found" });
       if (sources.length > 4) {
         const topics = sources.filter((s) => s.kind === "topic").length;
         const summary = `${plural(sources.length, "trajectory source", "trajectory sources")}` +
@@ -817,6 +821,10 @@
       if (!Number.isFinite(value) || value < 0) throw new FieldError("simplify_m", "Simplify paths: write a distance in metres, 0 or more.");
       options.simplify_m = value;
     }
+    const building = $("opt-building").value;
+    if (building) options.building = building;
+    const up = $("opt-building-up");
+    if (up.value !== up.querySelector("option[selected]")?.value) options.building_up = up.value;
     const boxes = Array.from(document.querySelectorAll("#format-boxes input"));
     const chosen = boxes.filter((b) => b.checked).map((b) => b.value);
     if (chosen.length < boxes.length) options.formats = chosen;
@@ -850,6 +858,28 @@
     }
     select.value = Array.from(select.options).some((o) => o.value === previous) ? previous : "";
     renderDeviceLinks();
+  }
+
+  /** What an uploaded building model holds, for the datasets list and the building choice. */
+  function buildingSummary(inspection) {
+    const facts = [`${String(inspection.format || "").toUpperCase()} building model`.trim()];
+    if (typeof inspection.faces === "number") facts.push(plural(inspection.faces, "face", "faces"));
+    if (typeof inspection.segments === "number") facts.push(`floor plan, ${plural(inspection.segments, "line", "lines")}`);
+    if (inspection.georeferenced) facts.push(`georeferenced${inspection.crs ? ` (${inspection.crs})` : ""}`);
+    return facts.join(", ");
+  }
+
+  /** Fill the building model choice with the uploaded building models (options.building). */
+  function renderBuildingSelect() {
+    const select = $("opt-building");
+    const previous = select.value;
+    select.replaceChildren(el("option", { value: "", text: "— none —" }));
+    for (const dataset of state.datasets) {
+      const inspection = dataset.inspection || {};
+      if (inspection.kind !== "building") continue;
+      select.append(el("option", { value: dataset.id, text: `${datasetLabel(dataset)} (${buildingSummary(inspection)})` }));
+    }
+    select.value = Array.from(select.options).some((o) => o.value === previous) ? previous : "";
   }
 
   /** Offer the chosen device file's links (URDF) or tf frames (bag) for the two link fields. */
@@ -1162,7 +1192,11 @@
     $("current-bar").dataset.state = status;
     let stage = progress.stage || "";
     if (status === "queued") stage = "Waiting in the queue for a worker…";
-    else if (status === "running") stage = `${capitalize(stage || "working")}… ${pct}%`.replace(/……/, "…");
+    else if (status === "running") {
+      // a stage that names an end ("done") is not what a running job is doing
+      const doing = !stage || /^(done|finished|succeeded)$/i.test(stage) ? "working" : stage;
+      stage = `${capitalize(doing)}… ${pct}%`.replace(/……/, "…");
+    }
     else if (status === "succeeded") stage = "Finished.";
     else if (status === "failed") stage = stage && stage !== "failed" ? `Failed while ${stage}.` : "";
     $("current-stage").textContent = stage;
@@ -1184,23 +1218,54 @@
     }
   }
 
+  const UNDECIDED_TITLE = "Undecided: the 95 % interval of the share within the tolerance " +
+    "straddles the required share, so this run cannot tell whether it meets it: record a longer run.";
+
+  /** The badge of a verdict, worded as the report words it. */
   function verdictBadge(verdict) {
     if (verdict === "pass") return el("span", { className: "verdict verdict-pass", text: "PASS" });
     if (verdict === "fail") return el("span", { className: "verdict verdict-fail", text: "FAIL" });
+    if (verdict === "undecided") {
+      return el("span", { className: "verdict verdict-undecided", text: "UNDECIDED", title: UNDECIDED_TITLE });
+    }
     return el("span", { className: "verdict verdict-none", text: "no tolerance", title: "Set a tolerance to get a pass/fail verdict" });
+  }
+
+  /** A share (0..1) as a percentage with one decimal, as the report prints it. */
+  function formatPercent(x) {
+    return `${(x * 100).toFixed(1)} %`;
+  }
+
+  /**
+   * What the verdict rests on, from the result document's verdict: the share within the
+   * tolerance, its 95 % interval and the share required (“96.1 % within 0.1 m, 95 % interval
+   * 90.7–100.0 %, 95 % required”).
+   */
+  function verdictFacts(verdict) {
+    if (!verdict || typeof verdict.share_within !== "number") return "";
+    const parts = [`${formatPercent(verdict.share_within)} within ${verdict.tolerance_m} m`];
+    if (Array.isArray(verdict.ci95) && verdict.ci95.length === 2) {
+      const [lo, hi] = verdict.ci95;
+      parts.push(`95 % interval ${(lo * 100).toFixed(1)}–${(hi * 100).toFixed(1)} %`);
+    }
+    if (typeof verdict.required_share === "number") parts.push(`${+(verdict.required_share * 100).toFixed(4)} % required`);
+    return parts.join(", ");
   }
 
   function renderSummary(evaluation) {
     const body = $("summary-body");
     body.replaceChildren();
-    for (const row of evaluation.summary || []) {
+    const estimates = (evaluation.result && Array.isArray(evaluation.result.estimates)) ? evaluation.result.estimates : [];
+    (evaluation.summary || []).forEach((row, i) => {
+      const facts = verdictFacts(estimates[i] && estimates[i].verdict);
       body.append(el("tr", {},
         el("th", { scope: "row", className: "name", text: row.name }),
         el("td", { className: "num ate", "data-label": "ATE RMSE", dataset: { valueM: String(row.ate_rmse_m) }, text: formatMetres(row.ate_rmse_m) }),
         el("td", { className: "num", "data-label": "RPE RMSE", text: formatMetres(row.rpe_rmse_m) }),
         el("td", { className: "num", "data-label": "Matched", text: typeof row.matched === "number" ? row.matched.toLocaleString() : "—" }),
-        el("td", { "data-label": "Verdict" }, verdictBadge(row.verdict))));
-    }
+        el("td", { className: "verdict-cell", "data-label": "Verdict" }, verdictBadge(row.verdict),
+          facts ? el("div", { className: "muted small verdict-facts", text: facts }) : null)));
+    });
   }
 
   function artifactUrl(evaluation, artifact) {
@@ -1220,7 +1285,7 @@
     const list = $("artifact-list");
     list.replaceChildren();
     const artifacts = [...(evaluation.artifacts || [])].sort((a, b) => {
-      const rank = (x) => (ALL_ARTIFACTS.indexOf(x.name) + 1 || 99);
+      const rank = (x) => (OPENED_IN_TAB.has(x.name) ? 0 : 1) * 100 + (ALL_ARTIFACTS.indexOf(x.name) + 1 || 99);
       return rank(a) - rank(b) || a.name.localeCompare(b.name);
     });
     if (!artifacts.length) {
@@ -1331,20 +1396,22 @@
     }
     if (summary.length === 1) {
       cell.dataset.valueM = String(summary[0].ate_rmse_m);
-      cell.append(formatMetres(summary[0].ate_rmse_m), " ", verdictMark(summary[0].verdict));
+      cell.append(formatMetres(summary[0].ate_rmse_m), ...verdictMark(summary[0].verdict));
       return cell;
     }
     for (const s of summary) {
       cell.append(el("div", {}, el("span", { className: "muted small", text: `${s.name} ` }),
-        formatMetres(s.ate_rmse_m), " ", verdictMark(s.verdict)));
+        formatMetres(s.ate_rmse_m), ...verdictMark(s.verdict)));
     }
     return cell;
   }
 
+  /** The history's small badge of a verdict; nothing (not a "null") without a tolerance. */
   function verdictMark(verdict) {
-    if (verdict === "pass") return el("span", { className: "verdict verdict-pass tiny", text: "PASS" });
-    if (verdict === "fail") return el("span", { className: "verdict verdict-fail tiny", text: "FAIL" });
-    return null;
+    if (!verdict) return [];
+    const badge = verdictBadge(verdict);
+    badge.classList.add("tiny");
+    return [" ", badge];
   }
 
   function renderHistory(items, count) {
@@ -1587,6 +1654,23 @@
     }
   }
 
+  // --- card numbers ------------------------------------------------------------------------
+
+  /** Number the shown cards 1, 2, 3… in page order: the numbers are not written in the HTML. */
+  function numberSteps() {
+    let n = 0;
+    for (const card of document.querySelectorAll("#app > .card")) {
+      const step = card.querySelector(":scope > h2 .step, :scope > .card-head > h2 .step");
+      if (!step) continue;
+      if (card.hidden) {
+        step.textContent = "";
+        continue;
+      }
+      n += 1;
+      if (step.textContent !== String(n)) step.textContent = String(n);
+    }
+  }
+
   // --- start -------------------------------------------------------------------------------
 
   function init() {
@@ -1625,6 +1709,9 @@
     $("schedules-refresh").addEventListener("click", loadSchedules);
     $("opt-device-dataset").addEventListener("change", renderDeviceLinks);
     renderFormatBoxes();
+    numberSteps();
+    // A card shown or hidden (the current evaluation's) renumbers the cards after it.
+    new MutationObserver(numberSteps).observe($("app"), { attributes: true, attributeFilter: ["hidden"], subtree: true });
     try {
       $("sched-timezone").defaultValue = Intl.DateTimeFormat().resolvedOptions().timeZone || "UTC";
     } catch {

@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from exporters import ARTIFACTS
 from tests.factories import ROVER_URDF
 from tests.service.conftest import upload
 from tests.service.test_web_browser import (
@@ -89,9 +90,9 @@ def test_every_api_option_is_sent(
     page.fill("#opt-site", "12.5  3.2 0 90")
     page.fill("#opt-simplify", "0.01")
     boxes = page.locator("#format-boxes input")
-    expect(boxes).to_have_count(8)
+    expect(boxes).to_have_count(len(ARTIFACTS))  # the server's list, paths.ifc among them
     assert page.is_disabled("#format-boxes input[value='result.json']")
-    for name in ("report.pdf", "paths.3dm", "paths.3dm.json", "paths.glb"):
+    for name in ("report.pdf", "paths.3dm", "paths.3dm.json", "paths.glb", "paths.ifc"):
         page.uncheck(f"#format-boxes input[value='{name}']")
     page.screenshot(path=str(tmp_path / "options.png"), full_page=True)
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import pytest
 
+from exporters import ARTIFACTS
 from exporters.report import render as report_render
 from tests.service._api_fixtures import Api
 from tests.service.conftest import running_server
@@ -32,15 +33,7 @@ from tests.service.test_web_browser import (
 __all__ = ["browser", "page"]  # the fixtures, used by name
 
 PDF_NOTE = "PDF reports need pango on the server"
-ALL_BUT_PDF = [
-    "report.html",
-    "result.json",
-    "errors.csv",
-    "paths.dxf",
-    "paths.3dm",
-    "paths.3dm.json",
-    "paths.glb",
-]
+ALL_BUT_PDF = [name for name in ARTIFACTS if name != "report.pdf"]
 _NO_PANGO = '''"""Stands in for WeasyPrint where its system library pango is missing."""
 raise OSError(
     "cannot load library 'libpango-1.0-0': libpango-1.0-0: cannot open shared object file: "
