@@ -16,30 +16,29 @@ All of it is vectorised over the poses or pairs.
 from __future__ import annotations
 
 from enum import StrEnum
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from loceval._typing import FloatArray, IntArray
+from loceval._typing import FloatArray, IntArray, StampsNs
 from loceval.alignment import align_umeyama
-from loceval.association import associate
 from loceval.errors import MetricError
 from loceval.geometry import SimilarityTransform
 from loceval.metrics import ErrorSeries
 from loceval.trajectory import Trajectory
-
-if TYPE_CHECKING:
-    from loceval.evaluation import EvaluationConfig
 
 __all__ = [
     "RELATION_UNITS",
     "PoseRelation",
     "ape_series",
     "evo_pairs",
+    "match_nearest_seconds",
     "rpe_series",
     "scale_only",
+    "seconds_of",
 ]
+
+_NS_PER_S = 1_000_000_000
 
 
 class PoseRelation(StrEnum):
@@ -190,6 +189,35 @@ def _path_axis(trajectory: Trajectory, unit: str) -> FloatArray:
     return out
 
 
+_PAIR_BLOCK = 512
+"""Start poses compared at once by :func:`_angle_pairs` (a block of 512 x N angles)."""
+
+
+def _angle_pairs(
+    trajectory: Trajectory, *, delta_rad: float, tolerance: float
+) -> tuple[IntArray, IntArray]:
+    """Every pair ``i < j`` whose relative rotation angle is within ``tolerance`` of delta.
+
+    The angles are computed a block of start poses at a time (memory: 512 x N).
+    """
+    if trajectory.quat_xyzw is None:
+        msg = "An RPE delta in degrees or radians needs orientations; count frames or metres."
+        raise MetricError(msg, option="rpe_unit")
+    quats = trajectory.quat_xyzw / np.linalg.norm(trajectory.quat_xyzw, axis=1, keepdims=True)
+    n = len(quats)
+    starts: list[IntArray] = []
+    ends: list[IntArray] = []
+    for first in range(0, n, _PAIR_BLOCK):  # one turn per block of 512 poses
+        block = quats[first : first + _PAIR_BLOCK]
+        cosines = np.clip(np.abs(block @ quats.T), 0.0, 1.0)
+        angles = 2.0 * np.arccos(cosines)
+        later = np.arange(n)[None, :] > np.arange(first, first + len(block))[:, None]
+        i, j = np.nonzero(later & (np.abs(angles - delta_rad) <= tolerance * delta_rad))
+        starts.append(i + first)
+        ends.append(j)
+    return np.concatenate(starts).astype(np.intp), np.concatenate(ends).astype(np.intp)
+
+
 def evo_pairs(
     reference: Trajectory,
     estimate: Trajectory,
@@ -205,6 +233,10 @@ def evo_pairs(
     ``f``: ``j = i + delta`` frames. ``m``, ``d``, ``r``: ``j`` is the first pose at least
     ``delta`` metres, degrees or radians of motion after ``i``, measured along the
     *estimate* as evo does. Without ``all_pairs`` each pair starts where the last ended.
+    With it (as evo 1.38 was observed to choose them): frames, every ``i``; metres, for
+    each ``i`` the first ``j`` whose path is at least ``delta (1 - tolerance)`` if it is
+    at most ``delta (1 + tolerance)``; degrees and radians, every ``i < j`` whose direct
+    relative rotation angle is within ``tolerance * delta`` of ``delta``.
 
     Args:
         reference: the matched reference poses (only their number is used).
@@ -233,11 +265,21 @@ def evo_pairs(
     axis = _path_axis(reference if from_reference else estimate, unit)
     reach = np.searchsorted(axis, axis + delta, side="left")
     reach = np.maximum(reach, np.arange(1, n + 1))
-    if all_pairs:
-        starts = np.flatnonzero(reach < n)
-        ends = reach[starts]
-        close = np.abs(axis[ends] - axis[starts] - delta) <= tolerance * delta
+    if all_pairs and unit == "m":  # per start, the pose whose path is nearest delta
+        low = np.maximum(np.searchsorted(axis, axis + delta, side="left"), np.arange(1, n + 1))
+        below = np.minimum(np.maximum(low - 1, np.arange(1, n + 1)), n - 1)
+        above = np.minimum(low, n - 1)
+        pick_below = np.abs(axis[below] - axis - delta) <= np.abs(axis[above] - axis - delta)
+        ends = np.where(pick_below, below, above)
+        starts = np.arange(n)
+        close = (ends > starts) & (np.abs(axis[ends] - axis - delta) <= delta * tolerance)
         return starts[close], ends[close]
+    if all_pairs:  # every pair whose relative rotation is within the tolerance
+        return _angle_pairs(
+            reference if from_reference else estimate,
+            delta_rad=np.radians(delta) if unit == "d" else delta,
+            tolerance=tolerance,
+        )
     firsts: list[int] = []
     i = 0
     reach_list = reach.tolist()
@@ -248,24 +290,62 @@ def evo_pairs(
     return starts, reach[starts]
 
 
-def scale_only(reference: Trajectory, estimate: Trajectory, config: EvaluationConfig) -> Trajectory:
-    """Return the estimate scaled about its frame's origin (evo's ``-s`` without ``-a``).
+def scale_only(reference: Trajectory, estimate: Trajectory, *, poses: int | None) -> Trajectory:
+    """Return the matched estimate scaled about its frame's origin (evo's ``-s`` without ``-a``).
 
-    The scale is Umeyama's Sim(3) scale of the poses matched as ``config`` matches them
-    (within its alignment window); rotation and translation are not applied.
+    The scale is Umeyama's Sim(3) scale of the first ``poses`` matched poses (all: None);
+    the rotation and translation found with it are not applied.
+
+    Args:
+        reference: the matched reference poses.
+        estimate: the matched estimate poses, pose by pose with ``reference``.
+        poses: how many leading poses estimate the scale (None: all).
     """
-    _NS = 1_000_000_000
-    matched = associate(
-        reference,
-        estimate,
-        method=config.association,
-        max_dt_ns=round(config.max_dt_s * _NS),
-        max_gap_ns=round(config.max_gap_s * _NS),
-        offset_ns=round(config.time_offset_s * _NS),
-    )
-    n = config.align_first.count(matched.estimate.stamps_ns)
+    n = len(estimate) if poses is None else min(poses, len(estimate))
     found = align_umeyama(
-        matched.estimate.positions_xyz[:n], matched.reference.positions_xyz[:n], with_scale=True
+        estimate.positions_xyz[:n], reference.positions_xyz[:n], with_scale=True
     )
-    scaling = SimilarityTransform(np.eye(3), np.zeros(3), found.scale)
-    return estimate.transformed(scaling)
+    return estimate.transformed(SimilarityTransform(np.eye(3), np.zeros(3), found.scale))
+
+
+def seconds_of(stamps_ns: StampsNs) -> FloatArray:
+    """Return float seconds as a text reader parses them (rounded once, as near as can be).
+
+    int64 nanoseconds are exact in an 80-bit long double; one division there and one
+    rounding to float64 gives the float nearest the decimal stamp, all but never off by one
+    unit in the last place.
+    """
+    exact = stamps_ns.astype(np.longdouble) / np.longdouble(_NS_PER_S)
+    out: FloatArray = exact.astype(np.float64)
+    return out
+
+
+def match_nearest_seconds(
+    reference_ns: StampsNs, estimate_ns: StampsNs, *, max_dt_s: float, offset_s: float = 0.0
+) -> tuple[IntArray, IntArray]:
+    """Match each estimate stamp to the nearest reference stamp in float seconds (evo's way).
+
+    Unlike :func:`loceval.association.associate` the matching is not one-to-one (two
+    estimate poses may share a reference pose), compares float seconds, not nanoseconds,
+    and a stamp half-way between two reference stamps (in float seconds) takes the earlier one.
+
+    Args:
+        reference_ns: (N,) sorted reference stamps.
+        estimate_ns: (M,) sorted estimate stamps.
+        max_dt_s: the largest time difference of a match, seconds.
+        offset_s: added to the estimate's stamps first, seconds.
+
+    Returns:
+        ``(reference_index, estimate_index)`` of the matches, in the estimate's order.
+    """
+    t_ref = seconds_of(reference_ns)
+    t_est = seconds_of(estimate_ns) + offset_s
+    n_ref = t_ref.shape[0]
+    right = np.clip(np.searchsorted(t_ref, t_est, side="left"), 0, n_ref - 1)
+    left = np.clip(right - 1, 0, n_ref - 1)
+    d_right = np.abs(t_ref[right] - t_est)
+    d_left = np.abs(t_est - t_ref[left])
+    use_right = d_right < d_left
+    nearest = np.where(use_right, right, left)
+    within = np.flatnonzero(np.minimum(d_left, d_right) <= max_dt_s)
+    return nearest[within], within

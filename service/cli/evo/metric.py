@@ -12,7 +12,7 @@ by loceval's 95 % intervals and notes.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -23,7 +23,14 @@ from loceval.association import AssociationMethod
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from loceval.readers import SourceSpec, TrajectoryFormat
-from loceval.relations import PoseRelation, ape_series, evo_pairs, rpe_series, scale_only
+from loceval.relations import (
+    PoseRelation,
+    ape_series,
+    evo_pairs,
+    match_nearest_seconds,
+    rpe_series,
+    scale_only,
+)
 from service.cli.output import emit
 from service.runner import JobSource, file_provenance
 
@@ -72,6 +79,7 @@ class EvoRun:
         estimate: the estimate's matched poses after the alignment.
         info: evo's ``info`` entries (label, title, relation, delta).
         pairs: RPE: the ``(i, j)`` index pairs into the matched poses; APE: None.
+        estimate_poses: how many poses the estimate has (in the time window).
     """
 
     metric: str
@@ -86,6 +94,7 @@ class EvoRun:
     estimate: Trajectory
     info: dict[str, object]
     pairs: tuple[IntArray, IntArray] | None = None
+    estimate_poses: int = 0
 
     @property
     def pairs_second(self) -> IntArray:
@@ -180,26 +189,79 @@ def _config(args: argparse.Namespace, method: AlignMethod) -> EvaluationConfig:
     if not args.t_max_diff > 0:
         msg = f"--t_max_diff must be a positive number of seconds, got {args.t_max_diff!r}."
         raise InputError(msg)
+    # The poses are matched before (evo's way) and carry the same stamps: the core's
+    # nearest matching then pairs them as they are.
     return EvaluationConfig(
-        association=AssociationMethod.NEAREST,
-        max_dt_s=args.t_max_diff,
-        time_offset_s=args.t_offset,
-        align=method,
-        align_first=window,
+        association=AssociationMethod.NEAREST, max_dt_s=1e-6, align=method, align_first=window
     )
+
+
+def _matched(
+    reference: Trajectory, estimate: Trajectory, args: argparse.Namespace
+) -> tuple[Trajectory, Trajectory, str]:
+    """Match the poses as evo does; return them stamped alike, and a note on the unmatched."""
+    ref_idx, est_idx = match_nearest_seconds(
+        reference.stamps_ns, estimate.stamps_ns, max_dt_s=args.t_max_diff, offset_s=args.t_offset
+    )
+    if est_idx.size < 3:  # noqa: PLR2004  (alignment and RPE need three)
+        msg = (
+            f"Only {est_idx.size} of {len(estimate)} poses of {estimate.name!r} have a pose of "
+            f"{reference.name!r} within --t_max_diff {args.t_max_diff:g} s (with --t_offset "
+            f"{args.t_offset:g} s); check that both record the same run in the same clock, "
+            "or give --t_offset."
+        )
+        raise InputError(msg)
+    est = estimate.select(est_idx)
+    ref = replace(
+        reference,
+        stamps_ns=est.stamps_ns,
+        positions_xyz=reference.positions_xyz[ref_idx],
+        quat_xyzw=None if reference.quat_xyzw is None else reference.quat_xyzw[ref_idx],
+        cov6=None if reference.cov6 is None else reference.cov6[ref_idx],
+        warnings=(),
+    )
+    unmatched = len(estimate) - est_idx.size
+    note = ""
+    if unmatched:
+        note = (
+            f"{unmatched} of {len(estimate)} estimate poses have no reference pose within "
+            f"{args.t_max_diff:g} s and were not evaluated."
+        )
+    return ref, est, note
+
+
+def _gap_notes(reference: Trajectory) -> list[str]:
+    """Return the note on the reference's tracking losses (gaps over 0.1 s), if any."""
+    gaps = reference.tracking_losses(_NS_PER_S // 10)
+    if not gaps:
+        return []
+    longest = max(b - a for a, b in gaps) / _NS_PER_S
+    return [
+        f"The reference has {len(gaps)} {'gap' if len(gaps) == 1 else 'gaps'} longer than "
+        f"0.1 s (tracking loss; longest {longest:.3f} s); estimate poses in them have no "
+        "reference pose to match."
+    ]
 
 
 def _run(args: argparse.Namespace, *, rpe: bool) -> EvoRun:
     relation = PoseRelation(args.pose_relation)
     ref_source, est_source = _sources(args)
-    reference = _window(ref_source.read(stamp="header"), args.t_start, args.t_end)
-    estimate = _window(est_source.read(stamp="header"), args.t_start, args.t_end)
     method, words = _alignment(args)
     config = _config(args, method)
+    # evo's --t_start/--t_end select reference poses; estimate poses match them within
+    # --t_max_diff (so one may lie just outside the window).
+    reference = _window(ref_source.read(stamp="header"), args.t_start, args.t_end)
+    estimate = est_source.read(stamp="header")
+    matched_ref, matched_est, note = _matched(reference, estimate, args)
     if args.correct_scale and not args.align and not args.align_origin:
-        estimate = scale_only(reference, estimate, config)
+        matched_est = scale_only(matched_ref, matched_est, poses=config.align_first.poses)
     inputs = [dict(ref_source.provenance), dict(est_source.provenance)]
-    result = evaluate(reference, [estimate], config, inputs=inputs)
+    result = evaluate(matched_ref, [matched_est], config, inputs=inputs)
+    notes = [*reference.warnings, *([note] if note else []), *_gap_notes(reference)]
+    # The core saw the matched poses only: its gaps are the estimate's; the full
+    # reference's are named above.
+    kept = [w for w in result.reference_warnings if not w.startswith("The reference has")]
+    result = replace(result, reference_warnings=(*notes, *kept))
     found = result.estimates[0]
     ref, est = found.reference, found.aligned
     info: dict[str, object] = {"ref_name": ref_source.name, "est_name": est_source.name}
@@ -215,13 +277,16 @@ def _run(args: argparse.Namespace, *, rpe: bool) -> EvoRun:
             from_reference=args.pairs_from_reference,
         )
         series = rpe_series(ref, est, relation, pairs)
-        delta = f"{args.delta:g} ({_DELTA_WORDS[args.delta_unit]})"
+        shown = f"{int(args.delta)}" if args.delta_unit == "f" else f"{args.delta!r}"
+        delta = f"{shown} ({_DELTA_WORDS[args.delta_unit]})"
         pair_words = " using all pairs" if args.all_pairs else " using consecutive pairs"
         title = f"RPE w.r.t. {_RELATION_TITLES[relation]}\nfor delta = {delta}{pair_words}"
         info.update(delta=args.delta, delta_unit=args.delta_unit, all_pairs=args.all_pairs)
     else:
         series = ape_series(ref, est, relation)
         title = f"APE w.r.t. {_RELATION_TITLES[relation]}"
+    if config.align_first.poses is not None and method is not AlignMethod.NONE:
+        words += f" (aligned poses: {config.align_first.poses})"
     info.update(title=title, pose_relation=relation.value, label=_label(relation, rpe=rpe))
     return EvoRun(
         metric="rpe" if rpe else "ape",
@@ -236,6 +301,7 @@ def _run(args: argparse.Namespace, *, rpe: bool) -> EvoRun:
         estimate=est,
         info=info,
         pairs=pairs,
+        estimate_poses=len(estimate),
     )
 
 
@@ -262,7 +328,7 @@ def format_additions(run: EvoRun) -> str:
     lines = [
         "",
         f"loceval: {len(run.series)} errors from {matched} matched poses "
-        f"({len(found.estimate)} in the estimate).",
+        f"({run.estimate_poses} in the estimate).",
     ]
     if len(run.series) >= 8:  # noqa: PLR2004  (the intervals' least sample)
         from loceval.uncertainty import interval_stats  # noqa: PLC0415  (scipy)
