@@ -323,11 +323,13 @@ def seconds_of(stamps_ns: StampsNs) -> FloatArray:
 def match_nearest_seconds(
     reference_ns: StampsNs, estimate_ns: StampsNs, *, max_dt_s: float, offset_s: float = 0.0
 ) -> tuple[IntArray, IntArray]:
-    """Match each estimate stamp to the nearest reference stamp in float seconds (evo's way).
+    """Match stamps to the nearest of the other side in float seconds (evo's way).
 
-    Unlike :func:`loceval.association.associate` the matching is not one-to-one (two
-    estimate poses may share a reference pose), compares float seconds, not nanoseconds,
-    and a stamp half-way between two reference stamps (in float seconds) takes the earlier one.
+    The side with fewer stamps is matched to the other: each of its stamps takes the
+    nearest stamp there, if within ``max_dt_s``. Unlike
+    :func:`loceval.association.associate` the matching is not one-to-one (two poses of the
+    shorter side may share a pose of the longer), compares float seconds, not nanoseconds,
+    and a stamp half-way between two (in float seconds) takes the earlier one.
 
     Args:
         reference_ns: (N,) sorted reference stamps.
@@ -336,16 +338,26 @@ def match_nearest_seconds(
         offset_s: added to the estimate's stamps first, seconds.
 
     Returns:
-        ``(reference_index, estimate_index)`` of the matches, in the estimate's order.
+        ``(reference_index, estimate_index)`` of the matches, in time order; the indices
+        of the shorter side (the estimate's when both are as long) increase strictly.
     """
     t_ref = seconds_of(reference_ns)
     t_est = seconds_of(estimate_ns) + offset_s
-    n_ref = t_ref.shape[0]
-    right = np.clip(np.searchsorted(t_ref, t_est, side="left"), 0, n_ref - 1)
-    left = np.clip(right - 1, 0, n_ref - 1)
-    d_right = np.abs(t_ref[right] - t_est)
-    d_left = np.abs(t_est - t_ref[left])
-    use_right = d_right < d_left
-    nearest = np.where(use_right, right, left)
+    if t_ref.shape[0] < t_est.shape[0]:
+        est_idx, ref_idx = _nearest(t_est, t_ref, max_dt_s)
+        return ref_idx, est_idx
+    return _nearest(t_ref, t_est, max_dt_s)
+
+
+def _nearest(
+    targets: FloatArray, queries: FloatArray, max_dt_s: float
+) -> tuple[IntArray, IntArray]:
+    """Return ``(target_index, query_index)`` of each query's nearest target within reach."""
+    n = targets.shape[0]
+    right = np.clip(np.searchsorted(targets, queries, side="left"), 0, n - 1)
+    left = np.clip(right - 1, 0, n - 1)
+    d_right = np.abs(targets[right] - queries)
+    d_left = np.abs(queries - targets[left])
+    nearest = np.where(d_right < d_left, right, left)
     within = np.flatnonzero(np.minimum(d_left, d_right) <= max_dt_s)
     return nearest[within], within

@@ -211,20 +211,29 @@ def _matched(
             "or give --t_offset."
         )
         raise InputError(msg)
-    est = estimate.select(est_idx)
-    ref = replace(
-        reference,
-        stamps_ns=est.stamps_ns,
-        positions_xyz=reference.positions_xyz[ref_idx],
-        quat_xyzw=None if reference.quat_xyzw is None else reference.quat_xyzw[ref_idx],
-        cov6=None if reference.cov6 is None else reference.cov6[ref_idx],
-        warnings=(),
-    )
-    unmatched = len(estimate) - est_idx.size
+    # The shorter side's poses are matched once each: its stamps stamp both.
+    by_estimate = len(reference) >= len(estimate)
+    stamps = estimate.stamps_ns[est_idx] if by_estimate else reference.stamps_ns[ref_idx]
+
+    def picked(trajectory: Trajectory, index: IntArray) -> Trajectory:
+        quats = trajectory.quat_xyzw
+        return replace(
+            trajectory,
+            stamps_ns=stamps,
+            positions_xyz=trajectory.positions_xyz[index],
+            quat_xyzw=None if quats is None else quats[index],
+            cov6=None if trajectory.cov6 is None else trajectory.cov6[index],
+            warnings=(),
+        )
+
+    ref, est = picked(reference, ref_idx), picked(estimate, est_idx)
+    shorter, side = (estimate, "estimate") if by_estimate else (reference, "reference")
+    unmatched = len(shorter) - est_idx.size
     note = ""
     if unmatched:
+        other = "reference" if by_estimate else "estimate"
         note = (
-            f"{unmatched} of {len(estimate)} estimate poses have no reference pose within "
+            f"{unmatched} of {len(shorter)} {side} poses have no {other} pose within "
             f"{args.t_max_diff:g} s and were not evaluated."
         )
     return ref, est, note
