@@ -120,7 +120,7 @@ def _sources(args: argparse.Namespace) -> tuple[JobSource, JobSource]:
     if fmt in {"bag", "bag2", "mcap"}:
         path = Path(args.bag)
         refs = (args.ref_topic, args.est_topic)
-        specs = [SourceSpec(TrajectoryFormat.BAG, path, topic) for topic in refs]
+        specs = [SourceSpec(TrajectoryFormat.BAG, path, _selector(topic)) for topic in refs]
         names = list(refs)
     else:
         formats = {
@@ -136,6 +136,15 @@ def _sources(args: argparse.Namespace) -> tuple[JobSource, JobSource]:
         JobSource(specs[0], names[0], file_provenance("reference", specs[0])),
         JobSource(specs[1], names[1], file_provenance("estimate", specs[1])),
     )
+
+
+def _selector(topic: str) -> str:
+    """Return loceval's selector of evo's topic: ``/tf:map.base_link`` is ``tf:map:base_link``."""
+    head, colon, frames = topic.partition(":")
+    if colon and head.strip("/") == "tf" and "." in frames:
+        parent, _, child = frames.partition(".")
+        return f"tf:{parent}:{child}"
+    return topic
 
 
 def _window(trajectory: Trajectory, start_s: float | None, end_s: float | None) -> Trajectory:
