@@ -92,16 +92,13 @@ def _require_orientations(relation: PoseRelation, *trajectories: Trajectory) -> 
 def _of_error(rotation: FloatArray, translation: FloatArray, relation: PoseRelation) -> FloatArray:
     """Return the relation's value of the errors (R (N, 3, 3), t (N, 3))."""
     if relation in {PoseRelation.TRANS_PART, PoseRelation.POINT_DISTANCE}:
-        out: FloatArray = np.linalg.norm(translation, axis=1)
-        return out
+        return np.asarray(np.linalg.norm(translation, axis=1))
     minus_identity = rotation - np.eye(3)
     if relation is PoseRelation.ROT_PART:
-        out = np.linalg.norm(minus_identity, axis=(1, 2))
-        return out
+        return np.asarray(np.linalg.norm(minus_identity, axis=(1, 2)))
     if relation is PoseRelation.FULL:
         squares = np.einsum("nij,nij->n", minus_identity, minus_identity)
-        out = np.sqrt(squares + np.einsum("ni,ni->n", translation, translation))
-        return out
+        return np.asarray(np.sqrt(squares + np.einsum("ni,ni->n", translation, translation)))
     cosine = np.clip((np.trace(rotation, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
     angles: FloatArray = np.arccos(cosine)
     return np.degrees(angles) if relation is PoseRelation.ANGLE_DEG else angles
@@ -302,9 +299,7 @@ def scale_only(reference: Trajectory, estimate: Trajectory, *, poses: int | None
         poses: how many leading poses estimate the scale (None: all).
     """
     n = len(estimate) if poses is None else min(poses, len(estimate))
-    found = align_umeyama(
-        estimate.positions_xyz[:n], reference.positions_xyz[:n], with_scale=True
-    )
+    found = align_umeyama(estimate.positions_xyz[:n], reference.positions_xyz[:n], with_scale=True)
     return estimate.transformed(SimilarityTransform(np.eye(3), np.zeros(3), found.scale))
 
 

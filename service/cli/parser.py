@@ -20,8 +20,8 @@ from typing import Any, Final, NoReturn
 from loceval import __version__
 from loceval.errors import InputError
 from loceval.options import AUTO, OPTIONS, OptionKind, OptionSpec
-from service.cli.evo.parser import add_evo_commands
 from service.cli.evo.hints import EVALUATE_EPILOG, unknown_arguments_message
+from service.cli.evo.parser import add_evo_commands
 
 __all__ = ["EXIT_BUG", "EXIT_INPUT", "build_parser", "names", "numbers"]
 
@@ -194,7 +194,7 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
         ),
     )
     ev.epilog = EVALUATE_EPILOG
-    ev.unknown_message = unknown_arguments_message  # type: ignore[attr-defined]
+    ev.unknown_message = unknown_arguments_message
     ev.add_argument("reference", help="the ground truth source")
     ev.add_argument("estimates", nargs="+", metavar="estimate", help="estimate sources")
     ev.add_argument(

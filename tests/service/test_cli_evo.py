@@ -127,16 +127,19 @@ def test_plot_writes_the_report_and_prints_its_path(
 ) -> None:
     """-p without a display writes loceval's report in the working folder; --save_plot beside."""
     monkeypatch.chdir(tmp_path)
-    ref, est = public_data / "freiburg1_xyz-groundtruth.txt", public_data / "freiburg1_xyz-rgbdslam.txt"
+    ref, est = (
+        public_data / "freiburg1_xyz-groundtruth.txt",
+        public_data / "freiburg1_xyz-rgbdslam.txt",
+    )
     code, out, _ = _loceval(["rpe", "tum", str(ref), str(est), "-a", "-p"], capsys)
     assert code == 0
     report = tmp_path / "loceval_rpe_report" / "report.html"
     assert f"Report written to {report}" in out
     assert "freiburg1_xyz-rgbdslam" in report.read_text()
+    plot = tmp_path / "plots" / "ape.pdf"
     code, out, _ = _loceval(
-        ["ape", "tum", str(ref), str(est), "-a", "--save_plot", str(tmp_path / "plots" / "ape.pdf")],
-        capsys,
-    )  # fmt: skip
+        ["ape", "tum", str(ref), str(est), "-a", "--save_plot", str(plot)], capsys
+    )
     assert code == 0
     assert (tmp_path / "plots" / "ape" / "report.html").is_file()
 
@@ -170,7 +173,10 @@ def test_align_and_align_origin_exclude_each_other(
     public_data: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """As in evo, -a and --align_origin cannot be combined; so says the error."""
-    ref, est = public_data / "freiburg1_xyz-groundtruth.txt", public_data / "freiburg1_xyz-rgbdslam.txt"
+    ref, est = (
+        public_data / "freiburg1_xyz-groundtruth.txt",
+        public_data / "freiburg1_xyz-rgbdslam.txt",
+    )
     code, _, err = _loceval(["ape", "tum", str(ref), str(est), "-a", "--align_origin"], capsys)
     assert code == 1
     assert "--align_origin" in err
@@ -246,8 +252,8 @@ def _evo_tool(name: str) -> str:
     path = shutil.which(name, path=folder) if folder else shutil.which(name)
     if path is None:
         pytest.skip(
-            f"evo's {name} is not installed (a scratch venv: python3 -m venv /tmp/evo && "
-            "/tmp/evo/bin/pip install evo, then LOCEVAL_EVO_BIN=/tmp/evo/bin)"
+            f"evo's {name} is not installed (in a scratch venv: python3 -m venv EVO && "
+            "EVO/bin/pip install evo, then LOCEVAL_EVO_BIN=EVO/bin)"
         )
     return path
 

@@ -160,11 +160,13 @@ def _document(
             for row in rows
         ],
         "comparisons": [
-            {"a": a.label, "b": b.label, **(
-                {"unavailable": found} if isinstance(found, str) else found.to_dict()
-            )}
+            {
+                "a": a.label,
+                "b": b.label,
+                **({"unavailable": found} if isinstance(found, str) else found.to_dict()),
+            }
             for a, b, found in compared
-        ],  # fmt: skip
+        ],
         "notes": notes,
     }
 

@@ -38,7 +38,6 @@ if TYPE_CHECKING:
     import argparse
 
     from loceval._typing import IntArray
-
     from loceval.metrics import ErrorSeries
     from loceval.trajectory import Trajectory
 
@@ -212,7 +211,7 @@ def _matched(
     ref_idx, est_idx = match_nearest_seconds(
         reference.stamps_ns, estimate.stamps_ns, max_dt_s=args.t_max_diff, offset_s=args.t_offset
     )
-    if est_idx.size < 3:  # noqa: PLR2004  (alignment and RPE need three)
+    if est_idx.size < 3:
         msg = (
             f"Only {est_idx.size} of {len(estimate)} poses of {estimate.name!r} have a pose of "
             f"{reference.name!r} within --t_max_diff {args.t_max_diff:g} s (with --t_offset "
@@ -254,11 +253,12 @@ def _gap_notes(reference: Trajectory) -> list[str]:
     if not gaps:
         return []
     longest = max(b - a for a, b in gaps) / _NS_PER_S
-    return [
+    note = (
         f"The reference has {len(gaps)} {'gap' if len(gaps) == 1 else 'gaps'} longer than "
         f"0.1 s (tracking loss; longest {longest:.3f} s); estimate poses in them have no "
         "reference pose to match."
-    ]
+    )
+    return [note]
 
 
 def _run(args: argparse.Namespace, *, rpe: bool) -> EvoRun:
@@ -343,12 +343,12 @@ def format_additions(run: EvoRun) -> str:
     """Return what loceval adds: the matches, the 95 % intervals and the notes."""
     found = run.result.estimates[0]
     matched = len(found.association)
-    lines = [
-        "",
+    summary = (
         f"loceval: {len(run.series)} errors from {matched} matched poses "
-        f"({run.estimate_poses} in the estimate).",
-    ]
-    if len(run.series) >= 8:  # noqa: PLR2004  (the intervals' least sample)
+        f"({run.estimate_poses} in the estimate)."
+    )
+    lines = ["", summary]
+    if len(run.series) >= 8:
         from loceval.uncertainty import interval_stats  # noqa: PLC0415  (scipy)
 
         found_ci = interval_stats(run.series.values)

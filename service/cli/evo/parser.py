@@ -105,9 +105,7 @@ def _common(parser: argparse.ArgumentParser, *, rpe: bool) -> None:
             "-t", "--delta_tol", type=float, default=0.1, metavar="TOL",
             help="relative delta tolerance for --all_pairs (default: 0.1)",
         )  # fmt: skip
-        metric.add_argument(
-            "--all_pairs", action="store_true", help="every pose starts a pair"
-        )
+        metric.add_argument("--all_pairs", action="store_true", help="every pose starts a pair")
         metric.add_argument(
             "--pairs_from_reference", action="store_true",
             help="measure the delta along the reference (default: along the estimate)",
@@ -165,7 +163,7 @@ def _add_metric(sub: Any, name: str, *, rpe: bool) -> None:  # noqa: ANN401
             help="a ROS bag and two topics" if bag else f"two {fmt} files",
             description=f"loceval {name} {fmt}: evo_{name}'s flags.",
         )
-        sub_cmd.strict = True  # type: ignore[attr-defined]
+        sub_cmd.strict = True
         if bag:
             sub_cmd.add_argument("bag", help="the bag (ROS 1 .bag; ROS 2 folder, .db3, .mcap)")
             sub_cmd.add_argument("ref_topic", help="the reference's topic (or tf:PARENT:CHILD)")
