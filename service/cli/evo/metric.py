@@ -12,16 +12,14 @@ by loceval's 95 % intervals and notes.
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
-
-import numpy as np
 
 from loceval.alignment import AlignMethod, AlignWindow
 from loceval.association import AssociationMethod
 from loceval.errors import InputError
-from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
+from loceval.evaluation import EvaluationConfig, evaluate
 from loceval.readers import SourceSpec, TrajectoryFormat
 from loceval.relations import (
     PoseRelation,
@@ -31,6 +29,7 @@ from loceval.relations import (
     rpe_series,
     scale_only,
 )
+from service.cli.evo.runs import EvoRun
 from service.cli.output import emit
 from service.runner import JobSource, file_provenance
 
@@ -38,10 +37,9 @@ if TYPE_CHECKING:
     import argparse
 
     from loceval._typing import IntArray
-    from loceval.metrics import ErrorSeries
     from loceval.trajectory import Trajectory
 
-__all__ = ["EvoRun", "run_ape", "run_rpe"]
+__all__ = ["run_ape", "run_rpe"]
 
 _NS_PER_S = 1_000_000_000
 
@@ -59,48 +57,6 @@ _DELTA_WORDS = {"f": "frames", "d": "deg", "r": "rad", "m": "m"}
 
 STAT_ORDER = ("max", "mean", "median", "min", "rmse", "sse", "std")
 """The statistics evo prints, in its order."""
-
-
-@dataclass(frozen=True, slots=True, eq=False)
-class EvoRun:
-    """One ``loceval ape`` or ``rpe`` run: what evo's result zip and the printout hold.
-
-    Attributes:
-        metric: ``ape`` or ``rpe``.
-        title: evo's title line (``APE w.r.t. translation part (m)``).
-        alignment_words: evo's alignment line (``(with SE(3) Umeyama alignment)``), or "".
-        series: the errors, stamped with the (first) matched reference pose.
-        relation: the pose relation.
-        result: loceval's evaluation (matching, alignment, intervals, notes).
-        ref_name: the reference's name (its file or topic, as evo names it).
-        est_name: the estimate's name.
-        reference: the reference's matched poses.
-        estimate: the estimate's matched poses after the alignment.
-        info: evo's ``info`` entries (label, title, relation, delta).
-        pairs: RPE: the ``(i, j)`` index pairs into the matched poses; APE: None.
-        estimate_poses: how many poses the estimate has (in the time window).
-    """
-
-    metric: str
-    title: str
-    alignment_words: str
-    series: ErrorSeries
-    relation: PoseRelation
-    result: EvaluationResult
-    ref_name: str
-    est_name: str
-    reference: Trajectory
-    estimate: Trajectory
-    info: dict[str, object]
-    pairs: tuple[IntArray, IntArray] | None = None
-    estimate_poses: int = 0
-
-    @property
-    def pairs_second(self) -> IntArray:
-        """Return the index of each error's pose (RPE: the pair's second pose)."""
-        if self.pairs is None:
-            return np.arange(len(self.series))
-        return self.pairs[1]
 
 
 def run_ape(args: argparse.Namespace) -> int:

@@ -9,6 +9,7 @@ then evo's flags with evo's defaults (nearest stamp within 10 ms, no alignment,
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Final
@@ -22,6 +23,9 @@ RELATIONS: Final = ("full", "trans_part", "rot_part", "angle_deg", "angle_rad", 
 
 DELTA_UNITS: Final = ("f", "d", "r", "m")
 """frames, degrees, radians, metres (evo's ``--delta_unit``)."""
+
+_EXIT_INPUT: Final = 1
+"""The exit code of bad input (``service.cli.parser.EXIT_INPUT``, not imported: a cycle)."""
 
 UNSUPPORTED: Final[dict[str, str]] = {
     "--plot_mode": "the report draws plan and side views",
@@ -50,10 +54,8 @@ class _EvoParser(argparse.ArgumentParser):
     """argparse for evo's command lines: exit 1, and name an unknown or unsupported flag."""
 
     def error(self, message: str) -> Any:  # noqa: ANN401  (NoReturn on argparse's side)
-        from service.cli.parser import EXIT_INPUT  # noqa: PLC0415
-
-        self.print_usage()
-        self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
+        self.print_usage(sys.stderr)
+        self.exit(_EXIT_INPUT, f"{self.prog}: error: {message}\n")
 
     def parse_known_args(  # type: ignore[override]
         self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None

@@ -27,7 +27,7 @@ from loceval._typing import FloatArray
 from loceval.errors import InputError
 
 if TYPE_CHECKING:
-    from service.cli.evo.metric import EvoRun
+    from service.cli.evo.runs import EvoRun
 
 __all__ = ["ResultZip", "read_result_zip", "write_result_zip"]
 
