@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from loceval._typing import FloatArray
+from loceval.core.arrays import FloatArray
 from loceval.errors import InputError
 
 __all__ = ["ResultZip", "is_result_zip", "read_result_zip"]
@@ -84,7 +84,10 @@ def read_result_zip(path: Path) -> ResultZip:
         msg = f"No such result zip: {where!r}."
         raise InputError(msg) from None
     except (zipfile.BadZipFile, OSError) as err:
-        msg = f"{where} is not a zip ({err}); give a zip written by --save_results."
+        msg = (
+            f"{where} is not a zip ({err}); give a result zip of evo_ape, evo_rpe or "
+            "loceval ape/rpe."
+        )
         raise InputError(msg) from None
     with archive:
         names = set(archive.namelist())
@@ -92,7 +95,7 @@ def read_result_zip(path: Path) -> ResultZip:
         if missing:
             msg = (
                 f"{where} lacks {', '.join(missing)}: it is not a result zip of evo_ape, "
-                "evo_rpe or loceval ape/rpe (--save_results)."
+                "evo_rpe or loceval ape/rpe."
             )
             raise InputError(msg)
         try:

@@ -7,15 +7,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from loceval.errors import MetricError
-from loceval.relations import (
+from loceval.metrics.relations import (
     PoseRelation,
     ape_series,
     evo_pairs,
-    match_nearest_seconds,
     rpe_series,
     scale_only,
-    seconds_of,
 )
+from loceval.registration.stamps import match_nearest_seconds, seconds_of
 from loceval.trajectory import Trajectory
 
 N = 50

@@ -3,7 +3,7 @@
 Each zip gives a row of the seven statistics (evo_res's columns and names). Where two zips
 hold their error series with stamps (evo's ``error_array`` and ``timestamps``, loceval's
 too), the RMSEs are compared with loceval's paired block bootstrap
-(:func:`loceval.comparison.compare_errors`) on the stamps both share: B's stamps are
+(:func:`loceval.assessment.comparison.compare_errors`) on the stamps both share: B's stamps are
 matched to A's nearest within 10 ms (evo's default), so two systems evaluated over the same
 run pair their errors instant by instant. ``--out DIR`` writes ``comparison.html`` and
 ``comparison.json``.
@@ -26,7 +26,7 @@ from service.cli.output import emit
 if TYPE_CHECKING:
     import argparse
 
-    from loceval.comparison import Comparison
+    from loceval.assessment.comparison import Comparison
 
 __all__ = ["Row", "format_table", "run_res"]
 
@@ -85,8 +85,8 @@ def _series(result: ResultZip) -> tuple[np.ndarray, np.ndarray] | None:
 
 def _paired(a: Row, b: Row) -> Comparison | str:
     """Compare two results' RMSE on their shared instants, or say why not."""
-    from loceval.comparison import ComparedMetric, compare_errors  # noqa: PLC0415  (scipy)
-    from loceval.relations import match_nearest_seconds  # noqa: PLC0415
+    from loceval.assessment.comparison import ComparedMetric, compare_errors  # noqa: PLC0415  (scipy)
+    from loceval.registration.stamps import match_nearest_seconds  # noqa: PLC0415
 
     series_a, series_b = _series(a.result), _series(b.result)
     if series_a is None or series_b is None:

@@ -16,19 +16,19 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from loceval.alignment import AlignMethod, AlignWindow
-from loceval.association import AssociationMethod
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, evaluate
-from loceval.readers import SourceSpec, TrajectoryFormat
-from loceval.relations import (
+from loceval.metrics.relations import (
     PoseRelation,
     ape_series,
     evo_pairs,
-    match_nearest_seconds,
     rpe_series,
     scale_only,
 )
+from loceval.readers import SourceSpec, TrajectoryFormat
+from loceval.registration.alignment import AlignMethod, AlignWindow
+from loceval.registration.association import AssociationMethod
+from loceval.registration.stamps import match_nearest_seconds
 from service.cli.evo.runs import EvoRun
 from service.cli.output import emit
 from service.runner import JobSource, file_provenance
@@ -36,7 +36,7 @@ from service.runner import JobSource, file_provenance
 if TYPE_CHECKING:
     import argparse
 
-    from loceval._typing import IntArray
+    from loceval.core.arrays import IntArray
     from loceval.trajectory import Trajectory
 
 __all__ = ["run_ape", "run_rpe"]
@@ -305,7 +305,7 @@ def format_additions(run: EvoRun) -> str:
     )
     lines = ["", summary]
     if len(run.series) >= 8:
-        from loceval.uncertainty import interval_stats  # noqa: PLC0415  (scipy)
+        from loceval.assessment.uncertainty import interval_stats  # noqa: PLC0415  (scipy)
 
         found_ci = interval_stats(run.series.values)
         lines.append("95 % intervals (block bootstrap over the error series):")

@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from loceval._typing import FloatArray
+from loceval.core.arrays import FloatArray
 from loceval.errors import InputError
 from loceval.readers.evo_result import ResultZip, read_result_zip
 

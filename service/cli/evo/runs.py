@@ -8,10 +8,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from loceval._typing import IntArray
+    from loceval.core.arrays import IntArray
     from loceval.evaluation import EvaluationResult
-    from loceval.metrics import ErrorSeries
-    from loceval.relations import PoseRelation
+    from loceval.metrics.pose_errors import ErrorSeries
+    from loceval.metrics.relations import PoseRelation
     from loceval.trajectory import Trajectory
 
 __all__ = ["EvoRun"]

@@ -20,11 +20,11 @@ from enum import StrEnum
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from loceval._typing import FloatArray, IntArray, StampsNs
-from loceval.alignment import align_umeyama
+from loceval.core.arrays import FloatArray, IntArray
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import MetricError
-from loceval.geometry import SimilarityTransform
-from loceval.metrics import ErrorSeries
+from loceval.metrics.pose_errors import ErrorSeries
+from loceval.registration.alignment import align_umeyama
 from loceval.trajectory import Trajectory
 
 __all__ = [
@@ -32,13 +32,9 @@ __all__ = [
     "PoseRelation",
     "ape_series",
     "evo_pairs",
-    "match_nearest_seconds",
     "rpe_series",
     "scale_only",
-    "seconds_of",
 ]
-
-_NS_PER_S = 1_000_000_000
 
 
 class PoseRelation(StrEnum):
@@ -301,58 +297,3 @@ def scale_only(reference: Trajectory, estimate: Trajectory, *, poses: int | None
     n = len(estimate) if poses is None else min(poses, len(estimate))
     found = align_umeyama(estimate.positions_xyz[:n], reference.positions_xyz[:n], with_scale=True)
     return estimate.transformed(SimilarityTransform(np.eye(3), np.zeros(3), found.scale))
-
-
-def seconds_of(stamps_ns: StampsNs) -> FloatArray:
-    """Return float seconds as a text reader parses them (rounded once, as near as can be).
-
-    int64 nanoseconds are exact in an 80-bit long double; one division there and one
-    rounding to float64 gives the float nearest the decimal stamp, all but never off by one
-    unit in the last place.
-    """
-    exact = stamps_ns.astype(np.longdouble) / np.longdouble(_NS_PER_S)
-    out: FloatArray = exact.astype(np.float64)
-    return out
-
-
-def match_nearest_seconds(
-    reference_ns: StampsNs, estimate_ns: StampsNs, *, max_dt_s: float, offset_s: float = 0.0
-) -> tuple[IntArray, IntArray]:
-    """Match stamps to the nearest of the other side in float seconds (evo's way).
-
-    The side with fewer stamps is matched to the other: each of its stamps takes the
-    nearest stamp there, if within ``max_dt_s``. Unlike
-    :func:`loceval.association.associate` the matching is not one-to-one (two poses of the
-    shorter side may share a pose of the longer), compares float seconds, not nanoseconds,
-    and a stamp half-way between two (in float seconds) takes the earlier one.
-
-    Args:
-        reference_ns: (N,) sorted reference stamps.
-        estimate_ns: (M,) sorted estimate stamps.
-        max_dt_s: the largest time difference of a match, seconds.
-        offset_s: added to the estimate's stamps first, seconds.
-
-    Returns:
-        ``(reference_index, estimate_index)`` of the matches, in time order; the indices
-        of the shorter side (the estimate's when both are as long) increase strictly.
-    """
-    t_ref = seconds_of(reference_ns)
-    t_est = seconds_of(estimate_ns) + offset_s
-    if t_ref.shape[0] < t_est.shape[0]:
-        est_idx, ref_idx = _nearest(t_est, t_ref, max_dt_s)
-        return ref_idx, est_idx
-    return _nearest(t_ref, t_est, max_dt_s)
-
-
-def _nearest(
-    targets: FloatArray, queries: FloatArray, max_dt_s: float
-) -> tuple[IntArray, IntArray]:
-    """Return ``(target_index, query_index)`` of each query's nearest target within reach."""
-    n = targets.shape[0]
-    right = np.clip(np.searchsorted(targets, queries, side="left"), 0, n - 1)
-    left = np.clip(right - 1, 0, n - 1)
-    d_right = np.abs(targets[right] - queries)
-    d_left = np.abs(queries - targets[left])
-    nearest = np.where(d_right < d_left, right, left)
-    within = np.flatnonzero(np.minimum(d_left, d_right) <= max_dt_s)
-    return nearest[within], within
