@@ -307,6 +307,9 @@ def _check_selector(dataset: Dataset, ref: SourceRef, role: str) -> None:
     if fmt == "ranges":
         msg = f"{label} is a radio ranges table, not a trajectory; use it in POST /ranging."
         raise InputError(msg)
+    if inspection.get("kind") == "evo_result":
+        msg = f"{label} is an evo result (figures, not poses); compare it with `loceval res`."
+        raise InputError(msg)
     _check_survey(fmt, label, role)
     sources = inspection.get("sources", [])
     selectors = [s.get("selector") for s in sources]

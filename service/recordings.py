@@ -40,6 +40,12 @@ def inspect_upload(path: Path, filename: str) -> dict[str, Any]:
         raise ReaderError(msg)
     if Path(filename).suffix.lower() in BUILDING_SUFFIXES:
         return _inspect_building(path, filename)
+    if Path(filename).suffix.lower() == ".zip":
+        from service.evo_datasets import inspect_result_zip  # noqa: PLC0415
+
+        found = inspect_result_zip(path, filename)
+        if found is not None:
+            return found
     kind = "urdf" if Path(filename).suffix.lower() in URDF_SUFFIXES else None
     inspection = inspect(path, kind=kind).to_dict()
     inspection.pop("path", None)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Final, NoReturn
@@ -20,6 +20,8 @@ from typing import Any, Final, NoReturn
 from loceval import __version__
 from loceval.errors import InputError
 from loceval.options import AUTO, OPTIONS, OptionKind, OptionSpec
+from service.cli.evo.hints import EVALUATE_EPILOG, unknown_arguments_message
+from service.cli.evo.parser import add_evo_commands
 
 __all__ = ["EXIT_BUG", "EXIT_INPUT", "build_parser", "names", "numbers"]
 
@@ -27,7 +29,8 @@ EXIT_INPUT = 1
 EXIT_BUG = 2
 
 _DESCRIPTION = (
-    "The loceval command line: evaluate, ranging, inspect, demo, report, serve, worker, keys."
+    "The loceval command line: evaluate, ape, rpe, res, ranging, inspect, demo, report, serve, "
+    "worker, keys."
 )
 
 
@@ -42,6 +45,19 @@ class _Parser(argparse.ArgumentParser):
             message += f"; for a value that starts with '-' write {flag}=VALUE"
         self.print_usage(sys.stderr)
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        """Parse; a command with ``unknown_message`` reports unknown arguments with its usage.
+
+        Without it argparse hands them up to ``loceval``, which prints the top-level usage.
+        """
+        parsed, extras = super().parse_known_args(args, namespace)
+        explain = getattr(self, "unknown_message", None)
+        if extras and explain is not None:
+            self.error(explain(extras))
+        return parsed, extras
 
 
 class _FormatNames:
@@ -148,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"loceval {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     _add_evaluate(sub)
+    add_evo_commands(sub)
 
     ins = sub.add_parser("inspect", help="list what a recording holds")
     ins.add_argument("path", help="a bag, bag directory, zip, MCAP or trajectory file")
@@ -176,6 +193,8 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
             "motive:take.csv@RigidBody, run.mcap@/amcl_pose, run.bag@tf:map:base_link."
         ),
     )
+    ev.epilog = EVALUATE_EPILOG
+    ev.unknown_message = unknown_arguments_message
     ev.add_argument("reference", help="the ground truth source")
     ev.add_argument("estimates", nargs="+", metavar="estimate", help="estimate sources")
     ev.add_argument(

@@ -1,0 +1,73 @@
+"""What an evo flag given to ``loceval evaluate`` is called there (issues 28 and 30).
+
+evo's users type ``evo_ape tum gt.txt est.txt -as`` from memory; ``loceval evaluate`` does
+not take evo's flags (``loceval ape`` and ``loceval rpe`` do), so an unknown argument that
+is one of evo's gets a message naming the loceval option that does the same. This module is
+pure Python: the parser imports it without numpy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Final
+
+__all__ = ["EVALUATE_EPILOG", "EVO_EQUIVALENTS", "unknown_arguments_message"]
+
+EVALUATE_EPILOG: Final = (
+    "evo's command lines (evo_ape tum gt.txt est.txt -as) run as `loceval ape` and "
+    "`loceval rpe`, with evo's flags and defaults; `loceval res` reads evo's result zips."
+)
+
+EVO_EQUIVALENTS: Final[dict[str, str]] = {
+    "-a": "--align se3 (loceval evaluate's default)",
+    "--align": "--align se3 (loceval evaluate's default)",
+    "-s": "--align sim3",
+    "--correct_scale": "--align sim3",
+    "-as": "--align sim3",
+    "-sa": "--align sim3",
+    "--n_to_align": "--align-first N",
+    "--align_origin": "--align origin",
+    "-r": "nothing: it prints translation (m) and rotation (deg) errors both",
+    "--pose_relation": "nothing: it prints translation (m) and rotation (deg) errors both",
+    "--t_max_diff": "--associate nearest --max-dt S",
+    "--t_offset": "--time-offset S",
+    "--delta": "--rpe-delta D",
+    "--delta_unit": "--rpe-unit frames|m|s",
+    "--all_pairs": "--rpe-all-pairs",
+    "-p": "--out DIR (writes report.html)",
+    "--plot": "--out DIR (writes report.html)",
+    "--save_plot": "--out DIR (writes report.html and report.pdf)",
+    "--save_results": "--out DIR (writes result.json and errors.csv)",
+    "--plot_mode": "--out DIR (the report has plan and side views)",
+    "--t_start": "nothing yet (loceval ape takes it)",
+    "--t_end": "nothing yet (loceval ape takes it)",
+    "-v": "nothing: it always prints its notes",
+    "--verbose": "nothing: it always prints its notes",
+    "--silent": "--json (prints only the result document)",
+}
+"""evo's flag -> what ``loceval evaluate`` calls the same thing."""
+
+
+def _flag(argument: str) -> str:
+    """Return the flag of ``--flag=value``."""
+    return argument.split("=", 1)[0]
+
+
+def unknown_arguments_message(extras: Sequence[str]) -> str:
+    """Return argparse's "unrecognized arguments" message, with the loceval names of evo's flags.
+
+    Args:
+        extras: the arguments ``loceval evaluate`` did not recognise, in order.
+    """
+    message = f"unrecognized arguments: {' '.join(extras)}"
+    hints = [
+        f"evo's {_flag(a)} is {EVO_EQUIVALENTS[_flag(a)]}"
+        for a in extras
+        if _flag(a) in EVO_EQUIVALENTS
+    ]
+    if not hints:
+        return message
+    return (
+        f"{message}. In loceval evaluate, {'; '.join(hints)}. "
+        "Or keep evo's command line: loceval ape tum GT EST -as (and loceval rpe)."
+    )
