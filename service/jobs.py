@@ -45,6 +45,7 @@ from service.options import (
 )
 from service.preflight import check_data_dir, prepare_schema
 from service.retention import sweep
+from service.mapjob import map_source
 from service.runner import Job, JobSource, RangingSources, file_provenance, run_job
 from service.runtime import JobKind, Runtime, create_huey
 from service.schedule_runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run
@@ -151,6 +152,21 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     building = None
     if options.building is not None:
         building = runtime.store.path(_dataset(session, project_id, options.building).storage_path)
+    export = export_from_options(options, evaluation_id=evaluation.id, building=building)
+    the_map = None
+    map_ref = options.map_ref
+    if map_ref is not None:
+        dataset = _dataset(session, project_id, map_ref.dataset_id)
+        source = str(runtime.store.path(dataset.storage_path))
+        if map_ref.selector:
+            source = f"{source}@{map_ref.selector}"
+        the_map = map_source(
+            source,
+            export,
+            estimate=options.map_estimate,
+            clutter_m=options.clutter_m,
+            display=dataset.filename + (f"@{map_ref.selector}" if map_ref.selector else ""),
+        )
     return Job(
         reference=reference,
         estimates=estimates,
@@ -160,10 +176,11 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
             reference_offset_source="urdf" if isinstance(options.device, DeviceOffset) else "given",
         ),
         stamp=options.stamp,
-        export=export_from_options(options, evaluation_id=evaluation.id, building=building),
+        export=export,
         formats=options.formats,
         visits=visits,
         checkpoints=checkpoints_from_options(options),
+        map=the_map,
     )
 
 

@@ -114,6 +114,10 @@ class EvaluationValues(Protocol):
         """Measure position errors in x-y only."""
 
     @property
+    def min_excursion_s(self) -> float:
+        """The shortest reference loss that is an excursion, seconds."""
+
+    @property
     def visit_radius_m(self) -> float | None:
         """Control points: how near a stop must be to a point, metres."""
 
@@ -251,6 +255,7 @@ def config_from_options(
         auto_device=is_auto(options.device),
         reference_offset_source=reference_offset_source,
         planar=options.planar,
+        min_excursion_s=options.min_excursion_s,
     )
 
 
