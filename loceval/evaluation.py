@@ -40,8 +40,8 @@ from loceval.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_o
 
 if TYPE_CHECKING:
     from loceval.assessment import Assessment
-    from loceval.maps import MapEvaluation
     from loceval.comparison import Comparison
+    from loceval.maps import MapEvaluation
     from loceval.uncertainty import IntervalStats
 
 if TYPE_CHECKING:

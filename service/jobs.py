@@ -35,6 +35,7 @@ from service.db import (
 )
 from service.evaluations import EVALUATION, visits_dataset_id
 from service.limits import Limits, run_limited
+from service.mapjob import map_source
 from service.options import (
     checkpoints_from_options,
     config_from_options,
@@ -45,7 +46,6 @@ from service.options import (
 )
 from service.preflight import check_data_dir, prepare_schema
 from service.retention import sweep
-from service.mapjob import map_source
 from service.runner import Job, JobSource, RangingSources, file_provenance, run_job
 from service.runtime import JobKind, Runtime, create_huey
 from service.schedule_runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run

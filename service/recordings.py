@@ -41,7 +41,7 @@ def inspect_upload(path: Path, filename: str) -> dict[str, Any]:
     if Path(filename).suffix.lower() in BUILDING_SUFFIXES:
         return _inspect_building(path, filename)
     if Path(filename).suffix.lower() == ".zip" and _holds_map_yaml(path):
-        return _inspect_map(path, filename)
+        return _inspect_map(path)
     kind = "urdf" if Path(filename).suffix.lower() in URDF_SUFFIXES else None
     inspection = inspect(path, kind=kind).to_dict()
     inspection.pop("path", None)
@@ -67,7 +67,7 @@ def _holds_map_yaml(path: Path) -> bool:
     return bool(yamls) and "metadata.yaml" not in names
 
 
-def _inspect_map(path: Path, filename: str) -> dict[str, Any]:
+def _inspect_map(path: Path) -> dict[str, Any]:
     """Read an uploaded map zip (map_server's YAML and image) once, so a broken one is refused."""
     from loceval.maps import read_map  # noqa: PLC0415
 

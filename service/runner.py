@@ -21,11 +21,11 @@ from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from exporters.options import ExportOptions
-    from service.mapjob import MapSource
     from loceval.checkpoint_evaluation import CheckpointEvaluation
     from loceval.controlpoints import ControlPoints, Visits
     from loceval.radio import RangingConfig
     from loceval.readers.radio import Ranges
+    from service.mapjob import MapSource
 
 __all__ = [
     "Job",

@@ -47,12 +47,18 @@ def grid_plan(cells_x: int, cells_y: int, room_m: float) -> np.ndarray:
     # each wall is cut into room-long pieces (as CAD exports them)
     hx0, hy = np.meshgrid(xs[:-1], ys)
     horizontal = np.stack(
-        [np.column_stack([hx0.ravel(), hy.ravel()]), np.column_stack([hx0.ravel() + room_m, hy.ravel()])],
+        [
+            np.column_stack([hx0.ravel(), hy.ravel()]),
+            np.column_stack([hx0.ravel() + room_m, hy.ravel()]),
+        ],
         axis=1,
     )
     vx, vy0 = np.meshgrid(xs, ys[:-1])
     vertical = np.stack(
-        [np.column_stack([vx.ravel(), vy0.ravel()]), np.column_stack([vx.ravel(), vy0.ravel() + room_m])],
+        [
+            np.column_stack([vx.ravel(), vy0.ravel()]),
+            np.column_stack([vx.ravel(), vy0.ravel() + room_m]),
+        ],
         axis=1,
     )
     return np.concatenate([horizontal, vertical])

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import maximum_filter
 
-from loceval._quantiles import median, quantiles
+from loceval._quantiles import quantiles
 from loceval._typing import BoolArray, FloatArray
 from loceval.errors import InputError, MetricError
 from loceval.geometry import SimilarityTransform

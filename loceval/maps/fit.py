@@ -70,7 +70,7 @@ class Fit2D:
         """Return the fit as a 3D similarity about the z axis."""
         c, s = math.cos(self.rotation_rad), math.sin(self.rotation_rad)
         rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        return SimilarityTransform(rotation, [*self.translation_m, 0.0], self.scale)
+        return SimilarityTransform(rotation, np.array([*self.translation_m, 0.0]), self.scale)
 
     def to_dict(self) -> dict[str, object]:
         """Return scale, rotation_deg and translation_m for the result document."""
@@ -108,8 +108,9 @@ def fit_to_plan(
     fit = Fit2D()
     threshold = float(start_m)
     kept = 0
-    iteration = 0
-    for iteration in range(1, _ITERATIONS + 1):  # iterations of the whole array, not per cell
+    iterations = 0
+    for _ in range(_ITERATIONS):  # iterations over the whole array, not per cell
+        iterations += 1
         moved = fit.apply(points)
         distance, closest = plan.nearest(moved)
         inlier = distance <= threshold
@@ -127,7 +128,7 @@ def fit_to_plan(
         threshold = max(min(threshold, 3.0 * sigma), float(floor_m))
         if abs(step[0]) < 1e-9 and abs(step[1]) < 1e-9 and np.hypot(*step[2]) < 1e-7:
             break
-    return Fit2D(fit.scale, fit.rotation_rad, fit.translation_m, kept, iteration)
+    return Fit2D(fit.scale, fit.rotation_rad, fit.translation_m, kept, iterations)
 
 
 def _step(

@@ -79,7 +79,7 @@ def read_map_yaml(path: Path) -> OccupancyGrid:
         msg = f"The map YAML {str(path)!r} cannot be read ({err}); check the file."
         raise ReaderError(msg, option="map") from err
     meta = _parse_yaml(text, str(path))
-    image = path.parent / meta["image"]
+    image = path.parent / str(meta["image"])
     if not image.is_file():
         msg = (
             f"{path.name}: its image {meta['image']!r} is not beside it; put the image next "
@@ -113,7 +113,7 @@ def read_map_zip(path: Path) -> OccupancyGrid:
             with archive.open(yamls[0]) as fh:
                 text = fh.read(_HEADER_BYTES * 16).decode("utf-8", errors="replace")
             meta = _parse_yaml(text, f"{path.name}/{yamls[0]}")
-            wanted = str(PurePosixPath(yamls[0]).parent / meta["image"]).removeprefix("./")
+            wanted = str(PurePosixPath(yamls[0]).parent / str(meta["image"])).removeprefix("./")
             if wanted not in names:
                 msg = (
                     f"The zip {path.name!r} has no {wanted!r}, the image its YAML names; it "
@@ -221,7 +221,9 @@ def _parse_yaml(text: str, where: str) -> dict[str, object]:
 def _read_pgm(data: bytes, *, where: str) -> NDArray[np.uint16]:
     """Read a binary (P5) or text (P2) PGM, checking its size before its pixels."""
     head = _PGM_HEADER.match(data[:_HEADER_BYTES])
-    rest = re.match(rb"(?:\s+|#[^\n]*\n)+(\d+)\s", data[head.end() : _HEADER_BYTES]) if head else None
+    rest = (
+        re.match(rb"(?:\s+|#[^\n]*\n)+(\d+)\s", data[head.end() : _HEADER_BYTES]) if head else None
+    )
     if head is None or rest is None:
         msg = f"{where}: the PGM header (magic, width, height, maxval) is damaged."
         raise ReaderError(msg, option="map")
@@ -255,7 +257,8 @@ def _read_pgm(data: bytes, *, where: str) -> NDArray[np.uint16]:
             )
             raise ReaderError(msg, option="map")
     scaled = pixels.reshape(height, width).astype(np.float32) * (255.0 / maxval)
-    return np.rint(scaled).astype(np.uint16)
+    out: NDArray[np.uint16] = np.rint(scaled).astype(np.uint16)
+    return out
 
 
 def _read_png(data: bytes, *, where: str) -> NDArray[np.uint16]:

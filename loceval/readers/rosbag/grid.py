@@ -52,7 +52,7 @@ class _InfoLike(Protocol):
 class _GridLike(Protocol):
     header: HeaderLike
     info: _InfoLike
-    data: np.ndarray  # type: ignore[type-arg]
+    data: np.ndarray
 
 
 def read_grid_topic(path: Path, topic: str) -> OccupancyGrid:

@@ -123,7 +123,9 @@ class TestScaledMap:
 def test_a_map_placed_wrong_is_right_after_the_rigid_fit(rng) -> None:
     """A true map shifted 0.8 m and turned 3°: bad as placed, a cell's error after the fit."""
     plan = office_plan()
-    grid = draw_map(plan, Distortion(yaw_deg=3.0, translation=(0.8, -0.5)), resolution_m=RES, rng=rng)
+    grid = draw_map(
+        plan, Distortion(yaw_deg=3.0, translation=(0.8, -0.5)), resolution_m=RES, rng=rng
+    )
     result = evaluate_map(grid, plan, SimilarityTransform.identity())
     fit, figures = result.rigid
     assert result.placed.rmse > 0.3
@@ -158,17 +160,22 @@ def test_a_bent_map_shows_its_bend_in_the_figures_and_the_regions(rng) -> None:
     # the mean of cell distances carries the cells' quantisation where the bend is under a
     # cell (|d + u| >= |d|), so it is compared with the cells' own exact distances
     cells = result.cells_xy[on_long & ~result.clutter]
-    assert float(found.mean()) == pytest.approx(float(plan_distances(cells, plan).mean()), abs=TENTH)
+    assert float(found.mean()) == pytest.approx(
+        float(plan_distances(cells, plan).mean()), abs=TENTH
+    )
     assert result.rigid[1].rmse > 0.05  # no rigid motion straightens a bend
     assert result.similarity[1].rmse > 0.05
     tiles = {(r["x_m"], r["y_m"]): r["rmse_m"] for r in result.regions}
-    assert tiles[(57.5, 2.5)] > 0.4 > 0.03 > tiles[(2.5, 2.5)]
+    assert tiles[(57.5, 2.5)] > 0.4
+    assert tiles[(2.5, 2.5)] < 0.03
 
 
 def test_the_placement_carries_the_map_onto_the_plan(rng) -> None:
     """A map in another frame placed by the estimate's alignment lands on the plan."""
     plan = office_plan()
-    grid = draw_map(plan, Distortion(yaw_deg=90.0, translation=(5.01, 1.01)), resolution_m=RES, rng=rng)
+    grid = draw_map(
+        plan, Distortion(yaw_deg=90.0, translation=(5.01, 1.01)), resolution_m=RES, rng=rng
+    )
     a = math.radians(-90.0)
     rotation = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
     back = SimilarityTransform(rotation, rotation @ -np.array([5.01, 1.01, 0.0]))
@@ -180,7 +187,7 @@ def test_the_placement_carries_the_map_onto_the_plan(rng) -> None:
 def test_a_map_without_occupied_cells_is_refused() -> None:
     """No occupied cell: InputError naming the thresholds."""
     grid = OccupancyGrid(np.full((20, 20), FREE, dtype=np.int8), RES, source="empty.yaml")
-    with pytest.raises(InputError, match="no occupied cell.*occupied_thresh"):
+    with pytest.raises(InputError, match=r"no occupied cell.*occupied_thresh"):
         evaluate_map(grid, office_plan(), SimilarityTransform.identity())
 
 
@@ -204,7 +211,9 @@ def test_a_map_and_a_plan_without_overlap_are_refused(rng) -> None:
 def test_a_map_near_but_not_on_the_plan_is_refused(rng) -> None:
     """Map walls inside the plan's extent but nowhere near its walls: too few to fit."""
     plan = np.array([[[0, 0], [40, 0]], [[0, 40], [40, 40]]], dtype=float)
-    small = np.array([[[15, 15], [25, 15]], [[15, 25], [25, 25]], [[15, 15], [15, 25]]], dtype=float)
+    small = np.array(
+        [[[15, 15], [25, 15]], [[15, 25], [25, 25]], [[15, 15], [15, 25]]], dtype=float
+    )
     grid = draw_map(small, Distortion(), resolution_m=RES, rng=rng)
     with pytest.raises(MetricError, match="overlap"):
         evaluate_map(grid, plan, SimilarityTransform.identity())
