@@ -416,7 +416,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "map",
         OptionKind.FILE,
         None,
-        "the robot's occupancy grid map to measure against the building plan (--building): "
+        "the robot's occupancy grid map to measure against the building model's plan: "
         "map_server's map.yaml beside its image, a zip of both, or BAG@TOPIC of "
         "nav_msgs/msg/OccupancyGrid (the API: the dataset id, with a selector for a bag)",
         "the map",

@@ -118,6 +118,10 @@ class EvaluationValues(Protocol):
         """The shortest reference loss that is an excursion, seconds."""
 
     @property
+    def clutter_m(self) -> float:
+        """Map: the clutter distance, metres."""
+
+    @property
     def visit_radius_m(self) -> float | None:
         """Control points: how near a stop must be to a point, metres."""
 
@@ -233,6 +237,7 @@ def config_from_options(
         InputError: a value cannot be used (the error carries the option's key).
     """
     auto_time = is_auto(options.time_offset_s)
+    check_option("clutter_m", options.clutter_m, unit="metres")  # the map's, checked as early
     checkpoints_from_options(options)  # control-point options fail as fast as the others
     return EvaluationConfig(
         association=AssociationMethod(options.association),

@@ -231,15 +231,21 @@ class EvaluationOptions(Strict):
     )
     stop_speed_mps: float = _field("stop_speed_mps")
     stop_min_s: float = _field("stop_min_s")
-    map: Id | MapRef | None = _field("map")
+    map: MapRef | None = _field("map")
     map_estimate: str | None = _field("map_estimate")
     clutter_m: float = _field("clutter_m")
     min_excursion_s: float = _field("min_excursion_s")
 
     @property
     def map_ref(self) -> MapRef | None:
-        """Return the map as a dataset and an optional bag topic (None without a map)."""
-        return MapRef(dataset_id=self.map) if isinstance(self.map, str) else self.map
+        """Return the map's dataset and bag topic (None without a map)."""
+        return self.map
+
+    @field_validator("map", mode="before")
+    @classmethod
+    def _map_id(cls, value: object) -> object:
+        """Take a bare dataset id (a map zip) as ``{"dataset_id": id}``."""
+        return {"dataset_id": value} if isinstance(value, str) else value
 
     @field_validator("formats")
     @classmethod

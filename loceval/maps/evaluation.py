@@ -278,7 +278,7 @@ def _check_overlap(cells: FloatArray, segments: FloatArray, source: str) -> None
             f"{cells.max(axis=0).round(2).tolist()} m) and the plan (from "
             f"{ends.min(axis=0).round(2).tolist()} to {ends.max(axis=0).round(2).tolist()} m) "
             "do not overlap; check the site transform, the estimate that places the map "
-            "(--map-estimate) and the plan's units."
+            "and the plan's units."
         )
         raise MetricError(msg, option="map")
 
