@@ -38,7 +38,7 @@ from loceval.maps.plan import PlanIndex, sample_segments
 
 __all__ = ["MapEvaluation", "WallFigures", "evaluate_map"]
 
-_FIT_CELLS: Final = 20_000
+_FIT_CELLS: Final = 8_000
 """Most wall cells the fits iterate on (evenly spread); the figures use every cell."""
 _START_M: Final = 2.0
 """The fits' first inlier distance at least: a placement off by a metre is still found."""
@@ -225,7 +225,10 @@ def evaluate_map(
     )
     rigid = fit_to_plan(cells[::step], plan, with_scale=False, start_m=start, floor_m=resolution)
     distance, _ = plan.nearest(cells)
-    fitted, _ = plan.nearest(similarity.apply(cells))
+    # the fitted cells moved little: the segments found for them serve the rigid fit too
+    fitted_cells = similarity.apply(cells)
+    near = plan.candidates(fitted_cells)
+    fitted, _ = plan.measure(fitted_cells, near)
     clutter = fitted > clutter_m
     if clutter.all():
         msg = (
@@ -233,10 +236,10 @@ def evaluate_map(
             "the plan even after the best fit; the map and the plan do not overlap."
         )
         raise MetricError(msg, option="map")
-    rigid_d, _ = plan.nearest(rigid.apply(cells))
+    rigid_d, _ = plan.measure(rigid.apply(cells), near)
     tolerance = max(max(thresholds_m, default=0.15), 2.0 * resolution)
     coverage = _Coverage.of(grid, walls, rows[~clutter], cols[~clutter], tolerance)
-    plan_samples, _ = sample_segments(plan.segments_xy, resolution)
+    plan_samples, _ = sample_segments(plan.segments_xy, 2.0 * resolution)
     to_map = placement.inverse()
 
     def figures(d: FloatArray, fit: Fit2D | None) -> WallFigures:
@@ -300,10 +303,13 @@ def _figures(d: FloatArray, thresholds_m: Sequence[float], coverage: float | Non
 def _regions(cells: FloatArray, d: FloatArray) -> tuple[dict[str, float | int], ...]:
     """The RMSE of the wall distances per square tile of the plan frame."""
     tiles = np.floor(cells / _REGION_M).astype(np.int64)
-    keys, inverse, counts = np.unique(tiles, axis=0, return_inverse=True, return_counts=True)
+    low = tiles.min(axis=0)
+    span = int(tiles[:, 1].max() - low[1]) + 1
+    flat = (tiles[:, 0] - low[0]) * span + (tiles[:, 1] - low[1])  # one key per tile
+    keys, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
     sse = np.bincount(inverse.reshape(-1), weights=d * d, minlength=len(keys))
     rmse = np.sqrt(sse / counts)
-    centres = (keys + 0.5) * _REGION_M
+    centres = (np.column_stack([keys // span, keys % span]) + low + 0.5) * _REGION_M
     return tuple(
         {"x_m": float(x), "y_m": float(y), "size_m": _REGION_M, "n": int(n), "rmse_m": float(r)}
         for (x, y), n, r in zip(centres.tolist(), counts.tolist(), rmse.tolist(), strict=True)

@@ -22,7 +22,7 @@ from loceval.errors import InputError
 __all__ = ["PlanIndex", "sample_segments"]
 
 _MAX_SAMPLES: Final = 4_000_000
-_NEIGHBOURS: Final = 6
+_NEIGHBOURS: Final = 4
 _CHUNK: Final = 500_000
 
 
@@ -58,12 +58,14 @@ class PlanIndex:
         spacing_m: the sampling step.
         tree: KD-tree over the samples.
         owner: (S,) the segment of each sample.
+        frames: (K, 5) each segment's start x, y, unit direction x, y and length.
     """
 
     segments_xy: FloatArray
     spacing_m: float
     tree: KDTree
     owner: NDArray[np.intp]
+    frames: FloatArray
 
     @classmethod
     def build(cls, segments_xy: FloatArray, *, spacing_m: float) -> PlanIndex:
@@ -86,12 +88,61 @@ class PlanIndex:
         total = float(lengths[keep].sum())
         spacing = max(float(spacing_m), total / _MAX_SAMPLES)
         samples, owner = sample_segments(segments, spacing)
-        return cls(segments, spacing, KDTree(samples), owner)
+        ab = segments[:, 1] - segments[:, 0]
+        length = np.linalg.norm(ab, axis=1)
+        frames = np.column_stack([segments[:, 0], ab / length[:, None], length])
+        return cls(segments, spacing, KDTree(samples), owner, frames)
 
     @property
     def length_m(self) -> float:
         """Return the plan's total wall length, metres."""
         return float(np.linalg.norm(self.segments_xy[:, 1] - self.segments_xy[:, 0], axis=1).sum())
+
+    def candidates(self, points_xy: FloatArray, *, k: int = _NEIGHBOURS) -> NDArray[np.intp]:
+        """Return the segments of each point's ``k`` nearest samples (the ones to measure).
+
+        Args:
+            points_xy: (N, 2) points, metres.
+            k: samples per point.
+
+        Returns:
+            (N, k) segment indices.
+        """
+        points = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+        k = min(k, self.tree.n)
+        _, idx = self.tree.query(points, k=k)
+        out: NDArray[np.intp] = self.owner[np.asarray(idx).reshape(len(points), k)]
+        return out
+
+    def measure(
+        self, points_xy: FloatArray, candidates: NDArray[np.intp]
+    ) -> tuple[FloatArray, FloatArray]:
+        """Return each point's exact distance to the nearest of its candidate segments.
+
+        Args:
+            points_xy: (N, 2) points, metres.
+            candidates: (N, k) segment indices (:meth:`candidates`).
+
+        Returns:
+            (N,) distances, metres, and (N, 2) the nearest points on those segments.
+        """
+        points = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+        distance = np.empty(len(points))
+        closest = np.empty((len(points), 2))
+        ax, ay, ux, uy, length = self.frames.T
+        for start in range(0, len(points), _CHUNK):  # blocks bound the memory, not per point
+            stop = start + _CHUNK
+            near = candidates[start:stop]
+            px, py = points[start:stop, 0:1], points[start:stop, 1:2]
+            sx, sy, dx, dy = ax[near], ay[near], ux[near], uy[near]
+            along = np.clip((px - sx) * dx + (py - sy) * dy, 0.0, length[near])
+            fx, fy = sx + along * dx, sy + along * dy
+            d2 = (px - fx) ** 2 + (py - fy) ** 2
+            best = np.argmin(d2, axis=1)[:, None]
+            distance[start:stop] = np.sqrt(np.take_along_axis(d2, best, axis=1)[:, 0])
+            closest[start:stop, 0] = np.take_along_axis(fx, best, axis=1)[:, 0]
+            closest[start:stop, 1] = np.take_along_axis(fy, best, axis=1)[:, 0]
+        return distance, closest
 
     def nearest(self, points_xy: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Return each point's distance to the plan and the nearest point on it.
@@ -102,22 +153,4 @@ class PlanIndex:
         Returns:
             (N,) distances, metres, and (N, 2) the nearest plan points.
         """
-        points = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
-        distance = np.empty(len(points))
-        closest = np.empty((len(points), 2))
-        k = min(_NEIGHBOURS, self.tree.n)
-        for start in range(0, len(points), _CHUNK):  # blocks bound the memory, not per point
-            p = points[start : start + _CHUNK]
-            _, idx = self.tree.query(p, k=k)
-            idx = np.asarray(idx).reshape(len(p), k)
-            seg = self.segments_xy[self.owner[idx]]  # (n, k, 2, 2)
-            a, ab = seg[:, :, 0], seg[:, :, 1] - seg[:, :, 0]
-            ap = p[:, None, :] - a
-            t = np.clip(np.einsum("nkj,nkj->nk", ap, ab) / np.einsum("nkj,nkj->nk", ab, ab), 0, 1)
-            foot = a + t[..., None] * ab
-            d = np.linalg.norm(p[:, None, :] - foot, axis=2)
-            best = np.argmin(d, axis=1)
-            rows = np.arange(len(p))
-            distance[start : start + len(p)] = d[rows, best]
-            closest[start : start + len(p)] = foot[rows, best]
-        return distance, closest
+        return self.measure(points_xy, self.candidates(points_xy))

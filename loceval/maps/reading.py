@@ -153,12 +153,14 @@ def grid_from_image(data: bytes, meta: dict[str, object], *, where: str) -> Occu
             "map_saver or convert the image to PGM."
         )
         raise ReaderError(msg, option="map")
-    occupancy = pixels.astype(np.float32) / np.float32(255.0)
+    # one state per grey level (a 256-entry table), so no arithmetic per cell
+    occupancy = np.arange(256, dtype=np.float64) / 255.0
     if not meta["negate"]:
         occupancy = 1.0 - occupancy
-    states = np.full(pixels.shape, UNKNOWN, dtype=np.int8)
-    states[occupancy > float(str(meta["occupied_thresh"]))] = OCCUPIED
-    states[occupancy < float(str(meta["free_thresh"]))] = FREE
+    table = np.full(256, UNKNOWN, dtype=np.int8)
+    table[occupancy > float(str(meta["occupied_thresh"]))] = OCCUPIED
+    table[occupancy < float(str(meta["free_thresh"]))] = FREE
+    states = table[pixels]
     origin = meta["origin"]
     assert isinstance(origin, tuple)  # noqa: S101  (_parse_yaml makes it one)
     return OccupancyGrid(
@@ -218,7 +220,7 @@ def _parse_yaml(text: str, where: str) -> dict[str, object]:
     }
 
 
-def _read_pgm(data: bytes, *, where: str) -> NDArray[np.uint16]:
+def _read_pgm(data: bytes, *, where: str) -> NDArray[np.uint8]:
     """Read a binary (P5) or text (P2) PGM, checking its size before its pixels."""
     head = _PGM_HEADER.match(data[:_HEADER_BYTES])
     rest = (
@@ -256,12 +258,15 @@ def _read_pgm(data: bytes, *, where: str) -> NDArray[np.uint16]:
                 f"{len(pixels):,} values follow; the image does not match its header."
             )
             raise ReaderError(msg, option="map")
-    scaled = pixels.reshape(height, width).astype(np.float32) * (255.0 / maxval)
-    out: NDArray[np.uint16] = np.rint(scaled).astype(np.uint16)
+    grey = np.minimum(pixels.reshape(height, width), maxval)
+    if maxval != 255:  # other depths to 0-255 through a table of their levels
+        levels = np.rint(np.arange(maxval + 1) * (255.0 / maxval)).astype(np.uint8)
+        grey = levels[grey]
+    out: NDArray[np.uint8] = grey.astype(np.uint8, copy=False)
     return out
 
 
-def _read_png(data: bytes, *, where: str) -> NDArray[np.uint16]:
+def _read_png(data: bytes, *, where: str) -> NDArray[np.uint8]:
     """Read a PNG as grey levels 0-255, checking its size before decoding."""
     try:
         from PIL import Image  # noqa: PLC0415  (only PNG maps need Pillow)
@@ -275,7 +280,7 @@ def _read_png(data: bytes, *, where: str) -> NDArray[np.uint16]:
         with image:
             width, height = image.size
             check_map_size(width, height, where=where)
-            grey = np.asarray(image.convert("L"), dtype=np.uint16)
+            grey = np.asarray(image.convert("L"), dtype=np.uint8)
     except (OSError, ValueError, Image.DecompressionBombError) as err:
         msg = f"{where}: the PNG cannot be decoded ({err}); check the image."
         raise ReaderError(msg, option="map") from err
