@@ -165,7 +165,9 @@ def _run(t_s: FloatArray, xyz: FloatArray, which: str) -> tuple[FloatArray, Floa
     return t[keep], p[keep]
 
 
-def _stretches(t: FloatArray, difference: FloatArray, tolerance_s: float) -> tuple[TimingStretch, ...]:
+def _stretches(
+    t: FloatArray, difference: FloatArray, tolerance_s: float
+) -> tuple[TimingStretch, ...]:
     """The runs of consecutive points whose |difference| exceeds the tolerance."""
     over = np.abs(difference) > tolerance_s
     edges = np.flatnonzero(np.diff(np.concatenate([[0], over.astype(np.int8), [0]])))

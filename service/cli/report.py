@@ -74,6 +74,9 @@ def run_report(args: argparse.Namespace) -> int:
                 reference_xyz=None
                 if isinstance(result, CheckpointEvaluation)
                 else result.reference.positions_xyz,
+                reference_t_s=None
+                if isinstance(result, CheckpointEvaluation)
+                else result.reference.stamps_ns / 1e9,
             )
         )
     tolerance = options.tolerance

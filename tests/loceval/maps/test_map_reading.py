@@ -59,7 +59,7 @@ def test_a_zip_of_the_pair_is_read(tmp_path: Path) -> None:
     np.testing.assert_array_equal(read_map(str(zipped)).states, _grid().states)
 
 
-def test_a_yaw_turns_the_cells(tmp_path: Path) -> None:
+def test_a_yaw_turns_the_cells() -> None:
     """origin yaw 90°: the first column runs along +y of the map frame."""
     grid = OccupancyGrid(_grid().states, 0.1, (1.0, 1.0), math.pi / 2)
     centres = grid.cell_centres(np.array([0, 0]), np.array([0, 1]))
