@@ -27,6 +27,7 @@ from exporters.plots.figure import FigureView, number_figures
 from exporters.plots.underlay import floor_plan_segments
 from exporters.report.clocks import ClockSection, build_clock_section
 from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
+from exporters.report.mapsection import MapView, build_map_view
 from exporters.report.provenance import (
     alignment_rows,
     estimate_name,
@@ -185,6 +186,7 @@ class ReportView:
     best_mark: str = BEST_MARK
     confidence: ConfidenceView = field(default_factory=ConfidenceView)
     ranging: RangingView | None = None  # the ranging section (exporters.report.ranging)
+    map: MapView | None = None  # the map section (exporters.report.mapsection)
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -502,4 +504,5 @@ def build_report_view(
             result, number=len(figures) + 1, image_format=image_format, max_points=max_points
         ),
         ranging=build_ranging_view(result),
+        map=build_map_view(result),
     )
