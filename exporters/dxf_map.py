@@ -7,6 +7,9 @@
 - ``map clutter``: the cells farther than the clutter distance after the fit (magenta).
 
 Cells and walls sit at the reference's median height, where the plan was cut.
+
+``excursions`` (any evaluation): each estimate's aligned path while the reference was lost
+for longer than the minimum excursion, with its duration, length and drift as a label.
 """
 
 from __future__ import annotations
@@ -22,12 +25,13 @@ from exporters.mapcells import map_bins
 from exporters.placement import Placement
 from loceval._typing import FloatArray
 
-__all__ = ["MAX_CAD_CELLS", "add_map_layers"]
+__all__ = ["MAX_CAD_CELLS", "add_excursion_layer", "add_map_layers"]
 
 MAX_CAD_CELLS: Final = 20_000
 """Most wall cells drawn into a CAD file (one entity each)."""
 _PLAN_RGB: Final = (158, 158, 158)
 _CLUTTER_RGB: Final = (194, 24, 91)
+_EXCURSION_RGB: Final = (106, 27, 154)
 
 
 def placed_cells(placement: Placement) -> tuple[FloatArray, FloatArray, np.ndarray] | None:
@@ -69,3 +73,29 @@ def _layer(doc: Drawing, name: str, rgb: tuple[int, int, int], description: str)
     layer = doc.layers.add(name)
     layer.rgb = rgb
     layer.description = description
+
+
+def add_excursion_layer(doc: Drawing, msp: Modelspace, placement: Placement, text_h: float) -> None:
+    """Add ``excursions``: each estimate's path outside the tracked room and its drift label."""
+    result = placement.result
+    todo = [(e, x) for e in result.estimates for x in e.excursions]
+    if not todo:
+        return
+    _layer(doc, "excursions", _EXCURSION_RGB, "loceval: estimate paths outside the tracked room")
+    for estimate, excursion in todo:  # a few stretches per run
+        stamps = estimate.estimate.stamps_ns + np.int64(estimate.association.offset_ns)
+        inside = (stamps >= excursion.start_ns) & (stamps <= excursion.end_ns)
+        xyz = estimate.alignment.transform.apply_positions(estimate.estimate.positions_xyz[inside])
+        if len(xyz) < 2:
+            continue
+        model = placement.to_model(xyz)
+        msp.add_polyline3d(model.tolist(), dxfattribs={"layer": "excursions"})
+        before = "-" if excursion.error_before_m is None else f"{excursion.error_before_m:.2f}"
+        after = "-" if excursion.error_after_m is None else f"{excursion.error_after_m:.2f}"
+        duration = (excursion.end_ns - excursion.start_ns) / 1e9
+        msp.add_text(
+            f"{estimate.name} excursion: {duration:.0f} s, {excursion.path_length_m:.0f} m, "
+            f"error {before} -> {after} m",
+            height=text_h,
+            dxfattribs={"layer": "excursions", "insert": tuple(model[0].tolist())},
+        )
