@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from loceval.geometry import SimilarityTransform
+from loceval.core.geometry import SimilarityTransform
 from loceval.maps import evaluate_map, read_map
 
 RESOLUTION_M = 0.05

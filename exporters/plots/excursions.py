@@ -1,6 +1,6 @@
 """Excursions in the report's time plots: stretches outside the tracked room, labelled.
 
-An excursion (:mod:`loceval.excursions`) is a reference loss longer than the minimum while
+An excursion (:mod:`loceval.metrics.excursions`) is a reference loss longer than the minimum while
 an estimate went on; the time plots draw each as a hatched band over the grey tracking-loss
 band, with the drift it measured written above it ("45 s, 38 m: 0.02 -> 0.21 m").
 """

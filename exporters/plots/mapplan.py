@@ -30,7 +30,7 @@ from loceval.evaluation import EvaluationResult
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from loceval._typing import FloatArray
+    from loceval.core.arrays import FloatArray
     from loceval.maps import MapEvaluation
 
 __all__ = ["MAP_FIGURE_KEY", "plot_map"]

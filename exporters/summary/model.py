@@ -3,7 +3,7 @@
 A schedule's service builds a :class:`SummaryInput` (one :class:`SummaryRun` per selected
 recording); :func:`system_stats` sums each system up over the runs and :func:`repeatability`
 compares every run's reference path with the first run's, in space, through the core's
-:func:`loceval.repeatability.path_deviations`.
+:func:`loceval.metrics.repeatability.path_deviations`.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from numpy.typing import NDArray
 
 from loceval.errors import InputError
 from loceval.evaluation import Tolerance
-from loceval.redrive import RedriveTiming, redrive_timing
-from loceval.repeatability import finite_positions, path_deviations
+from loceval.metrics.redrive import RedriveTiming, redrive_timing
+from loceval.metrics.repeatability import finite_positions, path_deviations
 
 __all__ = [
     "RepeatabilityRow",
@@ -117,7 +117,7 @@ class SummaryRun:
         duration_s: the reference's duration, seconds.
         recorded_at_is_upload: ``recorded_at`` is the upload time (the table marks it).
         reference_t_s: (N,) the reference's times (seconds), one per ``reference_xyz`` row,
-            for the re-drive timing (:mod:`loceval.redrive`); None leaves timing out.
+            for the re-drive timing (:mod:`loceval.metrics.redrive`); None leaves timing out.
     """
 
     dataset: str
@@ -362,7 +362,8 @@ class RepeatabilityRow:
         duration_diff_s: this run's duration minus the baseline's, seconds (None for the
             baseline or when a duration is unknown).
         timing: when this run passed the baseline's points against when the baseline did
-            (:func:`loceval.redrive.redrive_timing`); None for the baseline or without times.
+            (:func:`loceval.metrics.redrive.redrive_timing`); None for the baseline or
+            without times.
     """
 
     dataset: str
@@ -394,7 +395,7 @@ def repeatability(runs: Sequence[SummaryRun]) -> list[RepeatabilityRow]:
     The runs with a reference path are taken by ``recorded_at``; the first is the
     baseline. For each later run, every reference position's distance to the baseline's
     path (a polyline through its positions, point-to-segment) is measured
-    (:func:`loceval.repeatability.path_deviations`); the median and the largest summarise
+    (:func:`loceval.metrics.repeatability.path_deviations`); the median and the largest summarise
     how closely the path was re-driven. The duration difference tells whether it was
     driven at the same pace.
 

@@ -28,10 +28,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import maximum_filter
 
-from loceval._quantiles import quantiles
-from loceval._typing import BoolArray, FloatArray
+from loceval.core.arrays import BoolArray, FloatArray
+from loceval.core.geometry import SimilarityTransform
+from loceval.core.quantiles import quantiles
 from loceval.errors import InputError, MetricError
-from loceval.geometry import SimilarityTransform
 from loceval.maps.fit import Fit2D, fit_to_plan
 from loceval.maps.grid import FREE, OCCUPIED, OccupancyGrid
 from loceval.maps.plan import PlanIndex, sample_segments

@@ -19,10 +19,10 @@ from typing import Final
 
 import numpy as np
 
-from loceval._quantiles import median
-from loceval._typing import FloatArray
+from loceval.core.arrays import FloatArray
+from loceval.core.geometry import SimilarityTransform
+from loceval.core.quantiles import median
 from loceval.errors import MetricError
-from loceval.geometry import SimilarityTransform
 from loceval.maps.plan import PlanIndex
 
 __all__ = ["Fit2D", "fit_to_plan"]

@@ -19,7 +19,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
-from loceval._typing import BoolArray, FloatArray
+from loceval.core.arrays import BoolArray, FloatArray
 from loceval.errors import InputError
 
 __all__ = [

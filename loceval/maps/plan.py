@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import KDTree
 
-from loceval._typing import FloatArray
+from loceval.core.arrays import FloatArray
 from loceval.errors import InputError
 
 __all__ = ["PlanIndex", "sample_segments"]

@@ -12,10 +12,10 @@ import pytest
 from exporters import ExportOptions, render_artifact
 from exporters.plots.mapplan import MAP_FIGURE_KEY, plot_map
 from exporters.report.mapsection import build_map_view
-from loceval.alignment import AlignWindow
+from loceval.core.geometry import SimilarityTransform
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
-from loceval.geometry import SimilarityTransform
 from loceval.maps import evaluate_map
+from loceval.registration.alignment import AlignWindow
 from tests.loceval.test_excursions import _run
 from tests.mapfactory import Distortion, draw_map, office_plan
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from loceval.alignment import AlignWindow
 from loceval.evaluation import EvaluationConfig, evaluate
+from loceval.registration.alignment import AlignWindow
 from loceval.trajectory import Trajectory
 
 NS = 1_000_000_000

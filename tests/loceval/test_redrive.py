@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from loceval.errors import InputError
-from loceval.redrive import redrive_timing
+from loceval.metrics.redrive import redrive_timing
 
 
 def _path(s: np.ndarray) -> np.ndarray:

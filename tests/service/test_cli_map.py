@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from loceval.geometry import SimilarityTransform
+from loceval.core.geometry import SimilarityTransform
 from service.cli import main
 from tests.factories import make_trajectory, write_tum
 from tests.mapfactory import Distortion, draw_map, office_plan, write_map_server

@@ -12,10 +12,10 @@ import math
 import numpy as np
 import pytest
 
+from loceval.core.geometry import SimilarityTransform
+from loceval.core.polyline import segment_distances
 from loceval.errors import InputError, MetricError
-from loceval.geometry import SimilarityTransform
 from loceval.maps import FREE, OCCUPIED, OccupancyGrid, evaluate_map
-from loceval.polyline import segment_distances
 from tests.mapfactory import Distortion, draw_map, office_plan
 
 RES = 0.05
