@@ -13,27 +13,10 @@ from typing import Final
 
 import numpy as np
 
-from exporters.colours import ATEBin, ate_bins
 from exporters.options import ExportOptions
 from loceval.evaluation import EvaluationResult
-from loceval.maps import MapEvaluation
 
-__all__ = ["MAP_CELLS_COLUMNS", "export_map_cells_csv", "map_bins"]
-
-_MORE_EDGES_M: Final = (0.25, 0.5, 1.0, 2.0)
-"""Edges added above the thresholds while the map's cells lie farther."""
-
-
-def map_bins(found: MapEvaluation, thresholds_m: tuple[float, ...]) -> tuple[ATEBin, ...]:
-    """Return the colour bins of wall distances: the thresholds, then 0.25-2 m as needed.
-
-    The same green-to-red scale as the ATE in every output.
-    """
-    edges = sorted({float(t) for t in thresholds_m})
-    top = float(found.distance_m.max()) if len(found.distance_m) else 0.0
-    edges += [e for e in _MORE_EDGES_M if e > (edges[-1] if edges else 0.0) and e < top]
-    return ate_bins(edges)
-
+__all__ = ["MAP_CELLS_COLUMNS", "export_map_cells_csv"]
 
 MAP_CELLS_COLUMNS: Final = ("x_m", "y_m", "distance_m", "fitted_distance_m", "clutter")
 """The header of ``map_cells.csv``."""

@@ -2,7 +2,7 @@
 
 - ``map plan``: the plan's walls the map was measured against, grey ``LINE`` s;
 - ``map walls``: the map's wall cells as ``POINT`` s coloured by their distance to the plan
-  (the report's colours and bins, :func:`exporters.mapcells.map_bins`), at most
+  (the report's colours and bins, :func:`exporters.colours.map_bins`), at most
   :data:`MAX_CAD_CELLS` of them, evenly spread (every cell is in ``map_cells.csv``);
 - ``map clutter``: the cells farther than the clutter distance after the fit (magenta).
 
@@ -22,7 +22,7 @@ from ezdxf.document import Drawing
 from ezdxf.layouts.layout import Modelspace
 
 from exporters.cad.placement import Placement
-from exporters.mapcells import map_bins
+from exporters.colours import map_bins
 from loceval.core.arrays import FloatArray
 
 __all__ = ["MAX_CAD_CELLS", "add_excursion_layer", "add_map_layers"]
@@ -59,7 +59,7 @@ def add_map_layers(doc: Drawing, msp: Modelspace, placement: Placement) -> None:
     plan = placement.to_model(np.column_stack([ends, np.full(len(ends), z)])).reshape(-1, 2, 3)
     for a, b in plan.tolist():  # one entity per plan wall
         msp.add_line(a, b, dxfattribs={"layer": "map plan"})
-    bins = map_bins(found, placement.result.config.thresholds_m)
+    bins = map_bins(found.distance_m, placement.result.config.thresholds_m)
     _layer(doc, "map walls", bins[0].color_rgb, "loceval: map wall cells by distance to the plan")
     _layer(doc, "map clutter", _CLUTTER_RGB, "loceval: map cells not in the plan (clutter)")
     index = np.searchsorted([b.high_m for b in bins[:-1]], distance, side="left")

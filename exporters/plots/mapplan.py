@@ -15,7 +15,7 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
-from exporters.mapcells import map_bins
+from exporters.colours import map_bins
 from exporters.plots.figure import (
     DEFAULT_MAX_POINTS,
     ImageFormat,
@@ -50,7 +50,7 @@ def plot_map(
     found = result.map
     if found is None:
         return ()
-    bins = map_bins(found, result.config.thresholds_m)
+    bins = map_bins(found.distance_m, result.config.thresholds_m)
     cmap = ListedColormap(["#{:02x}{:02x}{:02x}".format(*b.color_rgb) for b in bins])
     norm = BoundaryNorm([0.0, *(b.high_m for b in bins[:-1]), np.inf], cmap.N)
     fig = new_figure(4.2)

@@ -28,12 +28,21 @@ from numpy.typing import NDArray
 from loceval.errors import InputError, ReaderError
 from loceval.maps.grid import FREE, MAX_MAP_CELLS, OCCUPIED, UNKNOWN, OccupancyGrid, check_map_size
 
-__all__ = ["MAP_SUFFIXES", "grid_from_image", "read_map", "read_map_yaml", "read_map_zip"]
+__all__ = [
+    "MAP_SUFFIXES",
+    "grid_from_image",
+    "read_bag_map",
+    "read_map",
+    "read_map_yaml",
+    "read_map_zip",
+]
 
 MAP_SUFFIXES: Final = (".yaml", ".yml", ".zip")
 """Map files read without a topic: map_server's YAML, or a zip holding it and its image."""
 _HEADER_BYTES: Final = 4096
 _PGM_HEADER: Final = re.compile(rb"^(P[25])(?:\s+|#[^\n]*\n)*?(\d+)(?:\s+|#[^\n]*\n)+(\d+)")
+_OCCUPIED_PCT: Final = 65
+_FREE_PCT: Final = 19.6
 _MAX_IMAGE_BYTES: Final = 2 * MAX_MAP_CELLS + _HEADER_BYTES
 """Most bytes of a map image read (16-bit PGM at the largest size)."""
 
@@ -53,9 +62,7 @@ def read_map(source: str) -> OccupancyGrid:
         return read_map_zip(path) if path.suffix.lower() == ".zip" else read_map_yaml(path)
     bag, sep, topic = source.rpartition("@")
     if sep and bag and topic:
-        from loceval.readers.rosbag.grid import read_grid_topic  # noqa: PLC0415  (rosbags)
-
-        return read_grid_topic(Path(bag), topic)
+        return read_bag_map(Path(bag), topic)
     if not path.exists():
         msg = f"The map {source!r} does not exist; give map.yaml, a zip of it or BAG@TOPIC."
         raise InputError(msg, option="map")
@@ -64,6 +71,41 @@ def read_map(source: str) -> OccupancyGrid:
         "map.yaml beside its image, a zip holding both, or run.bag@/map."
     )
     raise InputError(msg, option="map")
+
+
+def read_bag_map(path: Path, topic: str) -> OccupancyGrid:
+    """Read the last ``nav_msgs/msg/OccupancyGrid`` of a bag topic.
+
+    Cell values are ROS's: -1 unknown, 0-100 the occupancy in percent; occupied from 65,
+    free up to 19.6, as map_server saves them (``occupied_thresh: 0.65``,
+    ``free_thresh: 0.196``).
+
+    Raises:
+        ReaderError: no such topic, no message, data that do not match the declared size.
+        InputError: the declared size is over the limit.
+    """
+    from loceval.readers.rosbag.grid import read_grid_topic  # noqa: PLC0415  (rosbags)
+
+    found = read_grid_topic(path, topic)
+    check_map_size(found.width, found.height, where=found.where)
+    if found.values.size != found.width * found.height:
+        msg = (
+            f"{found.where}: the map declares {found.width} x {found.height} cells but holds "
+            f"{found.values.size} values; the message is damaged."
+        )
+        raise ReaderError(msg, option="map")
+    values = found.values.reshape(found.height, found.width)
+    states = np.full(values.shape, UNKNOWN, dtype=np.int8)
+    states[values >= _OCCUPIED_PCT] = OCCUPIED
+    states[(values >= 0) & (values <= _FREE_PCT)] = FREE
+    return OccupancyGrid(
+        states,
+        found.resolution_m,
+        (float(found.origin_xy[0]), float(found.origin_xy[1])),
+        found.origin_yaw_rad,
+        source=found.where,
+        stamp_ns=found.stamp_ns,
+    )
 
 
 def read_map_yaml(path: Path) -> OccupancyGrid:

@@ -1,21 +1,21 @@
 """Occupancy grid maps from a bag topic of ``nav_msgs/msg/OccupancyGrid`` (the last message).
 
 A SLAM system publishes its map again and again as it grows; the last message is the map
-it ended with. Cell values are ROS's: -1 unknown, 0-100 the occupancy probability in
-percent; a cell is occupied from 65 and free up to 19.6, as map_server saves them
-(``occupied_thresh: 0.65``, ``free_thresh: 0.196``).
+it ended with. The message is returned as read; :mod:`loceval.maps.reading` checks its size
+and turns its values into cell states.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Final, Protocol, cast
 
 import numpy as np
 
+from loceval.core.arrays import FloatArray
 from loceval.errors import ReaderError
-from loceval.maps.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid, check_map_size
 from loceval.readers.rosbag.bagfile import (
     deserialize,
     listing,
@@ -25,11 +25,34 @@ from loceval.readers.rosbag.bagfile import (
 )
 from loceval.readers.rosbag.messages import NS, HeaderLike, QuaternionLike
 
-__all__ = ["GRID_MSGTYPE", "read_grid_topic"]
+__all__ = ["GRID_MSGTYPE", "GridMessage", "read_grid_topic"]
 
 GRID_MSGTYPE: Final = "nav_msgs/msg/OccupancyGrid"
-_OCCUPIED_PCT: Final = 65
-_FREE_PCT: Final = 19.6
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class GridMessage:
+    """One ``nav_msgs/msg/OccupancyGrid`` as read (:mod:`loceval.maps.reading` checks it).
+
+    Attributes:
+        values: (N,) int8 cell values, -1 unknown, 0-100 occupancy percent, row-major.
+        width: cells per row.
+        height: rows.
+        resolution_m: the cell size, metres.
+        origin_xy: the grid origin in the map frame, metres.
+        origin_yaw_rad: the grid's rotation, radians.
+        stamp_ns: the header stamp.
+        where: ``bag@topic`` for messages.
+    """
+
+    values: np.ndarray
+    width: int
+    height: int
+    resolution_m: float
+    origin_xy: FloatArray
+    origin_yaw_rad: float
+    stamp_ns: int
+    where: str
 
 
 class _PointLike(Protocol):
@@ -55,7 +78,7 @@ class _GridLike(Protocol):
     data: np.ndarray
 
 
-def read_grid_topic(path: Path, topic: str) -> OccupancyGrid:
+def read_grid_topic(path: Path, topic: str) -> GridMessage:
     """Read the last ``nav_msgs/msg/OccupancyGrid`` message of a topic.
 
     Args:
@@ -63,9 +86,7 @@ def read_grid_topic(path: Path, topic: str) -> OccupancyGrid:
         topic: the map's topic (a ROS 1 topic with or without its leading slash).
 
     Raises:
-        ReaderError: no such topic, another type, no message, or data that do not match
-            the declared width and height.
-        InputError: the declared size is over the limit.
+        ReaderError: no such topic, another type or no message.
     """
     with open_bag(path) as bag:
         topics = bag.reader.topics
@@ -99,27 +120,16 @@ def read_grid_topic(path: Path, topic: str) -> OccupancyGrid:
         where = f"{bag.label}@{names[0]}"
         message = cast("_GridLike", deserialize(bag, last[1], last[2]))
     info = message.info
-    width, height = int(info.width), int(info.height)
-    check_map_size(width, height, where=where)
-    data = np.asarray(message.data, dtype=np.int8).reshape(-1)
-    if data.size != width * height:
-        msg = (
-            f"{where}: the map declares {width} x {height} cells but holds {data.size} values; "
-            "the message is damaged."
-        )
-        raise ReaderError(msg, option="map")
-    values = data.reshape(height, width)
-    states = np.full(values.shape, UNKNOWN, dtype=np.int8)
-    states[values >= _OCCUPIED_PCT] = OCCUPIED
-    states[(values >= 0) & (values <= _FREE_PCT)] = FREE
     q = info.origin.orientation
     yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
     stamp = message.header.stamp
-    return OccupancyGrid(
-        states,
-        float(info.resolution),
-        (float(info.origin.position.x), float(info.origin.position.y)),
-        yaw,
-        source=where,
+    return GridMessage(
+        values=np.asarray(message.data, dtype=np.int8).reshape(-1),
+        width=int(info.width),
+        height=int(info.height),
+        resolution_m=float(info.resolution),
+        origin_xy=np.array([info.origin.position.x, info.origin.position.y], dtype=np.float64),
+        origin_yaw_rad=yaw,
         stamp_ns=int(stamp.sec) * NS + int(stamp.nanosec),
+        where=where,
     )
