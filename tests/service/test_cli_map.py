@@ -200,3 +200,24 @@ def test_a_map_needs_a_plan(recording: dict[str, Path], capsys: pytest.CaptureFi
     )
     assert code == 1
     assert "give the plan too" in err
+
+
+def test_the_tables_show_the_map(
+    recording: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Without --json the tables end with the map's figures as placed and after the fits."""
+    code, out, err = _run(
+        capsys,
+        "evaluate",
+        str(recording["reference"]),
+        str(recording["estimate"]),
+        "--map",
+        str(recording["yaml"]),
+        "--building",
+        str(recording["dxf"]),
+        "--no-ci",
+    )
+    assert code == 0, err
+    assert "Map against the plan (map.yaml (map.pgm), 0 clutter cells)" in out
+    for label in ("as placed", "rigid fit", "similarity fit"):
+        assert f"  {label}" in out
