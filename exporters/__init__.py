@@ -86,6 +86,7 @@ ARTIFACTS: Final[Mapping[str, ArtifactSpec]] = {
     for spec in (
         ArtifactSpec("result.json", "application/json", "exporters:export_result_json", "all"),
         ArtifactSpec("errors.csv", "text/csv", "exporters.tables:export_errors_csv", "all"),
+        ArtifactSpec("map_cells.csv", "text/csv", "exporters.mapcells:export_map_cells_csv", "all"),
         ArtifactSpec("report.html", "text/html", "exporters.report:render_report_html", "report"),
         ArtifactSpec(
             "report.pdf", "application/pdf", "exporters.report:render_report_pdf", "report"
@@ -112,6 +113,7 @@ CAD_ARTIFACTS: Final = frozenset(
 ARTIFACT_ALIASES: Final[Mapping[str, str]] = {
     "json": "result.json",
     "csv": "errors.csv",
+    "cells": "map_cells.csv",
     "html": "report.html",
     "pdf": "report.pdf",
     "dxf": "paths.dxf",

@@ -15,10 +15,13 @@ from typing import Final, TypeAlias
 
 import numpy as np
 
+from loceval.core.arrays import FloatArray
 from loceval.core.display import display_text
 from loceval.evaluation import EvaluationResult
 
 RGB: TypeAlias = tuple[int, int, int]
+_MORE_EDGES_M: Final = (0.25, 0.5, 1.0, 2.0)
+"""Map colour edges added above the thresholds while the map's cells lie farther."""
 
 
 PALETTE: Final[tuple[RGB, ...]] = (
@@ -178,3 +181,19 @@ def ate_edges_m(result: EvaluationResult) -> tuple[float, ...]:
         pick = np.linspace(0, len(extra) - 1, _MAX_EXTRA_EDGES).round().astype(int)
         extra = [extra[i] for i in pick]
     return (*edges, *extra)
+
+
+def map_bins(distance_m: FloatArray, thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
+    """Return the colour bins of a map's wall distances: the thresholds, then 0.25-2 m.
+
+    The same green-to-red scale as the ATE in every output; the edges above the thresholds
+    are added while the largest distance lies beyond them.
+    """
+    edges = sorted({float(t) for t in thresholds_m})
+    top = float(distance_m.max()) if len(distance_m) else 0.0
+    edges += [e for e in _MORE_EDGES_M if e > (edges[-1] if edges else 0.0) and e < top]
+    return ate_bins(edges)
+
+
+MAP_CELLS_COLUMNS: Final = ("x_m", "y_m", "distance_m", "fitted_distance_m", "clutter")
+"""The header of ``map_cells.csv``."""

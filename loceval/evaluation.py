@@ -16,6 +16,7 @@ from loceval.core.arrays import IntArray
 from loceval.core.gaps import gap_threshold_ns
 from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
+from loceval.metrics.excursions import Excursion, find_excursions
 from loceval.metrics.pose_errors import (
     ErrorSeries,
     RPEUnit,
@@ -29,13 +30,19 @@ from loceval.metrics.pose_errors import (
 )
 from loceval.options import DEFAULT_THRESHOLDS_M, check_option, choice_default, number_default
 from loceval.registration.alignment import Alignment, AlignMethod, AlignWindow, align
-from loceval.registration.association import Association, AssociationMethod, associate
+from loceval.registration.association import (
+    Association,
+    AssociationMethod,
+    associate,
+    association_notes,
+)
 from loceval.trajectory import MAX_OFFSET_M, Trajectory
 
 if TYPE_CHECKING:
     from loceval.assessment.assess import Assessment
     from loceval.assessment.comparison import Comparison
     from loceval.assessment.uncertainty import IntervalStats
+    from loceval.maps import MapEvaluation
     from loceval.radio.ranging import RangingResult
 
 __all__ = [
@@ -87,6 +94,7 @@ class EvaluationConfig:
         reference_offset_source: ``urdf`` (a URDF or ``/tf_static``) or ``given``.
         planar: measure position errors in x-y only (each matched estimate pose takes
             the reference's height after alignment), for 2D systems.
+        min_excursion_s: the shortest reference loss that is an excursion, seconds.
     """
 
     association: AssociationMethod = _DEFAULT_ASSOCIATION
@@ -109,6 +117,7 @@ class EvaluationConfig:
     auto_device: bool = False
     reference_offset_source: DeviceSource = "given"
     planar: bool = False
+    min_excursion_s: float = number_default("min_excursion_s")
 
     def __post_init__(self) -> None:
         """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
@@ -125,6 +134,7 @@ class EvaluationConfig:
         for threshold in self.thresholds_m:
             check_option("thresholds_m", threshold, unit="metres")
         check_option("worst", self.worst_count)
+        check_option("min_excursion_s", self.min_excursion_s, unit="seconds")
         if self.reference_sigma_m is not None:
             check_option("reference_sigma_m", self.reference_sigma_m, unit="metres")
         if self.auto_device and self.reference_offset is not None:
@@ -159,6 +169,7 @@ class EvaluationConfig:
             "auto_time_offset": self.auto_time_offset,
             "auto_device": self.auto_device,
             "planar": self.planar,
+            "min_excursion_s": self.min_excursion_s,
         }
 
 
@@ -184,6 +195,7 @@ class EstimateResult:
         warnings: what the user should know (dropped poses, gaps, reader notes).
         assessment: intervals, consistency and reference error (None: nothing to assess).
         offsets: the time and device offsets given, estimated and applied.
+        excursions: the stretches outside the tracked room (:mod:`loceval.metrics.excursions`).
     """
 
     estimate: Trajectory
@@ -202,6 +214,7 @@ class EstimateResult:
     warnings: tuple[str, ...]
     assessment: Assessment | None = None
     offsets: OffsetCheck | None = None
+    excursions: tuple[Excursion, ...] = ()
 
     @property
     def name(self) -> str:
@@ -236,10 +249,13 @@ class EvaluationResult:
     """Why two estimates were not compared (too few shared stamps): about the pair."""
     ranging: RangingResult | None = None
     ranging_options: Mapping[str, object] = field(default_factory=dict)
+    map: MapEvaluation | None = None
+    """The robot's map against the building plan (:mod:`loceval.maps`), if one was given."""
 
     def to_dict(self) -> dict[str, object]:
         """Return the CLI's ``--json`` document (also the service's result schema)."""
         ref = self.reference
+        t0 = int(ref.stamps_ns[0])
         ranging = (
             {} if self.ranging is None else {"ranging": self.ranging.document(self.ranging_options)}
         )
@@ -267,7 +283,8 @@ class EvaluationResult:
                 "notes": list(ref.notes),
             },
             **ranging,
-            "estimates": [_estimate_dict(e, self.config) for e in self.estimates],
+            **({} if self.map is None else {"map": self.map.to_dict()}),
+            "estimates": [_estimate_dict(e, self.config, t0) for e in self.estimates],
             "comparisons": None
             if self.comparisons is None
             else [c.to_dict() for c in self.comparisons],
@@ -402,7 +419,7 @@ def _evaluate_one(
         max_gap_ns=round(config.max_gap_s * _NS_PER_S),
         offset_ns=round(offsets.time_offset_s * _NS_PER_S),
     )
-    notes.extend(_association_notes(matched, len(estimate), reference.loss_words))
+    notes.extend(association_notes(matched, len(estimate), reference.loss_words))
     min_gap_ns = round(config.max_gap_s * _NS_PER_S)
     own_gaps = estimate.tracking_losses(min_gap_ns)
     if own_gaps:
@@ -466,6 +483,15 @@ def _evaluate_one(
         warnings=tuple(notes),
         offsets=offsets,
         assessment=assessment,
+        excursions=find_excursions(
+            reference.tracking_losses(min_gap_ns),
+            estimate,
+            alignment.transform,
+            ref.stamps_ns,
+            ate_t.values,
+            min_excursion_s=config.min_excursion_s,
+            offset_ns=matched.offset_ns,
+        ),
     )
 
 
@@ -495,33 +521,6 @@ def _assess(
     )
 
 
-def _association_notes(matched: Association, total: int, loss: str) -> list[str]:
-    notes = []
-    if matched.dropped_outside:
-        notes.append(
-            f"{matched.dropped_outside} of {total} estimate poses lie outside the "
-            "reference's time range and were not evaluated."
-        )
-    if matched.dropped_gap:
-        note = (
-            f"{matched.dropped_gap} of {total} estimate poses fall in reference gaps longer "
-            f"than {matched.max_gap_ns / _NS_PER_S:g} s ({loss}) and were not evaluated."
-        )
-        if matched.dropped_gap > total // 2:
-            note += (
-                " Most poses were dropped: if the reference is sparse by design (AMCL, "
-                "surveyed points), match nearest poses within a maximum time difference, or "
-                "allow a larger gap."
-            )
-        notes.append(note)
-    if matched.dropped_unmatched:
-        notes.append(
-            f"{matched.dropped_unmatched} of {total} estimate poses have no reference pose "
-            f"within {matched.max_dt_ns / _NS_PER_S:g} s and were not evaluated."
-        )
-    return notes
-
-
 def _stats_or_none(series: ErrorSeries | None) -> dict[str, float | int] | None:
     return None if series is None else series.stats.to_dict()
 
@@ -545,7 +544,7 @@ def _within_ci95(e: EstimateResult) -> dict[str, list[float]] | None:
     return {f"{t:g}": list(found.within_ci95[t]) for t in e.within}
 
 
-def _estimate_dict(e: EstimateResult, config: EvaluationConfig) -> dict[str, object]:
+def _estimate_dict(e: EstimateResult, config: EvaluationConfig, t0: int) -> dict[str, object]:
     matched = e.association
     return {
         "name": e.estimate.name,
@@ -583,6 +582,7 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig) -> dict[str, obj
         "verdict": None if e.verdict is None else e.verdict.to_dict(),
         "consistency": _assessed(e, "consistency"),
         "reference_error": _assessed(e, "reference_error"),
+        "excursions": [x.to_dict(t0) for x in e.excursions],
         "warnings": list(e.warnings),
         "notes": list(e.estimate.notes),
     }

@@ -413,6 +413,56 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         exclusive_minimum=True,
     ),
     OptionSpec(
+        "map",
+        OptionKind.FILE,
+        None,
+        "the robot's occupancy grid map to measure against the building model's plan: "
+        "map_server's map.yaml beside its image, a zip of both, or BAG@TOPIC of "
+        "nav_msgs/msg/OccupancyGrid (the API: the dataset id, with a selector for a bag)",
+        "the map",
+        "map",
+        "SOURCE",
+        max_length=500,
+        group="map",
+    ),
+    OptionSpec(
+        "map_estimate",
+        OptionKind.TEXT,
+        None,
+        "the estimate whose alignment places the map on the plan (default: the first)",
+        "the estimate placing the map",
+        "map-estimate",
+        "NAME",
+        max_length=120,
+        group="map",
+    ),
+    OptionSpec(
+        "clutter_m",
+        OptionKind.NUMBER,
+        0.5,
+        "map: occupied cells farther than this from every plan wall after the best fit are "
+        "clutter (furniture), metres",
+        "the clutter distance",
+        "clutter-distance",
+        "M",
+        minimum=0.0,
+        maximum=100.0,
+        exclusive_minimum=True,
+        group="map",
+    ),
+    OptionSpec(
+        "min_excursion_s",
+        OptionKind.NUMBER,
+        5.0,
+        "a reference loss longer than this while the estimate goes on is an excursion, seconds",
+        "the shortest excursion",
+        "min-excursion",
+        "S",
+        minimum=0.0,
+        maximum=_MAX_S,
+        exclusive_minimum=True,
+    ),
+    OptionSpec(
         "solve",
         OptionKind.NAMES,
         ("nlls", "minmax"),
@@ -542,19 +592,9 @@ def choice_default(key: str) -> str:
 def check_option(key: str, value: float, *, unit: str = "") -> None:
     """Check a number (or one item of a list) against the option's bounds.
 
-    Args:
-        key: the option's key.
-        value: the value given.
-        unit: the unit named in the message ("seconds").
-
     Raises:
         InputError: the value is not finite or out of bounds; the error carries ``key``.
     """
-    spec = option(key)
-    if spec.within_bounds(value):
-        return
-    what = f"a finite number of {unit}" if unit else "a finite number"
-    bounds = f" {spec.bounds_text}" if spec.bounds_text else ""
-    words = spec.words[0].upper() + spec.words[1:]
-    msg = f"{words} must be {what}{bounds}, got {value!r}."
-    raise InputError(msg, option=key)
+    problem = option(key).bounds_problem(value, unit=unit)
+    if problem:
+        raise InputError(problem, option=key)

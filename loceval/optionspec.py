@@ -172,6 +172,15 @@ class OptionSpec:
             parts.append(f"at most {self.maximum:g}")
         return " and ".join(parts)
 
+    def bounds_problem(self, value: float, *, unit: str = "") -> str:
+        """Return what is wrong with a number for this option ("" when it is fine)."""
+        if self.within_bounds(value):
+            return ""
+        what = f"a finite number of {unit}" if unit else "a finite number"
+        bounds = f" {self.bounds_text}" if self.bounds_text else ""
+        words = self.words[0].upper() + self.words[1:]
+        return f"{words} must be {what}{bounds}, got {value!r}."
+
     def within_bounds(self, value: float) -> bool:
         """Return whether ``value`` is finite and within the bounds."""
         if not math.isfinite(value):

@@ -86,6 +86,9 @@ def create_evaluation(
             wanted.add(options.visits.strip())
         if options.building is not None:
             wanted.add(options.building)
+        map_ref = options.map_ref
+        if map_ref is not None:
+            wanted.add(map_ref.dataset_id)
         datasets = _datasets(session, project_id, wanted)
         for role, ref in [("reference", body.reference)] + [
             ("estimate", e) for e in body.estimates
@@ -94,6 +97,8 @@ def create_evaluation(
         _check_visits(datasets, body)
         if options.building is not None:
             _check_building(datasets[options.building])
+        if map_ref is not None:
+            _check_map(datasets[map_ref.dataset_id], map_ref.selector, options)
         check_options(options)
         evaluation = Evaluation(
             project_id=project_id,
@@ -245,6 +250,27 @@ def _check_building(dataset: Dataset) -> None:
             "STL or GLB model, or a DXF floor plan, and give its id."
         )
         raise InputError(msg, option="building")
+
+
+def _check_map(dataset: Dataset, selector: str | None, options: EvaluationOptions) -> None:
+    """Fail now when the map names no map zip or bag, a bag without its topic, or no plan."""
+    kind = dataset.inspection.get("kind")
+    bag = dataset.inspection.get("format") == "bag"
+    if kind != "map" and not bag:
+        msg = (
+            f"The dataset {dataset.name!r} is not a map; upload a zip of map_server's map.yaml "
+            "and its image, or a bag with the map's topic, and give its id."
+        )
+        raise InputError(msg, option="map")
+    if bag and not selector:
+        msg = (
+            f"The map dataset {dataset.name!r} is a bag; give the topic of its "
+            'nav_msgs/msg/OccupancyGrid messages: {"dataset_id": ..., "selector": "/map"}.'
+        )
+        raise InputError(msg, option="map")
+    if options.building is None:
+        msg = "A map is measured against the building's plan; give options.building too."
+        raise InputError(msg, option="map")
 
 
 def check_options(options: EvaluationOptions) -> None:

@@ -35,6 +35,7 @@ from service.db import (
 )
 from service.evaluations import EVALUATION, visits_dataset_id
 from service.limits import Limits, run_limited
+from service.mapjob import map_source
 from service.options import (
     checkpoints_from_options,
     config_from_options,
@@ -151,6 +152,23 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     building = None
     if options.building is not None:
         building = runtime.store.path(_dataset(session, project_id, options.building).storage_path)
+    export = export_from_options(
+        options, front_door="service", evaluation_id=evaluation.id, building=building
+    )
+    the_map = None
+    map_ref = options.map_ref
+    if map_ref is not None:
+        dataset = _dataset(session, project_id, map_ref.dataset_id)
+        source = str(runtime.store.path(dataset.storage_path))
+        if map_ref.selector:
+            source = f"{source}@{map_ref.selector}"
+        the_map = map_source(
+            source,
+            export,
+            estimate=options.map_estimate,
+            clutter_m=options.clutter_m,
+            display=dataset.filename + (f"@{map_ref.selector}" if map_ref.selector else ""),
+        )
     return Job(
         reference=reference,
         estimates=estimates,
@@ -160,12 +178,11 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
             reference_offset_source="urdf" if isinstance(options.device, DeviceOffset) else "given",
         ),
         stamp=options.stamp,
-        export=export_from_options(
-            options, front_door="service", evaluation_id=evaluation.id, building=building
-        ),
+        export=export,
         formats=options.formats,
         visits=visits,
         checkpoints=checkpoints_from_options(options),
+        map=the_map,
     )
 
 

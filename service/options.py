@@ -114,6 +114,14 @@ class EvaluationValues(Protocol):
         """Measure position errors in x-y only."""
 
     @property
+    def min_excursion_s(self) -> float:
+        """The shortest reference loss that is an excursion, seconds."""
+
+    @property
+    def clutter_m(self) -> float:
+        """Map: the clutter distance, metres."""
+
+    @property
     def visit_radius_m(self) -> float | None:
         """Control points: how near a stop must be to a point, metres."""
 
@@ -229,6 +237,7 @@ def config_from_options(
         InputError: a value cannot be used (the error carries the option's key).
     """
     auto_time = is_auto(options.time_offset_s)
+    check_option("clutter_m", options.clutter_m, unit="metres")  # the map's, checked as early
     checkpoints_from_options(options)  # control-point options fail as fast as the others
     return EvaluationConfig(
         association=AssociationMethod(options.association),
@@ -251,6 +260,7 @@ def config_from_options(
         auto_device=is_auto(options.device),
         reference_offset_source=reference_offset_source,
         planar=options.planar,
+        min_excursion_s=options.min_excursion_s,
     )
 
 

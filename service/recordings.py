@@ -8,7 +8,7 @@ corrupt file is refused at upload with the reader's message, not at evaluation.
 
 from __future__ import annotations
 
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any
 
 from exporters.cad.site import BUILDING_SUFFIXES
@@ -40,6 +40,8 @@ def inspect_upload(path: Path, filename: str) -> dict[str, Any]:
         raise ReaderError(msg)
     if Path(filename).suffix.lower() in BUILDING_SUFFIXES:
         return _inspect_building(path, filename)
+    if Path(filename).suffix.lower() == ".zip" and _holds_map_yaml(path):
+        return _inspect_map(path)
     if Path(filename).suffix.lower() == ".zip":
         from service.evo_datasets import inspect_result_zip  # noqa: PLC0415
 
@@ -56,6 +58,34 @@ def inspect_upload(path: Path, filename: str) -> dict[str, Any]:
     if isinstance(warnings, list):
         inspection["warnings"] = [str(w).replace(server_path, filename) for w in warnings]
     return inspection
+
+
+def _holds_map_yaml(path: Path) -> bool:
+    """Whether a zip holds a YAML that is not a ROS 2 bag's metadata (a map_server map)."""
+    import zipfile  # noqa: PLC0415
+
+    try:
+        with zipfile.ZipFile(path) as archive:
+            names = [PurePosixPath(n).name for n in archive.namelist()]
+    except (zipfile.BadZipFile, OSError):
+        return False
+    yamls = [n for n in names if n.lower().endswith((".yaml", ".yml"))]
+    return bool(yamls) and "metadata.yaml" not in names
+
+
+def _inspect_map(path: Path) -> dict[str, Any]:
+    """Read an uploaded map zip (map_server's YAML and image) once, so a broken one is refused."""
+    from loceval.maps import read_map  # noqa: PLC0415
+
+    grid = read_map(str(path))
+    rows, cols = grid.shape
+    return {
+        "kind": "map",
+        "format": "map",
+        "sources": [],
+        "warnings": [],
+        "map": {"width": cols, "height": rows, "resolution_m": grid.resolution_m},
+    }
 
 
 def _inspect_building(path: Path, filename: str) -> dict[str, Any]:

@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from loceval.controlpoints import ControlPoints, Visits
     from loceval.radio_evaluation import RangingConfig
     from loceval.readers.radio import Ranges
+    from service.mapjob import MapSource
 
 __all__ = [
     "Job",
@@ -138,6 +139,7 @@ class Job:
             (:func:`loceval.radio_evaluation.evaluate_radio`) and ``estimates`` is empty.
         visits: a control-point reference: the visits table; None finds the stops.
         checkpoints: a control-point reference: its options.
+        map: the robot's occupancy grid map to measure against the building plan.
     """
 
     reference: JobSource
@@ -149,6 +151,7 @@ class Job:
     ranging: RangingSources | None = None
     visits: JobSource | None = None
     checkpoints: CheckpointConfig = field(default_factory=CheckpointConfig)
+    map: MapSource | None = None
 
 
 def run_job(
@@ -207,6 +210,11 @@ def run_job(
             inputs=[dict(s.provenance) for s in sources],
             progress=evaluating,
         )
+    if job.map is not None:
+        from service.mapjob import measure_map  # noqa: PLC0415  (CAD libraries)
+
+        report("measuring the map", _EVALUATE)
+        result = replace(result, map=measure_map(result, job.map))
     if out_dir is not None and job.export is not None:
         from exporters import write_artifacts  # noqa: PLC0415
 

@@ -157,6 +157,7 @@ def _evaluate_all(
             continue
         rows.append({**row, "status": "succeeded", "error": None, "summary": done.summary})
         recorded_at, is_upload = recording_start(dataset.inspection, dataset.created_at)
+        reference_xyz, reference_t_s = _reference_path(runtime, dataset, template)
         summary_runs.append(
             SummaryRun.from_result(
                 done.result,
@@ -164,7 +165,8 @@ def _evaluate_all(
                 recorded_at=recorded_at,
                 recorded_at_is_upload=is_upload,
                 evaluation_id=done.id,
-                reference_xyz=_reference_xyz(runtime, dataset, template),
+                reference_xyz=reference_xyz,
+                reference_t_s=reference_t_s,
             )
         )
     return rows, summary_runs
@@ -228,12 +230,14 @@ def _failed_run(dataset: Dataset, reason: str, evaluation_id: str | None = None)
     )
 
 
-def _reference_xyz(
+def _reference_path(
     runtime: Runtime, dataset: Dataset, template: EvaluationTemplate
-) -> np.ndarray[Any, np.dtype[np.float64]] | None:
-    """Re-read the run's reference path for the repeatability table (None if unreadable)."""
+) -> tuple[
+    np.ndarray[Any, np.dtype[np.float64]] | None, np.ndarray[Any, np.dtype[np.float64]] | None
+]:
+    """Re-read the run's reference path and its times, seconds (None, None if unreadable)."""
     if template.reference.dataset_id is not None:
-        return None  # a fixed reference (control points): the same in every run
+        return None, None  # a fixed reference (control points): the same in every run
     fmt = dataset.inspection.get("format")
     try:
         spec = SourceSpec(
@@ -241,9 +245,10 @@ def _reference_xyz(
             runtime.store.path(dataset.storage_path),
             template.reference.selector,
         )
-        return read_trajectory(spec, stamp=template.options.stamp).positions_xyz
+        found = read_trajectory(spec, stamp=template.options.stamp)
     except (LocevalError, ValueError):
-        return None
+        return None, None
+    return found.positions_xyz, found.stamps_ns / 1e9
 
 
 def _render(

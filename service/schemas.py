@@ -79,6 +79,17 @@ class DeviceOffset(Strict):
     to_link: Annotated[str, Field(min_length=1, max_length=200)]
 
 
+class MapRef(Strict):
+    """An occupancy grid map in an uploaded dataset: a map zip, or a bag and its topic."""
+
+    dataset_id: Id
+    selector: Annotated[str, Field(min_length=1, max_length=500)] | None = Field(
+        default=None,
+        description="the bag's nav_msgs/msg/OccupancyGrid topic; null for a map zip",
+        examples=["/map"],
+    )
+
+
 class _Choices:
     """``Annotated`` metadata: the value is one of the option's choices (a JSON ``enum``)."""
 
@@ -220,6 +231,21 @@ class EvaluationOptions(Strict):
     )
     stop_speed_mps: float = _field("stop_speed_mps")
     stop_min_s: float = _field("stop_min_s")
+    map: MapRef | None = _field("map")
+    map_estimate: str | None = _field("map_estimate")
+    clutter_m: float = _field("clutter_m")
+    min_excursion_s: float = _field("min_excursion_s")
+
+    @property
+    def map_ref(self) -> MapRef | None:
+        """Return the map's dataset and bag topic (None without a map)."""
+        return self.map
+
+    @field_validator("map", mode="before")
+    @classmethod
+    def _map_id(cls, value: object) -> object:
+        """Take a bare dataset id (a map zip) as ``{"dataset_id": id}``."""
+        return {"dataset_id": value} if isinstance(value, str) else value
 
     @field_validator("formats")
     @classmethod

@@ -12,7 +12,10 @@ with both an ACI and a true colour):
 - ``<name> ATE`` (estimates, on): the path cut into pieces coloured by ATE bin, in the
   report's colours (:meth:`~exporters.cad.placement.Placement.ate_bins`), with a text legend;
 - ``tracking loss``: one ``POINT`` and label per tracking loss (at the last pose before
-  it), of the reference once, and of an estimate where the reference kept tracking.
+  it), of the reference once, and of an estimate where the reference kept tracking;
+- ``map plan``, ``map walls``, ``map clutter``: the robot's map on the building plan, when
+  one was measured, and ``excursions``: the paths outside the tracked room
+  (:mod:`exporters.cad.dxf_map`).
 
 DXF stores doubles, so vertices are absolute model coordinates; the base point and the
 rest of the metadata (evaluation id, units, frame, site matrix, tolerance, deviation) are
@@ -35,6 +38,7 @@ from ezdxf.layouts.layout import Modelspace
 from ezdxf.lldxf.const import DXFError
 
 from exporters.cad.dxf_bulk import BulkPolylines
+from exporters.cad.dxf_map import add_excursion_layer, add_map_layers
 from exporters.cad.georef import add_geodata
 from exporters.cad.placement import RGB, Marker, PlacedPath, Placement, place_evaluation
 from exporters.errors import ExportError
@@ -140,6 +144,8 @@ def _drawing(placement: Placement) -> tuple[Drawing, BulkPolylines]:
         text_h=text_h,
     )
 
+    add_map_layers(doc, msp, placement)
+    add_excursion_layer(doc, msp, placement, text_h)
     center = (lo[:2] + hi[:2]) / 2.0
     height = max(float(hi[1] - lo[1]), float(hi[0] - lo[0]) * 0.6, per_metre) * 1.3
     doc.set_modelspace_vport(height, center=(float(center[0]), float(center[1])))

@@ -9,6 +9,7 @@ from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
+from exporters.plots.excursions import excursion_note, mark_excursions
 from exporters.plots.figure import (
     DEFAULT_MAX_POINTS,
     ENVELOPE_DIVISOR,
@@ -167,6 +168,8 @@ def _time_plot(
     for r, (label, series_list) in enumerate(rows):
         ax = axes[r]
         _shade_gaps(ax, result, t0_ns)
+        if r == 0:
+            mark_excursions(ax, result, t0_ns)
         for k, series in enumerate(series_list):
             if series is not None:
                 _draw_series(ax, result, series, k, t0_ns=t0_ns, max_points=max_points)
@@ -205,6 +208,7 @@ def _time_plot_notes(
             if any(b - a < min_width_ns for a, b in gaps)
             else "."
         )
+    notes += excursion_note(result)
     series = [s for _, row in rows for s in row if s is not None]
     if any(bool(path_jumps(result, s.stamps_ns).any()) for s in series):
         notes += (

@@ -27,6 +27,7 @@ from exporters.plots.figure import FigureView, number_figures
 from exporters.plots.underlay import floor_plan_segments
 from exporters.report.clocks import ClockSection, build_clock_section
 from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
+from exporters.report.mapsection import MapView, build_map_view
 from exporters.report.provenance import (
     alignment_rows,
     estimate_name,
@@ -199,6 +200,7 @@ class ReportView:
     times_note: str = _TIMES_NOTE
     """What a time in the report counts (pose numbers when the reference has no times)."""
     """Where that value goes, when the example alone does not say it (page and API)."""
+    map: MapView | None = None  # the map section (exporters.report.mapsection)
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -558,4 +560,5 @@ def build_report_view(
             if result.reference.indexed
             else _TIMES_NOTE
         ),
+        map=build_map_view(result),
     )

@@ -17,7 +17,9 @@ from typing import Any, Final, Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from loceval.errors import InputError
 from loceval.evaluation import Tolerance
+from loceval.metrics.redrive import RedriveTiming, redrive_timing
 from loceval.metrics.repeatability import finite_positions, path_deviations
 
 __all__ = [
@@ -114,6 +116,8 @@ class SummaryRun:
         reference_xyz: (N, 3) the run's reference path, metres, for the repeatability test.
         duration_s: the reference's duration, seconds.
         recorded_at_is_upload: ``recorded_at`` is the upload time (the table marks it).
+        reference_t_s: (N,) the reference's times (seconds), one per ``reference_xyz`` row,
+            for the re-drive timing (:mod:`loceval.metrics.redrive`); None leaves timing out.
     """
 
     dataset: str
@@ -125,6 +129,7 @@ class SummaryRun:
     reference_xyz: NDArray[np.float64] | None = None
     duration_s: float | None = None
     recorded_at_is_upload: bool = False
+    reference_t_s: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         """Check the status and the path's shape; keep the date in UTC.
@@ -153,6 +158,7 @@ class SummaryRun:
         evaluation_id: str | None = None,
         reference_xyz: NDArray[np.float64] | None = None,
         recorded_at_is_upload: bool = False,
+        reference_t_s: NDArray[np.float64] | None = None,
     ) -> SummaryRun:
         """Build a succeeded run from an evaluation's result document.
 
@@ -168,6 +174,7 @@ class SummaryRun:
             evaluation_id: the evaluation's id.
             reference_xyz: (N, 3) the reference path, metres, for the repeatability test.
             recorded_at_is_upload: ``recorded_at`` is the upload time.
+            reference_t_s: (N,) the reference's times, seconds, for the re-drive timing.
 
         Returns:
             The run, status ``"succeeded"``.
@@ -197,6 +204,7 @@ class SummaryRun:
             evaluation_id=evaluation_id,
             systems=systems,
             reference_xyz=reference_xyz,
+            reference_t_s=reference_t_s,
             duration_s=_finite(_dig(document, "reference", "duration_s")),
             recorded_at_is_upload=recorded_at_is_upload,
         )
@@ -353,6 +361,9 @@ class RepeatabilityRow:
         duration_s: this run's reference duration, seconds.
         duration_diff_s: this run's duration minus the baseline's, seconds (None for the
             baseline or when a duration is unknown).
+        timing: when this run passed the baseline's points against when the baseline did
+            (:func:`loceval.metrics.redrive.redrive_timing`); None for the baseline or
+            without times.
     """
 
     dataset: str
@@ -364,6 +375,7 @@ class RepeatabilityRow:
     max_m: float | None
     duration_s: float | None
     duration_diff_s: float | None
+    timing: RedriveTiming | None = None
 
 
 def runs_with_path(runs: Sequence[SummaryRun]) -> list[tuple[SummaryRun, NDArray[np.float64]]]:
@@ -412,7 +424,7 @@ def repeatability(runs: Sequence[SummaryRun]) -> list[RepeatabilityRow]:
         )
     ]
     deviations = path_deviations(first_xyz, [xyz for _, xyz in later])
-    for (run, _), deviation in zip(later, deviations, strict=True):
+    for (run, _), deviation in zip(later, deviations, strict=True):  # one per run
         diff = (
             None
             if run.duration_s is None or first.duration_s is None
@@ -429,6 +441,25 @@ def repeatability(runs: Sequence[SummaryRun]) -> list[RepeatabilityRow]:
                 max_m=deviation.max_m,
                 duration_s=run.duration_s,
                 duration_diff_s=diff,
+                timing=_timing(first, run),
             )
         )
     return rows
+
+
+def _timing(first: SummaryRun, run: SummaryRun) -> RedriveTiming | None:
+    """The re-drive timing of ``run`` against ``first`` when both carry their times."""
+    t1, xyz1, t2, xyz2 = (
+        first.reference_t_s,
+        first.reference_xyz,
+        run.reference_t_s,
+        run.reference_xyz,
+    )
+    if t1 is None or xyz1 is None or t2 is None or xyz2 is None:
+        return None
+    if len(t1) != len(xyz1) or len(t2) != len(xyz2):
+        return None
+    try:
+        return redrive_timing(t1, xyz1, t2, xyz2)
+    except InputError:
+        return None

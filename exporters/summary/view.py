@@ -102,6 +102,9 @@ class RepeatabilityView:
     max_m: str
     duration_s: str
     duration_diff_s: str
+    timing_median_s: str = ""
+    timing_max_s: str = ""
+    timing_stretches: str = ""
 
 
 SummaryFigure = FigureView
@@ -306,9 +309,29 @@ def _repeatability_view(rows: Sequence[RepeatabilityRow]) -> tuple[Repeatability
             duration_diff_s=""
             if r.baseline
             else (_DASH if r.duration_diff_s is None else f"{r.duration_diff_s:+.1f}"),
+            **_timing_cells(r),
         )
         for r in rows
     )
+
+
+def _timing_cells(row: RepeatabilityRow) -> dict[str, str]:
+    """The timing columns: median and largest |difference|, stretches over the tolerance."""
+    if row.baseline:
+        return {}
+    timing = row.timing
+    if timing is None:
+        return {"timing_median_s": _DASH, "timing_max_s": _DASH, "timing_stretches": _DASH}
+    stretches = ", ".join(
+        f"{s.start_s:.0f} s +{s.duration_s:.0f} s ({s.max_abs_s:+.1f} s)"
+        for s in timing.stretches[:3]
+    )
+    more = len(timing.stretches) - 3
+    return {
+        "timing_median_s": f"{timing.median_abs_s:.2f}",
+        "timing_max_s": f"{timing.max_abs_s:.2f}",
+        "timing_stretches": (stretches + (f" and {more} more" if more > 0 else "")) or "none",
+    }
 
 
 def _repeatability_lead(rows: Sequence[RepeatabilityRow], runs: int) -> str:

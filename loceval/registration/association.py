@@ -32,10 +32,12 @@ __all__ = [
     "Association",
     "AssociationMethod",
     "associate",
+    "association_notes",
 ]
 
 DEFAULT_MAX_DT_NS = round(number_default("max_dt_s") * 1_000_000_000)
 """0.01 s: the TUM benchmark's and evo's default for nearest-stamp matching."""
+_NS_PER_S = 1_000_000_000
 DEFAULT_MAX_GAP_NS = round(number_default("max_gap_s") * 1_000_000_000)
 """0.1 s: a longer interval between reference poses is tracking loss, never bridged."""
 
@@ -227,3 +229,35 @@ def _span(stamps_ns: StampsNs) -> str:
     if stamps_ns.shape[0] == 0:
         return "nothing"
     return f"{stamps_ns[0] / 1e9:.3f} s to {stamps_ns[-1] / 1e9:.3f} s"
+
+
+def association_notes(matched: Association, total: int, loss: str = "tracking loss") -> list[str]:
+    """Return the warnings about the poses an association dropped (outside, gaps, unmatched).
+
+    ``loss`` names the reference's gaps (:attr:`loceval.trajectory.Trajectory.loss_words`:
+    a composed tf chain's gaps are not a tracking loss).
+    """
+    notes = []
+    if matched.dropped_outside:
+        notes.append(
+            f"{matched.dropped_outside} of {total} estimate poses lie outside the "
+            "reference's time range and were not evaluated."
+        )
+    if matched.dropped_gap:
+        note = (
+            f"{matched.dropped_gap} of {total} estimate poses fall in reference gaps longer "
+            f"than {matched.max_gap_ns / _NS_PER_S:g} s ({loss}) and were not evaluated."
+        )
+        if matched.dropped_gap > total // 2:
+            note += (
+                " Most poses were dropped: if the reference is sparse by design (AMCL, "
+                "surveyed points), match nearest poses within a maximum time difference, or "
+                "allow a larger gap."
+            )
+        notes.append(note)
+    if matched.dropped_unmatched:
+        notes.append(
+            f"{matched.dropped_unmatched} of {total} estimate poses have no reference pose "
+            f"within {matched.max_dt_ns / _NS_PER_S:g} s and were not evaluated."
+        )
+    return notes

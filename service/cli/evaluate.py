@@ -14,6 +14,7 @@ from loceval.errors import InputError
 from loceval.evaluation import EvaluationResult
 from loceval.readers import TrajectoryFormat, parse_source
 from service.cli.output import emit
+from service.mapjob import map_source
 from service.options import (
     EvaluationValues,
     ExportValues,
@@ -67,6 +68,10 @@ def run_evaluate(args: argparse.Namespace) -> int:
         )
         raise InputError(msg)
     export = export_options(args)
+    plan = export
+    if args.map is not None and plan is None:  # --json without --out still needs the plan
+        plan = export_from_options(cast("ExportValues", args), building=args.building)
+    the_map = map_source(args.map, plan, estimate=args.map_estimate, clutter_m=args.clutter_m)
     ref_spec = parse_source(args.reference, default_format=default_format)
     est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
     names = args.name or unique_names([default_name(s) for s in est_specs])
@@ -93,6 +98,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             formats=artifact_names(args.formats),
             visits=_visits_source(args.visits),
             checkpoints=checkpoints_from_options(cast("EvaluationValues", args)),
+            map=the_map,
         )
         result = run_job(job, args.out)
     if args.json:

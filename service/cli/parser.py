@@ -224,7 +224,7 @@ def _add_result_flags(parser: argparse.ArgumentParser) -> None:
     )
 
 
-RANGING_SKIPPED: Final = frozenset({"offset", "device"})
+RANGING_SKIPPED: Final = frozenset({"offset", "device", "map", "map_estimate", "clutter_m"})
 """Evaluation options ``loceval ranging`` does not take (the tag offset says where the tag is)."""
 
 

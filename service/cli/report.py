@@ -69,6 +69,9 @@ def run_report(args: argparse.Namespace) -> int:
                 reference_xyz=None
                 if isinstance(result, CheckpointEvaluation)
                 else result.reference.positions_xyz,
+                reference_t_s=None
+                if isinstance(result, CheckpointEvaluation)
+                else result.reference.stamps_ns / 1e9,
             )
         )
     from service.settings import Settings  # noqa: PLC0415

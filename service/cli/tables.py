@@ -41,6 +41,8 @@ def format_tables(result: EvaluationResult) -> str:
         cells = ["-" if d is None else f"{d.mean:.2f} %" for d in drifts]
         lines.append(_row("drift (mean)", cells))
     lines += [f"\n{e.name}: {e.verdict.summary}" for e in result.estimates if e.verdict]
+    lines += _excursion_lines(result)
+    lines += _map_lines(result)
     if result.comparisons:
         lines += [
             "",
@@ -100,6 +102,38 @@ def format_checkpoint_tables(result: CheckpointEvaluation) -> str:
     if warnings:
         lines += ["", "Warnings", *(f"  {who}: {w}" for who, w in warnings)]
     return "\n".join(lines)
+
+
+def _excursion_lines(result: EvaluationResult) -> list[str]:
+    """One line per excursion: "out of the room for 45 s, 38 m: 0.02 -> 0.21 m, 0.50 %"."""
+    lines = []
+    for e in result.estimates:
+        for x in e.excursions:  # a few per run
+            before = "-" if x.error_before_m is None else f"{x.error_before_m:.2f}"
+            after = "-" if x.error_after_m is None else f"{x.error_after_m:.2f}"
+            drift = "" if x.drift_per_m is None else f", {x.drift_per_m * 100:.2f} % of the path"
+            lines.append(
+                f"{e.name}: out of the room for {(x.end_ns - x.start_ns) / 1e9:.0f} s, "
+                f"{x.path_length_m:.0f} m: {after} m at re-entry after {before} m on leaving{drift}"
+            )
+    return ["", "Excursions", *(f"  {line}" for line in lines)] if lines else []
+
+
+def _map_lines(result: EvaluationResult) -> list[str]:
+    """The map against the plan: wall distances as placed and after the fits."""
+    found = result.map
+    if found is None:
+        return []
+    lines = ["", f"Map against the plan ({found.source}, {found.clutter_cells} clutter cells)"]
+    rows = (("as placed", found.placed), ("rigid fit", found.rigid[1]))
+    for label, figures in (*rows, ("similarity fit", found.similarity[1])):
+        coverage = "-" if figures.plan_coverage is None else f"{figures.plan_coverage:.1%}"
+        lines.append(
+            f"  {label:<15} RMSE {figures.rmse:.3f} m, p95 {figures.p95:.3f} m, "
+            f"max {figures.max:.3f} m, coverage {coverage}"
+        )
+    lines.append(f"  {found.drift_sentence()}")
+    return lines
 
 
 def _sections(result: EvaluationResult) -> list[tuple[str, list[ErrorStats | None], str]]:

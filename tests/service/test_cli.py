@@ -214,8 +214,8 @@ def test_out_writes_every_artifact(
     assert code == 0, err
     names = {p.name for p in out_dir.iterdir()}
     assert names == {
-        "result.json", "errors.csv", "report.html", "report.pdf", "paths.dxf", "paths.3dm",
-        "paths.3dm.json", "paths.glb", "paths.ifc",
+        "result.json", "errors.csv", "map_cells.csv", "report.html", "report.pdf", "paths.dxf",
+        "paths.3dm", "paths.3dm.json", "paths.glb", "paths.ifc",
     }  # fmt: skip
     doc = json.loads((out_dir / "result.json").read_text())
     assert doc["cad"]["units"] == "m"

@@ -107,6 +107,10 @@ def _check_artifact(
         rows = list(csv.reader(io.StringIO(content.decode("utf-8"))))
         assert rows[0][:3] == ["estimate", "stamp_ns", "t_s"]
         assert len(rows) == 1 + sum(e["matched"] for e in evaluation["result"]["estimates"])
+    elif name == "map_cells.csv":  # no map in this evaluation: the header and why
+        lines = content.decode("utf-8").splitlines()
+        assert lines[0] == "x_m,y_m,distance_m,fitted_distance_m,clutter"
+        assert lines[1].startswith("# no map was measured")
     elif name == "report.html":
         assert content.lstrip().lower().startswith(b"<!doctype html")
     elif name == "report.pdf":

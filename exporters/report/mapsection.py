@@ -1,0 +1,90 @@
+"""The report's map section: the robot's map against the building plan, formatted.
+
+Built only when a map was measured (``result.map`` is set); its figure (the map's wall
+cells on the plan, coloured by distance) is drawn by :mod:`exporters.plots.mapplan` and
+listed with the report's other plots.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from loceval.evaluation import EvaluationResult
+from loceval.maps import WallFigures
+
+__all__ = ["MapView", "build_map_view"]
+
+
+@dataclass(frozen=True, slots=True)
+class MapView:
+    """The map section, formatted.
+
+    Attributes:
+        source: the map's file or topic.
+        placed_by: how the map was placed ("SLAM's alignment").
+        wall_cells: wall cells measured, and the clutter left out, in words.
+        drift: the similarity scale in words ("the map is 1.2 % short").
+        thresholds: the share-within thresholds as column heads.
+        rows: placed, rigid fit, similarity fit: RMSE, mean, median, p95, max, within
+            shares, coverage and the fit's transform.
+        regions: the worst regions (tile centre, cells, RMSE).
+        warnings: the map evaluation's warnings.
+    """
+
+    source: str
+    placed_by: str
+    wall_cells: str
+    drift: str
+    thresholds: tuple[str, ...]
+    rows: tuple[Mapping[str, object], ...]
+    regions: tuple[str, ...]
+    warnings: tuple[str, ...]
+
+
+def _row(name: str, figures: WallFigures, transform: str) -> dict[str, object]:
+    coverage = figures.plan_coverage
+    return {
+        "name": name,
+        "rmse": f"{figures.rmse:.3f}",
+        "mean": f"{figures.mean:.3f}",
+        "median": f"{figures.median:.3f}",
+        "p95": f"{figures.p95:.3f}",
+        "max": f"{figures.max:.3f}",
+        "within": [f"{share * 100:.1f} %" for share in figures.within.values()],
+        "coverage": "–" if coverage is None else f"{coverage * 100:.1f} %",
+        "transform": transform,
+    }
+
+
+def build_map_view(result: EvaluationResult) -> MapView | None:
+    """Return the map section of the report, or None when no map was measured."""
+    found = result.map
+    if found is None:
+        return None
+    rows = [_row("as placed", found.placed, "—")]
+    for name, (fit, figures) in (("rigid fit", found.rigid), ("similarity fit", found.similarity)):
+        d = fit.to_dict()
+        tx, ty = fit.translation_m
+        text = f"scale {d['scale']:.4f}, {d['rotation_deg']:+.2f}°, ({tx:+.3f}, {ty:+.3f}) m"
+        rows.append(_row(name, figures, text))
+    worst = sorted(found.regions, key=lambda r: -float(r["rmse_m"]))[:5]
+    regions = tuple(
+        f"({r['x_m']:g}, {r['y_m']:g}) m: {float(r['rmse_m']):.3f} m over {r['n']} cells"
+        for r in worst
+    )
+    n = len(found.cells_xy)
+    return MapView(
+        source=found.source,
+        placed_by=f"{found.estimate}'s alignment" if found.estimate else "the given transform",
+        wall_cells=(
+            f"{n - found.clutter_cells:,} wall cells measured; {found.clutter_cells:,} farther "
+            f"than {found.clutter_m:g} m from every plan wall after the fit are clutter (not in "
+            "the plan) and left out"
+        ),
+        drift=found.drift_sentence(),
+        thresholds=tuple(f"≤ {t:g} m" for t in found.placed.within),
+        rows=tuple(rows),
+        regions=regions,
+        warnings=found.warnings,
+    )

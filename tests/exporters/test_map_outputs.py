@@ -1,0 +1,90 @@
+"""The map and the excursions in the outputs: map_cells.csv, the DXF layers, the report."""
+
+from __future__ import annotations
+
+import io
+import re
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from exporters import ExportOptions, render_artifact
+from exporters.plots.mapplan import MAP_FIGURE_KEY, plot_map
+from exporters.report.mapsection import build_map_view
+from loceval.core.geometry import SimilarityTransform
+from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
+from loceval.maps import evaluate_map
+from loceval.registration.alignment import AlignWindow
+from tests.loceval.test_excursions import _run
+from tests.mapfactory import Distortion, draw_map, office_plan
+
+ezdxf = pytest.importorskip("ezdxf")
+
+
+@pytest.fixture(scope="module", name="result")
+def _result() -> EvaluationResult:
+    """An evaluation with one excursion and a map 1.2 % short with two clutter blobs."""
+    reference, estimate, _ = _run()
+    config = EvaluationConfig(align_first=AlignWindow.parse("19s"), no_ci=True)
+    result = evaluate(reference, [estimate], config)
+    plan = office_plan()
+    grid = draw_map(
+        plan,
+        Distortion(scale=0.988),
+        resolution_m=0.05,
+        rng=np.random.default_rng(5),
+        clutter_xy=np.array([[3.0, 8.0], [12.5, 9.5]]),
+    )
+    found = evaluate_map(grid, plan, SimilarityTransform.identity(), estimate="slam")
+    return replace(result, map=found)
+
+
+def test_map_cells_csv_lists_every_wall_cell(result: EvaluationResult) -> None:
+    """One row per wall cell: placed x, y, both distances and the clutter flag."""
+    text = render_artifact("map_cells.csv", result, ExportOptions()).decode()
+    lines = text.splitlines()
+    assert lines[0] == "x_m,y_m,distance_m,fitted_distance_m,clutter"
+    table = np.loadtxt(io.StringIO(text), delimiter=",", skiprows=1)
+    found = result.map
+    assert found is not None
+    assert len(table) == len(found.cells_xy)
+    np.testing.assert_allclose(table[:, 2], found.distance_m, atol=1e-5)
+    assert int(table[:, 4].sum()) == found.clutter_cells
+
+
+def test_map_cells_csv_without_a_map_says_so(result: EvaluationResult) -> None:
+    """No map: the header and a comment naming what to give."""
+    text = render_artifact("map_cells.csv", replace(result, map=None), ExportOptions()).decode()
+    assert text.splitlines()[1].startswith("# no map was measured")
+
+
+def test_the_dxf_has_map_and_excursion_layers(result: EvaluationResult) -> None:
+    """map plan lines, map wall and clutter points, the excursion path and its label."""
+    data = render_artifact("paths.dxf", result, ExportOptions(units="m"))
+    doc = ezdxf.read(io.StringIO(data.decode()))
+    msp = doc.modelspace()
+    found = result.map
+    assert found is not None
+    assert len(msp.query('LINE[layer=="map plan"]')) == len(found.plan_xy)
+    walls = len(msp.query('POINT[layer=="map walls"]'))
+    clutter = len(msp.query('POINT[layer=="map clutter"]'))
+    assert walls + clutter == len(found.cells_xy)
+    assert clutter == found.clutter_cells
+    (label,) = msp.query('TEXT[layer=="excursions"]')
+    assert label.dxf.text == "slam excursion: 45 s, 45 m, error 0.00 -> 0.22 m"
+    assert len(msp.query('POLYLINE[layer=="excursions"]')) == 1
+
+
+def test_the_report_has_the_map_figure_and_section(result: EvaluationResult) -> None:
+    """The figure is drawn and the section's rows say placed, rigid and similarity."""
+    (plot,) = plot_map(result, formats=("svg",))
+    assert plot.key == MAP_FIGURE_KEY
+    assert b"<svg" in (plot.svg or b"")
+    # 1.2 % within the cells' quantisation (a half cell at a wall is 0.1 % of 20 m)
+    assert re.search(r"the map is 1\.[23] % short", plot.caption)
+    view = build_map_view(result)
+    assert view is not None
+    assert [row["name"] for row in view.rows] == ["as placed", "rigid fit", "similarity fit"]
+    assert view.drift in plot.caption
+    assert build_map_view(replace(result, map=None)) is None
