@@ -1,0 +1,235 @@
+"""What the viewer draws, as one JSON-ready document: paths, errors, building, anchors.
+
+Everything is in the site frame and units the CAD files use (:mod:`exporters.placement`):
+the evaluation frame mapped by the site transform (an IFC building's own map conversion
+when no site is given), scaled to the output units. Vertices are sent relative to the
+same base point as the GLB (the reference's bounding-box centre rounded to whole metres),
+so a national-grid site keeps its precision in the browser's 32-bit vertex buffers; the
+read-outs add it back.
+
+Per path the document holds its display set (:func:`~exporters.viewer.reduce.display_indices`):
+stamps in seconds since the reference's first stamp (as the report and ``errors.csv``),
+local vertices, the display indices after which a piece ends (a tracking loss of the path
+or of the reference, :func:`loceval.gaps.path_breaks`: drawn as a break, never a chord)
+and, for an estimate, its ATE at each vertex (rounded as in ``errors.csv``) with the
+reference position that error is measured to.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+
+from exporters.building import (
+    BuildingModel,
+    FloorPlan,
+    georeferenced_options,
+    read_underlay,
+)
+from exporters.colours import ate_bins, ate_edges_m, palette_color
+from exporters.options import ExportOptions, Units
+from exporters.site import check_options
+from exporters.tables import ERROR_DECIMALS
+from exporters.viewer.reduce import display_indices
+from loceval import __version__
+from loceval._typing import BoolArray, FloatArray, IntArray
+from loceval.display import display_text
+from loceval.evaluation import EvaluationResult
+from loceval.gaps import path_breaks
+from loceval.metrics import WorstPose
+
+__all__ = ["viewer_scene"]
+
+_NS_PER_S: Final = 1_000_000_000
+_WORST_SEPARATION_S: Final = 2.0  # as the CAD markers: one label per excursion
+_WORST_LABELS: Final = 3  # labels per estimate: more only pile up on a plan
+_TIME_DECIMALS: Final = 6  # microseconds: finer than any recording's stamps need here
+_RESOLUTION_M: Final = 1e-4  # vertices are rounded to 0.1 mm
+_MAX_BUILDING_FACES: Final = 400_000
+
+
+def _hex(rgb: tuple[int, int, int]) -> str:
+    return "#{:02x}{:02x}{:02x}".format(*rgb)
+
+
+def _decimals(units: Units) -> int:
+    """Decimals of a vertex coordinate in ``units`` that keep :data:`_RESOLUTION_M`."""
+    return max(0, round(-math.log10(_RESOLUTION_M * units.per_metre)))
+
+
+def _flat(values: FloatArray, decimals: int) -> list[float]:
+    out: list[float] = np.round(np.asarray(values, dtype=np.float64), decimals).ravel().tolist()
+    return out
+
+
+def _display_breaks(breaks: BoolArray, kept: IntArray) -> list[int]:
+    """Display indices ``k`` after which a piece ends (a break between kept[k] and kept[k+1])."""
+    if kept.shape[0] < 2:
+        return []
+    crossed = np.concatenate(([0], np.cumsum(breaks, dtype=np.int64)))
+    out: list[int] = np.flatnonzero(crossed[kept[1:]] > crossed[kept[:-1]]).tolist()
+    return out
+
+
+def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, object]:
+    """Return the viewer's document of one evaluation (JSON-ready).
+
+    Args:
+        result: the evaluation.
+        options: units, site transform, building model (mesh, IFC or DXF plan), title.
+
+    Returns:
+        The document ``viewer.js`` draws: ``paths`` (the reference first), ``bins`` (the
+        ATE colour scale), ``worst`` (labels), ``anchors``, ``building`` and the frame.
+
+    Raises:
+        ExportOptionsError: bad units or site, or a building file that cannot be read.
+    """
+    check_options(options)
+    options = georeferenced_options(options)
+    units = Units(options.units)
+    site = options.site
+    reference = result.reference
+    t0_ns = int(reference.stamps_ns[0]) if len(reference) else 0
+    ref_model_m = site.apply_positions(reference.positions_xyz)
+    base_m = np.round((ref_model_m.min(axis=0) + ref_model_m.max(axis=0)) / 2.0)
+    scale = units.per_metre
+    decimals = _decimals(units)
+
+    def local(positions_xyz: FloatArray) -> FloatArray:
+        out: FloatArray = (site.apply_positions(positions_xyz) - base_m) * scale
+        return out
+
+    min_gap_ns = round(result.config.max_gap_s * _NS_PER_S)
+    ref_losses = reference.tracking_losses(min_gap_ns)
+    bins = ate_bins(ate_edges_m(result))
+    paths: list[dict[str, object]] = []
+    worst: list[dict[str, object]] = []
+
+    ref_breaks = path_breaks(reference.stamps_ns, min_gap_ns=min_gap_ns, losses=ref_losses)
+    kept = display_indices(reference.positions_xyz, ref_breaks)
+    paths.append(
+        {
+            "name": display_text(reference.name or "reference"),
+            "kind": "reference",
+            "source": display_text(reference.source or ""),
+            "color": _hex(palette_color(0)),
+            "poses": len(reference),
+            "t": _flat((reference.stamps_ns[kept] - t0_ns) / _NS_PER_S, _TIME_DECIMALS),
+            "xyz": _flat(local(reference.positions_xyz[kept]), decimals),
+            "breaks": _display_breaks(ref_breaks, kept),
+        }
+    )
+    for k, est in enumerate(result.estimates, start=1):
+        name = display_text(est.name or f"estimate {k}")
+        stamps = est.association.reference.stamps_ns
+        errors = est.ate_translation.values
+        breaks = path_breaks(stamps, min_gap_ns=min_gap_ns, losses=ref_losses)
+        ranks = np.array([w.index for w in est.worst], dtype=np.intp)
+        kept = display_indices(est.aligned.positions_xyz, breaks, errors_m=errors, must_keep=ranks)
+        stats = est.ate_translation.stats
+        paths.append(
+            {
+                "name": name,
+                "kind": "estimate",
+                "source": display_text(est.estimate.source or ""),
+                "color": _hex(palette_color(k)),
+                "poses": len(stamps),
+                "t": _flat((stamps[kept] - t0_ns) / _NS_PER_S, _TIME_DECIMALS),
+                "xyz": _flat(local(est.aligned.positions_xyz[kept]), decimals),
+                "ref": _flat(local(est.association.reference.positions_xyz[kept]), decimals),
+                "err": _flat(errors[kept], ERROR_DECIMALS),
+                "breaks": _display_breaks(breaks, kept),
+                "ate": {"rmse": stats.rmse, "max": stats.max} if len(errors) else None,
+            }
+        )
+        worst += _worst_labels(est.worst, kept, path=len(paths) - 1, name=name)
+    return {
+        "generator": f"loceval {__version__}",
+        "title": options.title,
+        "units": units.value,
+        "per_metre": scale,
+        "frame": reference.frame_id or "reference frame",
+        "base": (base_m * scale).tolist(),
+        "crs": options.crs,
+        "t0_ns": str(t0_ns),
+        "bins": [
+            {
+                "high": None if math.isinf(b.high_m) else b.high_m,
+                "color": _hex(b.color_rgb),
+                "label": b.label,
+            }
+            for b in bins
+        ],
+        "paths": paths,
+        "worst": worst,
+        "anchors": _anchors(result, local, decimals),
+        "building": _building(options, base_m, scale, decimals),
+    }
+
+
+def _worst_labels(
+    ranked: tuple[WorstPose, ...], kept: IntArray, *, path: int, name: str
+) -> list[dict[str, object]]:
+    """One label per excursion of the greatest errors, at its display vertex."""
+    out: list[dict[str, object]] = []
+    labelled: list[float] = []
+    for rank, worst in enumerate(ranked, start=1):  # a handful (--worst), not per pose
+        t_s = worst.t_s
+        if any(abs(t_s - t) < _WORST_SEPARATION_S for t in labelled):
+            continue
+        if len(labelled) == _WORST_LABELS:
+            break
+        labelled.append(t_s)
+        index = int(np.searchsorted(kept, worst.index))
+        error = worst.error
+        out.append(
+            {
+                "path": path,
+                "index": min(index, len(kept) - 1),
+                "label": f"{name} #{rank}: {error:.3f} m at t={t_s:.1f} s",
+            }
+        )
+    return out
+
+
+def _anchors(result: EvaluationResult, local: Callable[[FloatArray], FloatArray], decimals: int) -> list[dict[str, object]]:
+    """The radio anchors of a ranging evaluation, placed like the paths."""
+    if result.ranging is None or not result.ranging.anchors:
+        return []
+    xyz = np.array([a.position_xyz for a in result.ranging.anchors], dtype=np.float64)
+    placed = local(xyz)
+    return [
+        {"id": display_text(a.id), "xyz": _flat(placed[i], decimals)}
+        for i, a in enumerate(result.ranging.anchors)
+    ]
+
+
+def _building(
+    options: ExportOptions, base_m: FloatArray, scale: float, decimals: int
+) -> dict[str, object] | None:
+    """The building model as a mesh, or a DXF floor plan as lines, in local model units."""
+    if options.building is None:
+        return None
+    underlay = read_underlay(options.building, units=options.units, up=options.building_up)
+    source = Path(options.building).name
+    if isinstance(underlay, FloorPlan):
+        ends = underlay.segments_m.reshape(-1, 2)
+        z = np.zeros((len(ends), 1))
+        xyz = (np.hstack([ends, z]) - base_m) * scale
+        xyz[:, 2] = 0.0
+        return {"kind": "plan", "source": source, "segments": _flat(xyz, decimals)}
+    assert isinstance(underlay, BuildingModel)
+    faces = underlay.faces[:_MAX_BUILDING_FACES]
+    return {
+        "kind": "mesh",
+        "source": source,
+        "faces_dropped": int(len(underlay.faces) - len(faces)),
+        "positions": _flat((underlay.vertices_m - base_m) * scale, decimals),
+        "index": faces.ravel().tolist(),
+    }
+
