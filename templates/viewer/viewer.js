@@ -100,6 +100,8 @@
     renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
     renderer.setPixelRatio(window.devicePixelRatio || 1);
     renderer.setClearColor(0xffffff, 1);
+    // Every path, marker and label is drawn in three's transparent pass, like the see-through
+    // building, so renderOrder alone decides: building first, then the paths over it.
     stage.append(renderer.domElement, overlay, tip);
     const world = new THREE.Scene();
 
@@ -176,8 +178,8 @@
       const pointsGeometry = geometry.clone();
       geometry.setIndex(index);
       const group = new THREE.Group();
-      const lines = new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ vertexColors: true, depthTest: false }));
-      const dots = new THREE.Points(pointsGeometry, new THREE.PointsMaterial({ vertexColors: true, size: POINT_SIZE_PX, sizeAttenuation: false, depthTest: false }));
+      const lines = new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ vertexColors: true, depthTest: false, transparent: true }));
+      const dots = new THREE.Points(pointsGeometry, new THREE.PointsMaterial({ vertexColors: true, size: POINT_SIZE_PX, sizeAttenuation: false, depthTest: false, transparent: true }));
       lines.renderOrder = dots.renderOrder = 10 + 2 * k;
       group.add(lines, dots);
       group.name = p.name;
@@ -187,7 +189,7 @@
       if (p.kind === "estimate") {
         const g = new THREE.BufferGeometry();
         g.setAttribute("position", new THREE.BufferAttribute(new Float32Array(6), 3));
-        layer.vector = new THREE.Line(g, new THREE.LineBasicMaterial({ color: 0x111111, depthTest: false }));
+        layer.vector = new THREE.Line(g, new THREE.LineBasicMaterial({ color: 0x111111, depthTest: false, transparent: true }));
         layer.vector.renderOrder = 30;
         layer.vector.visible = false;
         world.add(layer.vector);
@@ -203,8 +205,8 @@
     function makeMarker(color, order) {
       const g = new THREE.BufferGeometry();
       g.setAttribute("position", new THREE.BufferAttribute(new Float32Array(3), 3));
-      const ring = new THREE.Points(g, new THREE.PointsMaterial({ color: 0x111111, size: MARKER_SIZE_PX, sizeAttenuation: false, depthTest: false }));
-      const dot = new THREE.Points(g, new THREE.PointsMaterial({ color: new THREE.Color(color), size: MARKER_SIZE_PX - 5, sizeAttenuation: false, depthTest: false }));
+      const ring = new THREE.Points(g, new THREE.PointsMaterial({ color: 0x111111, size: MARKER_SIZE_PX, sizeAttenuation: false, depthTest: false, transparent: true }));
+      const dot = new THREE.Points(g, new THREE.PointsMaterial({ color: new THREE.Color(color), size: MARKER_SIZE_PX - 5, sizeAttenuation: false, depthTest: false, transparent: true }));
       ring.renderOrder = order + 40;
       dot.renderOrder = order + 41;
       const group = new THREE.Group();
@@ -219,7 +221,7 @@
       const xyz = scene.anchors.flatMap((a) => a.xyz);
       const g = new THREE.BufferGeometry();
       g.setAttribute("position", new THREE.Float32BufferAttribute(xyz, 3));
-      const dots = new THREE.Points(g, new THREE.PointsMaterial({ color: 0x3b3b98, size: 10, sizeAttenuation: false, depthTest: false }));
+      const dots = new THREE.Points(g, new THREE.PointsMaterial({ color: 0x3b3b98, size: 10, sizeAttenuation: false, depthTest: false, transparent: true }));
       dots.renderOrder = 50;
       dots.name = "anchors";
       world.add(dots);
