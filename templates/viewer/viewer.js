@@ -507,6 +507,7 @@
     setView("plan");
     reset();
     setTimeIndex(0);
+    render(); // the first frame now: a frame out of view gets no animation frames
   }
 
   function mountAll() {
