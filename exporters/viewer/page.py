@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import html
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
@@ -28,7 +29,9 @@ __all__ = [
     "DEFAULT_TEMPLATES_DIR",
     "ViewerFragment",
     "export_viewer_html",
+    "scene_fragment",
     "viewer_fragment",
+    "viewer_page",
 ]
 
 DEFAULT_TEMPLATES_DIR: Final[Path] = Path(__file__).resolve().parents[2] / "templates"
@@ -103,48 +106,63 @@ def viewer_fragment(
         ExportOptionsError: bad units or site, or an unreadable building file.
     """
     folder = templates_dir or options.templates_dir or DEFAULT_TEMPLATES_DIR
-    three = _inline(three_script(folder))
-    script = _inline(_read(folder, _SCRIPT))
-    style = _read(folder, _STYLE)
+    return scene_fragment(viewer_scene(result, options), folder, element_id=element_id)
+
+
+def scene_fragment(
+    scene: Mapping[str, object], templates_dir: Path, *, element_id: str = "loceval-viewer"
+) -> ViewerFragment:
+    """Return the markup of a viewer of ``scene`` (a trajectory or control-point scene).
+
+    Raises:
+        ExportError: the viewer's scripts or the vendored three.js are missing or damaged.
+    """
+    three = _inline(three_script(templates_dir))
+    script = _inline(_read(templates_dir, _SCRIPT))
+    style = _read(templates_dir, _STYLE)
     # "<" as \u003c: the JSON cannot close its <script> element, and JSON.parse reads it back
-    scene = finite_json(viewer_scene(result, options), indent=None, what="The viewer's scene")
-    scene = scene.replace("<", "\\u003c")
+    text = finite_json(scene, indent=None, what="The viewer's scene").replace("<", "\\u003c")
     root = html.escape(element_id, quote=True)
     markup = (
         f"<style>{style}</style>\n"
         f'<div class="loceval-viewer" id="{root}" data-scene="{root}-scene" data-ready="false" '
         f'data-time-s="" data-errors="{{}}" role="group" aria-label="Interactive view of the '
         f'paths"></div>\n'
-        f'<script type="application/json" id="{root}-scene">{scene}</script>\n'
+        f'<script type="application/json" id="{root}-scene">{text}</script>\n'
         f"<script>{three}</script>\n<script>{script}</script>\n"
     )
     return ViewerFragment(markup, (_csp_hash(three), _csp_hash(script)))
 
 
-def export_viewer_html(result: EvaluationResult, options: ExportOptions) -> bytes:
-    """Return ``viewer.html``: the viewer alone, code and data inlined, for opening from disk.
+def viewer_page(fragment: ViewerFragment, *, title: str, subtitle: str) -> bytes:
+    """Return a standalone page around one viewer: nothing but its own scripts may run.
 
-    Its Content-Security-Policy allows nothing but its own two scripts and inline styles:
-    no request leaves the file, with or without a network.
-
-    Raises:
-        ExportError: the viewer's scripts or the vendored three.js are missing or damaged.
-        ExportOptionsError: bad units or site, or an unreadable building file.
+    Its Content-Security-Policy allows its two scripts (by hash) and inline styles and
+    nothing else: no request leaves the file, with or without a network.
     """
-    fragment = viewer_fragment(result, options)
-    title = html.escape(options.title)
-    reference = result.reference
-    subtitle = html.escape(
-        f"{len(result.estimates)} estimate(s) against {reference.name or 'the reference'} · "
-        f"frame {reference.frame_id or 'reference frame'} · units {options.units} · "
-        f"drag to pan or turn, wheel to zoom, click a point for its figures"
-    )
     page = (
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
         '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
         '<meta http-equiv="Content-Security-Policy" content="default-src \'none\'; '
         f"script-src {fragment.csp_script_src}; style-src 'unsafe-inline'; img-src data:\">\n"
-        f"<title>{title}</title>\n<style>{_PAGE_STYLE}</style>\n</head>\n<body>\n"
-        f"<header><h1>{title}</h1><p>{subtitle}</p></header>\n{fragment.html}</body>\n</html>\n"
+        f"<title>{html.escape(title)}</title>\n<style>{_PAGE_STYLE}</style>\n</head>\n<body>\n"
+        f"<header><h1>{html.escape(title)}</h1><p>{html.escape(subtitle)}</p></header>\n"
+        f"{fragment.html}</body>\n</html>\n"
     )
     return page.encode("utf-8")
+
+
+def export_viewer_html(result: EvaluationResult, options: ExportOptions) -> bytes:
+    """Return ``viewer.html``: the viewer alone, code and data inlined, for opening from disk.
+
+    Raises:
+        ExportError: the viewer's scripts or the vendored three.js are missing or damaged.
+        ExportOptionsError: bad units or site, or an unreadable building file.
+    """
+    reference = result.reference
+    subtitle = (
+        f"{len(result.estimates)} estimate(s) against {reference.name or 'the reference'} · "
+        f"frame {reference.frame_id or 'reference frame'} · units {options.units} · "
+        f"drag to pan or turn, wheel to zoom, click a point for its figures"
+    )
+    return viewer_page(viewer_fragment(result, options), title=options.title, subtitle=subtitle)

@@ -42,7 +42,7 @@ from loceval.evaluation import EvaluationResult
 from loceval.gaps import path_breaks
 from loceval.metrics import WorstPose
 
-__all__ = ["viewer_scene"]
+__all__ = ["building_scene", "flat_rounded", "hex_colour", "vertex_decimals", "viewer_scene"]
 
 _NS_PER_S: Final = 1_000_000_000
 _WORST_SEPARATION_S: Final = 2.0  # as the CAD markers: one label per excursion
@@ -52,16 +52,18 @@ _RESOLUTION_M: Final = 1e-4  # vertices are rounded to 0.1 mm
 _MAX_BUILDING_FACES: Final = 400_000
 
 
-def _hex(rgb: tuple[int, int, int]) -> str:
+def hex_colour(rgb: tuple[int, int, int]) -> str:
+    """Return an RGB colour as ``#rrggbb``."""
     return "#{:02x}{:02x}{:02x}".format(*rgb)
 
 
-def _decimals(units: Units) -> int:
+def vertex_decimals(units: Units) -> int:
     """Decimals of a vertex coordinate in ``units`` that keep :data:`_RESOLUTION_M`."""
     return max(0, round(-math.log10(_RESOLUTION_M * units.per_metre)))
 
 
-def _flat(values: FloatArray, decimals: int) -> list[float]:
+def flat_rounded(values: FloatArray, decimals: int) -> list[float]:
+    """Return an array flattened to a list, rounded to ``decimals`` (compact JSON)."""
     out: list[float] = np.round(np.asarray(values, dtype=np.float64), decimals).ravel().tolist()
     return out
 
@@ -98,7 +100,7 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
     ref_model_m = site.apply_positions(reference.positions_xyz)
     base_m = np.round((ref_model_m.min(axis=0) + ref_model_m.max(axis=0)) / 2.0)
     scale = units.per_metre
-    decimals = _decimals(units)
+    decimals = vertex_decimals(units)
 
     def local(positions_xyz: FloatArray) -> FloatArray:
         out: FloatArray = (site.apply_positions(positions_xyz) - base_m) * scale
@@ -117,10 +119,10 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
             "name": display_text(reference.name or "reference"),
             "kind": "reference",
             "source": display_text(reference.source or ""),
-            "color": _hex(palette_color(0)),
+            "color": hex_colour(palette_color(0)),
             "poses": len(reference),
-            "t": _flat((reference.stamps_ns[kept] - t0_ns) / _NS_PER_S, _TIME_DECIMALS),
-            "xyz": _flat(local(reference.positions_xyz[kept]), decimals),
+            "t": flat_rounded((reference.stamps_ns[kept] - t0_ns) / _NS_PER_S, _TIME_DECIMALS),
+            "xyz": flat_rounded(local(reference.positions_xyz[kept]), decimals),
             "breaks": _display_breaks(ref_breaks, kept),
         }
     )
@@ -137,12 +139,12 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
                 "name": name,
                 "kind": "estimate",
                 "source": display_text(est.estimate.source or ""),
-                "color": _hex(palette_color(k)),
+                "color": hex_colour(palette_color(k)),
                 "poses": len(stamps),
-                "t": _flat((stamps[kept] - t0_ns) / _NS_PER_S, _TIME_DECIMALS),
-                "xyz": _flat(local(est.aligned.positions_xyz[kept]), decimals),
-                "ref": _flat(local(est.association.reference.positions_xyz[kept]), decimals),
-                "err": _flat(errors[kept], ERROR_DECIMALS),
+                "t": flat_rounded((stamps[kept] - t0_ns) / _NS_PER_S, _TIME_DECIMALS),
+                "xyz": flat_rounded(local(est.aligned.positions_xyz[kept]), decimals),
+                "ref": flat_rounded(local(est.association.reference.positions_xyz[kept]), decimals),
+                "err": flat_rounded(errors[kept], ERROR_DECIMALS),
                 "breaks": _display_breaks(breaks, kept),
                 "ate": {"rmse": stats.rmse, "max": stats.max} if len(errors) else None,
             }
@@ -160,7 +162,7 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
         "bins": [
             {
                 "high": None if math.isinf(b.high_m) else b.high_m,
-                "color": _hex(b.color_rgb),
+                "color": hex_colour(b.color_rgb),
                 "label": b.label,
             }
             for b in bins
@@ -168,7 +170,7 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
         "paths": paths,
         "worst": worst,
         "anchors": _anchors(result, local, decimals),
-        "building": _building(options, base_m, scale, decimals),
+        "building": building_scene(options, base_m, scale, decimals),
     }
 
 
@@ -204,12 +206,12 @@ def _anchors(result: EvaluationResult, local: Callable[[FloatArray], FloatArray]
     xyz = np.array([a.position_xyz for a in result.ranging.anchors], dtype=np.float64)
     placed = local(xyz)
     return [
-        {"id": display_text(a.id), "xyz": _flat(placed[i], decimals)}
+        {"id": display_text(a.id), "xyz": flat_rounded(placed[i], decimals)}
         for i, a in enumerate(result.ranging.anchors)
     ]
 
 
-def _building(
+def building_scene(
     options: ExportOptions, base_m: FloatArray, scale: float, decimals: int
 ) -> dict[str, object] | None:
     """The building model as a mesh, or a DXF floor plan as lines, in local model units."""
@@ -222,14 +224,14 @@ def _building(
         z = np.zeros((len(ends), 1))
         xyz = (np.hstack([ends, z]) - base_m) * scale
         xyz[:, 2] = 0.0
-        return {"kind": "plan", "source": source, "segments": _flat(xyz, decimals)}
+        return {"kind": "plan", "source": source, "segments": flat_rounded(xyz, decimals)}
     assert isinstance(underlay, BuildingModel)
     faces = underlay.faces[:_MAX_BUILDING_FACES]
     return {
         "kind": "mesh",
         "source": source,
         "faces_dropped": int(len(underlay.faces) - len(faces)),
-        "positions": _flat((underlay.vertices_m - base_m) * scale, decimals),
+        "positions": flat_rounded((underlay.vertices_m - base_m) * scale, decimals),
         "index": faces.ravel().tolist(),
     }
 

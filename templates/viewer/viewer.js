@@ -69,8 +69,9 @@
     };
     const resetButton = el("button", { type: "button", "data-action": "reset", text: "Reset" });
     const toggles = el("div", { className: "lv-group lv-paths" });
+    const controls = scene.controls || null; // an evaluation against control points
     const legend = el("div", { className: "lv-legend", "aria-label": "ATE colour scale" },
-      el("span", { text: "ATE:" }));
+      el("span", { text: controls ? "Error at control points:" : "ATE:" }));
     for (const b of scene.bins) {
       legend.append(el("span", {}, el("span", { className: "lv-swatch", style: `background:${b.color}` }), ` ${b.label}`));
     }
@@ -110,14 +111,22 @@
     for (const p of paths) {
       for (let i = 0; i < p.xyz.length; i += 3) box.expandByPoint(new THREE.Vector3(p.xyz[i], p.xyz[i + 1], p.xyz[i + 2]));
     }
+    for (const c of controls ? controls.points : []) box.expandByPoint(new THREE.Vector3(...c.xyz));
     if (box.isEmpty()) box.expandByPoint(new THREE.Vector3(0, 0, 0));
+    // a room-sized building is framed with the paths; a campus is not (the paths would be specks)
+    const building = scene.building;
+    if (building && building.kind === "mesh") {
+      const hull = new THREE.Box3().setFromArray(building.positions);
+      const paths0 = box.getSize(new THREE.Vector3()).length();
+      if (hull.getSize(new THREE.Vector3()).length() <= 10 * Math.max(paths0, 1e-3)) box.union(hull);
+    }
     const centre = box.getCenter(new THREE.Vector3());
     const size = box.getSize(new THREE.Vector3());
     const radius = Math.max(size.x, size.y, size.z, 1e-3) * 0.5;
 
     drawBuilding();
     const layers = paths.map(drawPath);
-    const anchorLabels = drawAnchors();
+    const anchorLabels = drawAnchors().concat(drawControls());
     const worstLabels = scene.worst.map((w) => ({
       path: w.path, index: w.index,
       node: overlay.appendChild(el("div", { className: "lv-label lv-worst", text: w.label })),
@@ -131,7 +140,7 @@
         geometry.setIndex(b.index);
         geometry.computeVertexNormals();
         const mesh = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({
-          color: 0x8a9bb0, transparent: true, opacity: 0.28, side: THREE.DoubleSide, depthWrite: false,
+          color: 0x8a9bb0, transparent: true, opacity: 0.2, side: THREE.DoubleSide, depthWrite: false,
         }));
         mesh.name = "building";
         mesh.renderOrder = 0;
@@ -226,6 +235,40 @@
       dots.name = "anchors";
       world.add(dots);
       return scene.anchors.map((a) => ({ xyz: a.xyz, node: overlay.appendChild(el("div", { className: "lv-label", text: `anchor ${a.id}` })) }));
+    }
+
+    // control points (white dots, black rings, their ids) and each visit's error vector from
+    // the surveyed point to the measured position, coloured by its error (grey: alignment)
+    function drawControls() {
+      if (!controls) return [];
+      const g = new THREE.BufferGeometry();
+      g.setAttribute("position", new THREE.Float32BufferAttribute(controls.points.flatMap((c) => c.xyz), 3));
+      const ring = new THREE.Points(g, new THREE.PointsMaterial({ color: 0x111111, size: 11, sizeAttenuation: false, depthTest: false, transparent: true }));
+      const fill = new THREE.Points(g, new THREE.PointsMaterial({ color: 0xffffff, size: 7, sizeAttenuation: false, depthTest: false, transparent: true }));
+      ring.renderOrder = 60; fill.renderOrder = 61;
+      const ends = [];
+      const colours = [];
+      const c = new THREE.Color();
+      for (const v of controls.visits) {
+        ends.push(...v.surveyed, ...v.measured);
+        c.set(v.color);
+        colours.push(c.r, c.g, c.b, c.r, c.g, c.b);
+      }
+      const lg = new THREE.BufferGeometry();
+      lg.setAttribute("position", new THREE.Float32BufferAttribute(ends, 3));
+      lg.setAttribute("color", new THREE.Float32BufferAttribute(colours, 3));
+      const vectors = new THREE.LineSegments(lg, new THREE.LineBasicMaterial({ vertexColors: true, depthTest: false, transparent: true }));
+      const measured = new THREE.Points(lg, new THREE.PointsMaterial({ vertexColors: true, size: 6, sizeAttenuation: false, depthTest: false, transparent: true }));
+      vectors.renderOrder = 62; measured.renderOrder = 63;
+      const group = new THREE.Group();
+      group.name = "control points";
+      group.add(vectors, measured, ring, fill);
+      world.add(group);
+      return controls.points.map((p) => {
+        const errors = controls.visits.filter((v) => v.id === p.id && !v.alignment).map((v) => v.error);
+        const text = errors.length ? `${p.id} ${fmt(Math.max(...errors) * 1000, 1)} mm` : p.id;
+        return { xyz: p.xyz, node: overlay.appendChild(el("div", { className: "lv-label", text })) };
+      });
     }
 
     // --- cameras and the two views -----------------------------------------------------
@@ -410,6 +453,7 @@
         const j = estimateIndexAt(p, t);
         const show = j >= 0 && layer.visible;
         setMarker(layer.marker, p.xyz, j, show);
+        if (p.kind !== "estimate") continue; // a track: its marker only
         layer.vector.visible = show;
         layer.label.hidden = !show;
         if (j < 0) continue;
@@ -422,6 +466,11 @@
         layer.label.textContent = `${p.name}: ${fmt(p.err[j], 4)} m at t = ${fmt(p.t[j], 3)} s`;
         now.estimates.push({ k, j });
         parts.push(`${p.name}: ${fmt(p.err[j], 4)} m`);
+      }
+      for (const v of controls ? controls.visits : []) {
+        if (t < v.t0 || t > v.t1) continue; // the visit in progress, if any
+        errors[paths[v.path].name] = v.error;
+        parts.push(`${paths[v.path].name} at ${v.id}: ${fmt(v.error, 4)} m`);
       }
       readout.textContent = parts.join(" · ");
       root.dataset.timeS = String(t);
@@ -451,9 +500,13 @@
 
     // --- drawing -----------------------------------------------------------------------
     function project(k) {
+      return projectXYZ(paths[k].xyz);
+    }
+
+    // CSS pixel positions in the canvas of a flat [x, y, z, x, y, z, ...] list of local vertices
+    function projectXYZ(xyz) {
       updateCamera();
       const r = canvas.getBoundingClientRect();
-      const xyz = paths[k].xyz;
       const m = new THREE.Matrix4().multiplyMatrices(camera.projectionMatrix, camera.matrixWorldInverse).elements;
       const out = new Array(xyz.length / 3);
       for (let i = 0; i < out.length; i++) {
@@ -503,7 +556,7 @@
     }
 
     new ResizeObserver(requestRender).observe(stage);
-    root.locevalViewer = { project, setView, setTimeIndex, showPath, reset };
+    root.locevalViewer = { project, projectXYZ, setView, setTimeIndex, showPath, reset };
     setView("plan");
     reset();
     setTimeIndex(0);

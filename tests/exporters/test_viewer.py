@@ -15,17 +15,27 @@ import numpy as np
 import pytest
 
 from exporters import ARTIFACTS, artifact_name, write_artifacts
+from exporters.checkpoints import checkpoint_errors_csv, write_checkpoint_artifacts
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
 from exporters.placement import place_evaluation
+from exporters.points_placement import place_control_points
 from exporters.site import parse_site
 from exporters.tables import export_errors_csv
 from exporters.viewer import display_indices, export_viewer_html, viewer_scene
+from exporters.viewer.checkpoints import checkpoint_scene
 from exporters.viewer.page import DEFAULT_TEMPLATES_DIR
 from exporters.viewer.vendor import THREE_FILE, THREE_SHA256, THREE_VERSION, three_script
-from loceval.evaluation import EvaluationResult
+from loceval.alignment import AlignMethod
+from loceval.checkpoint_evaluation import (
+    CheckpointConfig,
+    CheckpointEvaluation,
+    evaluate_control_points,
+)
+from loceval.evaluation import EvaluationConfig, EvaluationResult
 from loceval.gaps import path_breaks
 from loceval.trajectory import Trajectory
+from tests.checkpoint_factory import grid_points, stop_and_go
 from tests.exporters.conftest import with_reference_loss
 
 NS = 1_000_000_000
@@ -256,3 +266,48 @@ def test_viewer_is_an_artifact(tmp_path: Path, two_estimates: EvaluationResult) 
     written = write_artifacts(two_estimates, tmp_path / "out", ExportOptions(), names=["viewer.html"])
     assert [p.name for p in written] == ["viewer.html"]
     assert scene_of(written[0].read_bytes())["paths"][0]["name"] == "OptiTrack"
+
+
+# --- control points ---------------------------------------------------------------------------
+
+
+@pytest.fixture
+def survey(rng: np.random.Generator) -> CheckpointEvaluation:
+    """A 3 x 4 grid at 30 cm visited twice; the 4 corners' visits fix the alignment."""
+    rec = stop_and_go(rng, grid_points(3, 4), passes=2)
+    return evaluate_control_points(
+        rec.points,
+        [rec.estimate],
+        EvaluationConfig(align=AlignMethod.NONE),
+        CheckpointConfig(align_points=("P00", "P03", "P20", "P23")),
+        reference_name="survey",
+    )
+
+
+def test_checkpoint_scene_is_the_cad_placement(survey: CheckpointEvaluation) -> None:
+    """Control points and visit vectors sit where the CAD files put them; errors are errors.csv's."""
+    options = ExportOptions(units=Units.MM, site=parse_site("100 200 5 30"))
+    scene = checkpoint_scene(survey, options)
+    placed = place_control_points(survey, options)
+    np.testing.assert_allclose(scene["base"], placed.base_point)
+    shown = np.array([p["xyz"] for p in scene["controls"]["points"]]) + scene["base"]
+    np.testing.assert_allclose(shown, placed.points, atol=0.0501)  # 0.1 mm
+    rows = list(csv.DictReader(io.StringIO(checkpoint_errors_csv(survey).decode())))
+    visits = scene["controls"]["visits"]
+    assert len(visits) == len(rows) == 24
+    for visit, row, measured in zip(visits, rows, placed.estimates[0].measured, strict=True):
+        assert visit["id"] == row["id"]
+        assert visit["error"] == float(row["error_m"])
+        assert visit["alignment"] == (row["used_for_alignment"] == "true")
+        assert (visit["color"] == "#808080") == visit["alignment"]
+        np.testing.assert_allclose(np.array(visit["measured"]) + scene["base"], measured, atol=0.0501)
+    (track,) = scene["paths"]
+    assert track["kind"] == "track"
+    assert scene["mode"] == "checkpoints"
+
+
+def test_checkpoint_viewer_is_an_artifact(survey: CheckpointEvaluation, tmp_path: Path) -> None:
+    """write_checkpoint_artifacts writes viewer.html with the control points in it."""
+    written = write_checkpoint_artifacts(survey, tmp_path / "out", ExportOptions(), names=["viewer.html"])
+    scene = scene_of(written[0].read_bytes())
+    assert [p["id"] for p in scene["controls"]["points"]] == list(survey.points.ids)

@@ -329,3 +329,61 @@ def test_building_is_drawn(browser: Any, two_estimates: EvaluationResult, tmp_pa
         viewer.api(f"showPath({j}, true)")
     viewer.shoot("viewer_building_3d.png", tmp_path)
     viewer.assert_closed()
+
+
+def test_control_points_on_a_building(browser: Any, tmp_path: Path) -> None:
+    """Control points over a see-through room: drawn at their places; a visit gives its error."""
+    trimesh = pytest.importorskip("trimesh")
+    from exporters.checkpoints import checkpoint_errors_csv
+    from exporters.viewer.checkpoints import export_checkpoint_viewer_html
+    from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points
+    from tests.checkpoint_factory import grid_points, stop_and_go
+
+    rec = stop_and_go(np.random.default_rng(7), grid_points(3, 4), passes=2)
+    survey = evaluate_control_points(
+        rec.points,
+        [rec.estimate],
+        EvaluationConfig(align=AlignMethod.NONE),
+        CheckpointConfig(align_points=("P00", "P03", "P20", "P23")),
+        reference_name="survey",
+    )
+    low, high = rec.points.positions_xyz.min(axis=0), rec.points.positions_xyz.max(axis=0)
+    room = trimesh.creation.box(extents=(high[0] - low[0] + 0.6, high[1] - low[1] + 0.6, 2.4))
+    room.apply_translation([(low[0] + high[0]) / 2, (low[1] + high[1]) / 2, 1.2])
+    obj = tmp_path / "room.obj"
+    room.export(obj)
+    path = tmp_path / "viewer.html"
+    options = ExportOptions(building=obj, units=Units.M, title="Survey of 12 control points")
+    path.write_bytes(export_checkpoint_viewer_html(survey, options))
+    viewer = open_viewer(browser, path)
+    controls = viewer.scene["controls"]
+    assert viewer.scene["building"]["kind"] == "mesh"
+
+    # every control point: a black ring with a white centre at its projected place
+    viewer.api("showPath(0, false)")
+    pixels = viewer.canvas_pixels().astype(int)
+    xyz = [c for p in controls["points"] for c in p["xyz"]]
+    for x, y in viewer.api(f"projectXYZ({json.dumps(xyz)})"):
+        patch = pixels[int(y) - 6 : int(y) + 7, int(x) - 6 : int(x) + 7].reshape(-1, 3)
+        assert np.any(np.all(patch >= 250, axis=1)), (x, y)  # the white centre
+        assert np.any(np.all(patch <= 40, axis=1)), (x, y)  # the black ring
+    viewer.api("showPath(0, true)")
+
+    # the timeline in a visit: data-errors holds that visit's error, as errors.csv has it
+    rows = list(csv.DictReader(io.StringIO(checkpoint_errors_csv(survey).decode())))
+    track = viewer.scene["paths"][0]
+    slider = viewer.page.locator(f"{ROOT} input[type=range]")
+    root = viewer.page.locator(ROOT)
+    checked = 0
+    for visit, row in list(zip(controls["visits"], rows, strict=True))[::5]:
+        i = bisect.bisect_left(track["t"], (visit["t0"] + visit["t1"]) / 2)
+        slider.fill(str(i))
+        errors = json.loads(root.get_attribute("data-errors"))
+        assert errors == {track["name"]: float(row["error_m"])}
+        checked += 1
+    assert checked >= 4
+    viewer.api("setView('orbit')")
+    viewer.shoot("viewer_control_points_building_3d.png", tmp_path)
+    viewer.api("setView('plan')")
+    viewer.shoot("viewer_control_points_building_plan.png", tmp_path)
+    viewer.assert_closed()
