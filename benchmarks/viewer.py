@@ -82,11 +82,15 @@ def measure(label: str, result: EvaluationResult, repeat: int, folder: Path) -> 
     """Print the artifact's rendering time, its size and the time to data-ready."""
     options = ExportOptions(title=label)
     seconds, data = best_of(repeat, lambda: export_viewer_html(result, options))
-    assert isinstance(data, bytes)
+    if not isinstance(data, bytes):
+        msg = "export_viewer_html returned no bytes"
+        raise TypeError(msg)
     path = folder / f"{label.replace(' ', '_').replace('/', '_')}.html"
     path.write_bytes(data)
     ready = time_to_ready(path, repeat)
-    poses = " / ".join(f"{n:,}" for n in (len(result.reference), *(len(e.association) for e in result.estimates)))
+    poses = " / ".join(
+        f"{n:,}" for n in (len(result.reference), *(len(e.association) for e in result.estimates))
+    )
     print(
         f"{label:28s} poses {poses:28s} export {seconds:6.2f} s  "
         f"viewer.html {len(data) / 1e6:6.2f} MB  data-ready {ready:6.2f} s"

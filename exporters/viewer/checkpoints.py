@@ -129,7 +129,9 @@ def checkpoint_scene(evaluation: CheckpointEvaluation, options: ExportOptions) -
     }
 
 
-def export_checkpoint_viewer_html(evaluation: CheckpointEvaluation, options: ExportOptions) -> bytes:
+def export_checkpoint_viewer_html(
+    evaluation: CheckpointEvaluation, options: ExportOptions
+) -> bytes:
     """Return ``viewer.html`` of an evaluation against control points (one closed file).
 
     Raises:

@@ -141,7 +141,7 @@ def viewer_page(fragment: ViewerFragment, *, title: str, subtitle: str) -> bytes
     nothing else: no request leaves the file, with or without a network.
     """
     page = (
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
         '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
         '<meta http-equiv="Content-Security-Policy" content="default-src \'none\'; '
         f"script-src {fragment.csp_script_src}; style-src 'unsafe-inline'; img-src data:\">\n"

@@ -24,12 +24,7 @@ from typing import Final
 
 import numpy as np
 
-from exporters.building import (
-    BuildingModel,
-    FloorPlan,
-    georeferenced_options,
-    read_underlay,
-)
+from exporters.building import BuildingModel, georeferenced_options, read_underlay
 from exporters.colours import ate_bins, ate_edges_m, palette_color
 from exporters.options import ExportOptions, Units
 from exporters.site import check_options
@@ -199,7 +194,9 @@ def _worst_labels(
     return out
 
 
-def _anchors(result: EvaluationResult, local: Callable[[FloatArray], FloatArray], decimals: int) -> list[dict[str, object]]:
+def _anchors(
+    result: EvaluationResult, local: Callable[[FloatArray], FloatArray], decimals: int
+) -> list[dict[str, object]]:
     """The radio anchors of a ranging evaluation, placed like the paths."""
     if result.ranging is None or not result.ranging.anchors:
         return []
@@ -219,13 +216,12 @@ def building_scene(
         return None
     underlay = read_underlay(options.building, units=options.units, up=options.building_up)
     source = Path(options.building).name
-    if isinstance(underlay, FloorPlan):
+    if not isinstance(underlay, BuildingModel):  # a DXF floor plan
         ends = underlay.segments_m.reshape(-1, 2)
         z = np.zeros((len(ends), 1))
         xyz = (np.hstack([ends, z]) - base_m) * scale
         xyz[:, 2] = 0.0
         return {"kind": "plan", "source": source, "segments": flat_rounded(xyz, decimals)}
-    assert isinstance(underlay, BuildingModel)
     faces = underlay.faces[:_MAX_BUILDING_FACES]
     return {
         "kind": "mesh",
@@ -234,4 +230,3 @@ def building_scene(
         "positions": flat_rounded((underlay.vertices_m - base_m) * scale, decimals),
         "index": faces.ravel().tolist(),
     }
-

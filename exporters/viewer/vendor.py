@@ -74,6 +74,9 @@ def three_script(templates_dir: Path) -> str:
         names.append(f"{exported}:{local}")
     body = source[: clause.start()]
     return (
-        "(function(){\n" + body + "\nglobalThis.LOCEVAL_THREE=Object.freeze({"
-        + ",".join(names) + "});\n})();\n"
+        "(function(){\n"
+        + body
+        + "\nglobalThis.LOCEVAL_THREE=Object.freeze({"
+        + ",".join(names)
+        + "});\n})();\n"
     )

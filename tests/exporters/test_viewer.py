@@ -32,7 +32,7 @@ from loceval.checkpoint_evaluation import (
     CheckpointEvaluation,
     evaluate_control_points,
 )
-from loceval.evaluation import EvaluationConfig, EvaluationResult
+from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from loceval.gaps import path_breaks
 from loceval.trajectory import Trajectory
 from tests.checkpoint_factory import grid_points, stop_and_go
@@ -40,8 +40,8 @@ from tests.exporters.conftest import with_reference_loss
 
 NS = 1_000_000_000
 THREE = DEFAULT_TEMPLATES_DIR / THREE_FILE
-SCENE = re.compile(r'<script type="application/json" id="[^"]*-scene">(.*?)</script>', re.S)
-SCRIPTS = re.compile(r"<script>(.*?)</script>", re.S)
+SCENE = re.compile(r'<script type="application/json" id="[^"]*-scene">(.*?)</script>', re.DOTALL)
+SCRIPTS = re.compile(r"<script>(.*?)</script>", re.DOTALL)
 
 
 def scene_of(html: bytes) -> dict:
@@ -251,8 +251,6 @@ def test_hostile_names_stay_text(two_estimates: EvaluationResult) -> None:
     hostile = Trajectory(
         est.stamps_ns, est.positions_xyz, est.quat_xyzw, name="x</script><script>alert(1)//"
     )
-    from loceval.evaluation import evaluate  # noqa: PLC0415
-
     result = evaluate(two_estimates.reference, [hostile], two_estimates.config)
     html = export_viewer_html(result, ExportOptions())
     assert html.count(b"</script>") == 3
@@ -263,7 +261,9 @@ def test_viewer_is_an_artifact(tmp_path: Path, two_estimates: EvaluationResult) 
     """viewer.html is in the registry (alias 'viewer') and written like every artifact."""
     assert ARTIFACTS["viewer.html"].media_type == "text/html"
     assert artifact_name("viewer") == "viewer.html"
-    written = write_artifacts(two_estimates, tmp_path / "out", ExportOptions(), names=["viewer.html"])
+    written = write_artifacts(
+        two_estimates, tmp_path / "out", ExportOptions(), names=["viewer.html"]
+    )
     assert [p.name for p in written] == ["viewer.html"]
     assert scene_of(written[0].read_bytes())["paths"][0]["name"] == "OptiTrack"
 
@@ -285,7 +285,7 @@ def survey(rng: np.random.Generator) -> CheckpointEvaluation:
 
 
 def test_checkpoint_scene_is_the_cad_placement(survey: CheckpointEvaluation) -> None:
-    """Control points and visit vectors sit where the CAD files put them; errors are errors.csv's."""
+    """Control points and visits sit where the CAD files put them, with errors.csv's errors."""
     options = ExportOptions(units=Units.MM, site=parse_site("100 200 5 30"))
     scene = checkpoint_scene(survey, options)
     placed = place_control_points(survey, options)
@@ -300,7 +300,9 @@ def test_checkpoint_scene_is_the_cad_placement(survey: CheckpointEvaluation) -> 
         assert visit["error"] == float(row["error_m"])
         assert visit["alignment"] == (row["used_for_alignment"] == "true")
         assert (visit["color"] == "#808080") == visit["alignment"]
-        np.testing.assert_allclose(np.array(visit["measured"]) + scene["base"], measured, atol=0.0501)
+        np.testing.assert_allclose(
+            np.array(visit["measured"]) + scene["base"], measured, atol=0.0501
+        )
     (track,) = scene["paths"]
     assert track["kind"] == "track"
     assert scene["mode"] == "checkpoints"
@@ -308,6 +310,8 @@ def test_checkpoint_scene_is_the_cad_placement(survey: CheckpointEvaluation) -> 
 
 def test_checkpoint_viewer_is_an_artifact(survey: CheckpointEvaluation, tmp_path: Path) -> None:
     """write_checkpoint_artifacts writes viewer.html with the control points in it."""
-    written = write_checkpoint_artifacts(survey, tmp_path / "out", ExportOptions(), names=["viewer.html"])
+    written = write_checkpoint_artifacts(
+        survey, tmp_path / "out", ExportOptions(), names=["viewer.html"]
+    )
     scene = scene_of(written[0].read_bytes())
     assert [p["id"] for p in scene["controls"]["points"]] == list(survey.points.ids)

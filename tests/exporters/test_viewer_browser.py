@@ -76,9 +76,11 @@ class Opened:
         page.on("pageerror", lambda exc: self.problems.append(f"pageerror: {exc}"))
         page.on(
             "console",
-            lambda m: self.problems.append(f"{m.type}: {m.text}")
-            if m.type in ("error", "warning")
-            else None,
+            lambda m: (
+                self.problems.append(f"{m.type}: {m.text}")
+                if m.type in ("error", "warning")
+                else None
+            ),
         )
         page.on("request", lambda r: self.requests.append(r.url))
         page.goto(path.as_uri())
@@ -301,7 +303,9 @@ def test_report_has_the_viewer(browser: Any, fr2: EvaluationResult, tmp_path: Pa
     viewer.page.locator("#viewer").scroll_into_view_if_needed()
     check_paths_drawn(viewer)
     viewer.page.locator("#viewer").screenshot(
-        path=str(viewer.shoot("report_fr2_desk.png", tmp_path).with_name("report_viewer_fr2_desk.png"))
+        path=str(
+            viewer.shoot("report_fr2_desk.png", tmp_path).with_name("report_viewer_fr2_desk.png")
+        )
     )
     viewer.assert_closed()
 

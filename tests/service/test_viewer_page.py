@@ -43,7 +43,7 @@ ARGS = [
 
 
 @pytest.fixture
-def page(live_server: Any) -> Iterator[Any]:
+def page() -> Iterator[Any]:
     """A page of the system Chromium with WebGL; records problems and every request."""
     if not CHROMIUM.is_file():
         skip_or_fail(f"{CHROMIUM} is not installed (apt package chromium)")
@@ -58,9 +58,7 @@ def page(live_server: Any) -> Iterator[Any]:
         page.problems = []  # type: ignore[attr-defined]
         page.requests = []  # type: ignore[attr-defined]
         page.on("pageerror", lambda exc: page.problems.append(str(exc)))
-        page.on(
-            "console", lambda m: page.problems.append(m.text) if m.type == "error" else None
-        )
+        page.on("console", lambda m: page.problems.append(m.text) if m.type == "error" else None)
         page.on("request", lambda r: page.requests.append(r.url))
         try:
             yield page
@@ -108,8 +106,9 @@ def test_card_shows_the_viewer(
     page.locator("#current-card").screenshot(path=str(folder / "page_card_viewer.png"))
     origin = urlsplit(live_server.url).netloc
     foreign = [
-        u for u in page.requests if urlsplit(u).scheme in ("http", "https", "ws", "wss")
-        and urlsplit(u).netloc != origin
+        u
+        for u in page.requests
+        if urlsplit(u).scheme in ("http", "https", "ws", "wss") and urlsplit(u).netloc != origin
     ]
     assert foreign == []
     assert page.problems == []
