@@ -1,7 +1,7 @@
 // The interactive 3D and plan viewer of one evaluation (loceval issue 24).
 //
 // Mounted on every `.loceval-viewer[data-scene]` element, it reads its scene (the JSON that
-// exporters/viewer/scene.py writes, in a <script type="application/json"> with the id the
+// exporters/viewer/scene.py writes, in a JSON script element with the id the
 // root's data-scene names) and draws it with the vendored three.js (globalThis.LOCEVAL_THREE,
 // set by the inlined templates/vendor/three build). It makes no request of its own.
 //
