@@ -30,9 +30,9 @@ from pathlib import Path
 from benchmarks.report import best_of, build
 from exporters.options import ExportOptions
 from exporters.viewer import export_viewer_html
-from loceval.alignment import AlignMethod
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from loceval.readers import read_trajectory
+from loceval.registration.alignment import AlignMethod
 
 CHROMIUM = "/usr/bin/chromium"
 ARGS = [

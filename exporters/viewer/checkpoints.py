@@ -7,7 +7,7 @@ surveyed control points with their ids; and every visit's error vector, from the
 point to the measured (aligned median) position, coloured by the error on the report's
 scale (visits that fixed the alignment grey, as in the CAD files). The timeline moves along
 the tracks; ``data-errors`` holds, for each estimate, the error of the visit in progress.
-Everything is placed as :func:`exporters.points_placement.place_control_points` places it:
+Everything is placed as :func:`exporters.cad.points_placement.place_control_points` places it:
 the site transform, the output units, the survey's bounding-box centre as base point.
 """
 
@@ -18,17 +18,17 @@ from typing import Final
 
 import numpy as np
 
+from exporters.cad.site import check_options
 from exporters.colours import ate_bins, palette_color
 from exporters.options import ExportOptions, Units
-from exporters.site import check_options
 from exporters.viewer.page import DEFAULT_TEMPLATES_DIR, scene_fragment, viewer_page
 from exporters.viewer.reduce import display_indices
 from exporters.viewer.scene import building_scene, flat_rounded, hex_colour, vertex_decimals
 from loceval import __version__
-from loceval._typing import FloatArray
 from loceval.checkpoint_evaluation import CheckpointEvaluation
-from loceval.display import display_text
-from loceval.gaps import path_breaks
+from loceval.core.arrays import FloatArray
+from loceval.core.display import display_text
+from loceval.core.gaps import path_breaks
 
 __all__ = ["checkpoint_scene", "export_checkpoint_viewer_html"]
 

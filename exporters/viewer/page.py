@@ -18,8 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
+from exporters.cad.jsondoc import finite_json
 from exporters.errors import ExportError
-from exporters.jsondoc import finite_json
 from exporters.options import ExportOptions
 from exporters.viewer.scene import viewer_scene
 from exporters.viewer.vendor import three_script

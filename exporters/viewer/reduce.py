@@ -21,7 +21,7 @@ from typing import Final
 
 import numpy as np
 
-from loceval._typing import BoolArray, FloatArray, IntArray
+from loceval.core.arrays import BoolArray, FloatArray, IntArray
 
 __all__ = ["DISPLAY_BUDGET", "display_indices"]
 

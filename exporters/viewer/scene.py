@@ -1,6 +1,6 @@
 """What the viewer draws, as one JSON-ready document: paths, errors, building, anchors.
 
-Everything is in the site frame and units the CAD files use (:mod:`exporters.placement`):
+Everything is in the site frame and units the CAD files use (:mod:`exporters.cad.placement`):
 the evaluation frame mapped by the site transform (an IFC building's own map conversion
 when no site is given), scaled to the output units. Vertices are sent relative to the
 same base point as the GLB (the reference's bounding-box centre rounded to whole metres),
@@ -10,7 +10,7 @@ read-outs add it back.
 Per path the document holds its display set (:func:`~exporters.viewer.reduce.display_indices`):
 stamps in seconds since the reference's first stamp (as the report and ``errors.csv``),
 local vertices, the display indices after which a piece ends (a tracking loss of the path
-or of the reference, :func:`loceval.gaps.path_breaks`: drawn as a break, never a chord)
+or of the reference, :func:`loceval.core.gaps.path_breaks`: drawn as a break, never a chord)
 and, for an estimate, its ATE at each vertex (rounded as in ``errors.csv``) with the
 reference position that error is measured to.
 """
@@ -24,18 +24,18 @@ from typing import Final
 
 import numpy as np
 
-from exporters.building import BuildingModel, georeferenced_options, read_underlay
+from exporters.cad.building import BuildingModel, georeferenced_options, read_underlay
+from exporters.cad.site import check_options
 from exporters.colours import ate_bins, ate_edges_m, palette_color
 from exporters.options import ExportOptions, Units
-from exporters.site import check_options
 from exporters.tables import ERROR_DECIMALS
 from exporters.viewer.reduce import display_indices
 from loceval import __version__
-from loceval._typing import BoolArray, FloatArray, IntArray
-from loceval.display import display_text
+from loceval.core.arrays import BoolArray, FloatArray, IntArray
+from loceval.core.display import display_text
+from loceval.core.gaps import path_breaks
 from loceval.evaluation import EvaluationResult
-from loceval.gaps import path_breaks
-from loceval.metrics import WorstPose
+from loceval.metrics.pose_errors import WorstPose
 
 __all__ = ["building_scene", "flat_rounded", "hex_colour", "vertex_decimals", "viewer_scene"]
 

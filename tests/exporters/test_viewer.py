@@ -15,25 +15,25 @@ import numpy as np
 import pytest
 
 from exporters import ARTIFACTS, artifact_name, write_artifacts
+from exporters.cad.placement import place_evaluation
+from exporters.cad.points_placement import place_control_points
+from exporters.cad.site import parse_site
 from exporters.checkpoints import checkpoint_errors_csv, write_checkpoint_artifacts
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
-from exporters.placement import place_evaluation
-from exporters.points_placement import place_control_points
-from exporters.site import parse_site
 from exporters.tables import export_errors_csv
 from exporters.viewer import display_indices, export_viewer_html, viewer_scene
 from exporters.viewer.checkpoints import checkpoint_scene
 from exporters.viewer.page import DEFAULT_TEMPLATES_DIR
 from exporters.viewer.vendor import THREE_FILE, THREE_SHA256, THREE_VERSION, three_script
-from loceval.alignment import AlignMethod
 from loceval.checkpoint_evaluation import (
     CheckpointConfig,
     CheckpointEvaluation,
     evaluate_control_points,
 )
+from loceval.core.gaps import path_breaks
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
-from loceval.gaps import path_breaks
+from loceval.registration.alignment import AlignMethod
 from loceval.trajectory import Trajectory
 from tests.checkpoint_factory import grid_points, stop_and_go
 from tests.exporters.conftest import with_reference_loss

@@ -26,9 +26,9 @@ from exporters.options import ExportOptions, Units
 from exporters.report import render_report_html
 from exporters.tables import export_errors_csv
 from exporters.viewer import export_viewer_html
-from loceval.alignment import AlignMethod
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from loceval.readers import read_trajectory
+from loceval.registration.alignment import AlignMethod
 from tests.conftest import skip_or_fail
 from tests.exporters.test_viewer import scene_of
 
