@@ -34,7 +34,9 @@ from loceval import __version__
 from loceval.core.arrays import BoolArray, FloatArray, IntArray
 from loceval.core.display import display_text
 from loceval.core.gaps import path_breaks
+from loceval.core.geometry import SimilarityTransform
 from loceval.evaluation import EvaluationResult
+from loceval.trajectory import Trajectory
 from loceval.metrics.pose_errors import WorstPose
 
 __all__ = ["building_scene", "flat_rounded", "hex_colour", "vertex_decimals", "viewer_scene"]
@@ -45,6 +47,8 @@ _WORST_LABELS: Final = 3  # labels per estimate: more only pile up on a plan
 _TIME_DECIMALS: Final = 6  # microseconds: finer than any recording's stamps need here
 _RESOLUTION_M: Final = 1e-4  # vertices are rounded to 0.1 mm
 _MAX_BUILDING_FACES: Final = 400_000
+_MAX_ELLIPSES: Final = 400  # uncertainty ellipses per estimate: more only blur into a band
+_SIGMAS: Final = 2.0  # the ellipses are 2-sigma (about 86 % of a 2D normal's mass)
 
 
 def hex_colour(rgb: tuple[int, int, int]) -> str:
@@ -142,6 +146,7 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
                 "err": flat_rounded(errors[kept], ERROR_DECIMALS),
                 "breaks": _display_breaks(breaks, kept),
                 "ate": {"rmse": stats.rmse, "max": stats.max} if len(errors) else None,
+                "uncertainty": _uncertainty(est.aligned, kept, site, scale),
             }
         )
         worst += _worst_labels(est.worst, kept, path=len(paths) - 1, name=name)
@@ -192,6 +197,35 @@ def _worst_labels(
             }
         )
     return out
+
+
+def _uncertainty(
+    aligned: Trajectory, kept: IntArray, site: SimilarityTransform, scale: float
+) -> dict[str, list[float] | list[int]] | None:
+    """2-sigma horizontal ellipses of the reported position covariance at some display vertices.
+
+    The covariance follows the alignment and the site transform (``J Σ Jᵀ``,
+    :meth:`Trajectory.transformed`); each ellipse is the eigen-decomposition of its x-y block
+    (vectorised over the vertices): semi-axes ``2 sqrt(λ)`` in output units and the major
+    axis's angle from x, radians. At most :data:`_MAX_ELLIPSES` vertices, evenly spread.
+
+    Returns:
+        ``{"index": display indices, "ellipse": [a, b, angle, ...]}``, or None without
+        covariances.
+    """
+    if aligned.cov6 is None or not len(kept):
+        return None
+    pick = np.unique(np.linspace(0, len(kept) - 1, min(len(kept), _MAX_ELLIPSES)).round())
+    pick = pick.astype(np.intp)
+    cov = aligned.select(kept[pick]).transformed(site).cov6
+    if cov is None:
+        return None
+    values, vectors = np.linalg.eigh(cov[:, :2, :2])  # ascending: the major axis is last
+    major = _SIGMAS * np.sqrt(np.clip(values[:, 1], 0.0, None)) * scale
+    minor = _SIGMAS * np.sqrt(np.clip(values[:, 0], 0.0, None)) * scale
+    angle = np.arctan2(vectors[:, 1, 1], vectors[:, 0, 1])
+    ellipse = np.column_stack([major, minor, angle])
+    return {"index": pick.tolist(), "ellipse": flat_rounded(ellipse, 6)}
 
 
 def _anchors(

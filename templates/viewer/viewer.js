@@ -124,9 +124,21 @@
     const size = box.getSize(new THREE.Vector3());
     const radius = Math.max(size.x, size.y, size.z, 1e-3) * 0.5;
 
+    const ellipses = []; // filled by drawPath for estimates with covariances
     drawBuilding();
     const layers = paths.map(drawPath);
     const anchorLabels = drawAnchors().concat(drawControls());
+    if (ellipses.length) {
+      const box = el("input", { type: "checkbox", "data-action": "uncertainty" });
+      box.addEventListener("change", () => showUncertainty(box.checked));
+      toggles.append(el("label", { title: "2-sigma ellipses of the covariance the estimate reports" }, box, "Uncertainty (2σ)"));
+    }
+    function showUncertainty(on) {
+      for (const e of ellipses) e.visible = on;
+      const box = toggles.querySelector("input[data-action=uncertainty]");
+      if (box) box.checked = on;
+      requestRender();
+    }
     const worstLabels = scene.worst.map((w) => ({
       path: w.path, index: w.index,
       node: overlay.appendChild(el("div", { className: "lv-label lv-worst", text: w.label })),
@@ -191,6 +203,7 @@
       const dots = new THREE.Points(pointsGeometry, new THREE.PointsMaterial({ vertexColors: true, size: POINT_SIZE_PX, sizeAttenuation: false, depthTest: false, transparent: true }));
       lines.renderOrder = dots.renderOrder = 10 + 2 * k;
       group.add(lines, dots);
+      if (p.uncertainty) group.add(drawEllipses(p));
       group.name = p.name;
       world.add(group);
       const marker = makeMarker(p.color, 20 + k);
@@ -209,6 +222,36 @@
       toggles.append(el("label", { title: p.source || p.name }, box,
         el("span", { className: "lv-swatch", style: `background:${p.color}` }), p.name));
       return layer;
+    }
+
+    // 2-sigma ellipses of the reported covariance (scene.py): shown with the Uncertainty box
+    function drawEllipses(p) {
+      const SEGMENTS = 24;
+      const xyz = [];
+      const u = p.uncertainty;
+      for (let e = 0; e < u.index.length; e++) {
+        const i = u.index[e];
+        const [a, b, angle] = u.ellipse.slice(3 * e, 3 * e + 3);
+        const [cx, cy, cz] = p.xyz.slice(3 * i, 3 * i + 3);
+        const ca = Math.cos(angle);
+        const sa = Math.sin(angle);
+        for (let k = 0; k < SEGMENTS; k++) {
+          for (const step of [k, k + 1]) {
+            const w = (2 * Math.PI * step) / SEGMENTS;
+            const x = a * Math.cos(w);
+            const y = b * Math.sin(w);
+            xyz.push(cx + ca * x - sa * y, cy + sa * x + ca * y, cz);
+          }
+        }
+      }
+      const g = new THREE.BufferGeometry();
+      g.setAttribute("position", new THREE.Float32BufferAttribute(xyz, 3));
+      const lines = new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: new THREE.Color(p.color), depthTest: false, transparent: true, opacity: 0.6 }));
+      lines.renderOrder = 9;
+      lines.visible = false;
+      lines.name = "uncertainty";
+      ellipses.push(lines);
+      return lines;
     }
 
     function makeMarker(color, order) {
@@ -556,7 +599,7 @@
     }
 
     new ResizeObserver(requestRender).observe(stage);
-    root.locevalViewer = { project, projectXYZ, setView, setTimeIndex, showPath, reset };
+    root.locevalViewer = { project, projectXYZ, showUncertainty, setView, setTimeIndex, showPath, reset };
     setView("plan");
     reset();
     setTimeIndex(0);

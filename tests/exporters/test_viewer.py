@@ -315,3 +315,28 @@ def test_checkpoint_viewer_is_an_artifact(survey: CheckpointEvaluation, tmp_path
     )
     scene = scene_of(written[0].read_bytes())
     assert [p["id"] for p in scene["controls"]["points"]] == list(survey.points.ids)
+
+
+def test_uncertainty_ellipses_follow_the_covariance(two_estimates: EvaluationResult) -> None:
+    """A reported covariance gives 2-sigma ellipses: semi-axes 2 sqrt(eigenvalues), in units."""
+    truth = two_estimates.reference
+    est = two_estimates.estimates[0].estimate
+    cov = np.zeros((len(est), 6, 6))
+    cov[:, 0, 0] = 0.03**2  # sigma 3 cm along the estimate's x, 1 cm along y
+    cov[:, 1, 1] = 0.01**2
+    cov[:, 2, 2] = 0.01**2
+    with_cov = Trajectory(est.stamps_ns, est.positions_xyz, name="AMCL-like", cov6=cov)
+    result = evaluate(truth, [with_cov], two_estimates.config)
+    scene = viewer_scene(result, ExportOptions(units=Units.CM, site=parse_site("0 0 0 90")))
+    shown = scene["paths"][1]["uncertainty"]
+    assert 0 < len(shown["index"]) <= 400
+    ellipse = np.array(shown["ellipse"]).reshape(-1, 3)
+    np.testing.assert_allclose(ellipse[:, 0], 6.0, rtol=1e-3)  # 2 sigma of 3 cm, in cm
+    np.testing.assert_allclose(ellipse[:, 1], 2.0, rtol=1e-3)
+    # the alignment turned the estimate's x axis; the site turns it by another 90 degrees
+    turn = result.estimates[0].alignment.transform.rotation
+    expected = np.arctan2(turn[1, 0], turn[0, 0]) + np.pi / 2
+    assert np.allclose(
+        np.cos(2 * (ellipse[:, 2] - expected)), 1.0, atol=1e-3
+    )  # an axis, not a direction
+    assert viewer_scene(two_estimates, ExportOptions())["paths"][1]["uncertainty"] is None

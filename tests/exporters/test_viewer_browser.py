@@ -289,6 +289,19 @@ def test_nav2_viewer(browser: Any, nav2: EvaluationResult, tmp_path: Path) -> No
     n = len(viewer.scene["paths"][0]["t"])
     assert check_timeline(viewer, nav2, list(range(0, n, max(1, n // 12)))) >= 10
     viewer.page.locator(f"{ROOT} input[type=range]").fill(str(n // 2))
+    # AMCL reports covariances: its 2-sigma ellipses appear with the Uncertainty box
+    amcl = viewer.scene["paths"][1]
+    assert amcl["uncertainty"] is not None
+    assert viewer.scene["paths"][2]["uncertainty"] is None  # odometry reports none here
+
+    def pinkish() -> int:  # the ellipses: magenta at 60 % over white, (255, 102, 255)
+        p = viewer.canvas_pixels().astype(int)
+        return int(np.sum((p[:, :, 0] > 200) & (p[:, :, 2] > 200) & (p[:, :, 1] < 180)))
+
+    assert amcl["color"] == "#ff00ff"
+    before = pinkish()
+    viewer.page.locator(f"{ROOT} input[data-action=uncertainty]").check()
+    assert pinkish() > before + 1000
     viewer.shoot("viewer_nav2_plan.png", tmp_path)
     check_click(viewer, 2, 40)
     viewer.assert_closed()
