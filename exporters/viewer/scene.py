@@ -36,8 +36,8 @@ from loceval.core.display import display_text
 from loceval.core.gaps import path_breaks
 from loceval.core.geometry import SimilarityTransform
 from loceval.evaluation import EvaluationResult
-from loceval.trajectory import Trajectory
 from loceval.metrics.pose_errors import WorstPose
+from loceval.trajectory import Trajectory
 
 __all__ = ["building_scene", "flat_rounded", "hex_colour", "vertex_decimals", "viewer_scene"]
 
