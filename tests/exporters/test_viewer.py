@@ -33,10 +33,12 @@ from loceval.checkpoint_evaluation import (
 )
 from loceval.core.gaps import path_breaks
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
+from loceval.radio_evaluation import RangingConfig, evaluate_radio
 from loceval.registration.alignment import AlignMethod
 from loceval.trajectory import Trajectory
 from tests.checkpoint_factory import grid_points, stop_and_go
 from tests.exporters.conftest import with_reference_loss
+from tests.radio_factory import make_ranges, make_reference
 
 NS = 1_000_000_000
 THREE = DEFAULT_TEMPLATES_DIR / THREE_FILE
@@ -340,3 +342,15 @@ def test_uncertainty_ellipses_follow_the_covariance(two_estimates: EvaluationRes
         np.cos(2 * (ellipse[:, 2] - expected)), 1.0, atol=1e-3
     )  # an axis, not a direction
     assert viewer_scene(two_estimates, ExportOptions())["paths"][1]["uncertainty"] is None
+
+
+def test_radio_anchors_are_placed(rng: np.random.Generator) -> None:
+    """A ranging evaluation's anchors are drawn where the site puts them, with their ids."""
+    result = evaluate_radio(make_reference(), make_ranges(rng, end_s=20.0).ranges, RangingConfig())
+    options = ExportOptions(units=Units.M, site=parse_site("10 20 0 90"))
+    scene = viewer_scene(result, options)
+    anchors = result.ranging.anchors if result.ranging is not None else ()
+    assert [a["id"] for a in scene["anchors"]] == [a.id for a in anchors]
+    shown = np.array([a["xyz"] for a in scene["anchors"]]) + scene["base"]
+    expected = options.site.apply_positions(np.array([a.position_xyz for a in anchors]))
+    np.testing.assert_allclose(shown, expected, atol=1e-4)

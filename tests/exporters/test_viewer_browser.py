@@ -225,6 +225,10 @@ def check_click(viewer: Opened, k: int, i: int) -> None:
         viewer.api(f"showPath({j}, {str(j == k).lower()})")
     x, y = viewer.api(f"project({k})")[i]
     box = viewer.page.locator(f"{ROOT} canvas").bounding_box()
+    viewer.page.mouse.move(box["x"] + x, box["y"] + y)  # hovering shows the same figures
+    tip = viewer.page.locator(f"{ROOT} .lv-tip")
+    assert tip.is_visible()
+    assert tip.inner_text().startswith(path["name"])
     viewer.page.mouse.click(box["x"] + x, box["y"] + y)
     info = viewer.page.locator(f"{ROOT} .lv-info")
     assert info.get_attribute("data-path") == path["name"]
@@ -233,6 +237,7 @@ def check_click(viewer: Opened, k: int, i: int) -> None:
     assert np.hypot(*(np.array(viewer.api(f"project({k})")[j]) - [x, y])) <= 1.0
     text = info.inner_text()
     assert f"t = {t:.3f} s" in text
+    assert f"t = {t:.3f} s" in tip.inner_text()
     if path["kind"] == "estimate":
         assert float(info.get_attribute("data-error-m")) == path["err"][j]
         assert f"ATE = {path['err'][j]:.4f} m" in text
