@@ -9,7 +9,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEVSTAMP := $(VENV)/.installed-dev
 
-.PHONY: setup setup-dev serve run demo test lint typecheck pytest bench clean lock vendor-swagger-ui
+.PHONY: setup setup-dev serve run demo test lint typecheck pytest bench clean lock vendor-swagger-ui vendor-three
 
 LOCK_PYTHON := 3.11
 PIP_LOCKED := $(BIN)/python -m pip install --quiet --require-hashes --only-binary=:all:
@@ -84,6 +84,18 @@ vendor-swagger-ui:
 	echo $(SWAGGER_UI_VERSION) > $(SWAGGER_UI_DIR)/VERSION
 	cd $(SWAGGER_UI_DIR) && sha256sum $(SWAGGER_UI_FILES) > SHA256SUMS
 	rm -rf .swagger-ui
+
+# Refresh the vendored three.js (templates/vendor/three) from the npm registry: the module
+# build and its licence, byte for byte; then put the printed version and SHA-256 into
+# exporters/viewer/vendor.py (THREE_VERSION, THREE_SHA256), which tests/exporters/test_viewer.py
+# checks the file against.
+THREE_VERSION ?= 0.170.0
+vendor-three:
+	rm -rf .vendor-three && mkdir .vendor-three
+	cd .vendor-three && npm pack --silent three@$(THREE_VERSION) && tar xzf three-$(THREE_VERSION).tgz
+	cp .vendor-three/package/build/three.module.min.js .vendor-three/package/LICENSE templates/vendor/three/
+	@echo "three $(THREE_VERSION): sha256 $$(sha256sum templates/vendor/three/three.module.min.js | cut -d' ' -f1)"
+	rm -rf .vendor-three
 
 clean:
 	rm -rf $(VENV) out var .mypy_cache .ruff_cache

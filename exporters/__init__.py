@@ -100,6 +100,8 @@ ARTIFACTS: Final[Mapping[str, ArtifactSpec]] = {
         # IFC is an ISO 10303-21 (STEP) file with no IFC-specific registered type: viewers
         # go by the .ifc suffix, and application/x-step makes browsers save it as a file
         ArtifactSpec("paths.ifc", "application/x-step", "exporters.cad.ifc:export_ifc", "cad"),
+        # one self-contained page: the interactive 3D and plan viewer (templates/viewer)
+        ArtifactSpec("viewer.html", "text/html", "exporters.viewer:export_viewer_html", "all"),
     )
 }
 """Every artifact, by file name, in the order they are written."""
@@ -123,6 +125,7 @@ ARTIFACT_ALIASES: Final[Mapping[str, str]] = {
     "glb": "paths.glb",
     "gltf": "paths.glb",
     "ifc": "paths.ifc",
+    "viewer": "viewer.html",
 }
 """Format names a user may give instead of file names (``dxf`` for ``paths.dxf``)."""
 

@@ -4,8 +4,8 @@ The names are those of :data:`exporters.ARTIFACTS` (so the service lists and ser
 ``result.json``, ``errors.csv``, ``report.html``, ``report.pdf``, and ``paths.dxf``,
 ``paths.3dm``, ``paths.3dm.json`` and ``paths.glb``, which here hold the control points, the
 measured positions and the error lines (:mod:`exporters.cad.dxf_points`,
-:mod:`exporters.cad.rhino_points`, :mod:`exporters.cad.gltf_points`); ``paths.ifc`` is not written
-for control points.
+:mod:`exporters.cad.rhino_points`, :mod:`exporters.cad.gltf_points`), and ``viewer.html``
+(:mod:`exporters.viewer.checkpoints`); ``paths.ifc`` is not written for control points.
 
 ``errors.csv`` has one row per visit of every estimate::
 
@@ -47,6 +47,7 @@ CHECKPOINT_ARTIFACTS: Final = (
     "paths.3dm",
     "paths.3dm.json",
     "paths.glb",
+    "viewer.html",
 )
 """The artifacts an evaluation against control points writes."""
 
@@ -100,6 +101,10 @@ def _render(
     if "errors.csv" in wanted:
         out["errors.csv"] = checkpoint_errors_csv(evaluation)
     out.update(_render_cad(evaluation, options, wanted))
+    if "viewer.html" in wanted:
+        from exporters.viewer.checkpoints import export_checkpoint_viewer_html  # noqa: PLC0415
+
+        out["viewer.html"] = export_checkpoint_viewer_html(evaluation, options)
     if "report.html" in wanted or "report.pdf" in wanted:
         from exporters.report.checkpoints import render_checkpoint_report  # noqa: PLC0415
 

@@ -100,7 +100,7 @@ STAGES: Final[tuple[tuple[str, ...], ...]] = (
     ("exporters.options",),
     ("exporters.colours", "exporters.tables", "exporters.mapcells"),
     ("exporters.cad",),
-    ("exporters.plots",),
+    ("exporters.plots", "exporters.viewer"),
     ("exporters.report",),
     ("exporters.summary", "exporters.checkpoints"),
     ("exporters",),

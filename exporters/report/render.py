@@ -17,6 +17,7 @@ from exporters.options import ExportOptions
 from exporters.plots import DEFAULT_MAX_POINTS, render_plots
 from exporters.plots.underlay import floor_plan_segments
 from exporters.report.view import ReportView, build_report_view
+from exporters.viewer import ViewerFragment, viewer_fragment
 from loceval.core.display import shown_text
 from loceval.evaluation import EvaluationResult
 
@@ -132,15 +133,27 @@ def _templates_dir(options: ExportOptions, templates_dir: Path | None) -> Path:
     return check_templates(folder, TEMPLATE_NAME, label="report")
 
 
-def render_view_html(view: ReportView, *, templates_dir: Path) -> bytes:
+def render_view_html(
+    view: ReportView, *, templates_dir: Path, viewer: ViewerFragment | None = None
+) -> bytes:
     """Render a view model to the report's HTML (UTF-8).
+
+    Args:
+        view: the report's view model.
+        templates_dir: the template folder.
+        viewer: the interactive viewer's section (HTML only; the PDF keeps its figures).
 
     Raises:
         ExportUnavailableError: Jinja2 is not installed.
         ExportError: the templates are missing or broken.
     """
     return render_template(
-        templates_dir, TEMPLATE_NAME, label="report", requirement="report.html", report=view
+        templates_dir,
+        TEMPLATE_NAME,
+        label="report",
+        requirement="report.html",
+        report=view,
+        viewer=viewer,
     )
 
 
@@ -262,7 +275,9 @@ def render_report(
         floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
     )
     html = render_view_html(
-        build_report_view(result, options, plots=plots, image_format="svg"), templates_dir=folder
+        build_report_view(result, options, plots=plots, image_format="svg"),
+        templates_dir=folder,
+        viewer=viewer_fragment(result, options, templates_dir=folder),
     )
     printable = render_view_html(
         build_report_view(result, options, plots=plots, image_format="png"), templates_dir=folder
@@ -278,7 +293,11 @@ def render_report_html(result: EvaluationResult, options: ExportOptions) -> byte
         ExportError: the templates are missing or broken.
     """
     folder = _templates_dir(options, None)
-    return render_view_html(build_report_view(result, options), templates_dir=folder)
+    return render_view_html(
+        build_report_view(result, options),
+        templates_dir=folder,
+        viewer=viewer_fragment(result, options, templates_dir=folder),
+    )
 
 
 def render_report_pdf(result: EvaluationResult, options: ExportOptions) -> bytes:

@@ -1212,6 +1212,7 @@
       renderSummary(evaluation);
       renderRanging(evaluation);
       renderArtifacts(evaluation);
+      renderViewer(evaluation);
       setHidden($("current-result"), false);
     } else {
       setHidden($("current-result"), true);
@@ -1314,6 +1315,37 @@
           onclick: () => fetchArtifact(evaluation, artifact, false, null, message),
         }) : null,
         message));
+    }
+  }
+
+  // The interactive viewer: the evaluation's viewer.html (code and data inlined, no request of
+  // its own) fetched with the key and shown in a sandboxed frame of its own (opaque origin).
+  async function renderViewer(evaluation) {
+    const holder = $("current-viewer");
+    const artifact = (evaluation.artifacts || []).find((a) => a.name === "viewer.html");
+    if (!artifact) {
+      delete holder.dataset.evaluation;
+      holder.replaceChildren();
+      setHidden(holder, true);
+      return;
+    }
+    if (holder.dataset.evaluation === evaluation.id) return; // shown already: polling again
+    holder.dataset.evaluation = evaluation.id;
+    setHidden(holder, false);
+    holder.replaceChildren(el("p", { className: "hint", text: "Loading the interactive view…" }));
+    try {
+      const response = await apiFetch(artifactUrl(evaluation, artifact));
+      const page = await response.text();
+      if (holder.dataset.evaluation !== evaluation.id) return; // another evaluation by now
+      const frame = el("iframe", {
+        className: "viewer-frame", title: "Interactive view of the paths", sandbox: "allow-scripts",
+      });
+      frame.srcdoc = page;
+      holder.replaceChildren(frame);
+    } catch (err) {
+      const message = el("p", { className: "error-text" });
+      reportError(err, message);
+      holder.replaceChildren(message);
     }
   }
 

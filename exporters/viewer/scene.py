@@ -1,0 +1,266 @@
+"""What the viewer draws, as one JSON-ready document: paths, errors, building, anchors.
+
+Everything is in the site frame and units the CAD files use (:mod:`exporters.cad.placement`):
+the evaluation frame mapped by the site transform (an IFC building's own map conversion
+when no site is given), scaled to the output units. Vertices are sent relative to the
+same base point as the GLB (the reference's bounding-box centre rounded to whole metres),
+so a national-grid site keeps its precision in the browser's 32-bit vertex buffers; the
+read-outs add it back.
+
+Per path the document holds its display set (:func:`~exporters.viewer.reduce.display_indices`):
+stamps in seconds since the reference's first stamp (as the report and ``errors.csv``),
+local vertices, the display indices after which a piece ends (a tracking loss of the path
+or of the reference, :func:`loceval.core.gaps.path_breaks`: drawn as a break, never a chord)
+and, for an estimate, its ATE at each vertex (rounded as in ``errors.csv``) with the
+reference position that error is measured to.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+
+from exporters.cad.building import BuildingModel, georeferenced_options, read_underlay
+from exporters.cad.site import check_options
+from exporters.colours import ate_bins, ate_edges_m, palette_color
+from exporters.options import ExportOptions, Units
+from exporters.tables import ERROR_DECIMALS
+from exporters.viewer.reduce import display_indices
+from loceval import __version__
+from loceval.core.arrays import BoolArray, FloatArray, IntArray
+from loceval.core.display import display_text
+from loceval.core.gaps import path_breaks
+from loceval.core.geometry import SimilarityTransform
+from loceval.evaluation import EvaluationResult
+from loceval.metrics.pose_errors import WorstPose
+from loceval.trajectory import Trajectory
+
+__all__ = ["building_scene", "flat_rounded", "hex_colour", "vertex_decimals", "viewer_scene"]
+
+_NS_PER_S: Final = 1_000_000_000
+_WORST_SEPARATION_S: Final = 2.0  # as the CAD markers: one label per excursion
+_WORST_LABELS: Final = 3  # labels per estimate: more only pile up on a plan
+_TIME_DECIMALS: Final = 6  # microseconds: finer than any recording's stamps need here
+_RESOLUTION_M: Final = 1e-4  # vertices are rounded to 0.1 mm
+_MAX_BUILDING_FACES: Final = 400_000
+_MAX_ELLIPSES: Final = 400  # uncertainty ellipses per estimate: more only blur into a band
+_SIGMAS: Final = 2.0  # the ellipses are 2-sigma (about 86 % of a 2D normal's mass)
+
+
+def hex_colour(rgb: tuple[int, int, int]) -> str:
+    """Return an RGB colour as ``#rrggbb``."""
+    return "#{:02x}{:02x}{:02x}".format(*rgb)
+
+
+def vertex_decimals(units: Units) -> int:
+    """Decimals of a vertex coordinate in ``units`` that keep :data:`_RESOLUTION_M`."""
+    return max(0, round(-math.log10(_RESOLUTION_M * units.per_metre)))
+
+
+def flat_rounded(values: FloatArray, decimals: int) -> list[float]:
+    """Return an array flattened to a list, rounded to ``decimals`` (compact JSON)."""
+    out: list[float] = np.round(np.asarray(values, dtype=np.float64), decimals).ravel().tolist()
+    return out
+
+
+def _display_breaks(breaks: BoolArray, kept: IntArray) -> list[int]:
+    """Display indices ``k`` after which a piece ends (a break between kept[k] and kept[k+1])."""
+    if kept.shape[0] < 2:
+        return []
+    crossed = np.concatenate(([0], np.cumsum(breaks, dtype=np.int64)))
+    out: list[int] = np.flatnonzero(crossed[kept[1:]] > crossed[kept[:-1]]).tolist()
+    return out
+
+
+def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, object]:
+    """Return the viewer's document of one evaluation (JSON-ready).
+
+    Args:
+        result: the evaluation.
+        options: units, site transform, building model (mesh, IFC or DXF plan), title.
+
+    Returns:
+        The document ``viewer.js`` draws: ``paths`` (the reference first), ``bins`` (the
+        ATE colour scale), ``worst`` (labels), ``anchors``, ``building`` and the frame.
+
+    Raises:
+        ExportOptionsError: bad units or site, or a building file that cannot be read.
+    """
+    check_options(options)
+    options = georeferenced_options(options)
+    units = Units(options.units)
+    site = options.site
+    reference = result.reference
+    t0_ns = int(reference.stamps_ns[0]) if len(reference) else 0
+    ref_model_m = site.apply_positions(reference.positions_xyz)
+    base_m = np.round((ref_model_m.min(axis=0) + ref_model_m.max(axis=0)) / 2.0)
+    scale = units.per_metre
+    decimals = vertex_decimals(units)
+
+    def local(positions_xyz: FloatArray) -> FloatArray:
+        out: FloatArray = (site.apply_positions(positions_xyz) - base_m) * scale
+        return out
+
+    min_gap_ns = round(result.config.max_gap_s * _NS_PER_S)
+    ref_losses = reference.tracking_losses(min_gap_ns)
+    bins = ate_bins(ate_edges_m(result))
+    paths: list[dict[str, object]] = []
+    worst: list[dict[str, object]] = []
+
+    ref_breaks = path_breaks(reference.stamps_ns, min_gap_ns=min_gap_ns, losses=ref_losses)
+    kept = display_indices(reference.positions_xyz, ref_breaks)
+    paths.append(
+        {
+            "name": display_text(reference.name or "reference"),
+            "kind": "reference",
+            "source": display_text(reference.source or ""),
+            "color": hex_colour(palette_color(0)),
+            "poses": len(reference),
+            "t": flat_rounded((reference.stamps_ns[kept] - t0_ns) / _NS_PER_S, _TIME_DECIMALS),
+            "xyz": flat_rounded(local(reference.positions_xyz[kept]), decimals),
+            "breaks": _display_breaks(ref_breaks, kept),
+        }
+    )
+    for k, est in enumerate(result.estimates, start=1):
+        name = display_text(est.name or f"estimate {k}")
+        stamps = est.association.reference.stamps_ns
+        errors = est.ate_translation.values
+        breaks = path_breaks(stamps, min_gap_ns=min_gap_ns, losses=ref_losses)
+        ranks = np.array([w.index for w in est.worst], dtype=np.intp)
+        kept = display_indices(est.aligned.positions_xyz, breaks, errors_m=errors, must_keep=ranks)
+        stats = est.ate_translation.stats
+        paths.append(
+            {
+                "name": name,
+                "kind": "estimate",
+                "source": display_text(est.estimate.source or ""),
+                "color": hex_colour(palette_color(k)),
+                "poses": len(stamps),
+                "t": flat_rounded((stamps[kept] - t0_ns) / _NS_PER_S, _TIME_DECIMALS),
+                "xyz": flat_rounded(local(est.aligned.positions_xyz[kept]), decimals),
+                "ref": flat_rounded(local(est.association.reference.positions_xyz[kept]), decimals),
+                "err": flat_rounded(errors[kept], ERROR_DECIMALS),
+                "breaks": _display_breaks(breaks, kept),
+                "ate": {"rmse": stats.rmse, "max": stats.max} if len(errors) else None,
+                "uncertainty": _uncertainty(est.aligned, kept, site, scale),
+            }
+        )
+        worst += _worst_labels(est.worst, kept, path=len(paths) - 1, name=name)
+    return {
+        "generator": f"loceval {__version__}",
+        "title": options.title,
+        "units": units.value,
+        "per_metre": scale,
+        "frame": reference.frame_id or "reference frame",
+        "base": (base_m * scale).tolist(),
+        "crs": options.crs,
+        "t0_ns": str(t0_ns),
+        "bins": [
+            {
+                "high": None if math.isinf(b.high_m) else b.high_m,
+                "color": hex_colour(b.color_rgb),
+                "label": b.label,
+            }
+            for b in bins
+        ],
+        "paths": paths,
+        "worst": worst,
+        "anchors": _anchors(result, local, decimals),
+        "building": building_scene(options, base_m, scale, decimals),
+    }
+
+
+def _worst_labels(
+    ranked: tuple[WorstPose, ...], kept: IntArray, *, path: int, name: str
+) -> list[dict[str, object]]:
+    """One label per excursion of the greatest errors, at its display vertex."""
+    out: list[dict[str, object]] = []
+    labelled: list[float] = []
+    for rank, worst in enumerate(ranked, start=1):  # a handful (--worst), not per pose
+        t_s = worst.t_s
+        if any(abs(t_s - t) < _WORST_SEPARATION_S for t in labelled):
+            continue
+        if len(labelled) == _WORST_LABELS:
+            break
+        labelled.append(t_s)
+        index = int(np.searchsorted(kept, worst.index))
+        error = worst.error
+        out.append(
+            {
+                "path": path,
+                "index": min(index, len(kept) - 1),
+                "label": f"{name} #{rank}: {error:.3f} m at t={t_s:.1f} s",
+            }
+        )
+    return out
+
+
+def _uncertainty(
+    aligned: Trajectory, kept: IntArray, site: SimilarityTransform, scale: float
+) -> dict[str, list[float] | list[int]] | None:
+    """2-sigma horizontal ellipses of the reported position covariance at some display vertices.
+
+    The covariance follows the alignment and the site transform (``J Σ Jᵀ``,
+    :meth:`Trajectory.transformed`); each ellipse is the eigen-decomposition of its x-y block
+    (vectorised over the vertices): semi-axes ``2 sqrt(λ)`` in output units and the major
+    axis's angle from x, radians. At most :data:`_MAX_ELLIPSES` vertices, evenly spread.
+
+    Returns:
+        ``{"index": display indices, "ellipse": [a, b, angle, ...]}``, or None without
+        covariances.
+    """
+    if aligned.cov6 is None or not len(kept):
+        return None
+    pick = np.unique(np.linspace(0, len(kept) - 1, min(len(kept), _MAX_ELLIPSES)).round())
+    pick = pick.astype(np.intp)
+    cov = aligned.select(kept[pick]).transformed(site).cov6
+    if cov is None:
+        return None
+    values, vectors = np.linalg.eigh(cov[:, :2, :2])  # ascending: the major axis is last
+    major = _SIGMAS * np.sqrt(np.clip(values[:, 1], 0.0, None)) * scale
+    minor = _SIGMAS * np.sqrt(np.clip(values[:, 0], 0.0, None)) * scale
+    angle = np.arctan2(vectors[:, 1, 1], vectors[:, 0, 1])
+    ellipse = np.column_stack([major, minor, angle])
+    return {"index": pick.tolist(), "ellipse": flat_rounded(ellipse, 6)}
+
+
+def _anchors(
+    result: EvaluationResult, local: Callable[[FloatArray], FloatArray], decimals: int
+) -> list[dict[str, object]]:
+    """The radio anchors of a ranging evaluation, placed like the paths."""
+    if result.ranging is None or not result.ranging.anchors:
+        return []
+    xyz = np.array([a.position_xyz for a in result.ranging.anchors], dtype=np.float64)
+    placed = local(xyz)
+    return [
+        {"id": display_text(a.id), "xyz": flat_rounded(placed[i], decimals)}
+        for i, a in enumerate(result.ranging.anchors)
+    ]
+
+
+def building_scene(
+    options: ExportOptions, base_m: FloatArray, scale: float, decimals: int
+) -> dict[str, object] | None:
+    """The building model as a mesh, or a DXF floor plan as lines, in local model units."""
+    if options.building is None:
+        return None
+    underlay = read_underlay(options.building, units=options.units, up=options.building_up)
+    source = Path(options.building).name
+    if not isinstance(underlay, BuildingModel):  # a DXF floor plan
+        ends = underlay.segments_m.reshape(-1, 2)
+        z = np.zeros((len(ends), 1))
+        xyz = (np.hstack([ends, z]) - base_m) * scale
+        xyz[:, 2] = 0.0
+        return {"kind": "plan", "source": source, "segments": flat_rounded(xyz, decimals)}
+    faces = underlay.faces[:_MAX_BUILDING_FACES]
+    return {
+        "kind": "mesh",
+        "source": source,
+        "faces_dropped": int(len(underlay.faces) - len(faces)),
+        "positions": flat_rounded((underlay.vertices_m - base_m) * scale, decimals),
+        "index": faces.ravel().tolist(),
+    }

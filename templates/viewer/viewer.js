@@ -1,0 +1,625 @@
+// The interactive 3D and plan viewer of one evaluation (loceval issue 24).
+//
+// Mounted on every `.loceval-viewer[data-scene]` element, it reads its scene (the JSON that
+// exporters/viewer/scene.py writes, in a JSON script element with the id the
+// root's data-scene names) and draws it with the vendored three.js (globalThis.LOCEVAL_THREE,
+// set by the inlined templates/vendor/three build). It makes no request of its own.
+//
+// State a test (or a user script) can read from the root element:
+//   data-ready="true"  once the first frame with every path is drawn;
+//   data-time-s        seconds since the reference's first stamp at the timeline's position;
+//   data-errors        JSON: estimate name -> its ATE in metres there (absent where it has none).
+// root.locevalViewer exposes project(pathIndex) (CSS pixel positions of a path's display
+// vertices in the canvas), setView("plan" | "orbit"), setTimeIndex(i) and showPath(i, on).
+(function () {
+  "use strict";
+
+  const PICK_RADIUS_PX = 8;
+  const POINT_SIZE_PX = 4;
+  const MARKER_SIZE_PX = 14;
+  const PLAY_SECONDS = 20; // a whole recording plays in this long (at least real time / 60)
+
+  function el(tag, props, ...children) {
+    const node = document.createElement(tag);
+    for (const [key, value] of Object.entries(props || {})) {
+      if (key === "text") node.textContent = value;
+      else if (key === "className") node.className = value;
+      else if (key === "style") node.style.cssText = value;
+      else if (key.startsWith("on")) node.addEventListener(key.slice(2), value);
+      else node.setAttribute(key, value);
+    }
+    for (const child of children) if (child) node.append(child);
+    return node;
+  }
+
+  function fmt(value, digits) {
+    return Number.isFinite(value) ? value.toFixed(digits) : "—";
+  }
+
+  // index of the last element of a sorted array <= value (-1 when none)
+  function floorIndex(sorted, value) {
+    let lo = 0;
+    let hi = sorted.length - 1;
+    if (hi < 0 || value < sorted[0]) return -1;
+    while (lo < hi) {
+      const mid = (lo + hi + 1) >> 1;
+      if (sorted[mid] <= value) lo = mid; else hi = mid - 1;
+    }
+    return lo;
+  }
+
+  function binColor(bins, error) {
+    for (const b of bins) if (b.high === null || error <= b.high) return b.color;
+    return bins.length ? bins[bins.length - 1].color : "#000000";
+  }
+
+  function mount(root, THREE) {
+    const scene = JSON.parse(document.getElementById(root.dataset.scene).textContent);
+    const paths = scene.paths;
+    const reference = paths[0];
+    const base = scene.base;
+    const units = scene.units;
+    THREE.ColorManagement.enabled = false; // the palette's sRGB values reach the screen as they are
+
+    // --- the DOM -------------------------------------------------------------------------
+    root.replaceChildren();
+    const viewButtons = {
+      plan: el("button", { type: "button", "data-view": "plan", text: "Plan", title: "Top view" }),
+      orbit: el("button", { type: "button", "data-view": "orbit", text: "3D", title: "Orbit: drag to turn, shift-drag or right-drag to pan, wheel to zoom" }),
+    };
+    const resetButton = el("button", { type: "button", "data-action": "reset", text: "Reset" });
+    const toggles = el("div", { className: "lv-group lv-paths" });
+    const controls = scene.controls || null; // an evaluation against control points
+    const legend = el("div", { className: "lv-legend", "aria-label": "ATE colour scale" },
+      el("span", { text: controls ? "Error at control points:" : "ATE:" }));
+    for (const b of scene.bins) {
+      legend.append(el("span", {}, el("span", { className: "lv-swatch", style: `background:${b.color}` }), ` ${b.label}`));
+    }
+    const bar = el("div", { className: "lv-bar" },
+      el("div", { className: "lv-group" }, viewButtons.plan, viewButtons.orbit, resetButton), toggles, legend);
+    const stage = el("div", { className: "lv-stage" });
+    const overlay = el("div", { className: "lv-overlay" });
+    const tip = el("div", { className: "lv-tip", hidden: "" });
+    const play = el("button", { type: "button", "data-action": "play", text: "▶ Play", "aria-label": "Play" });
+    const slider = el("input", {
+      type: "range", min: "0", max: String(Math.max(0, reference.t.length - 1)), step: "1", value: "0",
+      "aria-label": "Time since the reference's first stamp",
+    });
+    const readout = el("output", { className: "lv-readout", "aria-live": "polite" });
+    const info = el("div", { className: "lv-info", text: "Hover or click a point of a path for its stamp, error and coordinates." });
+    root.append(bar, stage, el("div", { className: "lv-time" }, play, slider, readout), info);
+
+    // --- three.js ----------------------------------------------------------------------
+    let renderer;
+    try {
+      renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
+    } catch (err) {
+      stage.append(el("p", { className: "lv-note", text: "This browser cannot draw 3D (WebGL is off or unavailable); the report's figures and errors.csv hold the same data." }));
+      root.dataset.ready = "error";
+      return;
+    }
+    renderer.outputColorSpace = THREE.LinearSRGBColorSpace;
+    renderer.setPixelRatio(window.devicePixelRatio || 1);
+    renderer.setClearColor(0xffffff, 1);
+    // Every path, marker and label is drawn in three's transparent pass, like the see-through
+    // building, so renderOrder alone decides: building first, then the paths over it.
+    stage.append(renderer.domElement, overlay, tip);
+    const world = new THREE.Scene();
+
+    // the extent of the paths (the building may be a whole campus: the view fits the paths)
+    const box = new THREE.Box3();
+    for (const p of paths) {
+      for (let i = 0; i < p.xyz.length; i += 3) box.expandByPoint(new THREE.Vector3(p.xyz[i], p.xyz[i + 1], p.xyz[i + 2]));
+    }
+    for (const c of controls ? controls.points : []) box.expandByPoint(new THREE.Vector3(...c.xyz));
+    if (box.isEmpty()) box.expandByPoint(new THREE.Vector3(0, 0, 0));
+    // a room-sized building is framed with the paths; a campus is not (the paths would be specks)
+    const building = scene.building;
+    if (building && building.kind === "mesh") {
+      const hull = new THREE.Box3().setFromArray(building.positions);
+      const paths0 = box.getSize(new THREE.Vector3()).length();
+      if (hull.getSize(new THREE.Vector3()).length() <= 10 * Math.max(paths0, 1e-3)) box.union(hull);
+    }
+    const centre = box.getCenter(new THREE.Vector3());
+    const size = box.getSize(new THREE.Vector3());
+    const radius = Math.max(size.x, size.y, size.z, 1e-3) * 0.5;
+
+    const ellipses = []; // filled by drawPath for estimates with covariances
+    drawBuilding();
+    const layers = paths.map(drawPath);
+    const anchorLabels = drawAnchors().concat(drawControls());
+    if (ellipses.length) {
+      const box = el("input", { type: "checkbox", "data-action": "uncertainty" });
+      box.addEventListener("change", () => showUncertainty(box.checked));
+      toggles.append(el("label", { title: "2-sigma ellipses of the covariance the estimate reports" }, box, "Uncertainty (2σ)"));
+    }
+    function showUncertainty(on) {
+      for (const e of ellipses) e.visible = on;
+      const box = toggles.querySelector("input[data-action=uncertainty]");
+      if (box) box.checked = on;
+      requestRender();
+    }
+    const worstLabels = scene.worst.map((w) => ({
+      path: w.path, index: w.index,
+      node: overlay.appendChild(el("div", { className: "lv-label lv-worst", text: w.label })),
+    }));
+
+    function drawBuilding() {
+      const b = scene.building;
+      if (b && b.kind === "mesh") {
+        const geometry = new THREE.BufferGeometry();
+        geometry.setAttribute("position", new THREE.Float32BufferAttribute(b.positions, 3));
+        geometry.setIndex(b.index);
+        geometry.computeVertexNormals();
+        const mesh = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({
+          color: 0x8a9bb0, transparent: true, opacity: 0.2, side: THREE.DoubleSide, depthWrite: false,
+        }));
+        mesh.name = "building";
+        mesh.renderOrder = 0;
+        world.add(mesh);
+        world.add(new THREE.HemisphereLight(0xffffff, 0x667788, 2.2));
+        const sun = new THREE.DirectionalLight(0xffffff, 1.2);
+        sun.position.set(1, 0.6, 2);
+        world.add(sun);
+      } else if (b && b.kind === "plan") {
+        const geometry = new THREE.BufferGeometry();
+        const z = box.min.z;
+        const xyz = Float32Array.from(b.segments, (v, i) => (i % 3 === 2 ? z : v));
+        geometry.setAttribute("position", new THREE.BufferAttribute(xyz, 3));
+        const lines = new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ color: 0x9aa3ad }));
+        lines.name = "building";
+        world.add(lines);
+      } else {
+        const span = Math.max(size.x, size.y, 1) * 1.6;
+        const step = Math.pow(10, Math.floor(Math.log10(span / 4)));
+        const divisions = Math.max(2, Math.ceil(span / step));
+        const grid = new THREE.GridHelper(divisions * step, divisions, 0xc9ced6, 0xe4e7ec);
+        grid.rotation.x = Math.PI / 2; // GridHelper lies in x-z; the site frame is z up
+        grid.position.set(centre.x, centre.y, box.min.z);
+        grid.name = "grid";
+        world.add(grid);
+      }
+    }
+
+    function drawPath(p, k) {
+      const n = p.t.length;
+      const positions = new THREE.Float32BufferAttribute(p.xyz, 3);
+      const colors = new Float32Array(n * 3);
+      const c = new THREE.Color();
+      for (let i = 0; i < n; i++) {
+        c.set(p.kind === "estimate" ? binColor(scene.bins, p.err[i]) : p.color);
+        colors[3 * i] = c.r; colors[3 * i + 1] = c.g; colors[3 * i + 2] = c.b;
+      }
+      const breaks = new Set(p.breaks);
+      const index = [];
+      for (let i = 0; i + 1 < n; i++) if (!breaks.has(i)) index.push(i, i + 1);
+      const geometry = new THREE.BufferGeometry();
+      geometry.setAttribute("position", positions);
+      geometry.setAttribute("color", new THREE.BufferAttribute(colors, 3));
+      const pointsGeometry = geometry.clone();
+      geometry.setIndex(index);
+      const group = new THREE.Group();
+      const lines = new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ vertexColors: true, depthTest: false, transparent: true }));
+      const dots = new THREE.Points(pointsGeometry, new THREE.PointsMaterial({ vertexColors: true, size: POINT_SIZE_PX, sizeAttenuation: false, depthTest: false, transparent: true }));
+      lines.renderOrder = dots.renderOrder = 10 + 2 * k;
+      group.add(lines, dots);
+      if (p.uncertainty) group.add(drawEllipses(p));
+      group.name = p.name;
+      world.add(group);
+      const marker = makeMarker(p.color, 20 + k);
+      const layer = { group, marker, visible: true, vector: null };
+      if (p.kind === "estimate") {
+        const g = new THREE.BufferGeometry();
+        g.setAttribute("position", new THREE.BufferAttribute(new Float32Array(6), 3));
+        layer.vector = new THREE.Line(g, new THREE.LineBasicMaterial({ color: 0x111111, depthTest: false, transparent: true }));
+        layer.vector.renderOrder = 30;
+        layer.vector.visible = false;
+        world.add(layer.vector);
+        layer.label = overlay.appendChild(el("div", { className: "lv-label lv-now", hidden: "" }));
+      }
+      const box = el("input", { type: "checkbox", checked: "", "data-path": String(k) });
+      box.addEventListener("change", () => showPath(k, box.checked));
+      toggles.append(el("label", { title: p.source || p.name }, box,
+        el("span", { className: "lv-swatch", style: `background:${p.color}` }), p.name));
+      return layer;
+    }
+
+    // 2-sigma ellipses of the reported covariance (scene.py): shown with the Uncertainty box
+    function drawEllipses(p) {
+      const SEGMENTS = 24;
+      const xyz = [];
+      const u = p.uncertainty;
+      for (let e = 0; e < u.index.length; e++) {
+        const i = u.index[e];
+        const [a, b, angle] = u.ellipse.slice(3 * e, 3 * e + 3);
+        const [cx, cy, cz] = p.xyz.slice(3 * i, 3 * i + 3);
+        const ca = Math.cos(angle);
+        const sa = Math.sin(angle);
+        for (let k = 0; k < SEGMENTS; k++) {
+          for (const step of [k, k + 1]) {
+            const w = (2 * Math.PI * step) / SEGMENTS;
+            const x = a * Math.cos(w);
+            const y = b * Math.sin(w);
+            xyz.push(cx + ca * x - sa * y, cy + sa * x + ca * y, cz);
+          }
+        }
+      }
+      const g = new THREE.BufferGeometry();
+      g.setAttribute("position", new THREE.Float32BufferAttribute(xyz, 3));
+      const lines = new THREE.LineSegments(g, new THREE.LineBasicMaterial({ color: new THREE.Color(p.color), depthTest: false, transparent: true, opacity: 0.6 }));
+      lines.renderOrder = 9;
+      lines.visible = false;
+      lines.name = "uncertainty";
+      ellipses.push(lines);
+      return lines;
+    }
+
+    function makeMarker(color, order) {
+      const g = new THREE.BufferGeometry();
+      g.setAttribute("position", new THREE.BufferAttribute(new Float32Array(3), 3));
+      const ring = new THREE.Points(g, new THREE.PointsMaterial({ color: 0x111111, size: MARKER_SIZE_PX, sizeAttenuation: false, depthTest: false, transparent: true }));
+      const dot = new THREE.Points(g, new THREE.PointsMaterial({ color: new THREE.Color(color), size: MARKER_SIZE_PX - 5, sizeAttenuation: false, depthTest: false, transparent: true }));
+      ring.renderOrder = order + 40;
+      dot.renderOrder = order + 41;
+      const group = new THREE.Group();
+      group.add(ring, dot);
+      group.visible = false;
+      world.add(group);
+      return { group, geometry: g };
+    }
+
+    function drawAnchors() {
+      if (!scene.anchors.length) return [];
+      const xyz = scene.anchors.flatMap((a) => a.xyz);
+      const g = new THREE.BufferGeometry();
+      g.setAttribute("position", new THREE.Float32BufferAttribute(xyz, 3));
+      const dots = new THREE.Points(g, new THREE.PointsMaterial({ color: 0x3b3b98, size: 10, sizeAttenuation: false, depthTest: false, transparent: true }));
+      dots.renderOrder = 50;
+      dots.name = "anchors";
+      world.add(dots);
+      return scene.anchors.map((a) => ({ xyz: a.xyz, node: overlay.appendChild(el("div", { className: "lv-label", text: `anchor ${a.id}` })) }));
+    }
+
+    // control points (white dots, black rings, their ids) and each visit's error vector from
+    // the surveyed point to the measured position, coloured by its error (grey: alignment)
+    function drawControls() {
+      if (!controls) return [];
+      const g = new THREE.BufferGeometry();
+      g.setAttribute("position", new THREE.Float32BufferAttribute(controls.points.flatMap((c) => c.xyz), 3));
+      const ring = new THREE.Points(g, new THREE.PointsMaterial({ color: 0x111111, size: 11, sizeAttenuation: false, depthTest: false, transparent: true }));
+      const fill = new THREE.Points(g, new THREE.PointsMaterial({ color: 0xffffff, size: 7, sizeAttenuation: false, depthTest: false, transparent: true }));
+      ring.renderOrder = 60; fill.renderOrder = 61;
+      const ends = [];
+      const colours = [];
+      const c = new THREE.Color();
+      for (const v of controls.visits) {
+        ends.push(...v.surveyed, ...v.measured);
+        c.set(v.color);
+        colours.push(c.r, c.g, c.b, c.r, c.g, c.b);
+      }
+      const lg = new THREE.BufferGeometry();
+      lg.setAttribute("position", new THREE.Float32BufferAttribute(ends, 3));
+      lg.setAttribute("color", new THREE.Float32BufferAttribute(colours, 3));
+      const vectors = new THREE.LineSegments(lg, new THREE.LineBasicMaterial({ vertexColors: true, depthTest: false, transparent: true }));
+      const measured = new THREE.Points(lg, new THREE.PointsMaterial({ vertexColors: true, size: 6, sizeAttenuation: false, depthTest: false, transparent: true }));
+      vectors.renderOrder = 62; measured.renderOrder = 63;
+      const group = new THREE.Group();
+      group.name = "control points";
+      group.add(vectors, measured, ring, fill);
+      world.add(group);
+      return controls.points.map((p) => {
+        const errors = controls.visits.filter((v) => v.id === p.id && !v.alignment).map((v) => v.error);
+        const text = errors.length ? `${p.id} ${fmt(Math.max(...errors) * 1000, 1)} mm` : p.id;
+        return { xyz: p.xyz, node: overlay.appendChild(el("div", { className: "lv-label", text })) };
+      });
+    }
+
+    // --- cameras and the two views -----------------------------------------------------
+    const plan = new THREE.OrthographicCamera(-1, 1, 1, -1, -1e7, 1e7);
+    const orbit = new THREE.PerspectiveCamera(45, 1, radius / 1000, radius * 1000);
+    orbit.up.set(0, 0, 1);
+    const view = { mode: "plan", target: new THREE.Vector3(), zoom: 1, azimuth: -Math.PI / 2, elevation: 0.7, distance: 1 };
+    let camera = plan;
+
+    function aspect() {
+      const r = stage.getBoundingClientRect();
+      return Math.max(r.width, 1) / Math.max(r.height, 1);
+    }
+
+    function updateCamera() {
+      const a = aspect();
+      if (view.mode === "plan") {
+        const half = Math.max(size.y / 2, size.x / 2 / a, radius * 0.05) * 1.12 / view.zoom;
+        plan.left = -half * a; plan.right = half * a; plan.top = half; plan.bottom = -half;
+        plan.position.set(view.target.x, view.target.y, box.max.z + radius * 10 + 1);
+        plan.up.set(0, 1, 0);
+        plan.lookAt(view.target.x, view.target.y, view.target.z);
+        plan.updateProjectionMatrix();
+        camera = plan;
+      } else {
+        orbit.aspect = a;
+        const ce = Math.cos(view.elevation);
+        orbit.position.set(
+          view.target.x + view.distance * ce * Math.cos(view.azimuth),
+          view.target.y + view.distance * ce * Math.sin(view.azimuth),
+          view.target.z + view.distance * Math.sin(view.elevation));
+        orbit.lookAt(view.target);
+        orbit.updateProjectionMatrix();
+        camera = orbit;
+      }
+      camera.updateMatrixWorld();
+    }
+
+    function reset() {
+      view.target.copy(centre);
+      view.zoom = 1;
+      view.azimuth = -Math.PI / 2;
+      view.elevation = 0.7;
+      view.distance = radius * 2.8 + 1e-3;
+      requestRender();
+    }
+
+    function setView(mode) {
+      view.mode = mode;
+      for (const [name, button] of Object.entries(viewButtons)) button.setAttribute("aria-pressed", String(name === mode));
+      requestRender();
+    }
+    viewButtons.plan.addEventListener("click", () => setView("plan"));
+    viewButtons.orbit.addEventListener("click", () => setView("orbit"));
+    resetButton.addEventListener("click", reset);
+
+    // --- pointer: drag to pan/turn, wheel to zoom, hover/click to read a point ----------
+    let drag = null;
+    const canvas = renderer.domElement;
+    canvas.addEventListener("contextmenu", (e) => e.preventDefault());
+    canvas.addEventListener("pointerdown", (e) => {
+      drag = { x: e.clientX, y: e.clientY, moved: false, pan: view.mode === "plan" || e.shiftKey || e.button === 2 };
+      canvas.setPointerCapture(e.pointerId);
+    });
+    canvas.addEventListener("pointermove", (e) => {
+      if (!drag) { hover(e); return; }
+      const dx = e.clientX - drag.x;
+      const dy = e.clientY - drag.y;
+      if (!drag.moved && Math.hypot(dx, dy) < 4) return;
+      drag.moved = true;
+      drag.x = e.clientX; drag.y = e.clientY;
+      const r = stage.getBoundingClientRect();
+      if (drag.pan) {
+        const perPx = view.mode === "plan"
+          ? (plan.top - plan.bottom) / Math.max(r.height, 1)
+          : 2 * view.distance * Math.tan((orbit.fov * Math.PI) / 360) / Math.max(r.height, 1);
+        const right = new THREE.Vector3().setFromMatrixColumn(camera.matrixWorld, 0);
+        const up = new THREE.Vector3().setFromMatrixColumn(camera.matrixWorld, 1);
+        view.target.addScaledVector(right, -dx * perPx).addScaledVector(up, dy * perPx);
+      } else {
+        view.azimuth -= dx * 0.008;
+        view.elevation = Math.min(1.55, Math.max(-1.55, view.elevation + dy * 0.008));
+      }
+      requestRender();
+    });
+    canvas.addEventListener("pointerup", (e) => {
+      if (drag && !drag.moved) select(e);
+      drag = null;
+    });
+    canvas.addEventListener("pointerleave", () => { tip.hidden = true; });
+    canvas.addEventListener("wheel", (e) => {
+      e.preventDefault();
+      const f = Math.exp(-e.deltaY * 0.0015);
+      if (view.mode === "plan") view.zoom *= f; else view.distance /= f;
+      requestRender();
+    }, { passive: false });
+
+    function pick(e) {
+      const r = canvas.getBoundingClientRect();
+      const x = e.clientX - r.left;
+      const y = e.clientY - r.top;
+      let best = null;
+      let bestD = PICK_RADIUS_PX * PICK_RADIUS_PX;
+      for (let k = paths.length - 1; k >= 0; k--) {
+        if (!layers[k].visible) continue;
+        const screen = project(k);
+        for (let i = 0; i < screen.length; i++) {
+          const d = (screen[i][0] - x) ** 2 + (screen[i][1] - y) ** 2;
+          if (d < bestD) { bestD = d; best = { k, i }; }
+        }
+      }
+      return best ? { ...best, x, y } : null;
+    }
+
+    function describe(k, i) {
+      const p = paths[k];
+      const at = (j) => p.xyz[3 * i + j] + base[j];
+      const lines = [`${p.name}`, `t = ${fmt(p.t[i], 3)} s`];
+      if (p.kind === "estimate") lines.push(`ATE = ${fmt(p.err[i], 4)} m`);
+      lines.push(`x = ${fmt(at(0), 3)} ${units}, y = ${fmt(at(1), 3)} ${units}, z = ${fmt(at(2), 3)} ${units}`);
+      return lines;
+    }
+
+    function hover(e) {
+      const hit = pick(e);
+      if (!hit) { tip.hidden = true; return; }
+      tip.textContent = describe(hit.k, hit.i).join("\n");
+      tip.style.left = `${hit.x}px`;
+      tip.style.top = `${hit.y}px`;
+      tip.hidden = false;
+    }
+
+    function select(e) {
+      const hit = pick(e);
+      if (!hit) return;
+      const p = paths[hit.k];
+      info.textContent = describe(hit.k, hit.i).join(" · ");
+      info.dataset.path = p.name;
+      info.dataset.tS = String(p.t[hit.i]);
+      if (p.kind === "estimate") info.dataset.errorM = String(p.err[hit.i]); else delete info.dataset.errorM;
+    }
+
+    // --- visibility --------------------------------------------------------------------
+    function showPath(k, on) {
+      layers[k].visible = on;
+      layers[k].group.visible = on;
+      const box = toggles.querySelector(`input[data-path="${k}"]`);
+      if (box) box.checked = on;
+      setTimeIndex(Number(slider.value));
+    }
+
+    // --- the timeline ------------------------------------------------------------------
+    function estimateIndexAt(p, t) {
+      const n = p.t.length;
+      if (!n || t < p.t[0] || t > p.t[n - 1]) return -1;
+      const j = floorIndex(p.t, t);
+      if (j === n - 1 || p.t[j] === t) return j;
+      if (p.breaks.includes(j)) return -1; // inside a tracking loss: no estimate there
+      return t - p.t[j] <= p.t[j + 1] - t ? j : j + 1;
+    }
+
+    function setMarker(marker, xyz, i, show) {
+      marker.group.visible = show;
+      if (!show) return;
+      marker.geometry.attributes.position.array.set([xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]]);
+      marker.geometry.attributes.position.needsUpdate = true;
+    }
+
+    const now = { t: 0, estimates: [] };
+    function setTimeIndex(i) {
+      i = Math.max(0, Math.min(reference.t.length - 1, Math.round(i)));
+      slider.value = String(i);
+      const t = reference.t[i];
+      const errors = {};
+      const parts = [`t = ${fmt(t, 3)} s`];
+      now.t = t;
+      now.estimates = [];
+      setMarker(layers[0].marker, reference.xyz, i, layers[0].visible);
+      for (let k = 1; k < paths.length; k++) {
+        const p = paths[k];
+        const layer = layers[k];
+        const j = estimateIndexAt(p, t);
+        const show = j >= 0 && layer.visible;
+        setMarker(layer.marker, p.xyz, j, show);
+        if (p.kind !== "estimate") continue; // a track: its marker only
+        layer.vector.visible = show;
+        layer.label.hidden = !show;
+        if (j < 0) continue;
+        errors[p.name] = p.err[j];
+        if (!show) continue;
+        const v = layer.vector.geometry.attributes.position;
+        v.array.set([p.xyz[3 * j], p.xyz[3 * j + 1], p.xyz[3 * j + 2], p.ref[3 * j], p.ref[3 * j + 1], p.ref[3 * j + 2]]);
+        v.needsUpdate = true;
+        layer.vector.geometry.computeBoundingSphere();
+        layer.label.textContent = `${p.name}: ${fmt(p.err[j], 4)} m at t = ${fmt(p.t[j], 3)} s`;
+        now.estimates.push({ k, j });
+        parts.push(`${p.name}: ${fmt(p.err[j], 4)} m`);
+      }
+      for (const v of controls ? controls.visits : []) {
+        if (t < v.t0 || t > v.t1) continue; // the visit in progress, if any
+        errors[paths[v.path].name] = v.error;
+        parts.push(`${paths[v.path].name} at ${v.id}: ${fmt(v.error, 4)} m`);
+      }
+      readout.textContent = parts.join(" · ");
+      root.dataset.timeS = String(t);
+      root.dataset.errors = JSON.stringify(errors);
+      requestRender();
+    }
+    slider.addEventListener("input", () => setTimeIndex(Number(slider.value)));
+
+    let playing = null;
+    function togglePlay() {
+      if (playing) { cancelAnimationFrame(playing.frame); playing = null; play.textContent = "▶ Play"; return; }
+      const ts = reference.t;
+      const span = ts[ts.length - 1] - ts[0];
+      const rate = span / Math.max(PLAY_SECONDS, span / 60); // recording seconds per real second
+      const start = Number(slider.value) >= ts.length - 1 ? ts[0] : ts[Number(slider.value)];
+      const began = performance.now();
+      play.textContent = "❚❚ Pause";
+      const step = (clock) => {
+        const t = start + ((clock - began) / 1000) * rate;
+        setTimeIndex(Math.max(0, floorIndex(ts, t)));
+        if (t >= ts[ts.length - 1]) { playing = null; play.textContent = "▶ Play"; return; }
+        playing.frame = requestAnimationFrame(step);
+      };
+      playing = { frame: requestAnimationFrame(step) };
+    }
+    play.addEventListener("click", togglePlay);
+
+    // --- drawing -----------------------------------------------------------------------
+    function project(k) {
+      return projectXYZ(paths[k].xyz);
+    }
+
+    // CSS pixel positions in the canvas of a flat [x, y, z, x, y, z, ...] list of local vertices
+    function projectXYZ(xyz) {
+      updateCamera();
+      const r = canvas.getBoundingClientRect();
+      const m = new THREE.Matrix4().multiplyMatrices(camera.projectionMatrix, camera.matrixWorldInverse).elements;
+      const out = new Array(xyz.length / 3);
+      for (let i = 0; i < out.length; i++) {
+        const x = xyz[3 * i]; const y = xyz[3 * i + 1]; const z = xyz[3 * i + 2];
+        const w = m[3] * x + m[7] * y + m[11] * z + m[15];
+        const nx = (m[0] * x + m[4] * y + m[8] * z + m[12]) / w;
+        const ny = (m[1] * x + m[5] * y + m[9] * z + m[13]) / w;
+        out[i] = [(nx + 1) / 2 * r.width, (1 - ny) / 2 * r.height];
+      }
+      return out;
+    }
+
+    function place(node, x, y, z) {
+      const v = new THREE.Vector3(x, y, z).project(camera);
+      const r = stage.getBoundingClientRect();
+      const inside = v.z < 1 && Math.abs(v.x) <= 1.05 && Math.abs(v.y) <= 1.05;
+      node.style.display = inside ? "" : "none";
+      node.style.left = `${((v.x + 1) / 2) * r.width}px`;
+      node.style.top = `${((1 - v.y) / 2) * r.height}px`;
+    }
+
+    let pending = false;
+    function requestRender() {
+      if (pending) return;
+      pending = true;
+      requestAnimationFrame(render);
+    }
+
+    function render() {
+      pending = false;
+      const r = stage.getBoundingClientRect();
+      if (r.width < 2 || r.height < 2) return; // hidden (a closed section): drawn when shown
+      renderer.setSize(r.width, r.height, false);
+      updateCamera();
+      renderer.render(world, camera);
+      for (const w of worstLabels) {
+        const xyz = paths[w.path].xyz;
+        w.node.hidden = !layers[w.path].visible;
+        place(w.node, xyz[3 * w.index], xyz[3 * w.index + 1], xyz[3 * w.index + 2]);
+      }
+      for (const a of anchorLabels) place(a.node, a.xyz[0], a.xyz[1], a.xyz[2]);
+      for (const { k, j } of now.estimates) {
+        const p = paths[k];
+        place(layers[k].label, p.xyz[3 * j], p.xyz[3 * j + 1], p.xyz[3 * j + 2]);
+      }
+      if (root.dataset.ready !== "true") root.dataset.ready = "true"; // every path is in this frame
+    }
+
+    new ResizeObserver(requestRender).observe(stage);
+    root.locevalViewer = { project, projectXYZ, showUncertainty, setView, setTimeIndex, showPath, reset };
+    setView("plan");
+    reset();
+    setTimeIndex(0);
+    render(); // the first frame now: a frame out of view gets no animation frames
+  }
+
+  function mountAll() {
+    const THREE = globalThis.LOCEVAL_THREE;
+    for (const root of document.querySelectorAll(".loceval-viewer[data-scene]")) {
+      if (root.locevalViewer) continue;
+      try {
+        mount(root, THREE);
+      } catch (err) {
+        root.dataset.ready = "error";
+        root.append(el("p", { className: "lv-note", text: `The viewer could not start: ${err && err.message}` }));
+        throw err;
+      }
+    }
+  }
+
+  if (document.readyState === "loading") document.addEventListener("DOMContentLoaded", mountAll);
+  else mountAll();
+})();
