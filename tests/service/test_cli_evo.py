@@ -292,10 +292,9 @@ def test_evo_res_reads_loceval_zips_and_loceval_res_reads_evo_zips(
 
 
 @pytest.mark.public_data
-@pytest.mark.parametrize(("fmt", "bag"), [("bag2", "tf_example"), ("bag", "tf_example.bag")])
+@pytest.mark.parametrize("fmt_bag", ["bag2 tf_example", "bag tf_example.bag"])
 def test_tf_topics_in_evo_syntax(
-    fmt: str,
-    bag: str,
+    fmt_bag: str,
     public_data: Path,
     tmp_path: Path,
     monkeypatch: pytest.MonkeyPatch,
@@ -308,7 +307,7 @@ def test_tf_topics_in_evo_syntax(
     """
     monkeypatch.chdir(public_data)
     results = tmp_path / "tf.zip"
-    argv = ["ape", fmt, bag, "/tf:odom.base_footprint", "/tf:odom.base_link", "-r", "full"]
+    argv = ["ape", *fmt_bag.split(), "/tf:odom.base_footprint", "/tf:odom.base_link", "-r", "full"]
     code, _, err = _loceval([*argv, "--silent", "--save_results", str(results)], capsys)
     assert code == 0, err
     found = _zip_stats(results)
