@@ -289,3 +289,27 @@ def test_evo_res_reads_loceval_zips_and_loceval_res_reads_evo_zips(
     for row in rows:
         assert float(row.split()[1]) == pytest.approx(expected["rmse"], abs=1e-6)
     assert "the same errors at every instant" in out
+
+
+@pytest.mark.public_data
+@pytest.mark.parametrize("fmt_bag", ["bag2 tf_example", "bag tf_example.bag"])
+def test_tf_topics_in_evo_syntax(
+    fmt_bag: str,
+    public_data: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """evo's /tf:PARENT.CHILD reads the tf chain (evo 1.38.1 itself needs ROS's tf2_py here).
+
+    base_link sits on base_footprint by an identity /tf_static, so both chains give the
+    same 517 poses and every error is zero.
+    """
+    monkeypatch.chdir(public_data)
+    results = tmp_path / "tf.zip"
+    argv = ["ape", *fmt_bag.split(), "/tf:odom.base_footprint", "/tf:odom.base_link", "-r", "full"]
+    code, _, err = _loceval([*argv, "--silent", "--save_results", str(results)], capsys)
+    assert code == 0, err
+    found = _zip_stats(results)
+    assert found["n"] == 517
+    assert found["max"] == pytest.approx(0.0, abs=1e-9)

@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     import argparse
 
     from loceval.core.arrays import IntArray
+    from loceval.evaluation import EstimateResult
     from loceval.trajectory import Trajectory
 
 __all__ = ["run_ape", "run_rpe"]
@@ -86,11 +87,18 @@ def _sources(args: argparse.Namespace) -> tuple[JobSource, JobSource]:
         }[fmt]
         paths = (Path(args.ref_file), Path(args.est_file))
         specs = [SourceSpec(f, p) for f, p in zip(formats, paths, strict=True)]
-        names = [str(p) for p in paths]
+        names = [p.name for p in paths]  # the reports' names; evo's zips keep the paths
     return (
         JobSource(specs[0], names[0], file_provenance("reference", specs[0])),
         JobSource(specs[1], names[1], file_provenance("estimate", specs[1])),
     )
+
+
+def _evo_names(args: argparse.Namespace) -> tuple[str, str]:
+    """Return the names evo gives the two trajectories: the topics, or the paths as given."""
+    if args.evo_format in {"bag", "bag2", "mcap"}:
+        return args.ref_topic, args.est_topic
+    return args.ref_file, args.est_file
 
 
 def _selector(topic: str) -> str:
@@ -153,10 +161,14 @@ def _config(args: argparse.Namespace, method: AlignMethod) -> EvaluationConfig:
     if not args.t_max_diff > 0:
         msg = f"--t_max_diff must be a positive number of seconds, got {args.t_max_diff!r}."
         raise InputError(msg)
-    # The poses are matched before (evo's way) and carry the same stamps: the core's
-    # nearest matching then pairs them as they are.
+    # The poses are matched before (evo's way) and carry the same stamps once the time
+    # offset is added: the core's nearest matching then pairs them as they are.
     return EvaluationConfig(
-        association=AssociationMethod.NEAREST, max_dt_s=1e-6, align=method, align_first=window
+        association=AssociationMethod.NEAREST,
+        max_dt_s=args.t_max_diff,
+        time_offset_s=args.t_offset,
+        align=method,
+        align_first=window,
     )
 
 
@@ -175,22 +187,26 @@ def _matched(
             "or give --t_offset."
         )
         raise InputError(msg)
-    # The shorter side's poses are matched once each: its stamps stamp both.
+    # The shorter side's poses are matched once each: its stamps stamp both, the
+    # estimate's without the time offset (the core adds it again).
     by_estimate = len(reference) >= len(estimate)
+    offset_ns = round(args.t_offset * _NS_PER_S)
     stamps = estimate.stamps_ns[est_idx] if by_estimate else reference.stamps_ns[ref_idx]
+    if not by_estimate:
+        stamps = stamps - offset_ns
 
-    def picked(trajectory: Trajectory, index: IntArray) -> Trajectory:
+    def picked(trajectory: Trajectory, index: IntArray, shift_ns: int) -> Trajectory:
         quats = trajectory.quat_xyzw
         return replace(
             trajectory,
-            stamps_ns=stamps,
+            stamps_ns=stamps + shift_ns,
             positions_xyz=trajectory.positions_xyz[index],
             quat_xyzw=None if quats is None else quats[index],
             cov6=None if trajectory.cov6 is None else trajectory.cov6[index],
             warnings=(),
         )
 
-    ref, est = picked(reference, ref_idx), picked(estimate, est_idx)
+    ref, est = picked(reference, ref_idx, offset_ns), picked(estimate, est_idx, 0)
     shorter, side = (estimate, "estimate") if by_estimate else (reference, "reference")
     unmatched = len(shorter) - est_idx.size
     note = ""
@@ -217,6 +233,32 @@ def _gap_notes(reference: Trajectory) -> list[str]:
     return [note]
 
 
+def _offsets_of_full(
+    found: EstimateResult,
+    reference: Trajectory,
+    estimate: Trajectory,
+    args: argparse.Namespace,
+    method: AlignMethod,
+) -> EstimateResult:
+    """Check the time offset on the whole recordings, not on the matched poses only.
+
+    The core saw the poses evo's way of matching kept; the clock check needs the motion
+    of both recordings, so it runs again on them and its notes replace the core's.
+    """
+    from loceval.calibration.offsets import check_offsets  # noqa: PLC0415  (scipy)
+
+    full = check_offsets(
+        reference,
+        estimate,
+        time_offset_s=args.t_offset,
+        max_gap_s=0.1,
+        with_scale=method is AlignMethod.SIM3 or bool(args.correct_scale),
+    )
+    dropped = set(() if found.offsets is None else found.offsets.warnings)
+    kept = [w for w in found.warnings if w not in dropped]
+    return replace(found, warnings=(*kept, *full.warnings), offsets=full)
+
+
 def _run(args: argparse.Namespace, *, rpe: bool) -> EvoRun:
     relation = PoseRelation(args.pose_relation)
     ref_source, est_source = _sources(args)
@@ -236,9 +278,11 @@ def _run(args: argparse.Namespace, *, rpe: bool) -> EvoRun:
     # reference's are named above.
     kept = [w for w in result.reference_warnings if not w.startswith("The reference has")]
     result = replace(result, reference_warnings=(*notes, *kept))
-    found = result.estimates[0]
+    found = _offsets_of_full(result.estimates[0], reference, estimate, args, method)
+    result = replace(result, estimates=(found,))
     ref, est = found.reference, found.aligned
-    info: dict[str, object] = {"ref_name": ref_source.name, "est_name": est_source.name}
+    ref_name, est_name = _evo_names(args)
+    info: dict[str, object] = {"ref_name": ref_name, "est_name": est_name}
     pairs = None
     if rpe:
         pairs = evo_pairs(
@@ -269,8 +313,8 @@ def _run(args: argparse.Namespace, *, rpe: bool) -> EvoRun:
         series=series,
         relation=relation,
         result=result,
-        ref_name=ref_source.name,
-        est_name=est_source.name,
+        ref_name=ref_name,
+        est_name=est_name,
         reference=ref,
         estimate=est,
         info=info,
@@ -358,7 +402,7 @@ def _write_report(run: EvoRun, save_plot: Path | None) -> Path:
         folder = save_plot.with_suffix("") if save_plot.suffix else save_plot
     else:
         folder = Path.cwd() / f"loceval_{run.metric}_report"
-    title = f"{run.metric.upper()}: {run.ref_name} vs {run.est_name}"
+    title = f"{run.metric.upper()}: {run.result.reference.name} vs {run.result.estimates[0].name}"
     options = ExportOptions(evaluation_id=folder.name, title=title)
     written = write_artifacts(run.result, folder, options, names=["report.html"])
     return written[0]
