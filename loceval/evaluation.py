@@ -370,7 +370,8 @@ def evaluate(
     for k, estimate in enumerate(estimates):
         report(f"evaluating {estimate.name or k}", k / len(estimates))
         results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
-    comparisons, comparison_notes = None, ()
+    comparisons = None
+    comparison_notes: tuple[str, ...] = ()
     if not config.no_ci:
         from loceval.assessment.assess import compare_estimates  # noqa: PLC0415  (scipy)
 

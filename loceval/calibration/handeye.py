@@ -503,8 +503,7 @@ def _travel_axis_spread(
             rot_a[block], a_t[block], b_t[block], rotation, axis, free=free, with_scale=with_scale
         )
         angles.append(float(Rotation.from_matrix(found @ rotation.T).as_rotvec() @ u))
-    spread = float(np.std(angles, ddof=1)) / np.sqrt(TRAVEL_BLOCKS)
-    return spread * TRAVEL_STUDENT
+    return float(np.std(angles, ddof=1) / np.sqrt(TRAVEL_BLOCKS)) * TRAVEL_STUDENT
 
 
 def _drop_rotation_about(rotation: FloatArray, axis: int) -> FloatArray:
