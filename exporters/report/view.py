@@ -194,7 +194,7 @@ class ReportView:
     best_mark: str = BEST_MARK
     confidence: ConfidenceView = field(default_factory=ConfidenceView)
     ranging: RangingView | None = None  # the ranging section (exporters.report.ranging)
-    tolerance_example: str = "--tolerance 0.10@95"
+    tolerance_example: str = ""
     """How the front door that made the report takes a tolerance (the flag, or the value)."""
     tolerance_where: str = ""
     times_note: str = _TIMES_NOTE

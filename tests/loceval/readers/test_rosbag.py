@@ -271,7 +271,8 @@ class TestTf:
         )
         assert (traj.frame_id, traj.child_frame_id) == ("map", "camera")
         assert traj.source == f"{bag.name}@tf:map:camera"
-        assert any("map -> odom -> base_link -> camera" in w for w in traj.warnings)
+        # The chain is information (issue 30, item 12): a note, not a warning.
+        assert any("map -> odom -> base_link -> camera" in n for n in traj.notes)
         assert any(f"{expected.dropped} of" in w for w in traj.warnings)
 
     def test_containers_agree(self, tmp_path, tf_setup):
