@@ -70,7 +70,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
     export = export_options(args)
     plan = export
     if args.map is not None and plan is None:  # --json without --out still needs the plan
-        plan = export_from_options(cast("ExportValues", args), building=args.building)
+        plan = export_from_options(
+            cast("ExportValues", args), front_door="cli", building=args.building
+        )
     the_map = map_source(args.map, plan, estimate=args.map_estimate, clutter_m=args.clutter_m)
     ref_spec = parse_source(args.reference, default_format=default_format)
     est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
