@@ -100,3 +100,16 @@ def test_the_3dm_has_the_map_as_coloured_point_clouds(result: EvaluationResult) 
     assert sum(len(o.Geometry) for o in clouds) == len(found.cells_xy)
     (clutter,) = [o for o in clouds if o.Attributes.Name == "map clutter"]
     assert len(clutter.Geometry) == found.clutter_cells
+
+
+def test_the_glb_has_the_map_as_coloured_points(result: EvaluationResult) -> None:
+    """A ``map walls`` node: one POINTS primitive, a colour per wall cell."""
+    pygltflib = pytest.importorskip("pygltflib")
+    gltf = pygltflib.GLTF2.load_from_bytes(render_artifact("paths.glb", result, ExportOptions()))
+    (node,) = [n for n in gltf.nodes if n.name == "map walls"]
+    (primitive,) = gltf.meshes[node.mesh].primitives
+    assert primitive.mode == pygltflib.POINTS
+    found = result.map
+    assert found is not None
+    assert gltf.accessors[primitive.attributes.POSITION].count == len(found.cells_xy)
+    assert gltf.accessors[primitive.attributes.COLOR_0].count == len(found.cells_xy)
