@@ -137,7 +137,7 @@ def _add_map(scene: _SceneBuilder, placement: Placement) -> None:
     )
     index = np.searchsorted([b.high_m for b in bins[:-1]], found.distance_m, side="left")
     index[found.clutter] = len(bins)
-    extras = {
+    extras: dict[str, object] = {
         "kind": "map",
         "bins": [{"label": b.label, "color": list(b.color_rgb)} for b in bins],
         "clutter_color": list(_CLUTTER_RGB),

@@ -102,10 +102,12 @@ def test_the_3dm_has_the_map_as_coloured_point_clouds(result: EvaluationResult) 
     assert len(clutter.Geometry) == found.clutter_cells
 
 
-def test_the_glb_has_the_map_as_coloured_points(result: EvaluationResult) -> None:
-    """A ``map walls`` node: one POINTS primitive, a colour per wall cell."""
+def test_the_glb_has_the_map_as_coloured_points(result: EvaluationResult, validate) -> None:
+    """A ``map walls`` node: one POINTS primitive, a colour per wall cell; the GLB is valid."""
     pygltflib = pytest.importorskip("pygltflib")
-    gltf = pygltflib.GLTF2.load_from_bytes(render_artifact("paths.glb", result, ExportOptions()))
+    data = render_artifact("paths.glb", result, ExportOptions())
+    assert validate(data)["issues"]["numErrors"] == 0
+    gltf = pygltflib.GLTF2.load_from_bytes(data)
     (node,) = [n for n in gltf.nodes if n.name == "map walls"]
     (primitive,) = gltf.meshes[node.mesh].primitives
     assert primitive.mode == pygltflib.POINTS
