@@ -132,6 +132,9 @@ def create_ranging(runtime: Runtime, project_id: str, body: RangingCreate) -> Ev
         _check_selector(datasets[body.reference.dataset_id], body.reference, "reference")
         _check_radio(datasets[body.anchors], datasets[ranges.dataset_id], ranges)
         check_ranging_options(options)
+        if options.map is not None:
+            msg = "A map is measured in a trajectory evaluation, not a ranging one; leave it out."
+            raise InputError(msg, option="map")
         request = body.model_dump(mode="json")
         request["estimates"] = [
             {"dataset_id": ranges.dataset_id, "selector": ranges.selector, "name": solver}

@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from exporters.cad.building import read_building
 from exporters.cad.gltf_scene import Z_UP_TO_Y_UP, GlbScene, linear_rgba, node_matrix
 from exporters.cad.placement import ATERun, Marker, Placement, place_evaluation
+from exporters.colours import map_bins
 from exporters.options import ExportOptions
 from loceval.core.arrays import FloatArray
 from loceval.evaluation import EvaluationResult
@@ -51,6 +52,7 @@ from loceval.evaluation import EvaluationResult
 __all__ = ["Z_UP_TO_Y_UP", "export_glb", "node_matrix"]
 
 _BUILDING_RGBA: Final = (0.75, 0.75, 0.75, 0.35)
+_CLUTTER_RGB: Final = (194, 24, 91)
 
 
 def export_glb(
@@ -102,6 +104,7 @@ def export_glb(
         scene.add_markers(f"{path.name} markers", worst, placement.base_point, per_metre)
     losses = [m for m in markers if m.kind == "gap"]
     scene.add_markers("tracking loss", losses, placement.base_point, per_metre)
+    _add_map(scene, placement)
     plan_only = options.building is not None and options.building.suffix.lower() == ".dxf"
     if options.building is not None and not plan_only:
         building = read_building(options.building, units=placement.units, up=options.building_up)
@@ -117,6 +120,29 @@ def export_glb(
     if plan_only and options.building is not None:  # a 2D drawing has no mesh for the scene
         meta["building_note"] = f"{options.building.name} is a 2D floor plan, not in the scene"
     return scene.to_glb(meta)
+
+
+def _add_map(scene: _SceneBuilder, placement: Placement) -> None:
+    """Add ``map walls``: every wall cell a point coloured by its distance (with a map)."""
+    found = placement.result.map
+    if found is None:
+        return
+    z = float(np.median(placement.result.reference.positions_xyz[:, 2]))
+    xyz = placement.to_model(np.column_stack([found.cells_xy, np.full(len(found.cells_xy), z)]))
+    local = ((xyz - placement.base_point) / placement.units.per_metre).astype(np.float32)
+    bins = map_bins(found.distance_m, placement.result.config.thresholds_m)
+    palette = np.array(
+        [linear_rgba(rgb)[:3] for rgb in (*(b.color_rgb for b in bins), _CLUTTER_RGB)],
+        dtype=np.float32,
+    )
+    index = np.searchsorted([b.high_m for b in bins[:-1]], found.distance_m, side="left")
+    index[found.clutter] = len(bins)
+    extras: dict[str, object] = {
+        "kind": "map",
+        "bins": [{"label": b.label, "color": list(b.color_rgb)} for b in bins],
+        "clutter_color": list(_CLUTTER_RGB),
+    }
+    scene.add_points("map walls", local, palette[index], extras)
 
 
 def _ate_strips(
@@ -182,6 +208,22 @@ class _SceneBuilder(GlbScene):
                 )
             )
         self._node(name, pygltflib.Mesh(name=name, primitives=primitives), extras)
+
+    def add_points(
+        self,
+        name: str,
+        positions: NDArray[np.float32],
+        colours: NDArray[np.float32],
+        extras: dict[str, object],
+    ) -> None:
+        """Add one POINTS primitive with a colour per point, and its node."""
+        material = self.unlit_material(name, [1.0, 1.0, 1.0, 1.0])
+        attributes = pygltflib.Attributes(POSITION=self.positions(positions))
+        attributes.COLOR_0 = self._colours(np.ascontiguousarray(colours))
+        primitive = pygltflib.Primitive(
+            attributes=attributes, material=material, mode=pygltflib.POINTS
+        )
+        self._node(name, pygltflib.Mesh(name=name, primitives=[primitive]), extras)
 
     def add_markers(
         self, name: str, markers: list[Marker], base_point: FloatArray, per_metre: float

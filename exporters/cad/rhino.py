@@ -28,11 +28,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Final
 
+import numpy as np
 import rhino3dm as _rhino3dm
 
+from exporters.cad.dxf_map import placed_cells
 from exporters.cad.georef import set_earth_anchor
 from exporters.cad.jsondoc import finite_json
 from exporters.cad.placement import Marker, PlacedPath, Placement, layer_name, place_evaluation
+from exporters.colours import map_bins
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
 from loceval.core.arrays import FloatArray
@@ -238,7 +241,36 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
     losses = [m for m in markers if m.kind == "gap"]
     if losses:
         _add_dots(model, losses, _add_layer(model, LOSS_LAYER, _LOSS_RGB, evaluation))
+    _add_map(model, placement, evaluation)
     return model
+
+
+def _add_map(model: Any, placement: Placement, parent: int) -> None:  # noqa: ANN401
+    """Add the map's wall cells as one coloured point cloud per distance bin (with a map)."""
+    cells = placed_cells(placement)
+    found = placement.result.map
+    if cells is None or found is None:
+        return
+    xyz, distance, clutter = cells
+    bins = map_bins(found.distance_m, placement.result.config.thresholds_m)
+    index = np.searchsorted([b.high_m for b in bins[:-1]], distance, side="left")
+    index[clutter] = len(bins)
+    layer = _add_layer(model, "map walls", bins[0].color_rgb, parent)
+    names = [*(f"map walls {b.label}" for b in bins), "map clutter"]
+    colours = [*(b.color_rgb for b in bins), (194, 24, 91)]
+    for k, (name, rgb) in enumerate(zip(names, colours, strict=True)):  # one cloud per bin
+        chosen = xyz[index == k]
+        if not len(chosen):
+            continue
+        cloud = rhino3dm.PointCloud()
+        for x, y, z in chosen.tolist():  # rhino3dm adds points one by one (capped cells)
+            cloud.Add(rhino3dm.Point3d(x, y, z))
+        attributes = rhino3dm.ObjectAttributes()
+        attributes.Name = name
+        attributes.LayerIndex = layer
+        attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromObject
+        attributes.ObjectColor = (*rgb, 255)
+        model.Objects.AddPointCloud(cloud, attributes)
 
 
 def _add_dots(model: Any, markers: list[Marker], layer: int) -> None:  # noqa: ANN401

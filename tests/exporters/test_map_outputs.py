@@ -88,3 +88,30 @@ def test_the_report_has_the_map_figure_and_section(result: EvaluationResult) -> 
     assert [row["name"] for row in view.rows] == ["as placed", "rigid fit", "similarity fit"]
     assert view.drift in plot.caption
     assert build_map_view(replace(result, map=None)) is None
+
+
+def test_the_3dm_has_the_map_as_coloured_point_clouds(result: EvaluationResult) -> None:
+    """One point cloud per distance bin and one of clutter, every wall cell in one of them."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    model = rhino3dm.File3dm.FromByteArray(render_artifact("paths.3dm", result, ExportOptions()))
+    clouds = [o for o in model.Objects if isinstance(o.Geometry, rhino3dm.PointCloud)]
+    found = result.map
+    assert found is not None
+    assert sum(len(o.Geometry) for o in clouds) == len(found.cells_xy)
+    (clutter,) = [o for o in clouds if o.Attributes.Name == "map clutter"]
+    assert len(clutter.Geometry) == found.clutter_cells
+
+
+def test_the_glb_has_the_map_as_coloured_points(result: EvaluationResult, validate) -> None:
+    """A ``map walls`` node: one POINTS primitive, a colour per wall cell; the GLB is valid."""
+    pygltflib = pytest.importorskip("pygltflib")
+    data = render_artifact("paths.glb", result, ExportOptions())
+    assert validate(data)["issues"]["numErrors"] == 0
+    gltf = pygltflib.GLTF2.load_from_bytes(data)
+    (node,) = [n for n in gltf.nodes if n.name == "map walls"]
+    (primitive,) = gltf.meshes[node.mesh].primitives
+    assert primitive.mode == pygltflib.POINTS
+    found = result.map
+    assert found is not None
+    assert gltf.accessors[primitive.attributes.POSITION].count == len(found.cells_xy)
+    assert gltf.accessors[primitive.attributes.COLOR_0].count == len(found.cells_xy)
