@@ -86,7 +86,14 @@
       "aria-label": "Time since the reference's first stamp",
     });
     const readout = el("output", { className: "lv-readout", "aria-live": "polite" });
-    const info = el("div", { className: "lv-info", text: "Hover or click a point of a path for its stamp, error and coordinates." });
+    const reduced = paths.filter((p) => p.poses > p.t.length)
+      .map((p) => `${p.name} ${p.t.length.toLocaleString("en")} of ${p.poses.toLocaleString("en")}`);
+    const info = el("div", {
+      className: "lv-info",
+      text: "Hover or click a point of a path for its stamp, error and coordinates." + (reduced.length
+        ? ` Drawn: ${reduced.join(", ")} poses (every error peak and break kept); errors.csv has every pose.`
+        : ""),
+    });
     root.append(bar, stage, el("div", { className: "lv-time" }, play, slider, readout), info);
 
     // --- three.js ----------------------------------------------------------------------
