@@ -99,6 +99,9 @@
     // --- three.js ----------------------------------------------------------------------
     let renderer;
     try {
+      // asked first, so a browser without WebGL gets the note, not three.js's console error
+      const probe = document.createElement("canvas");
+      if (!(probe.getContext("webgl2") || probe.getContext("webgl"))) throw new Error("no WebGL");
       renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
     } catch (err) {
       stage.append(el("p", { className: "lv-note", text: "This browser cannot draw 3D (WebGL is off or unavailable); the report's figures and errors.csv hold the same data." }));
