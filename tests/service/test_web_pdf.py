@@ -40,6 +40,7 @@ ALL_BUT_PDF = [
     "paths.3dm",
     "paths.3dm.json",
     "paths.glb",
+    "viewer.html",
 ]
 _NO_PANGO = '''"""Stands in for WeasyPrint where its system library pango is missing."""
 raise OSError(
