@@ -21,6 +21,8 @@ from exporters.report.render import (
     html_to_pdf,
     render_template,
 )
+from exporters.viewer.checkpoints import checkpoint_scene
+from exporters.viewer.page import scene_fragment
 from loceval.checkpoint_evaluation import CheckpointEstimate, CheckpointEvaluation
 
 if TYPE_CHECKING:
@@ -227,6 +229,10 @@ def render_checkpoint_report(
             label="control-point report",
             requirement="report.html",
             report=view,
+            # the interactive section is the HTML's only (the PDF keeps its figures)
+            viewer=scene_fragment(checkpoint_scene(evaluation, options), folder)
+            if image_format == "svg"
+            else None,
         )
 
     html = render("svg")

@@ -86,12 +86,22 @@
       "aria-label": "Time since the reference's first stamp",
     });
     const readout = el("output", { className: "lv-readout", "aria-live": "polite" });
-    const info = el("div", { className: "lv-info", text: "Hover or click a point of a path for its stamp, error and coordinates." });
+    const reduced = paths.filter((p) => p.poses > p.t.length)
+      .map((p) => `${p.name} ${p.t.length.toLocaleString("en")} of ${p.poses.toLocaleString("en")}`);
+    const info = el("div", {
+      className: "lv-info",
+      text: "Hover or click a point of a path for its stamp, error and coordinates." + (reduced.length
+        ? ` Drawn: ${reduced.join(", ")} poses (every error peak and break kept); errors.csv has every pose.`
+        : ""),
+    });
     root.append(bar, stage, el("div", { className: "lv-time" }, play, slider, readout), info);
 
     // --- three.js ----------------------------------------------------------------------
     let renderer;
     try {
+      // asked first, so a browser without WebGL gets the note, not three.js's console error
+      const probe = document.createElement("canvas");
+      if (!(probe.getContext("webgl2") || probe.getContext("webgl"))) throw new Error("no WebGL");
       renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
     } catch (err) {
       stage.append(el("p", { className: "lv-note", text: "This browser cannot draw 3D (WebGL is off or unavailable); the report's figures and errors.csv hold the same data." }));

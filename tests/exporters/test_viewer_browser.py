@@ -409,3 +409,12 @@ def test_control_points_on_a_building(browser: Any, tmp_path: Path) -> None:
     viewer.api("setView('plan')")
     viewer.shoot("viewer_control_points_building_plan.png", tmp_path)
     viewer.assert_closed()
+
+    # the control-point report carries the same viewer, allowed by its CSP
+    from exporters.report.checkpoints import render_checkpoint_report
+
+    report = tmp_path / "report.html"
+    report.write_bytes(render_checkpoint_report(survey, options, pdf=False)[0])
+    in_report = open_viewer(browser, report)
+    assert in_report.scene["controls"]["visits"] == controls["visits"]
+    in_report.assert_closed()

@@ -508,6 +508,7 @@ def test_all_artifacts(api: Api, datasets: tuple[str, str]) -> None:
         "paths.3dm.json": ("application/json", "attachment"),
         "paths.glb": ("model/gltf-binary", "attachment"),
         "paths.ifc": ("application/x-step", "attachment"),
+        "viewer.html": ("text/html", "attachment"),
     }
     listed = {a["name"]: a for a in evaluation["artifacts"]}
     assert list(listed) == list(expected)

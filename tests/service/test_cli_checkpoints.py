@@ -364,7 +364,7 @@ def test_every_cad_format_with_out(tmp_path: Path, capsys: pytest.CaptureFixture
     assert code == 0, err
     assert sorted(p.name for p in out_dir.iterdir()) == [
         "errors.csv", "paths.3dm", "paths.3dm.json", "paths.dxf", "paths.glb", "report.html",
-        "report.pdf", "result.json",
+        "report.pdf", "result.json", "viewer.html",
     ]  # fmt: skip
     visits = json.loads(out)["estimates"][0]["checkpoints"]["visits"]
     # the site "100 200 0 90" by hand: a quarter turn about z (east becomes north, north
