@@ -252,6 +252,22 @@ def _allowed_methods(request: Request) -> str:
     return ", ".join(allowed)
 
 
+def _other_slash_form(request: Request) -> str | None:
+    """Return the request's path with its trailing slash toggled, if a route answers that.
+
+    Only the path is returned, never a URL: the request's Host header is not trusted.
+    """
+    path = str(request.scope.get("path", ""))
+    if path in {"", "/"}:
+        return None
+    other = path[:-1] if path.endswith("/") else path + "/"
+    routes = request.app.router.routes
+    scope = {**request.scope, "path": other}
+    if any(route.matches(scope)[0] is not Match.NONE for route in routes):
+        return other
+    return None
+
+
 async def _handle_http_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, StarletteHTTPException)  # noqa: S101
     if exc.status_code == 400 and isinstance(exc.__cause__, UnicodeDecodeError):
@@ -266,6 +282,8 @@ async def _handle_http_error(request: Request, exc: Exception) -> JSONResponse:
     detail = str(exc.detail)
     if exc.status_code == 404 and detail == "Not Found":
         detail = "No such endpoint; the API is described at /docs."
+        if other := _other_slash_form(request):
+            detail = f"No such endpoint; did you mean {other} (no redirect is sent)?"
     headers = dict(exc.headers or {})
     if exc.status_code == 405 and (allowed := _allowed_methods(request)):
         headers["Allow"] = allowed

@@ -94,6 +94,10 @@ def create_app(
         lifespan=lifespan,
         docs_url=None,  # service.api.docs serves /docs with its files: no CDN, works offline
         redoc_url=None,  # ReDoc loads from a CDN too; /docs is the one documentation page
+        # Starlette's redirect of "/path/" to "/path" builds an absolute Location from the
+        # request's Host and X-Forwarded-Proto: a link to any host a client names. The other
+        # form answers 404 instead, whose detail names the path to use (service.errors).
+        redirect_slashes=False,
     )
     app.state.runtime = runtime
     app.state.settings = settings

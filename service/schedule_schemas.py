@@ -145,7 +145,7 @@ class SchedulePatch(Strict):
     def _not_null(cls, value: Any) -> Any:  # noqa: ANN401
         if value is None:
             msg = "may be left out (it then stays as it is), but not null"
-            raise PydanticCustomError("null_refused", msg)
+            raise PydanticCustomError("null_refused", msg)  # noqa: EM101  (the error type)
         return value
 
 
