@@ -133,7 +133,9 @@ def read_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep) -
 
 
 @router.delete(
-    "/{dataset_id}", status_code=status.HTTP_204_NO_CONTENT, responses=problems(404, 409)
+    "/{dataset_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    responses=problems(404, 409, 507),
 )
 def delete_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Delete a dataset and its file (refused while a queued or running evaluation uses it).
