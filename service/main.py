@@ -22,6 +22,7 @@ from service.logs import RequestLogMiddleware, configure_logging
 from service.metrics import MetricsMiddleware, create_metrics
 from service.metrics import router as metrics_router
 from service.preflight import check_data_dir
+from service.retention import sweep_leftovers
 from service.runtime import Runtime
 from service.schedules import tick
 from service.settings import Settings, get_settings
@@ -69,9 +70,7 @@ def create_app(
             raise
         if low_space:
             logger.warning("%s", low_space)
-        swept = runtime.store.sweep()
-        if swept:
-            logger.warning("Removed %d uploads left half-received by a crash", swept)
+        sweep_leftovers(runtime)  # partial uploads and unrecorded datasets of dead processes
         running = runtime.start_consumer() if consumer else None
         if running is not None:
             requeued = recover(runtime)
