@@ -13,6 +13,7 @@ from service.api.responses import problems
 from service.db import Dataset, get_owned
 from service.links import api_url
 from service.metrics import count_upload
+from service.schema_base import NO_NUL
 from service.schemas import (
     MAX_DATASET_NAME,
     MAX_TAG,
@@ -117,7 +118,7 @@ async def create_dataset(
 def read_datasets(
     runtime: RuntimeDep,
     project_id: ProjectDep,
-    tag: Annotated[str | None, Query(max_length=50)] = None,
+    tag: Annotated[str | None, Query(max_length=50, pattern=NO_NUL)] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
     offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
 ) -> DatasetsPublic:
