@@ -29,6 +29,7 @@ __all__ = ["router"]
 
 router = APIRouter(prefix="/datasets", tags=["datasets"])
 
+_PRINTABLE = r"^[^\x00-\x1f\x7f]*$"  # control characters are refused (422)
 _UPLOAD_BODY = {
     "required": True,
     "content": {
@@ -47,11 +48,13 @@ _UPLOAD_BODY = {
                     "name": {
                         "type": "string",
                         "maxLength": MAX_DATASET_NAME,
+                        "pattern": _PRINTABLE,
                         "description": "default (or empty): the file name; a longer name or "
                         "one with control characters is refused (422), never shortened",
                     },
                     "tags": {
                         "type": "string",
+                        "pattern": _PRINTABLE,
                         "description": f"comma-separated, at most {MAX_TAGS} tags of up to "
                         f"{MAX_TAG} characters; longer ones are refused (422)",
                     },
