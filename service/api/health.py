@@ -57,7 +57,7 @@ def _check(runtime: Runtime) -> dict[str, str]:
     except ServiceUnavailableError as err:
         logger.warning("Readiness: %s", err)
         raise
-    return {"status": "ready", "database": "ok", "queue": "ok", "storage": "ok"}
+    return {"status": "ready", "database": "ok", "queue": "ok"}
 
 
 @router.get(
