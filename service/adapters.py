@@ -17,7 +17,12 @@ from typing import Final, Literal
 from sqlalchemy.exc import DisconnectionError, InterfaceError, OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 
-from service.errors import ServiceUnavailableError
+from service.errors import (
+    STORAGE_FULL_DETAIL,
+    InsufficientStorageError,
+    ServiceUnavailableError,
+    is_storage_full,
+)
 
 try:  # Redis is the optional scale-out queue ("scale" extra)
     from redis.exceptions import RedisError
@@ -55,6 +60,8 @@ def converted(what: Literal["queue", "database"]) -> Iterator[None]:
     """Raise ServiceUnavailableError for an outage of the queue or the database.
 
     Raises:
+        InsufficientStorageError: the backend could not write for a full disk (507: an
+            administrator must free space; retrying alone does not help).
         ServiceUnavailableError: the backend cannot be reached; the message names it and
             the error's class, and asks to try again.
     """
@@ -62,6 +69,8 @@ def converted(what: Literal["queue", "database"]) -> Iterator[None]:
     try:
         yield
     except errors as err:
+        if is_storage_full(err):
+            raise InsufficientStorageError(STORAGE_FULL_DETAIL) from err
         msg = (
             f"{label} cannot be reached ({type(err).__name__}); try again in a minute "
             "(GET /readyz shows when it is back)."

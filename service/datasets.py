@@ -177,6 +177,23 @@ def store_upload(
         received.path.unlink(missing_ok=True)
         return _existing(runtime, existing, name=fields.name, tags=tags, filename=filename)
     dataset_id = new_id()
+    with runtime.store.publishing(dataset_id):  # a sweep removes the folder if we die inside
+        return _publish(
+            runtime, project_id, received, dataset_id, fields=fields, notes=notes, filename=filename
+        )
+
+
+def _publish(
+    runtime: Runtime,
+    project_id: str,
+    received: ReceivedFile,
+    dataset_id: str,
+    *,
+    fields: DatasetFields,
+    notes: list[str],
+    filename: str,
+) -> tuple[Dataset, UploadPublic]:
+    """Move a new upload into its folder, inspect it there and record its row."""
     relative = runtime.store.publish_dataset(received.path, dataset_id, filename)
     try:  # its errors name the stored path: problem_for() scrubs the server's folders
         inspection = inspect_upload(runtime.store.path(relative), filename)
@@ -191,7 +208,7 @@ def store_upload(
         kind=str(inspection["kind"]),
         size_bytes=received.size,
         sha256=received.sha256,
-        tags=tags,
+        tags=fields.tags,
         inspection=inspection,
         storage_path=relative,
     )
@@ -209,11 +226,11 @@ def store_upload(
             )
             if winner is None:
                 raise
-            return _existing(runtime, winner, name=fields.name, tags=tags, filename=filename)
+            return _existing(runtime, winner, name=fields.name, tags=fields.tags, filename=filename)
         except BaseException:
             runtime.store.remove_dataset(dataset_id)
             raise
-    report = UploadPublic(deduplicated=False, tags_added=tags, notes=notes)
+    report = UploadPublic(deduplicated=False, tags_added=fields.tags, notes=notes)
     return dataset, report
 
 

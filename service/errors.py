@@ -7,8 +7,10 @@ routes and wrong methods are rendered the same way, so a client parses one error
 
 from __future__ import annotations
 
+import errno
 import json
 import logging
+import sqlite3
 import uuid
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar, Final
@@ -17,6 +19,7 @@ from fastapi import FastAPI, Request
 from fastapi.encoders import jsonable_encoder
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy.exc import SQLAlchemyError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
@@ -50,6 +53,7 @@ __all__ = [
     "WebhookUnresolvedError",
     "install_error_handlers",
     "internal_problem",
+    "is_storage_full",
     "problem",
     "problem_for",
     "register_private_root",
@@ -155,6 +159,42 @@ class StartupError(ServiceUnavailableError):
     """The service cannot start: its data directory or database is not usable as it is."""
 
     code: ClassVar[str] = "service.startup"
+
+
+_FULL_ERRNOS: Final = frozenset({errno.ENOSPC, errno.EDQUOT})
+_PG_DISK_FULL: Final = "53100"  # PostgreSQL's disk_full ("could not extend file")
+STORAGE_FULL_DETAIL: Final = (
+    "The server's disk is full, so nothing of this request was saved. Ask the server's "
+    "administrator to free space where the data directory (LOCEVAL_DATA_DIR) and the "
+    "database live (remove other files, or give the volume more space; then delete old "
+    "evaluations or datasets, or set LOCEVAL_RETENTION_DAYS, so it stays free), and send the "
+    "request again."
+)
+"""What a request refused for a full disk is told."""
+
+
+def is_storage_full(exc: BaseException) -> bool:
+    """Whether an error, or one it was raised from, means the disk is full.
+
+    SQLite's ``SQLITE_FULL`` ("database or disk is full"), PostgreSQL's ``disk_full``
+    (SQLSTATE 53100; psycopg's ``DiskFull``), and a write that failed with ENOSPC or EDQUOT;
+    SQLAlchemy and huey raise them from their own errors, so the chain is followed.
+    """
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        seen.add(id(current))
+        if isinstance(current, OSError) and current.errno in _FULL_ERRNOS:
+            return True
+        if isinstance(current, sqlite3.Error) and (
+            getattr(current, "sqlite_errorcode", None) == sqlite3.SQLITE_FULL
+            or "database or disk is full" in str(current)
+        ):
+            return True
+        if getattr(current, "sqlstate", None) == _PG_DISK_FULL:
+            return True
+        current = getattr(current, "orig", None) or current.__cause__ or current.__context__
+    return False
 
 
 STATUS_BY_ERROR: Final[Mapping[type[LocevalError], int]] = {
@@ -270,6 +310,22 @@ def _allowed_methods(request: Request) -> str:
     return ", ".join(allowed)
 
 
+def _other_slash_form(request: Request) -> str | None:
+    """Return the request's path with its trailing slash toggled, if a route answers that.
+
+    Only the path is returned, never a URL: the request's Host header is not trusted.
+    """
+    path = str(request.scope.get("path", ""))
+    if path in {"", "/"}:
+        return None
+    other = path[:-1] if path.endswith("/") else path + "/"
+    routes = request.app.router.routes
+    scope = {**request.scope, "path": other}
+    if any(route.matches(scope)[0] is not Match.NONE for route in routes):
+        return other
+    return None
+
+
 async def _handle_http_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, StarletteHTTPException)  # noqa: S101
     if exc.status_code == 400 and isinstance(exc.__cause__, UnicodeDecodeError):
@@ -284,12 +340,24 @@ async def _handle_http_error(request: Request, exc: Exception) -> JSONResponse:
     detail = str(exc.detail)
     if exc.status_code == 404 and detail == "Not Found":
         detail = "No such endpoint; the API is described at /docs."
+        if other := _other_slash_form(request):
+            detail = f"No such endpoint; did you mean {other} (no redirect is sent)?"
     headers = dict(exc.headers or {})
     if exc.status_code == 405 and (allowed := _allowed_methods(request)):
         headers["Allow"] = allowed
         detail = f"This endpoint answers to {allowed} only."
     body = problem(exc.status_code, "http", titles.get(exc.status_code, "HTTPError"), detail)
     return _response(body, headers)
+
+
+async def _handle_backend_error(request: Request, exc: Exception) -> JSONResponse:
+    """A database or file error that reached a route: a full disk is 507, else a bug."""
+    if is_storage_full(exc):
+        logger.error("Refused a request: the disk is full (%s)", type(exc).__name__)
+        return _response(
+            problem(507, InsufficientStorageError.code, "InsufficientStorage", STORAGE_FULL_DETAIL)
+        )
+    return await _handle_bug(request, exc)
 
 
 async def _handle_bug(_request: Request, exc: Exception) -> JSONResponse:
@@ -304,4 +372,6 @@ def install_error_handlers(app: FastAPI) -> None:
     app.add_exception_handler(RequestValidationError, _handle_validation_error)
     app.add_exception_handler(InvalidFieldsError, _handle_validation_error)
     app.add_exception_handler(StarletteHTTPException, _handle_http_error)
+    for backend_error in (SQLAlchemyError, sqlite3.Error, OSError):
+        app.add_exception_handler(backend_error, _handle_backend_error)
     app.add_exception_handler(Exception, _handle_bug)

@@ -45,7 +45,7 @@ from service.options import (
     ranging_from_options,
 )
 from service.preflight import check_data_dir, prepare_schema
-from service.retention import sweep
+from service.retention import sweep, sweep_leftovers
 from service.runner import Job, JobSource, RangingSources, file_provenance, run_job
 from service.runtime import JobKind, Runtime, create_huey
 from service.schedule_runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run
@@ -331,6 +331,7 @@ def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runt
     def every_minute() -> None:
         recover(runtime)
         tick(runtime)
+        sweep_leftovers(runtime)
 
     @huey.periodic_task(crontab(minute="17"), name="retention_sweep")  # type: ignore[untyped-decorator]
     def hourly_sweep() -> None:

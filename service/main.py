@@ -22,6 +22,7 @@ from service.logs import RequestLogMiddleware, configure_logging
 from service.metrics import MetricsMiddleware, create_metrics
 from service.metrics import router as metrics_router
 from service.preflight import check_data_dir
+from service.retention import sweep_leftovers
 from service.runtime import Runtime
 from service.schedules import tick
 from service.settings import Settings, get_settings
@@ -70,9 +71,7 @@ def create_app(
             raise
         if low_space:
             logger.warning("%s", low_space)
-        swept = runtime.store.sweep()
-        if swept:
-            logger.warning("Removed %d uploads left half-received by a crash", swept)
+        sweep_leftovers(runtime)  # partial uploads and unrecorded datasets of dead processes
         running = runtime.start_consumer() if consumer else None
         if running is not None:
             requeued = recover(runtime)
@@ -95,6 +94,10 @@ def create_app(
         lifespan=lifespan,
         docs_url=None,  # service.api.docs serves /docs with its files: no CDN, works offline
         redoc_url=None,  # ReDoc loads from a CDN too; /docs is the one documentation page
+        # Starlette's redirect of "/path/" to "/path" builds an absolute Location from the
+        # request's Host and X-Forwarded-Proto: a link to any host a client names. The other
+        # form answers 404 instead, whose detail names the path to use (service.errors).
+        redirect_slashes=False,
     )
     app.state.runtime = runtime
     app.state.settings = settings

@@ -32,14 +32,21 @@ from typing import Any, Final
 from sqlalchemy import and_, delete, or_, select, update
 from sqlalchemy.orm import Session
 
-from service.db import Evaluation, JobStatus, ScheduleRun, get_owned, utcnow
+from service.db import Dataset, Evaluation, JobStatus, ScheduleRun, get_owned, utcnow
 from service.errors import ConflictError, NotFoundError
 from service.evaluations import EVALUATION
 from service.logs import log_transition
 from service.runtime import JobModel, Runtime
-from service.storage import EVALUATIONS, RUNS
+from service.storage import EVALUATIONS, RUNS, Swept
 
-__all__ = ["FINISHED_STATUSES", "SweepCounts", "delete_evaluation", "sweep", "sweep_orphans"]
+__all__ = [
+    "FINISHED_STATUSES",
+    "SweepCounts",
+    "delete_evaluation",
+    "sweep",
+    "sweep_leftovers",
+    "sweep_orphans",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -59,11 +66,13 @@ class SweepCounts:
         evaluations: finished evaluations past the retention period (rows and folders).
         orphans: job folders without a row (evaluations and schedule runs).
         partial_uploads: uploads abandoned mid-transfer.
+        unrecorded_datasets: dataset folders whose upload died before its row was recorded.
     """
 
     evaluations: int
     orphans: int
     partial_uploads: int
+    unrecorded_datasets: int = 0
 
 
 def delete_evaluation(runtime: Runtime, project_id: str, evaluation_id: str) -> None:
@@ -155,7 +164,29 @@ def _expired_batch(runtime: Runtime, cutoff: dt.datetime) -> tuple[int, int]:
     return len(ids), int(done.rowcount)  # type: ignore[attr-defined]
 
 
-def _existing(runtime: Runtime, model: JobModel, ids: Sequence[str]) -> set[str]:
+def sweep_leftovers(runtime: Runtime) -> Swept:
+    """Remove what upload processes that are gone left: partial uploads, unrecorded datasets.
+
+    Runs on every start, once a minute in the workers and in the hourly sweep; an owner
+    still running (its lock held) keeps everything (:meth:`service.storage.BlobStore.sweep`).
+    """
+    swept = runtime.store.sweep(lambda ids: _existing(runtime, Dataset, ids))
+    if swept.partial_uploads or swept.datasets:
+        logger.warning(
+            "Removed %d partial uploads and %d unrecorded dataset folders left by processes "
+            "that are gone",
+            swept.partial_uploads,
+            swept.datasets,
+            extra={
+                "event": "leftovers_swept",
+                "partial_uploads": swept.partial_uploads,
+                "datasets": swept.datasets,
+            },
+        )
+    return swept
+
+
+def _existing(runtime: Runtime, model: JobModel | type[Dataset], ids: Sequence[str]) -> set[str]:
     """Return which of ``ids`` have a row in ``model``'s table."""
     found: set[str] = set()
     with runtime.sessions() as session:
@@ -211,8 +242,12 @@ def sweep(runtime: Runtime, *, now: dt.datetime | None = None) -> SweepCounts:
             expired += deleted
             if found < _BATCH:
                 break
+    left = sweep_leftovers(runtime)
     counts = SweepCounts(
-        evaluations=expired, orphans=sweep_orphans(runtime), partial_uploads=runtime.store.sweep()
+        evaluations=expired,
+        orphans=sweep_orphans(runtime),
+        partial_uploads=left.partial_uploads,
+        unrecorded_datasets=left.datasets,
     )
     logger.info(
         "Retention sweep: %d evaluations %s, %d orphaned job folders, %d abandoned uploads removed",

@@ -136,8 +136,9 @@ class Runtime:
             logger.warning("Queued %d unfinished jobs again for the next start", released)
 
     def close(self) -> None:
-        """Release the database connections."""
+        """Release the database connections and the data directory's lock."""
         self.engine.dispose()
+        self.store.close()
 
 
 class _EmbeddedConsumer(Consumer):  # type: ignore[misc]

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Final, Literal
 
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, Field, field_validator
+from pydantic.json_schema import SkipJsonSchema
+from pydantic_core import PydanticCustomError
 
 from service.schema_base import Id, Printable, Strict
 from service.schemas import (
@@ -104,17 +106,47 @@ class ScheduleCreate(Strict):
     paused: bool = False
 
 
-class SchedulePatch(Strict):
-    """Changes to a schedule; absent fields stay as they are."""
+_NOT_NULL: Final = ("name", "cron", "timezone", "selection", "template", "produce", "paused")
+"""The fields of a patch that cannot be emptied (absent keeps them; null is refused)."""
 
-    name: Annotated[str, Field(min_length=1, max_length=200), Printable] | None = None
-    cron: Annotated[str, Field(min_length=1, max_length=200)] | None = None
-    timezone: Annotated[str, Field(min_length=1, max_length=64)] | None = None
-    selection: Selection | None = None
-    template: EvaluationTemplate | None = None
-    produce: Produce | None = None
-    webhook_url: _Url | None = None
-    paused: bool | None = None
+
+def _no_default(schema: dict[str, Any]) -> None:
+    """Drop the ``default: null`` of a field that may be absent but never null."""
+    schema.pop("default", None)
+
+
+def _optional(**constraints: Any) -> Any:  # noqa: ANN401  (a pydantic FieldInfo)
+    """A patch field that may be absent but not null: absent in the schema's ``required``."""
+    return Field(default=None, json_schema_extra=_no_default, **constraints)
+
+
+class SchedulePatch(Strict):
+    """Changes to a schedule; absent fields stay as they are.
+
+    Only ``webhook_url`` may be null (no webhook); a null for another field is refused with
+    422 naming it, since a schedule cannot be without a name, a cron line, a selection...
+    """
+
+    name: Annotated[str, Field(min_length=1, max_length=200), Printable] | SkipJsonSchema[None] = (
+        _optional()
+    )
+    cron: Annotated[str, Field(min_length=1, max_length=200)] | SkipJsonSchema[None] = _optional()
+    timezone: Annotated[str, Field(min_length=1, max_length=64)] | SkipJsonSchema[None] = (
+        _optional()
+    )
+    selection: Selection | SkipJsonSchema[None] = _optional()
+    template: EvaluationTemplate | SkipJsonSchema[None] = _optional()
+    produce: Produce | SkipJsonSchema[None] = _optional()
+    webhook_url: _Url | None = Field(default=None, description="null removes the webhook")
+    paused: bool | SkipJsonSchema[None] = _optional()
+
+    @field_validator(*_NOT_NULL, mode="before")
+    @classmethod
+    def _not_null(cls, value: Any) -> Any:  # noqa: ANN401
+        if value is None:
+            msg = "may be left out (it then stays as it is), but not null"
+            raise PydanticCustomError("null_refused", msg)  # noqa: EM101  (the error type)
+        return value
 
 
 class SchedulePublic(BaseModel):

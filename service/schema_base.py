@@ -6,12 +6,15 @@ these.
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated, Any, Final
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
 from pydantic_core import PydanticCustomError
 
-__all__ = ["Id", "Printable", "Strict"]
+__all__ = ["NO_NUL", "Id", "Printable", "Strict"]
+
+NO_NUL: Final = r"^[^\x00]*$"
+"""The pattern of a text that holds no NUL character (the OpenAPI document says so)."""
 
 Id = Annotated[str, Field(min_length=1, max_length=64, examples=["0b8e6c1e-..."])]
 """The id of a stored dataset, evaluation or schedule, as a client sends it."""

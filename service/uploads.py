@@ -8,8 +8,9 @@ is a few chunks whatever the file size. A file is fsynced before it is handed on
 failure the partial files are deleted, so nothing half-received is ever visible.
 
 The data directory keeps a reserve of free space (``min_free_bytes``): an upload whose
-announced size would eat into it is refused with 507 before a byte is read, and one without
-a size (or a disk filling from elsewhere) is stopped as soon as the free space drops below it.
+announced size would eat into it is refused with 507 before a byte is read, and no write of
+one without a size (or of one the disk filled under from elsewhere) passes it: the free space
+is asked again whenever the bytes written since the last answer would reach the reserve.
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ _MAX_FIELD_BYTES: Final = 64 * 1024
 _MAX_FIELDS: Final = 200
 _BATCH_BYTES: Final = 1 << 20
 _FORM_OVERHEAD: Final = 1 << 20  # headers and text fields allowed beyond the file limit
-_SPACE_CHECK_BYTES: Final = 16 << 20  # the free space is checked again after this many bytes
+_SPACE_CHECK_BYTES: Final = 16 << 20  # the free space is asked again after this many bytes
 _MAX_HEADER_BYTES: Final = 16 * 1024  # all header lines of one part
 _MAX_HEADERS: Final = 16  # header lines in one part
 _BOUNDARY: Final = re.compile(r"[0-9A-Za-z'()+_,\-./:=? ]{0,69}[0-9A-Za-z'()+_,\-./:=?]")
@@ -117,7 +118,7 @@ class _Receiver:
         self.max_bytes = max_bytes
         self.max_files = max_files
         self.min_free_bytes = min_free_bytes
-        self._next_space_check = 0
+        self._room = 0  # bytes that may be written before the free space is asked again
         self.form = ReceivedForm()
         self.ended = False
         self._header_field = b""
@@ -221,9 +222,8 @@ class _Receiver:
             self._total += len(chunk)
             if self._total > self.max_bytes:
                 raise UploadTooLargeError(_too_large(self.max_bytes))
-            if self.min_free_bytes and self._total >= self._next_space_check:
-                self._next_space_check = self._total + _SPACE_CHECK_BYTES
-                check_free_space(self.store, self.min_free_bytes)
+            if self.min_free_bytes:
+                self._make_room(len(chunk))
             with _disk_full_refused():
                 self._fh.write(chunk)
             self._digest.update(chunk)
@@ -235,6 +235,23 @@ class _Receiver:
                     "send files in file fields."
                 )
                 raise UploadError(msg)
+
+    def _make_room(self, size: int) -> None:
+        """Refuse a write of ``size`` bytes that would eat into the free-space reserve.
+
+        The free space is asked (one statvfs) when the room left by the last answer is
+        used up, and at least every 16 MB (other writers use the disk too), so no write
+        passes the reserve by more than what others wrote meanwhile.
+
+        Raises:
+            InsufficientStorageError: less than ``size`` bytes above the reserve.
+        """
+        if self._room < size:
+            free = shutil.disk_usage(self.store.incoming).free
+            self._room = min(free - self.min_free_bytes, _SPACE_CHECK_BYTES)
+            if self._room < size:
+                raise InsufficientStorageError(_STORAGE_FULL)
+        self._room -= size
 
     def _part_end(self) -> None:
         if self._fh is not None and self._path is not None:
@@ -326,7 +343,9 @@ def _too_large(max_bytes: int) -> str:
 
 _STORAGE_FULL: Final = (
     "The server's storage is nearly full, so the upload was not accepted (nothing of it was "
-    "kept); try again later, or ask the server's administrator to free space."
+    "kept); try again later, or ask the server's administrator to free space in the data "
+    "directory (LOCEVAL_DATA_DIR): delete old evaluations or datasets, set "
+    "LOCEVAL_RETENTION_DAYS, or give the volume more space."
 )
 
 

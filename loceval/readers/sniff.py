@@ -77,7 +77,7 @@ def sniff_format(path: Path) -> TrajectoryFormat:
         raise ReaderError(msg) from err
     if head.startswith(_BAG_MAGICS):
         return TrajectoryFormat.BAG
-    if not head.strip():
+    if not _visible(head):
         what = "empty" if not head else "empty but for whitespace"
         msg = f"{str(path)!r} is {what}; give the file that holds the recording."
         raise ReaderError(msg)
@@ -97,8 +97,17 @@ def sniff_format(path: Path) -> TrajectoryFormat:
     return fmt
 
 
+def _visible(head: bytes) -> bool:
+    """Whether the text holds anything but whitespace, Unicode's separators included.
+
+    Python's ``str.strip`` also takes the ASCII separators 0x1c-0x1f and U+0085, U+2028:
+    a file of those alone is as blank as one of spaces.
+    """
+    return bool(head.decode("utf-8-sig", errors="replace").strip())
+
+
 def _sniff_text(head: bytes) -> TrajectoryFormat | None:
-    if not head.strip() or b"\x00" in head:
+    if not _visible(head) or b"\x00" in head:
         return None
     text = head.decode("utf-8-sig", errors="replace")
     if "\r" in text and "\n" not in text:
@@ -106,7 +115,7 @@ def _sniff_text(head: bytes) -> TrajectoryFormat | None:
     if len(head) == _HEAD_BYTES and "\n" in text:
         text = text[: text.rindex("\n")]  # drop the cut-off last line
     lines = [line.strip() for line in text.split("\n") if line.strip()]
-    first = lines[0]
+    first = lines[0] if lines else ""  # blank but for a cut-off last line: no data below
     if first.split(",", 1)[0].strip().lower() == "format version":
         return TrajectoryFormat.MOTIVE
     if _is_euroc_header(first):

@@ -13,6 +13,7 @@ from service.api.responses import problems
 from service.db import Dataset, get_owned
 from service.links import api_url
 from service.metrics import count_upload
+from service.schema_base import NO_NUL
 from service.schemas import (
     MAX_DATASET_NAME,
     MAX_TAG,
@@ -28,6 +29,7 @@ __all__ = ["router"]
 
 router = APIRouter(prefix="/datasets", tags=["datasets"])
 
+_PRINTABLE = r"^[^\x00-\x1f\x7f]*$"  # control characters are refused (422)
 _UPLOAD_BODY = {
     "required": True,
     "content": {
@@ -46,11 +48,13 @@ _UPLOAD_BODY = {
                     "name": {
                         "type": "string",
                         "maxLength": MAX_DATASET_NAME,
+                        "pattern": _PRINTABLE,
                         "description": "default (or empty): the file name; a longer name or "
                         "one with control characters is refused (422), never shortened",
                     },
                     "tags": {
                         "type": "string",
+                        "pattern": _PRINTABLE,
                         "description": f"comma-separated, at most {MAX_TAGS} tags of up to "
                         f"{MAX_TAG} characters; longer ones are refused (422)",
                     },
@@ -117,7 +121,7 @@ async def create_dataset(
 def read_datasets(
     runtime: RuntimeDep,
     project_id: ProjectDep,
-    tag: Annotated[str | None, Query(max_length=50)] = None,
+    tag: Annotated[str | None, Query(max_length=50, pattern=NO_NUL)] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
     offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
 ) -> DatasetsPublic:
@@ -133,7 +137,9 @@ def read_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep) -
 
 
 @router.delete(
-    "/{dataset_id}", status_code=status.HTTP_204_NO_CONTENT, responses=problems(404, 409)
+    "/{dataset_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    responses=problems(404, 409, 507),
 )
 def delete_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Delete a dataset and its file (refused while a queued or running evaluation uses it).

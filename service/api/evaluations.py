@@ -42,7 +42,7 @@ def _accepted(evaluation: Evaluation, response: Response, runtime: Runtime) -> E
     "/evaluations",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=EvaluationPublic,
-    responses=problems(404, 503),
+    responses=problems(404, 503, 507),
 )
 def create_evaluation_job(
     body: EvaluationCreate,
@@ -59,7 +59,7 @@ def create_evaluation_job(
     "/ranging",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=EvaluationPublic,
-    responses=problems(404, 503),
+    responses=problems(404, 503, 507),
 )
 def create_ranging_job(
     body: RangingCreate,
@@ -112,7 +112,7 @@ def read_evaluation(
 @router.delete(
     "/evaluations/{evaluation_id}",
     status_code=status.HTTP_204_NO_CONTENT,
-    responses=problems(404, 409),
+    responses=problems(404, 409, 507),
 )
 def delete_evaluation(evaluation_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Delete a finished evaluation and its artifacts (409 while it is queued or running).

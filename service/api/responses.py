@@ -17,7 +17,8 @@ _DESCRIPTIONS = {
     413: "upload larger than the limit",
     422: "invalid request or unusable input (the detail says what to do)",
     503: "database or queue unreachable",
-    507: "the server's storage is nearly full (try later)",
+    507: "the server's storage is full or nearly so: nothing was saved (the detail says "
+    "what to free)",
 }
 
 

@@ -37,7 +37,7 @@ router = APIRouter(prefix="/schedules", tags=["schedules"])
     "",
     status_code=status.HTTP_201_CREATED,
     response_model=ScheduleWithSecret,
-    responses=problems(),
+    responses=problems(507),
 )
 def create_schedule(
     body: ScheduleCreate, response: Response, runtime: RuntimeDep, project_id: ProjectDep
@@ -66,7 +66,7 @@ def read_schedule(schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep)
     return schedule_public(get_owned(runtime.sessions, Schedule, schedule_id, project_id))
 
 
-@router.patch("/{schedule_id}", response_model=SchedulePublic, responses=problems(404))
+@router.patch("/{schedule_id}", response_model=SchedulePublic, responses=problems(404, 507))
 def update_schedule(
     schedule_id: str, body: SchedulePatch, runtime: RuntimeDep, project_id: ProjectDep
 ) -> SchedulePublic:
@@ -78,7 +78,9 @@ def update_schedule(
     return schedule_public(schedules.update_schedule(runtime, project_id, schedule_id, body))
 
 
-@router.post("/{schedule_id}/secret", response_model=ScheduleWithSecret, responses=problems(404))
+@router.post(
+    "/{schedule_id}/secret", response_model=ScheduleWithSecret, responses=problems(404, 507)
+)
 def rotate_secret(
     schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep
 ) -> ScheduleWithSecret:
@@ -86,7 +88,9 @@ def rotate_secret(
     return schedule_with_secret(schedules.rotate_secret(runtime, project_id, schedule_id))
 
 
-@router.delete("/{schedule_id}", status_code=status.HTTP_204_NO_CONTENT, responses=problems(404))
+@router.delete(
+    "/{schedule_id}", status_code=status.HTTP_204_NO_CONTENT, responses=problems(404, 507)
+)
 def delete_schedule(schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Delete a schedule with its runs and their reports (the evaluations stay)."""
     schedules.delete_schedule(runtime, project_id, schedule_id)
@@ -97,7 +101,7 @@ def delete_schedule(schedule_id: str, runtime: RuntimeDep, project_id: ProjectDe
     "/{schedule_id}/run",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=ScheduleRunPublic,
-    responses=problems(404),
+    responses=problems(404, 507),
 )
 def run_schedule_now(
     schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep

@@ -22,9 +22,8 @@ __all__ = ["run_keys_create", "run_keys_revoke", "run_serve", "run_worker"]
 
 def run_serve(args: argparse.Namespace) -> int:
     """Start the HTTP service (with its queue consumer unless told not to)."""
-    import uvicorn  # noqa: PLC0415
-
     from service.auth import bootstrap  # noqa: PLC0415
+    from service.http_server import run  # noqa: PLC0415
     from service.jobs import create_runtime  # noqa: PLC0415
     from service.main import create_app  # noqa: PLC0415
     from service.settings import get_settings  # noqa: PLC0415
@@ -44,7 +43,7 @@ def run_serve(args: argparse.Namespace) -> int:
         f"{settings.public_url.rstrip('/')}/, set by LOCEVAL_PUBLIC_URL)",
         flush=True,
     )
-    uvicorn.run(app, host=host, port=port, log_level="info", access_log=False)
+    run(app, host=host, port=port)
     return 0
 
 

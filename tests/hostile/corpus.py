@@ -486,6 +486,43 @@ OPTION_CASES: Final[list[Case]] = [
 """Hostile option values with a valid TUM reference."""
 
 
+# --- tiny files ----------------------------------------------------------------------
+
+TINY: Final[dict[str, bytes]] = {
+    "1c": b"\x1c",  # the ASCII separators: whitespace to Python's str.strip, not to bytes'
+    "1d": b"\x1d",
+    "1e": b"\x1e",
+    "1f": b"\x1f",
+    "nel": "\x85".encode(),  # U+0085 and U+2028: Unicode line breaks
+    "ls": "\u2028".encode(),
+    "nul": b"\x00",
+    "ff": b"\xff",
+    "hash": b"#",
+    "comma": b",",
+    "digit": b"7",
+    "newline": b"\n",
+    "1c-lines": b"\x1c\n\x1d\n\x1e\n",
+}
+"""One-byte and other tiny files, by name."""
+
+
+def _tiny_case(base: Base, name: str, content: bytes) -> Case:
+    def build(into: Path) -> Path:
+        path = into / base.filename
+        path.write_bytes(content)
+        return path
+
+    return Case(f"{base.name}-tiny-{name}", base, build)
+
+
+def _tiny_cases() -> list[Case]:
+    """Every tiny file under a TUM name; the separators under the other text and model names."""
+    cases = [_tiny_case(BASES["tum"], name, content) for name, content in TINY.items()]
+    for base in ("csv", "points", "anchors", "ranges", "obj", "dxf"):
+        cases += [_tiny_case(BASES[base], name, TINY[name]) for name in ("1c", "1d", "1e")]
+    return cases
+
+
 # --- the list --------------------------------------------------------------------------
 
 
@@ -513,6 +550,7 @@ def _all_cases() -> list[Case]:
         cases.append(_selector_case(BASES[name], "ansi-selector", "@/\x1b[31mred"))
     cases += ZIP_CASES + [_truncated_zip(f) for f in (0.1, 0.5, 0.95)]
     cases += _building_cases()
+    cases += _tiny_cases()
     cases += OPTION_CASES
     ids = [case.id for case in cases]
     assert len(ids) == len(set(ids)), "case ids must be unique"

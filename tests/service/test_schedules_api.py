@@ -196,6 +196,42 @@ def test_pause_resume_change_and_delete(client: TestClient):
     assert client.post(f"{url}/run").status_code == 404
 
 
+@pytest.mark.parametrize(
+    "field", ["produce", "selection", "template", "paused", "name", "timezone", "cron"]
+)
+def test_a_null_for_a_field_that_cannot_be_empty_is_refused(client: TestClient, field: str):
+    """PATCH with null for a required field: 422 naming it, nothing saved, the list still works."""
+    schedule = client.post("/api/v1/schedules", json=schedule_body()).json()
+    url = f"/api/v1/schedules/{schedule['id']}"
+    response = client.patch(url, json={field: None, "cron": "15 5 * * *"} | {field: None})
+    assert response.status_code == 422, response.text
+    body = response.json()
+    assert response.headers["content-type"].startswith("application/problem+json")
+    assert [e["loc"] for e in body["errors"]] == [["body", field]], body
+    assert f"body.{field}: may be left out" in body["detail"]
+    shown = client.get(url)
+    assert shown.status_code == 200, shown.text
+    kept = {k: v for k, v in shown.json().items() if k != "next_fire_at"}
+    assert kept == {
+        k: v for k, v in schedule.items() if k not in {"next_fire_at", "webhook_secret"}
+    }
+    assert client.get("/api/v1/schedules").status_code == 200
+    assert client.post(f"{url}/run").status_code == 202
+
+
+def test_the_patch_schema_says_which_fields_may_be_null(client: TestClient):
+    """The OpenAPI document: only webhook_url of a patch may be null; no field is required."""
+    schema = client.get("/openapi.json").json()["components"]["schemas"]["SchedulePatch"]
+    nullable = {
+        name
+        for name, prop in schema["properties"].items()
+        if {"type": "null"} in prop.get("anyOf", []) or prop.get("type") == "null"
+    }
+    assert nullable == {"webhook_url"}
+    assert "required" not in schema
+    assert all("default" not in p for n, p in schema["properties"].items() if n != "webhook_url")
+
+
 def test_other_projects_see_nothing(client: TestClient):
     """Another project's key gets 404 for the schedule, its runs and its reports."""
     schedule = client.post("/api/v1/schedules", json=schedule_body(selection={})).json()

@@ -74,7 +74,10 @@ CHECKS = [
 ]
 """Every built-in check of single responses; the stateful ones need links the API lacks."""
 
-EXAMPLES = 20
+EXAMPLES = 100
+"""Examples per operation of the with-key run (the issue asks for at least 100, every check)."""
+OTHER_EXAMPLES = 20
+"""Examples per operation of the runs that check one property (no key, uploads of files)."""
 
 
 class _Proxy:
@@ -199,6 +202,7 @@ def test_schema_is_the_served_one(api: Api) -> None:
     deadline=None,
     suppress_health_check=list(HealthCheck),
     derandomize=True,
+    phases=[Phase.explicit, Phase.generate],  # a failure is reported as found, not shrunk
 )
 def test_api_with_key(case: Any, api: Api) -> None:
     """With a valid key: no 500, responses as documented, every error a problem document."""
@@ -208,7 +212,7 @@ def test_api_with_key(case: Any, api: Api) -> None:
 @schema.include(path_regex="^/api/v1/(datasets|evaluate)$", method="POST").parametrize()
 @schema.given(picks=st.lists(st.sampled_from(RECORDINGS), min_size=2, max_size=4))
 @settings(
-    max_examples=EXAMPLES,
+    max_examples=OTHER_EXAMPLES,
     deadline=None,
     suppress_health_check=list(HealthCheck),
     derandomize=True,
@@ -289,10 +293,11 @@ def _call_with_key(case: Any, api: Api) -> None:
 
 @api_schema.parametrize()
 @settings(
-    max_examples=EXAMPLES,
+    max_examples=OTHER_EXAMPLES,
     deadline=None,
     suppress_health_check=list(HealthCheck),
     derandomize=True,
+    phases=[Phase.explicit, Phase.generate],
 )
 def test_api_without_key(case: Any, api: Api) -> None:
     """Without a key (or with a generated one) nothing is reached: 401 or a routing error."""
