@@ -163,7 +163,7 @@ def _wait_done(cluster: Cluster, ids: list[str]) -> dict[str, tuple[str, int, dt
     return rows
 
 
-def _submit(cluster: Cluster) -> list[str]:
+def _submit(cluster: Cluster, jobs: int = JOBS) -> list[str]:
     reference, estimate = cluster.datasets
     with cluster.server.client() as client:
         return [
@@ -173,7 +173,7 @@ def _submit(cluster: Cluster) -> list[str]:
                 [{"dataset_id": estimate, "name": f"job {k}"}],
                 {"formats": ["errors.csv"]},
             )["id"]
-            for k in range(JOBS)
+            for k in range(jobs)
         ]
 
 
@@ -251,7 +251,9 @@ def test_worker_killed_mid_job_its_jobs_run_again_within_20_s(cluster: Cluster) 
     """SIGKILL of a worker mid-job: its jobs are noticed (10 s lease) and run elsewhere."""
     cluster.ensure_workers()
     victim = cluster.workers[0]
-    ids = _submit(cluster)
+    # One job per thread: what is timed is the killed worker's jobs coming back, not one
+    # remaining worker draining a backlog alone.
+    ids = _submit(cluster, 2 * _WORKERS)
     started = re.compile(rf"evaluation ({'|'.join(ids)}) started")
     if victim.wait_for_line(started, 60) is None:
         pytest.fail(f"the worker started no job within 60 s:\n{victim.output}")
