@@ -9,10 +9,12 @@ locked or unreachable database) and lets everything else through, so a bug stays
 
 from __future__ import annotations
 
+import logging
 import sqlite3
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Final, Literal
+from typing import Final, Literal, TypeVar
 
 from sqlalchemy.exc import DisconnectionError, InterfaceError, OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
@@ -31,7 +33,25 @@ except ImportError:  # pragma: no cover  (installed with the scale extra)
 else:
     _REDIS_ERRORS = (RedisError,)
 
-__all__ = ["DATABASE_ERRORS", "QUEUE_ERRORS", "converted"]
+__all__ = [
+    "BACKOFF_FIRST_S",
+    "BACKOFF_MAX_S",
+    "DATABASE_ERRORS",
+    "OUTAGE_ERRORS",
+    "QUEUE_ERRORS",
+    "converted",
+    "persist",
+    "unavailable",
+]
+
+logger = logging.getLogger(__name__)
+
+BACKOFF_FIRST_S: Final = 0.25
+BACKOFF_MAX_S: Final = 2.0
+"""Retries of a write that met an outage: 0.25, 0.5, 1, 2, 2, ... s, so a database that
+comes back is used again within 2 s."""
+
+T = TypeVar("T")
 
 DATABASE_ERRORS: Final[tuple[type[Exception], ...]] = (
     OperationalError,
@@ -49,6 +69,11 @@ QUEUE_ERRORS: Final[tuple[type[Exception], ...]] = (
 )
 """The queue backends' errors of an unreachable queue (huey passes them through)."""
 
+OUTAGE_ERRORS: Final[tuple[type[Exception], ...]] = (*DATABASE_ERRORS, *_REDIS_ERRORS)
+"""What a route may let through for the error handlers to answer 503 (not 500): the
+database's and Redis's outages. (The builtin and sqlite3 errors of :data:`QUEUE_ERRORS` are
+only outages where a queue call raised them, so routes convert those with :func:`converted`.)"""
+
 _WHAT: Final = {
     "queue": ("The job queue", QUEUE_ERRORS + DATABASE_ERRORS),
     "database": ("The metadata database", DATABASE_ERRORS),
@@ -65,14 +90,56 @@ def converted(what: Literal["queue", "database"]) -> Iterator[None]:
         ServiceUnavailableError: the backend cannot be reached; the message names it and
             the error's class, and asks to try again.
     """
-    label, errors = _WHAT[what]
+    _, errors = _WHAT[what]
     try:
         yield
     except errors as err:
         if is_storage_full(err):
             raise InsufficientStorageError(STORAGE_FULL_DETAIL) from err
-        msg = (
-            f"{label} cannot be reached ({type(err).__name__}); try again in a minute "
-            "(GET /readyz shows when it is back)."
-        )
-        raise ServiceUnavailableError(msg) from err
+        raise unavailable(err, what) from err
+
+
+def unavailable(
+    err: Exception, what: Literal["queue", "database"] | None = None
+) -> ServiceUnavailableError:
+    """Return the 503 error of a backend's outage (``what`` by default: from the error's class)."""
+    if what is None:
+        what = "database" if isinstance(err, DATABASE_ERRORS) else "queue"
+    label, _ = _WHAT[what]
+    msg = (
+        f"{label} cannot be reached ({type(err).__name__}); try again in a minute "
+        "(GET /readyz shows when it is back)."
+    )
+    return ServiceUnavailableError(msg)
+
+
+def persist(call: Callable[[], T], what: str, job_id: str, *, patience_s: float) -> T:
+    """Return ``call()``, retried with backoff while the database is away, for ``patience_s``.
+
+    Raises:
+        OperationalError: (or another of ``DATABASE_ERRORS``) still failing after patience.
+    """
+    deadline = time.monotonic() + patience_s
+    delay = BACKOFF_FIRST_S
+    failures = 0
+    while True:
+        try:
+            result = call()
+        except DATABASE_ERRORS as err:
+            failures += 1
+            if failures == 1:
+                logger.warning(
+                    "%s of %s: the database cannot be reached (%s); retrying for up to %g s",
+                    what,
+                    job_id,
+                    type(err).__name__,
+                    patience_s,
+                )
+            if time.monotonic() + delay > deadline:
+                raise
+            time.sleep(delay)
+            delay = min(delay * 2, BACKOFF_MAX_S)
+        else:
+            if failures:
+                logger.warning("%s of %s done after %d retries", what, job_id, failures)
+            return result

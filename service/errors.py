@@ -12,7 +12,7 @@ import json
 import logging
 import sqlite3
 import uuid
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar, Final
 
 from fastapi import FastAPI, Request
@@ -36,6 +36,7 @@ from service.redact import register_private_root, scrub
 
 __all__ = [
     "PROBLEM_JSON",
+    "RETRY_AFTER_S",
     "STATUS_BY_ERROR",
     "AuthenticationError",
     "ConflictError",
@@ -56,6 +57,7 @@ __all__ = [
     "is_storage_full",
     "problem",
     "problem_for",
+    "problem_headers",
     "register_private_root",
     "scrub",
     "status_for",
@@ -65,6 +67,8 @@ logger = logging.getLogger(__name__)
 
 PROBLEM_JSON: Final = "application/problem+json"
 _METHODS: Final = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
+RETRY_AFTER_S: Final = 5
+"""The ``Retry-After`` of a 503: a restarting database or queue is back within seconds."""
 
 
 class NotFoundError(LocevalError):
@@ -273,13 +277,25 @@ def _response(body: Mapping[str, Any], headers: Mapping[str, str] | None = None)
     )
 
 
+def problem_headers(exc: LocevalError) -> dict[str, str]:
+    """Return the headers that go with an error's problem document.
+
+    A 401 names the scheme (``WWW-Authenticate``); a 503 says when to try again
+    (``Retry-After``), as ``/readyz`` does while the database or the queue is away.
+    """
+    if isinstance(exc, AuthenticationError):
+        return {"WWW-Authenticate": "Bearer"}
+    if isinstance(exc, ServiceUnavailableError) and not isinstance(exc, StartupError):
+        return {"Retry-After": str(RETRY_AFTER_S)}
+    return {}
+
+
 async def _handle_loceval_error(_request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, LocevalError)  # noqa: S101  (registered for this class only)
     body = problem_for(exc)
-    headers = {"WWW-Authenticate": "Bearer"} if isinstance(exc, AuthenticationError) else None
     if body["status"] >= 500:
         logger.error("%s: %s", type(exc).__name__, exc)
-    return _response(body, headers)
+    return _response(body, problem_headers(exc))
 
 
 async def _handle_validation_error(_request: Request, exc: Exception) -> JSONResponse:
@@ -366,9 +382,34 @@ async def _handle_bug(_request: Request, exc: Exception) -> JSONResponse:
     return _response(internal_problem(error_id))
 
 
-def install_error_handlers(app: FastAPI) -> None:
-    """Register the problem+json handlers."""
+def install_error_handlers(
+    app: FastAPI,
+    *,
+    outages: tuple[type[Exception], ...] = (),
+    unavailable: Callable[[Exception], ServiceUnavailableError] | None = None,
+) -> None:
+    """Register the problem+json handlers.
+
+    Args:
+        app: the application.
+        outages: the backends' errors of an outage (:data:`service.adapters.OUTAGE_ERRORS`)
+            that a route may let through: answered 503 with ``Retry-After``, like
+            :class:`ServiceUnavailableError`, not 500. (Registered by class, they are handled
+            inside the app: the kept-alive connection stays open, unlike after a 500.)
+        unavailable: turns such an error into the 503 error
+            (:func:`service.adapters.unavailable`).
+    """
     app.add_exception_handler(LocevalError, _handle_loceval_error)
+    if unavailable is not None:
+        convert = unavailable
+
+        async def _handle_outage(request: Request, exc: Exception) -> JSONResponse:
+            if is_storage_full(exc):  # SQLite's "disk is full" is an OperationalError too
+                return await _handle_backend_error(request, exc)
+            return await _handle_loceval_error(request, convert(exc))
+
+        for outage in outages:
+            app.add_exception_handler(outage, _handle_outage)
     app.add_exception_handler(RequestValidationError, _handle_validation_error)
     app.add_exception_handler(InvalidFieldsError, _handle_validation_error)
     app.add_exception_handler(StarletteHTTPException, _handle_http_error)

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Final
 
 from huey import crontab
+from huey.exceptions import RetryTask
 from sqlalchemy.orm import Session
 
 from exporters import ARTIFACTS
@@ -53,7 +54,8 @@ from service.schedules import RUN, tick
 from service.schemas import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
 from service.settings import Settings
 from service.storage import EVALUATIONS, RUNS, BlobStore
-from service.tracking import recover, release, tracked_job
+from service.tracking import JobDeferred, recover, release, tracked_job
+from service.watchdog import start_watchdog
 
 __all__ = [
     "JOB_KINDS",
@@ -65,6 +67,8 @@ __all__ = [
     "release",
 ]
 
+_DEFERRED_DELAY_S: Final = 2.0
+"""When a job put off by a database outage is tried again (its thread waited 30 s already)."""
 _WEBHOOK_RETRY_DELAY_S: Final = 2.0  # then 4 s (retry_backoff=2), as before the queue did it
 
 
@@ -312,6 +316,7 @@ def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runt
         worker_id=f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}",
         kinds={kind.name: kind for kind in JOB_KINDS},
         release=release,
+        watch=lambda r: start_watchdog(r).stop,
     )
     for kind in JOB_KINDS:
         runtime.tasks[kind.name] = _job_task(runtime, kind)
@@ -346,6 +351,9 @@ def _job_task(runtime: Runtime, kind: JobKind) -> Any:  # noqa: ANN401  (huey's 
 
     @runtime.huey.task(name=kind.task_name)  # type: ignore[untyped-decorator]
     def run(job_id: str) -> None:
-        kind.execute(runtime, job_id)
+        try:
+            kind.execute(runtime, job_id)
+        except JobDeferred as err:  # the database was away: the row is queued, so is this
+            raise RetryTask(str(err), delay=_DEFERRED_DELAY_S) from err
 
     return run

@@ -14,6 +14,7 @@ from fastapi import APIRouter, FastAPI
 
 from loceval import __version__
 from service import web
+from service.adapters import OUTAGE_ERRORS, unavailable
 from service.api import datasets, docs, evaluations, health, hops, schedules
 from service.api.middleware import ApiKeyMiddleware
 from service.errors import StartupError, install_error_handlers
@@ -102,7 +103,7 @@ def create_app(
     app.state.runtime = runtime
     app.state.settings = settings
     app.state.metrics = create_metrics(runtime)
-    install_error_handlers(app)
+    install_error_handlers(app, outages=OUTAGE_ERRORS, unavailable=unavailable)
     app.add_middleware(ApiKeyMiddleware)
     app.add_middleware(MetricsMiddleware, metrics=app.state.metrics)  # 401s counted too
     app.add_middleware(RequestLogMiddleware)  # added last: the outermost, it sees every request

@@ -75,6 +75,9 @@ class Runtime:
         tasks: the queue task of each job kind by kind name, and ``"webhook"``.
         release: queues again the jobs this process still runs when it stops
             (:func:`service.tracking.release`; given by the wiring, which knows both).
+        watch: starts the re-queue check of a consumer process and returns what stops it
+            (:func:`service.watchdog.start_watchdog`; given by the wiring).
+        active: the ids of the jobs this process is running now (never judged abandoned).
     """
 
     settings: Settings
@@ -86,6 +89,9 @@ class Runtime:
     kinds: Mapping[str, JobKind] = field(default_factory=dict)
     tasks: dict[str, Callable[[str], object]] = field(default_factory=dict)
     release: Callable[[Runtime], int] = lambda _runtime: 0
+    watch: Callable[[Runtime], Callable[[], None]] = lambda _runtime: lambda: None
+    active: set[str] = field(default_factory=set)
+    _unwatch: Callable[[], None] | None = None
 
     def enqueue(self, kind: str, job_id: str, *, requeued: str | None = None) -> None:
         """Queue a job of a kind (in immediate mode: run it now).
@@ -126,10 +132,14 @@ class Runtime:
             shutdown_timeout=_CONSUMER_SHUTDOWN_S,
         )
         consumer.start()
+        self._unwatch = self.watch(self)
         return consumer
 
     def stop_consumer(self, consumer: Consumer) -> None:
         """Stop the consumer (running jobs get 10 s) and queue again what did not finish."""
+        if self._unwatch is not None:
+            self._unwatch()
+            self._unwatch = None
         consumer.stop(graceful=True)
         released = self.release(self)
         if released:

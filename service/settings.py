@@ -64,7 +64,7 @@ class Settings(BaseSettings):
     max_upload_bytes: Annotated[int, Field(gt=0)] = 4 * _GIB
     workers: Annotated[int, Field(ge=1, le=64)] = 2
     job_attempts: Annotated[int, Field(ge=1, le=20)] = 3
-    job_lease_s: Annotated[float, Field(gt=0)] = 60.0
+    job_lease_s: Annotated[float, Field(gt=0)] = 10.0
     templates_dir: Path = _REPO / "templates"
     public_url: str = "http://127.0.0.1:8000"
     host: Annotated[str, Field(min_length=1)] = "127.0.0.1"

@@ -3,9 +3,15 @@
 Job state lives in the database, not in the queue or in process memory: the queue carries
 only job ids. A worker claims a job with a conditional update (``queued -> running``), so a
 job enqueued twice runs once; while it runs it beats a heartbeat. A job whose heartbeat stops
-(the worker crashed or the service restarted) is found by :func:`recover`, on start and once a
-minute, and is queued again (the work is idempotent: artifacts are rebuilt from the inputs) or,
-after ``job_attempts`` starts, marked failed with the reason.
+(the worker crashed or the service restarted) is found by :func:`recover`, on start and every
+few seconds (:mod:`service.watchdog`), and is queued again (the work is idempotent: artifacts
+are rebuilt from the inputs) or, after ``job_attempts`` starts, marked failed with the reason.
+
+The database may be away for a moment (a restart, a failover). Nothing is lost then: a claim,
+a progress write, a heartbeat or the final write that fails with an outage error is retried with
+backoff (:func:`persist`); a job that still cannot claim, or whose own reads fail, is put back
+(``queued``, the attempt not counted) and :class:`JobDeferred` tells the queue task to queue
+it again later. An outage is never recorded as the job's failure, nor logged as a bug.
 
 :func:`tracked_job` is the one sequence every executor runs inside; each transition (queued,
 started, succeeded, failed, requeued) is one log line with the kind, job id, project,
@@ -29,16 +35,20 @@ from typing import Any, Final
 from sqlalchemy import or_, select, update
 
 from loceval.errors import LocevalError
-from service.adapters import DATABASE_ERRORS
+from service.adapters import BACKOFF_MAX_S, DATABASE_ERRORS, persist
 from service.db import JobStatus, utcnow
 from service.errors import internal_problem, problem, problem_for
 from service.logs import log_context, log_transition
 from service.runtime import JobKind, JobModel, Runtime
 
 __all__ = [
+    "CLAIM_PATIENCE_S",
+    "FINISH_PATIENCE_S",
     "Heartbeat",
+    "JobDeferred",
     "ProgressWriter",
     "TrackedJob",
+    "beat_interval",
     "claim",
     "finish",
     "recover",
@@ -49,6 +59,35 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 _PROGRESS_INTERVAL_S: Final = 0.5
+CLAIM_PATIENCE_S: Final = 30.0
+"""How long a worker thread retries a claim before it puts the message back in the queue
+(with a delay) and takes the next one: a long outage does not hold a thread for ever."""
+FINISH_PATIENCE_S: Final = 300.0
+"""How long the end of a finished job is retried (its artifacts are published; giving up
+means the lease runs out and the job runs again)."""
+_BEAT_MAX_S: Final = 2.0
+_BEAT_MIN_S: Final = 0.2
+
+
+class JobDeferred(Exception):  # noqa: N818  (not an error of the job: it is put off)
+    """The job could not be claimed or run because the database was away; queue it again.
+
+    Not a :class:`LocevalError`: the job has not failed. The queue task turns it into a
+    retry of the message after a delay (:func:`service.jobs.create_runtime`).
+    """
+
+
+_OUTAGES: Final[tuple[type[Exception], ...]] = (*DATABASE_ERRORS, JobDeferred)
+"""What ends a job's run without ending the job: it is put back and queued again."""
+
+
+def beat_interval(lease_s: float) -> float:
+    """Return the heartbeat period (also the re-queue check's): a fifth of the lease, <= 2 s.
+
+    With the default lease of 10 s, a job is judged abandoned only after five beats in a row
+    did not arrive, while a worker killed mid-job is noticed within lease + one check (12 s).
+    """
+    return min(max(lease_s / 5, _BEAT_MIN_S), _BEAT_MAX_S)
 
 
 @dataclass
@@ -110,7 +149,16 @@ def tracked_job(
     error id. Leaving normally stores what :meth:`TrackedJob.succeed` was given.
     """
     spec = runtime.kinds[kind]
-    claimed = claim(runtime, spec.model, job_id, stage=stage)
+    try:
+        claimed = persist(
+            lambda: claim(runtime, spec.model, job_id, stage=stage),
+            "claim",
+            job_id,
+            patience_s=CLAIM_PATIENCE_S,
+        )
+    except DATABASE_ERRORS as err:  # the row is still queued: the message is queued again
+        msg = f"{kind} {job_id} could not be claimed: the database cannot be reached"
+        raise JobDeferred(msg) from err
     if claimed is None:
         yield None
         return
@@ -119,34 +167,102 @@ def tracked_job(
         runtime, spec, job_id, project_id, attempt, ProgressWriter(runtime, spec.model, job_id)
     )
     heartbeat = Heartbeat(runtime, spec.model, job_id)
+    runtime.active.add(job_id)
     heartbeat.start()
     started = time.monotonic()
-    with log_context(job_id=job_id, kind=kind, project=project_id):
-        log_transition("started", kind, job_id, project=project_id, attempt=attempt)
-        status, values = JobStatus.SUCCEEDED, job.values
-        try:
-            yield job
-            values = job.values
-        except LocevalError as err:
-            status, values = JobStatus.FAILED, {"error": problem_for(err)}
-        except Exception:  # a bug in the job: it must not kill the consumer thread
-            error_id = uuid.uuid4().hex[:12]
-            logger.exception("%s %s failed with a bug (error_id=%s)", kind, job_id, error_id)
-            status, values = JobStatus.FAILED, {"error": internal_problem(error_id)}
-        finally:
-            heartbeat.stop()
-            job.discard_staging()
-        job.finished_here = finish(runtime, spec.model, job_id, status=status, **values)
-        log_transition(
-            str(status),
-            kind,
+    try:
+        with log_context(job_id=job_id, kind=kind, project=project_id):
+            log_transition("started", kind, job_id, project=project_id, attempt=attempt)
+            status, values = JobStatus.SUCCEEDED, job.values
+            try:
+                yield job
+                values = job.values
+            except LocevalError as err:
+                status, values = JobStatus.FAILED, {"error": problem_for(err)}
+            except _OUTAGES as err:  # an outage, not the job's failure
+                job.discard_staging()
+                _defer(runtime, spec, job_id, attempt, err)
+                msg = f"{kind} {job_id} was put back: the database cannot be reached"
+                raise JobDeferred(msg) from err
+            except Exception:  # a bug in the job: it must not kill the consumer thread
+                error_id = uuid.uuid4().hex[:12]
+                logger.exception("%s %s failed with a bug (error_id=%s)", kind, job_id, error_id)
+                status, values = JobStatus.FAILED, {"error": internal_problem(error_id)}
+            finally:
+                job.discard_staging()
+            job.finished_here = _finish_persisted(runtime, spec.model, job_id, status, values)
+            log_transition(
+                str(status),
+                kind,
+                job_id,
+                level=logging.INFO if status == JobStatus.SUCCEEDED else logging.WARNING,
+                project=project_id,
+                attempt=attempt,
+                duration_s=round(time.monotonic() - started, 3),
+                error=values.get("error", {}).get("type") if "error" in values else None,
+            )
+    finally:  # beats go on until the end is written: a long retry must not look abandoned
+        heartbeat.stop()
+        runtime.active.discard(job_id)
+
+
+def _finish_persisted(
+    runtime: Runtime, model: JobModel, job_id: str, status: str, values: dict[str, Any]
+) -> bool:
+    """Record the job's end, retried through an outage; False if it never could be."""
+    try:
+        return persist(
+            lambda: finish(runtime, model, job_id, status=status, **values),
+            "finish",
             job_id,
-            level=logging.INFO if status == JobStatus.SUCCEEDED else logging.WARNING,
-            project=project_id,
-            attempt=attempt,
-            duration_s=round(time.monotonic() - started, 3),
-            error=values.get("error", {}).get("type") if "error" in values else None,
+            patience_s=FINISH_PATIENCE_S,
         )
+    except DATABASE_ERRORS:
+        logger.error(  # noqa: TRY400  (persist logged the cause)
+            "The end of %s could not be recorded (the database stayed away %g s); the job "
+            "runs again when its lease runs out",
+            job_id,
+            FINISH_PATIENCE_S,
+        )
+        return False
+
+
+def _defer(runtime: Runtime, kind: JobKind, job_id: str, attempt: int, err: Exception) -> None:
+    """Put a job back to ``queued`` after an outage (the attempt not counted)."""
+    model = kind.model
+
+    def put_back() -> None:
+        with runtime.sessions() as session:
+            session.execute(
+                update(model)
+                .where(
+                    model.id == job_id,
+                    model.status == JobStatus.RUNNING,
+                    model.worker == runtime.worker_id,
+                )
+                .values(
+                    status=JobStatus.QUEUED,
+                    attempts=model.attempts - 1,
+                    worker=None,
+                    heartbeat_at=None,
+                    stage="queued again: the database could not be reached",
+                    fraction=0.0,
+                )
+            )
+            session.commit()
+
+    log_transition(
+        "deferred",
+        kind.name,
+        job_id,
+        level=logging.WARNING,
+        attempt=attempt,
+        error=type(err).__name__,
+    )
+    try:
+        persist(put_back, "putting back", job_id, patience_s=CLAIM_PATIENCE_S)
+    except DATABASE_ERRORS:  # still running without a heartbeat: the lease check re-queues it
+        logger.error("%s stays running until its lease runs out", job_id)  # noqa: TRY400
 
 
 def claim(
@@ -226,13 +342,17 @@ class ProgressWriter:
         if stage == self._stage and now - self._last < _PROGRESS_INTERVAL_S:
             return
         self._last, self._stage = now, stage
-        with self.runtime.sessions() as session:
-            session.execute(
-                update(self.model)
-                .where(self.model.id == self.job_id)
-                .values(stage=stage[:200], fraction=min(max(fraction, 0.0), 1.0))
-            )
-            session.commit()
+        try:
+            with self.runtime.sessions() as session:
+                session.execute(
+                    update(self.model)
+                    .where(self.model.id == self.job_id)
+                    .values(stage=stage[:200], fraction=min(max(fraction, 0.0), 1.0))
+                )
+                session.commit()
+        except DATABASE_ERRORS as err:  # progress is shown, not kept: the work goes on
+            self._last, self._stage = 0.0, ""  # write the next one, whatever its stage
+            logger.warning("Progress of %s not stored (%s)", self.job_id, type(err).__name__)
 
 
 class Heartbeat:
@@ -257,9 +377,10 @@ class Heartbeat:
         self._thread.join(timeout=5)
 
     def _run(self) -> None:
-        interval = max(self.runtime.settings.job_lease_s / 4, 0.2)
+        interval = beat_interval(self.runtime.settings.job_lease_s)
         model = self.model
-        while not self._stop.wait(interval):
+        wait, missed = interval, 0
+        while not self._stop.wait(wait):
             try:
                 with self.runtime.sessions() as session:
                     session.execute(
@@ -268,36 +389,66 @@ class Heartbeat:
                         .values(heartbeat_at=utcnow())
                     )
                     session.commit()
-            except DATABASE_ERRORS:  # a lost beat is retried; the job itself goes on
-                logger.warning("Heartbeat of %s failed", self.job_id, exc_info=True)
+            except DATABASE_ERRORS as err:  # a lost beat is retried soon; the job goes on
+                if not missed:
+                    logger.warning("Heartbeat of %s failed (%s)", self.job_id, type(err).__name__)
+                missed += 1
+                wait = min(interval, BACKOFF_MAX_S / 4)
+            else:
+                if missed:
+                    logger.warning("Heartbeat of %s back after %d misses", self.job_id, missed)
+                wait, missed = interval, 0
 
 
 # --- recovery --------------------------------------------------------------------------
 
 
-def recover(runtime: Runtime, *, now: dt.datetime | None = None) -> list[str]:
+def recover(
+    runtime: Runtime,
+    *,
+    now: dt.datetime | None = None,
+    stale: bool = True,
+    lost_after_s: float | None = 60.0,
+) -> list[str]:
     """Re-queue or fail jobs whose worker stopped; return the ids that were re-queued.
 
     A running job (of any kind) whose heartbeat is older than the lease was abandoned: it is
     queued again unless it has been started ``job_attempts`` times, then it fails with the
-    reason. A queued job that the queue no longer holds (a Redis without persistence
-    restarted) is enqueued again; the claim makes a duplicate harmless.
+    reason. A job this process is running is never taken for abandoned. A queued job that
+    the queue no longer holds (a Redis without persistence restarted, a retry that could not
+    be queued) is enqueued again; the claim makes a duplicate harmless.
+
+    Args:
+        runtime: the process's runtime.
+        now: the time to judge by (default: now).
+        stale: look for abandoned running jobs (the watchdog skips it until the database
+            has been reachable for a whole lease: a heartbeat missed during an outage is not
+            a dead worker).
+        lost_after_s: look for queued jobs older than this that the queue does not hold;
+            None: do not look (it lists the queue).
     """
     now = now or utcnow()
     kinds = list(runtime.kinds.values())
-    stale = {kind.name: _requeue_stale(runtime, kind, now) for kind in kinds}
+    requeued = {kind.name: _requeue_stale(runtime, kind, now) if stale else [] for kind in kinds}
     lost: dict[str, list[str]] = {kind.name: [] for kind in kinds}
-    if not runtime.huey.immediate:
-        queued = {kind.name: _queued_before(runtime, kind.model, now) for kind in kinds}
+    if lost_after_s is not None and not runtime.huey.immediate:
+        since = now - dt.timedelta(seconds=lost_after_s)
+        queued = {kind.name: _queued_before(runtime, kind.model, since) for kind in kinds}
         if any(queued.values()):
-            pending = {(t.name, str(t.args[0])) for t in runtime.huey.pending() if t.args}
+            held = {
+                (t.name, str(t.args[0]))
+                for t in [*runtime.huey.pending(), *runtime.huey.scheduled()]
+                if t.args
+            }
             for kind in kinds:
-                held = {job_id for name, job_id in pending if name == kind.task_name}
-                lost[kind.name] = sorted(queued[kind.name] - held - set(stale[kind.name]))
+                mine = {job_id for name, job_id in held if name == kind.task_name}
+                lost[kind.name] = sorted(queued[kind.name] - mine - set(requeued[kind.name]))
     for kind in kinds:
-        for job_id in stale[kind.name] + lost[kind.name]:
+        for job_id in requeued[kind.name]:
             runtime.enqueue(kind.name, job_id, requeued="interrupted")
-    return [job_id for kind in kinds for job_id in stale[kind.name] + lost[kind.name]]
+        for job_id in lost[kind.name]:
+            runtime.enqueue(kind.name, job_id, requeued="not in the queue")
+    return [job_id for kind in kinds for job_id in requeued[kind.name] + lost[kind.name]]
 
 
 def _requeue_stale(runtime: Runtime, kind: JobKind, now: dt.datetime) -> list[str]:
@@ -307,12 +458,16 @@ def _requeue_stale(runtime: Runtime, kind: JobKind, now: dt.datetime) -> list[st
     requeued: list[str] = []
     with runtime.sessions() as session:
         stale = session.execute(
-            select(model.id, model.attempts, model.heartbeat_at, model.project_id).where(
+            select(
+                model.id, model.attempts, model.heartbeat_at, model.project_id, model.worker
+            ).where(
                 model.status == JobStatus.RUNNING,
                 or_(model.heartbeat_at.is_(None), model.heartbeat_at < cutoff),
             )
         ).all()
-        for job_id, attempts, beat, project_id in stale:
+        for job_id, attempts, beat, project_id, worker in stale:
+            if worker == runtime.worker_id and job_id in runtime.active:
+                continue  # this process runs it: alive, whatever its heartbeat says
             given_up = attempts >= runtime.settings.job_attempts
             if given_up:
                 detail = kind.interrupted_detail.format(n=attempts)
@@ -355,14 +510,14 @@ def _requeue_stale(runtime: Runtime, kind: JobKind, now: dt.datetime) -> list[st
     return requeued
 
 
-def _queued_before(runtime: Runtime, model: JobModel, now: dt.datetime) -> set[str]:
-    """Return the jobs queued for more than a minute (candidates for a lost queue entry)."""
+def _queued_before(runtime: Runtime, model: JobModel, since: dt.datetime) -> set[str]:
+    """Return the jobs queued before ``since`` (candidates for a lost queue entry)."""
     with runtime.sessions() as session:
         return set(
             session.scalars(
                 select(model.id).where(
                     model.status == JobStatus.QUEUED,
-                    model.created_at < now - dt.timedelta(seconds=60),
+                    model.created_at < since,
                 )
             ).all()
         )

@@ -13,11 +13,16 @@ does not answer to, still needs the key.
 Once the key is known, a path or query holding a NUL character (``%00``) is refused with
 422 here, for every route at once: no id, tag or filter is ever NUL-bearing, and PostgreSQL
 cannot even compare text with one (it would fail the request with a 500).
+
+When the database cannot be reached, the key cannot be looked up: the answer is the 503
+problem with ``Retry-After`` that every route gives in an outage (never a 500, and the
+kept-alive connection stays usable), not a 401 that would send the user after a new key.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 from typing import Any, Final
 from urllib.parse import parse_qsl
 
@@ -25,12 +30,22 @@ import anyio.to_thread
 from starlette.routing import Match
 from starlette.types import ASGIApp, Receive, Scope, Send
 
+from service.adapters import converted
 from service.auth import authenticate
-from service.errors import PROBLEM_JSON, AuthenticationError, problem, problem_for
+from service.errors import (
+    PROBLEM_JSON,
+    AuthenticationError,
+    ServiceUnavailableError,
+    problem,
+    problem_for,
+    problem_headers,
+)
 from service.logs import log_context
 from service.runtime import Runtime
 
 __all__ = ["PROJECT_STATE_KEY", "ApiKeyMiddleware"]
+
+logger = logging.getLogger(__name__)
 
 PROJECT_STATE_KEY: Final = "project_id"
 _PREFIX: Final = "/api/v1"
@@ -61,7 +76,15 @@ class ApiKeyMiddleware:
         runtime: Runtime = scope["app"].state.runtime
         project_id = None
         if key is not None:
-            project_id = await anyio.to_thread.run_sync(_lookup, runtime, key)
+            try:
+                project_id = await anyio.to_thread.run_sync(_lookup, runtime, key)
+            except ServiceUnavailableError as err:
+                logger.error("%s: %s", type(err).__name__, err)  # noqa: TRY400  (no traceback)
+                headers = [
+                    (k.lower().encode(), v.encode()) for k, v in problem_headers(err).items()
+                ]
+                await _send_problem(send, problem_for(err), headers)
+                return
         if project_id is None:
             await _refuse(send, _MISSING if key is None else _UNKNOWN)
             return
@@ -91,7 +114,7 @@ def _bearer(scope: Scope) -> str | None:
 
 
 def _lookup(runtime: Runtime, key: str) -> str | None:
-    with runtime.sessions() as session:
+    with converted("database"), runtime.sessions() as session:
         project_id: str | None = authenticate(session, key)
         return project_id
 
@@ -115,9 +138,9 @@ def _nul_problem(locations: list[list[str]]) -> dict[str, Any]:
 
 
 async def _refuse(send: Send, detail: str) -> None:
-    await _send_problem(
-        send, problem_for(AuthenticationError(detail)), [(b"www-authenticate", b"Bearer")]
-    )
+    error = AuthenticationError(detail)
+    headers = [(k.lower().encode(), v.encode()) for k, v in problem_headers(error).items()]
+    await _send_problem(send, problem_for(error), headers)
 
 
 async def _send_problem(
