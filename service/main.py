@@ -69,7 +69,7 @@ def create_app(
             raise
         if low_space:
             logger.warning("%s", low_space)
-        swept = runtime.store.sweep()
+        swept = runtime.store.sweep(startup=True)
         if swept:
             logger.warning("Removed %d uploads left half-received by a crash", swept)
         running = runtime.start_consumer() if consumer else None

@@ -91,7 +91,7 @@ class Settings(BaseSettings):
     def _known_blob_url(cls, value: str) -> str:
         if not value.strip():
             return ""
-        from service.blobs.s3 import parse_blob_url  # noqa: PLC0415  (boto3: the scale extra)
+        from service.blobs.base import parse_blob_url  # noqa: PLC0415  (imports starlette)
 
         parse_blob_url(value)  # ValueError says what is wrong
         return value.strip()

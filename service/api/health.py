@@ -32,16 +32,17 @@ def _check(runtime: Runtime) -> dict[str, str]:
             connection.execute(text("SELECT 1"))
         with converted("queue"):
             runtime.huey.pending_count()
+        runtime.store.ping()
     except ServiceUnavailableError as err:
         logger.warning("Readiness: %s", err)
         raise
-    return {"status": "ready", "database": "ok", "queue": "ok"}
+    return {"status": "ready", "database": "ok", "queue": "ok", "store": runtime.store.kind}
 
 
 @router.get(
     "/readyz",
-    responses={503: {"description": "database or queue unreachable"}},
+    responses={503: {"description": "database, queue or object store unreachable"}},
 )
 async def read_readiness(runtime: RuntimeDep) -> dict[str, str]:
-    """The database and the job queue answer."""
+    """The database, the job queue and the blob store answer."""
     return await anyio.to_thread.run_sync(_check, runtime)

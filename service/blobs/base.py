@@ -16,19 +16,46 @@ from __future__ import annotations
 
 import abc
 import contextlib
+import re
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Final
 
 from starlette.responses import Response
 
-__all__ = ["HEAD_BYTES", "STALE_UPLOAD_S", "Blobs", "Incoming", "artifact_key"]
+__all__ = [
+    "HEAD_BYTES",
+    "STALE_UPLOAD_S",
+    "Blobs",
+    "Incoming",
+    "artifact_key",
+    "parse_blob_url",
+]
 
 STALE_UPLOAD_S: Final = 3600.0
 """An upload untouched this long was abandoned (its sender is gone)."""
 
 HEAD_BYTES: Final = 64
 """How many leading bytes of an upload are kept for sniffing its kind."""
+
+_BUCKET: Final = re.compile(r"[a-z0-9][a-z0-9.\-]{1,61}[a-z0-9]")
+
+
+def parse_blob_url(url: str) -> tuple[str, str]:
+    """Return the bucket and the key prefix (``""`` or ending in ``/``) of an ``s3://`` URL.
+
+    Raises:
+        ValueError: not ``s3://BUCKET[/PREFIX]``, or not a valid bucket name.
+    """
+    match = re.fullmatch(r"s3://([^/]+)(/.*)?", url.strip())
+    if match is None or not _BUCKET.fullmatch(match.group(1)):
+        msg = (
+            "LOCEVAL_BLOB_URL must be s3://BUCKET[/PREFIX] (a bucket name of 3 to 63 "
+            f"lower-case letters, digits, '.' and '-'), or empty for the data folder, not {url!r}"
+        )
+        raise ValueError(msg)
+    prefix = (match.group(2) or "").strip("/")
+    return match.group(1), f"{prefix}/" if prefix else ""
 
 
 def artifact_key(folder: str, job_id: str, name: str) -> str:
@@ -44,6 +71,7 @@ class Incoming(abc.ABC):
     """
 
     def __init__(self) -> None:
+        """Start with nothing received."""
         self.head = b""
         """The first :data:`HEAD_BYTES` bytes (a bag's magic)."""
 
@@ -168,6 +196,10 @@ class Blobs(abc.ABC):
             startup: this is the API process's start: its own earlier uploads are all
                 abandoned, whatever their age.
         """
+
+    def cached_bytes(self) -> int:
+        """Return the bytes of local copies of stored inputs (0: the store is local)."""
+        return 0
 
     @abc.abstractmethod
     def ping(self) -> None:

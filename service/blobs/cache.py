@@ -48,6 +48,7 @@ class InputCache:
     """
 
     def __init__(self, root: Path, *, max_bytes: int, min_free_bytes: int) -> None:
+        """Use (and create) the cache folder."""
         self.root = root
         self.max_bytes = max_bytes
         self.min_free_bytes = min_free_bytes

@@ -33,6 +33,7 @@ class LocalIncoming(Incoming):
     """An upload written to ``incoming/<uuid>.part``, fsynced on commit."""
 
     def __init__(self, path: Path) -> None:
+        """Create the file (it must not exist)."""
         super().__init__()
         self.path = path
         self._fh: IO[bytes] | None = path.open("xb")
@@ -45,6 +46,7 @@ class LocalIncoming(Incoming):
             self._fh.write(chunk)
 
     def commit(self) -> None:
+        """See :meth:`Incoming.commit`."""
         if self._fh is not None:
             with _disk_full_refused():
                 self._fh.flush()
@@ -53,6 +55,7 @@ class LocalIncoming(Incoming):
             self._fh = None
 
     def abort(self) -> None:
+        """See :meth:`Incoming.abort`."""
         if self._fh is not None:
             with contextlib.suppress(OSError):  # an unflushable buffer (a full disk): it goes
                 self._fh.close()
@@ -78,14 +81,17 @@ class LocalBlobs(BlobStore, Blobs):
 
     @property
     def description(self) -> str:
+        """See :meth:`Blobs.description`."""
         return f"data in {self.root}"
 
     def open_incoming(self) -> LocalIncoming:
+        """See :meth:`Blobs.open_incoming`."""
         return LocalIncoming(self.new_incoming())
 
     def publish_upload(
         self, incoming: Incoming, *, project_id: str, dataset_id: str, filename: str, sha256: str
     ) -> str:
+        """See :meth:`Blobs.publish_upload`."""
         del project_id, sha256  # the folder is the dataset's own
         if not isinstance(incoming, LocalIncoming):
             msg = f"a {type(incoming).__name__} cannot be published in a folder"
@@ -93,19 +99,23 @@ class LocalBlobs(BlobStore, Blobs):
         return self.publish_dataset(incoming.path, dataset_id, filename)
 
     def remove_upload(self, dataset_id: str, storage_path: str) -> None:
+        """See :meth:`Blobs.remove_upload`."""
         del storage_path
         self.remove_dataset(dataset_id)
 
     def check_free_space(self, min_free_bytes: int, *, incoming_bytes: int = 0) -> bool:
+        """See :meth:`Blobs.check_free_space`."""
         if min_free_bytes <= 0:
             return True
         return shutil.disk_usage(self.incoming).free - incoming_bytes >= min_free_bytes
 
     def local_path(self, storage_path: str, *, filename: str, sha256: str) -> Path:
+        """See :meth:`Blobs.local_path`."""
         del filename, sha256
         return self.path(storage_path)
 
     def job_ids(self, folder: str) -> Mapping[str, float]:
+        """See :meth:`Blobs.job_ids`."""
         found: dict[str, float] = {}
         for child in (self.root / folder).iterdir():
             with contextlib.suppress(FileNotFoundError):
@@ -113,12 +123,15 @@ class LocalBlobs(BlobStore, Blobs):
         return found
 
     def exists(self, key: str) -> bool:
+        """See :meth:`Blobs.exists`."""
         return self.path(key).is_file()
 
     def read_bytes(self, key: str) -> bytes:
+        """See :meth:`Blobs.read_bytes`."""
         return self.path(key).read_bytes()
 
     def response(self, key: str, *, media_type: str, filename: str, inline: bool) -> Response:
+        """See :meth:`Blobs.response`."""
         return FileResponse(
             self.path(key),
             media_type=media_type,
@@ -127,8 +140,10 @@ class LocalBlobs(BlobStore, Blobs):
         )
 
     def sweep(self, *, older_than_s: float = STALE_UPLOAD_S, startup: bool = False) -> int:
+        """See :meth:`Blobs.sweep`."""
         del startup  # a .part file's age tells; the folder is this machine's
         return super().sweep(older_than_s=older_than_s)
 
     def ping(self) -> None:
-        return None
+        """See :meth:`Blobs.ping`."""
+        return

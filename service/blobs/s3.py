@@ -38,41 +38,23 @@ from botocore.config import Config
 from botocore.exceptions import BotoCoreError, ClientError
 from starlette.responses import RedirectResponse, Response, StreamingResponse
 
-from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming
+from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming, parse_blob_url
 from service.blobs.cache import InputCache
-from service.errors import ServiceUnavailableError, StartupError
+from service.errors import ServiceUnavailableError, StartupError, register_private_root
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
 
-__all__ = ["PART_BYTES", "S3Blobs", "S3Incoming", "parse_blob_url"]
+__all__ = ["PART_BYTES", "S3Blobs", "S3Incoming", "make_client", "store_errors"]
 
 PART_BYTES: Final = 8 << 20
 """The size of an upload's parts (S3 wants at least 5 MiB but for the last)."""
 _IN_FLIGHT: Final = 4  # parts sent at once: the upload holds at most this many in memory
 _COPY_LIMIT: Final = 5 << 30  # CopyObject's limit; above it the managed copy goes by parts
-_BUCKET: Final = re.compile(r"[a-z0-9][a-z0-9.\-]{1,61}[a-z0-9]")
 _DOWNLOAD_CHUNK: Final = 1 << 20
 _TRANSFER: Final = TransferConfig(
     multipart_threshold=64 << 20, multipart_chunksize=16 << 20, max_concurrency=4
 )
-
-
-def parse_blob_url(url: str) -> tuple[str, str]:
-    """Return the bucket and the key prefix (``""`` or ending in ``/``) of an ``s3://`` URL.
-
-    Raises:
-        ValueError: not ``s3://BUCKET[/PREFIX]``, or not a valid bucket name.
-    """
-    match = re.fullmatch(r"s3://([^/]+)(/.*)?", url.strip())
-    if match is None or not _BUCKET.fullmatch(match.group(1)):
-        msg = (
-            "LOCEVAL_BLOB_URL must be s3://BUCKET[/PREFIX] (a bucket name of 3 to 63 "
-            f"lower-case letters, digits, '.' and '-'), or empty for the data folder, not {url!r}"
-        )
-        raise ValueError(msg)
-    prefix = (match.group(2) or "").strip("/")
-    return match.group(1), f"{prefix}/" if prefix else ""
 
 
 @contextlib.contextmanager
@@ -117,6 +99,7 @@ class S3Incoming(Incoming):
     """An upload streamed into a multipart upload, at most a few parts in memory."""
 
     def __init__(self, store: S3Blobs, key: str) -> None:
+        """Receive into ``key`` (relative to the prefix); nothing is sent before a part is full."""
         super().__init__()
         self.store = store
         self.key = key  # relative to the prefix
@@ -169,6 +152,7 @@ class S3Incoming(Incoming):
         return answer["ETag"]
 
     def commit(self) -> None:
+        """See :meth:`Incoming.commit`."""
         if self.committed:
             return
         client = self.store.client
@@ -198,6 +182,7 @@ class S3Incoming(Incoming):
             self._pool = None
 
     def abort(self) -> None:
+        """See :meth:`Incoming.abort`."""
         if self.done:
             return
         self.done = True
@@ -237,6 +222,7 @@ class S3Blobs(Blobs):
         redirect_s: int = 0,
         client: S3Client | None = None,
     ) -> None:
+        """Connect to the bucket (checked by :meth:`check_bucket`)."""
         self.bucket, self.prefix = parse_blob_url(url)
         self.root = root.resolve()
         self.client = client or make_client()
@@ -246,9 +232,11 @@ class S3Blobs(Blobs):
             self.root / "cache", max_bytes=cache_bytes, min_free_bytes=min_free_bytes
         )
         self.staging = self.root / "staging"
+        register_private_root(self.root)  # problem documents never show it
 
     @property
     def description(self) -> str:
+        """See :meth:`Blobs.description`."""
         endpoint = os.environ.get("AWS_ENDPOINT_URL") or "AWS"
         return f"blobs in s3://{self.bucket}/{self.prefix} at {endpoint}"
 
@@ -261,7 +249,11 @@ class S3Blobs(Blobs):
         try:
             self.client.head_bucket(Bucket=self.bucket)
         except (BotoCoreError, ClientError) as err:
-            code = err.response.get("Error", {}).get("Code", "") if isinstance(err, ClientError) else ""
+            code = (
+                err.response.get("Error", {}).get("Code", "")
+                if isinstance(err, ClientError)
+                else ""
+            )
             endpoint = os.environ.get("AWS_ENDPOINT_URL") or "AWS's default endpoint"
             msg = (
                 f"The bucket {self.bucket!r} at {endpoint} cannot be used "
@@ -273,11 +265,13 @@ class S3Blobs(Blobs):
     # -- uploads ---------------------------------------------------------------------------
 
     def open_incoming(self) -> S3Incoming:
+        """See :meth:`Blobs.open_incoming`."""
         return S3Incoming(self, f"incoming/{self.host}/{uuid.uuid4().hex}")
 
     def publish_upload(
         self, incoming: Incoming, *, project_id: str, dataset_id: str, filename: str, sha256: str
     ) -> str:
+        """See :meth:`Blobs.publish_upload`."""
         del dataset_id, filename  # addressed by content: the row keeps the name
         if not isinstance(incoming, S3Incoming) or not incoming.committed:
             msg = "only a committed upload to the bucket can be published in it"
@@ -297,17 +291,20 @@ class S3Blobs(Blobs):
         return key
 
     def remove_upload(self, dataset_id: str, storage_path: str) -> None:
+        """See :meth:`Blobs.remove_upload`."""
         del dataset_id
         with store_errors():
             self.client.delete_object(Bucket=self.bucket, Key=self.prefix + storage_path)
 
     def check_free_space(self, min_free_bytes: int, *, incoming_bytes: int = 0) -> bool:
+        """See :meth:`Blobs.check_free_space`."""
         del min_free_bytes, incoming_bytes  # uploads touch no local disk; a bucket has no "free"
         return True
 
     # -- inputs ----------------------------------------------------------------------------
 
     def local_path(self, storage_path: str, *, filename: str, sha256: str) -> Path:
+        """See :meth:`Blobs.local_path`."""
         key = self.prefix + storage_path
         with store_errors():
             size = self.client.head_object(Bucket=self.bucket, Key=key)["ContentLength"]
@@ -319,16 +316,19 @@ class S3Blobs(Blobs):
         return self.cache.fetch(sha256, filename, size, download)
 
     def pinned(self) -> contextlib.AbstractContextManager[None]:
+        """See :meth:`Blobs.pinned`."""
         return self.cache.pinned()
 
     # -- job artifacts ---------------------------------------------------------------------
 
     def job_staging_dir(self, folder: str, job_id: str) -> Path:
+        """See :meth:`Blobs.job_staging_dir`."""
         parent = self.staging / folder / job_id
         parent.mkdir(parents=True, exist_ok=True)
         return parent / f".staging-{uuid.uuid4().hex}"
 
     def publish_job_artifacts(self, folder: str, job_id: str, staging: Path) -> Path:
+        """See :meth:`Blobs.publish_job_artifacts`."""
         self._delete_prefix(f"{folder}/{job_id}/artifacts/")
         for path in sorted(p for p in staging.rglob("*") if p.is_file()):
             key = f"{self.prefix}{folder}/{job_id}/artifacts/{path.relative_to(staging).as_posix()}"
@@ -337,13 +337,16 @@ class S3Blobs(Blobs):
         return staging
 
     def clear_job(self, folder: str, job_id: str) -> None:
+        """See :meth:`Blobs.clear_job`."""
         self.remove_job(folder, job_id)
 
     def remove_job(self, folder: str, job_id: str) -> None:
+        """See :meth:`Blobs.remove_job`."""
         shutil.rmtree(self.staging / folder / job_id, ignore_errors=True)
         self._delete_prefix(f"{folder}/{job_id}/")
 
     def job_ids(self, folder: str) -> Mapping[str, float]:
+        """See :meth:`Blobs.job_ids`."""
         found: dict[str, float] = {}
         for item in self._list(f"{folder}/"):
             job_id = item["Key"][len(self.prefix) + len(folder) + 1 :].split("/", 1)[0]
@@ -353,24 +356,31 @@ class S3Blobs(Blobs):
     # -- reading back ----------------------------------------------------------------------
 
     def exists(self, key: str) -> bool:
+        """See :meth:`Blobs.exists`."""
+        return self.size(key) is not None
+
+    def size(self, key: str) -> int | None:
+        """Return a blob's size in bytes, or None when there is no such blob."""
         try:
-            self.client.head_object(Bucket=self.bucket, Key=self.prefix + key)
+            head = self.client.head_object(Bucket=self.bucket, Key=self.prefix + key)
         except ClientError as err:
             if _missing(err):
-                return False
+                return None
             with store_errors():
                 raise
         except BotoCoreError:
             with store_errors():
                 raise
-        return True
+        return int(head["ContentLength"])
 
     def read_bytes(self, key: str) -> bytes:
+        """See :meth:`Blobs.read_bytes`."""
         with store_errors():
             body = self.client.get_object(Bucket=self.bucket, Key=self.prefix + key)["Body"]
             return body.read()
 
     def response(self, key: str, *, media_type: str, filename: str, inline: bool) -> Response:
+        """See :meth:`Blobs.response`."""
         disposition = f'{"inline" if inline else "attachment"}; filename="{filename}"'
         if self.redirect_s:
             with store_errors():
@@ -398,6 +408,7 @@ class S3Blobs(Blobs):
     # -- upkeep ----------------------------------------------------------------------------
 
     def sweep(self, *, older_than_s: float = STALE_UPLOAD_S, startup: bool = False) -> int:
+        """See :meth:`Blobs.sweep`."""
         cutoff = dt.datetime.now(dt.UTC) - dt.timedelta(seconds=older_than_s)
         own = f"{self.prefix}incoming/{self.host}/"
         removed = 0
@@ -419,7 +430,12 @@ class S3Blobs(Blobs):
                     removed += 1
         return removed
 
+    def cached_bytes(self) -> int:
+        """See :meth:`Blobs.cached_bytes`."""
+        return self.cache.size()
+
     def ping(self) -> None:
+        """See :meth:`Blobs.ping`."""
         with store_errors():
             self.client.head_bucket(Bucket=self.bucket)
 
