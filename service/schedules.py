@@ -425,7 +425,7 @@ def delete_schedule(runtime: Runtime, project_id: str, schedule_id: str) -> None
         session.delete(session.get_one(Schedule, schedule.id))
         session.commit()
     for run_id in run_ids:
-        runtime.store.remove_run(run_id)
+        runtime.store.remove_job(RUNS, run_id)
 
 
 def list_runs(

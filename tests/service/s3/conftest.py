@@ -111,8 +111,10 @@ def seaweedfs(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SeaweedFS]:
         f"-filer.port={filer}",
         "-s3",
         f"-s3.port={s3}",
-        "-master.volumeSizeLimitMB=1024",
-        "-volume.max=0",
+        "-master.volumeSizeLimitMB=128",  # every test's bucket is a collection with volumes
+        "-volume.max=1000",  # of its own (created sparse): room for many buckets
+        "-s3.port.iceberg=0",  # no Iceberg or Lance listeners on their fixed default ports
+        "-s3.port.lance=0",
     ]
     with log.open("wb") as out:
         process = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT, cwd=folder)
