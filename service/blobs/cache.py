@@ -84,20 +84,24 @@ class InputCache:
         entry = self.root / sha256
         entry.mkdir(parents=True, exist_ok=True)
         lock = (entry / _LOCK).open("a+b")
+        target = entry / filename
         try:
-            fcntl.flock(lock, fcntl.LOCK_EX)  # one download per entry; evictors keep off
-            target = entry / filename
-            if target.is_file() and target.stat().st_size == size:
+            # Shared first: a copy that is here is read by many (this job may hold it already,
+            # the reference and the estimate of one bag); evictors keep off meanwhile.
+            fcntl.flock(lock, fcntl.LOCK_SH)
+            if _whole(target, size):
                 os.utime(target)  # recently used
             else:
-                self._make_room(size, keep=sha256)
-                partial = entry / f".part-{uuid.uuid4().hex}"
-                try:
-                    download(partial)
-                    partial.replace(target)
-                finally:
-                    partial.unlink(missing_ok=True)
-            fcntl.flock(lock, fcntl.LOCK_SH)  # pinned while the caller's block runs
+                fcntl.flock(lock, fcntl.LOCK_EX)  # one download per entry
+                if not _whole(target, size):  # another process may have fetched it meanwhile
+                    self._make_room(size, keep=sha256)
+                    partial = entry / f".part-{uuid.uuid4().hex}"
+                    try:
+                        download(partial)
+                        partial.replace(target)
+                    finally:
+                        partial.unlink(missing_ok=True)
+                fcntl.flock(lock, fcntl.LOCK_SH)  # pinned while the caller's block runs
         except BaseException:
             lock.close()
             raise
@@ -146,6 +150,14 @@ class InputCache:
 
     def _disk_allows(self, size: int) -> bool:
         return shutil.disk_usage(self.root).free - size >= self.min_free_bytes
+
+
+def _whole(path: Path, size: int) -> bool:
+    """Return whether ``path`` is a complete copy (``size`` bytes)."""
+    try:
+        return path.stat().st_size == size
+    except FileNotFoundError:
+        return False
 
 
 def _evict(entry: Path) -> bool:

@@ -299,3 +299,16 @@ def test_unreachable_store_is_a_clear_startup_error(tmp_path: Path, monkeypatch:
     store.client.meta.config.retries = {"max_attempts": 1}
     with pytest.raises(StartupError, match=r"'nowhere'.*AWS_ENDPOINT_URL"):
         store.check_bucket()
+
+
+def test_one_job_reads_the_same_input_twice(
+    bucket: str, s3_env: dict[str, str], tmp_path: Path
+) -> None:
+    """A bag that is reference and estimate at once: the second fetch reuses the pinned copy."""
+    del s3_env
+    store = _store(bucket, tmp_path / "w")
+    key, sha = _dataset(store, _payload(1 << 20, seed=40))
+    with store.pinned():
+        first = store.local_path(key, filename="both.bag", sha256=sha)
+        second = store.local_path(key, filename="both.bag", sha256=sha)  # must not wait
+    assert first == second
