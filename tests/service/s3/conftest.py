@@ -8,7 +8,6 @@ own. Without the binary the tests are skipped (a failure when CI is set).
 
 from __future__ import annotations
 
-import os
 import secrets
 import shutil
 import socket
@@ -183,4 +182,8 @@ def object_keys(server: SeaweedFS, bucket: str, prefix: str = "") -> list[str]:
     return sorted(keys)
 
 
-__all__ = ["SeaweedFS", "object_keys", "open_multipart_uploads", "os"]
+
+@pytest.fixture(autouse=True)
+def _patient_start(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Give ``serve``/``worker`` 120 s to start: boto3 adds seconds to a loaded machine's start."""
+    monkeypatch.setattr("tests.service.conftest.READY_TIMEOUT_S", 120.0)
