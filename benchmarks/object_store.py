@@ -131,8 +131,8 @@ def _seaweedfs(folder: Path) -> Iterator[dict[str, str]]:
             f"-s3.port={s3}",
             "-master.volumeSizeLimitMB=1024",
             "-volume.max=200",
-        "-s3.port.iceberg=0",  # no Iceberg or Lance listeners on their fixed default ports
-        "-s3.port.lance=0",
+            "-s3.port.iceberg=0",  # no Iceberg or Lance listeners on their fixed default ports
+            "-s3.port.lance=0",
         ],
         stdout=log,
         stderr=subprocess.STDOUT,

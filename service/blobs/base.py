@@ -17,7 +17,7 @@ from __future__ import annotations
 import abc
 import contextlib
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Final
 
@@ -140,10 +140,9 @@ class Blobs(abc.ABC):
     def local_path(self, storage_path: str, *, filename: str, sha256: str) -> Path:
         """Return a local file with a dataset's bytes (held while :meth:`pinned` is open)."""
 
-    @contextlib.contextmanager
-    def pinned(self) -> Iterator[None]:
+    def pinned(self) -> contextlib.AbstractContextManager[None]:
         """Keep the local copies :meth:`local_path` hands out in this block from eviction."""
-        yield
+        return contextlib.nullcontext()
 
     # -- job artifacts ---------------------------------------------------------------------
 

@@ -44,6 +44,7 @@ from service.errors import ServiceUnavailableError, StartupError, register_priva
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
+    from mypy_boto3_s3.type_defs import CopySourceTypeDef, ObjectIdentifierTypeDef
 
 __all__ = ["PART_BYTES", "S3Blobs", "S3Incoming", "make_client", "store_errors"]
 
@@ -278,9 +279,11 @@ class S3Blobs(Blobs):
             raise TypeError(msg)
         key = f"datasets/{project_id}/{sha256}"
         if not self.exists(key):
-            source = {"Bucket": self.bucket, "Key": self.prefix + incoming.key}
+            source: CopySourceTypeDef = {"Bucket": self.bucket, "Key": self.prefix + incoming.key}
             with store_errors():
-                size = self.client.head_object(**source)["ContentLength"]
+                size = self.client.head_object(Bucket=self.bucket, Key=source["Key"])[
+                    "ContentLength"
+                ]
                 if size < _COPY_LIMIT:
                     self.client.copy_object(
                         CopySource=source, Bucket=self.bucket, Key=self.prefix + key
@@ -450,7 +453,7 @@ class S3Blobs(Blobs):
     def _delete_prefix(self, relative: str) -> None:
         keys = [item["Key"] for item in self._list(relative)]
         for start in range(0, len(keys), 1000):
-            batch = [{"Key": key} for key in keys[start : start + 1000]]
+            batch: list[ObjectIdentifierTypeDef] = [{"Key": k} for k in keys[start : start + 1000]]
             with store_errors():
                 self.client.delete_objects(
                     Bucket=self.bucket, Delete={"Objects": batch, "Quiet": True}

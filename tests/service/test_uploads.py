@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from starlette.requests import Request
 
-from service.errors import UploadError, UploadTooLargeError
 from service.blobs import LocalBlobs
+from service.errors import UploadError, UploadTooLargeError
 from service.uploads import ReceivedForm, receive_multipart
 
 BOUNDARY = "loceval-test-boundary"

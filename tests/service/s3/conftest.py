@@ -182,7 +182,6 @@ def object_keys(server: SeaweedFS, bucket: str, prefix: str = "") -> list[str]:
     return sorted(keys)
 
 
-
 @pytest.fixture(autouse=True)
 def _patient_start(monkeypatch: pytest.MonkeyPatch) -> None:
     """Give ``serve``/``worker`` 120 s to start: boto3 adds seconds to a loaded machine's start."""
