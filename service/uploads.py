@@ -30,8 +30,9 @@ from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
 from service.blobs import Blobs, Incoming
-from service.blobs.local import STORAGE_FULL, LocalIncoming
+from service.blobs.local import STORAGE_FULL, LocalBlobs, LocalIncoming
 from service.errors import InsufficientStorageError, UploadError, UploadTooLargeError
+from service.storage import BlobStore
 
 __all__ = ["ReceivedFile", "ReceivedForm", "check_free_space", "receive_multipart"]
 
@@ -320,7 +321,14 @@ def _too_large(max_bytes: int) -> str:
     )
 
 
-def check_free_space(store: Blobs, min_free_bytes: int, *, incoming_bytes: int = 0) -> None:
+def _blobs(store: Blobs | BlobStore) -> Blobs:
+    """Return the blob store to receive into (a bare data folder's store is the local one)."""
+    return store if isinstance(store, Blobs) else LocalBlobs(store.root)
+
+
+def check_free_space(
+    store: Blobs | BlobStore, min_free_bytes: int, *, incoming_bytes: int = 0
+) -> None:
     """Refuse an upload that would leave less than ``min_free_bytes`` free in the store.
 
     With a bucket an upload touches no local disk and is not refused here (the workers'
@@ -334,7 +342,7 @@ def check_free_space(store: Blobs, min_free_bytes: int, *, incoming_bytes: int =
     Raises:
         InsufficientStorageError: the free space minus ``incoming_bytes`` is below the reserve.
     """
-    if not store.check_free_space(min_free_bytes, incoming_bytes=incoming_bytes):
+    if not _blobs(store).check_free_space(min_free_bytes, incoming_bytes=incoming_bytes):
         raise InsufficientStorageError(STORAGE_FULL)
 
 
@@ -353,7 +361,7 @@ async def _feed(request: Request, parser: MultipartParser) -> None:
 
 async def receive_multipart(
     request: Request,
-    store: Blobs,
+    store: Blobs | BlobStore,
     *,
     max_bytes: int,
     file_fields: frozenset[str],
@@ -383,6 +391,7 @@ async def receive_multipart(
         InsufficientStorageError: the upload would leave less than ``min_free_bytes`` free
             (checked on Content-Length first, then while receiving); nothing is kept.
     """
+    store = _blobs(store)
     content_type, params = parse_options_header(request.headers.get("content-type"))
     if content_type.lower() != b"multipart/form-data" or not params.get(b"boundary"):
         fields = " or ".join(repr(f) for f in sorted(file_fields))
