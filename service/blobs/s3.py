@@ -54,7 +54,7 @@ _IN_FLIGHT: Final = 4  # parts sent at once: the upload holds at most this many 
 _COPY_LIMIT: Final = 5 << 30  # CopyObject's limit; above it the managed copy goes by parts
 _DOWNLOAD_CHUNK: Final = 1 << 20
 _TRANSFER: Final = TransferConfig(
-    multipart_threshold=64 << 20, multipart_chunksize=16 << 20, max_concurrency=4
+    multipart_threshold=64 << 20, multipart_chunksize=8 << 20, max_concurrency=4
 )
 
 
