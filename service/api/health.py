@@ -36,7 +36,10 @@ def _check(runtime: Runtime) -> dict[str, str]:
     except ServiceUnavailableError as err:
         logger.warning("Readiness: %s", err)
         raise
-    return {"status": "ready", "database": "ok", "queue": "ok", "store": runtime.store.kind}
+    answer = {"status": "ready", "database": "ok", "queue": "ok"}
+    if runtime.store.kind != "local":  # the data folder was checked at start; a bucket now
+        answer["store"] = runtime.store.kind
+    return answer
 
 
 @router.get(
