@@ -29,8 +29,8 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation
 
 from exporters import ARTIFACTS
+from exporters.cad.placement import parse_site, place_evaluation
 from exporters.options import ExportOptions
-from exporters.placement import parse_site, place_evaluation
 from loceval.evaluation import EvaluationResult, evaluate
 from loceval.trajectory import Trajectory
 

@@ -17,8 +17,8 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from loceval.clock import estimate_time_offset
-from loceval.handeye import estimate_device_offset
+from loceval.calibration.clock import estimate_time_offset
+from loceval.calibration.handeye import estimate_device_offset
 from loceval.trajectory import Trajectory
 
 N_REF, N_EST, TARGET_S = 200_000, 50_000, 2.0

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from loceval.rotation import Rotation
+from loceval.core.rotation import Rotation
 
 EVO_S = 7.06
 """evo_ape + evo_rpe on the 200,000 / 50,000 files (issue 11)."""

@@ -3,7 +3,7 @@
 Run by hand: ``.venv/bin/python -m benchmarks.ranging [--repeat N] [--ranges N]``.
 Target on a 2-core machine: 100,000 ranges from 20 anchors (10 Hz each, 500 s walk,
 100 Hz reference with orientations): ranging evaluation + NLLS + Min-Max under 3 s, in
-2D and in 3D. The whole pipeline (:func:`loceval.radio.evaluate_radio`: the same plus
+2D and in 3D. The whole pipeline (:func:`loceval.radio_evaluation.evaluate_radio`: the same plus
 the evaluation of both solvers' positions, as ``loceval ranging`` runs it) is timed too, and
 reading the two CSV files separately.
 """
@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from loceval.multilateration import make_epochs, solve_minmax, solve_nlls
-from loceval.radio import RangingConfig, evaluate_radio
-from loceval.ranging import evaluate_ranging
+from loceval.radio.multilateration import make_epochs, solve_minmax, solve_nlls
+from loceval.radio.ranging import evaluate_ranging
+from loceval.radio_evaluation import RangingConfig, evaluate_radio
 from loceval.readers.radio import Anchors, Ranges, read_anchors, read_ranges
 from loceval.trajectory import Trajectory
 

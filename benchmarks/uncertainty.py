@@ -18,11 +18,11 @@ from collections.abc import Callable
 import numpy as np
 from scipy.signal import lfilter
 
-from loceval.comparison import ComparedMetric, compare_errors
-from loceval.consistency import check_consistency
+from loceval.assessment.comparison import ComparedMetric, compare_errors
+from loceval.assessment.consistency import check_consistency
+from loceval.assessment.uncertainty import interval_stats
 from loceval.evaluation import EvaluationConfig, Tolerance, evaluate
 from loceval.trajectory import Trajectory
-from loceval.uncertainty import interval_stats
 
 N = 50_000
 TARGET_S = 0.5

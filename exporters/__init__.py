@@ -15,13 +15,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final, Protocol, cast
 
+from exporters.cad.jsondoc import finite_json
 from exporters.errors import ExportError, ExportOptionsError, ExportUnavailableError
-from exporters.jsondoc import finite_json
 from exporters.options import ExportOptions, Units
 from loceval.evaluation import EvaluationResult, ProgressCallback
 
 if TYPE_CHECKING:
-    from exporters.placement import Placement
+    from exporters.cad.placement import Placement
 
 __all__ = [
     "ARTIFACTS",
@@ -90,15 +90,15 @@ ARTIFACTS: Final[Mapping[str, ArtifactSpec]] = {
         ArtifactSpec(
             "report.pdf", "application/pdf", "exporters.report:render_report_pdf", "report"
         ),
-        ArtifactSpec("paths.dxf", "image/vnd.dxf", "exporters.dxf:export_dxf", "cad"),
-        ArtifactSpec("paths.3dm", "model/vnd.3dm", "exporters.rhino:export_3dm", "cad"),
+        ArtifactSpec("paths.dxf", "image/vnd.dxf", "exporters.cad.dxf:export_dxf", "cad"),
+        ArtifactSpec("paths.3dm", "model/vnd.3dm", "exporters.cad.rhino:export_3dm", "cad"),
         ArtifactSpec(
-            "paths.3dm.json", "application/json", "exporters.rhino:export_3dm_json", "cad"
+            "paths.3dm.json", "application/json", "exporters.cad.rhino:export_3dm_json", "cad"
         ),
-        ArtifactSpec("paths.glb", "model/gltf-binary", "exporters.gltf:export_glb", "cad"),
+        ArtifactSpec("paths.glb", "model/gltf-binary", "exporters.cad.gltf:export_glb", "cad"),
         # IFC is an ISO 10303-21 (STEP) file with no IFC-specific registered type: viewers
         # go by the .ifc suffix, and application/x-step makes browsers save it as a file
-        ArtifactSpec("paths.ifc", "application/x-step", "exporters.ifc:export_ifc", "cad"),
+        ArtifactSpec("paths.ifc", "application/x-step", "exporters.cad.ifc:export_ifc", "cad"),
     )
 }
 """Every artifact, by file name, in the order they are written."""
@@ -271,7 +271,7 @@ def _render_into(
     placement = None
     if CAD_ARTIFACTS.intersection(wanted):
         # Placing (site transform, units, simplification) is shared by every CAD file.
-        from exporters.placement import place_evaluation  # noqa: PLC0415
+        from exporters.cad.placement import place_evaluation  # noqa: PLC0415
 
         placement = place_evaluation(result, options)
     for k, name in enumerate(wanted):

@@ -3,8 +3,8 @@
 The names are those of :data:`exporters.ARTIFACTS` (so the service lists and serves them):
 ``result.json``, ``errors.csv``, ``report.html``, ``report.pdf``, and ``paths.dxf``,
 ``paths.3dm``, ``paths.3dm.json`` and ``paths.glb``, which here hold the control points, the
-measured positions and the error lines (:mod:`exporters.dxf_points`,
-:mod:`exporters.rhino_points`, :mod:`exporters.gltf_points`); ``paths.ifc`` is not written
+measured positions and the error lines (:mod:`exporters.cad.dxf_points`,
+:mod:`exporters.cad.rhino_points`, :mod:`exporters.cad.gltf_points`); ``paths.ifc`` is not written
 for control points.
 
 ``errors.csv`` has one row per visit of every estimate::
@@ -26,8 +26,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Final
 
+from exporters.cad.jsondoc import finite_json
 from exporters.errors import ExportError, ExportOptionsError
-from exporters.jsondoc import finite_json
 from exporters.options import ExportOptions
 from loceval.checkpoint_evaluation import CheckpointEvaluation, errors_table
 
@@ -73,18 +73,18 @@ def _render_cad(
     """Render the wanted CAD files: the points, measured positions and error lines."""
     out: dict[str, bytes] = {}
     if "paths.dxf" in wanted:
-        from exporters.dxf_points import export_points_dxf  # noqa: PLC0415
+        from exporters.cad.dxf_points import export_points_dxf  # noqa: PLC0415
 
         out["paths.dxf"] = export_points_dxf(evaluation, options)
     if "paths.3dm" in wanted or "paths.3dm.json" in wanted:
-        from exporters.rhino_points import export_points_3dm, export_points_3dm_json  # noqa: PLC0415
+        from exporters.cad.rhino_points import export_points_3dm, export_points_3dm_json  # noqa: PLC0415
 
         if "paths.3dm" in wanted:
             out["paths.3dm"] = export_points_3dm(evaluation, options)
         if "paths.3dm.json" in wanted:
             out["paths.3dm.json"] = export_points_3dm_json(evaluation, options)
     if "paths.glb" in wanted:
-        from exporters.gltf_points import export_points_glb  # noqa: PLC0415
+        from exporters.cad.gltf_points import export_points_glb  # noqa: PLC0415
 
         out["paths.glb"] = export_points_glb(evaluation, options)
     return out

@@ -15,7 +15,7 @@ from typing import Final, TypeAlias
 
 import numpy as np
 
-from loceval.display import display_text
+from loceval.core.display import display_text
 from loceval.evaluation import EvaluationResult
 
 RGB: TypeAlias = tuple[int, int, int]
@@ -34,6 +34,24 @@ PALETTE: Final[tuple[RGB, ...]] = (
     (110, 110, 110),  # grey
 )
 """Trajectory colours in order: the reference first, then the estimates."""
+
+ESTIMATE_COLOURS: tuple[str, ...] = (
+    "#d4009a",  # magenta (RTAB-Map in the framework paper's Fig. 5)
+    "#1f9e34",  # green (ISAAC in the framework paper's Fig. 5)
+    "#f58a07",  # orange
+    "#3b4cc0",  # blue
+    "#8c564b",  # brown
+    "#6b6b6b",  # grey
+    "#b8a700",  # olive
+    "#7b2cbf",  # violet
+)
+"""Distinct estimate colours in order of the estimates."""
+
+
+def estimate_colour(index: int) -> str:
+    """Return the colour of the ``index``-th estimate (cycling after eight)."""
+    return ESTIMATE_COLOURS[index % len(ESTIMATE_COLOURS)]
+
 
 _INVALID_LAYER_CHARS: Final = re.compile(r'[<>/\\":;?*|=,`\[\]{}\x00-\x1f\x7f\ufffd]+')
 _BIN_COLORS: Final[tuple[RGB, ...]] = ((0, 170, 0), (230, 200, 0), (255, 120, 0), (220, 0, 0))
@@ -60,7 +78,7 @@ def layer_name(name: str) -> str:
 
     Characters that DXF forbids in table names (``<>/\\":;?*|=,```) or that Rhino uses in
     layer paths (``::``, brackets, braces) become ``_``, as do control characters and
-    bidirectional overrides (:func:`~loceval.display.display_text`); the result is at most 200
+    bidirectional overrides (:func:`~loceval.core.display.display_text`); the result is at most 200
     characters and never empty.
     """
     cleaned = _INVALID_LAYER_CHARS.sub("_", display_text(name)).strip()[:200].strip()

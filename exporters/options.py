@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Final
 
 from exporters.errors import ExportOptionsError
-from loceval.display import display_text
-from loceval.geometry import SimilarityTransform
+from loceval.core.display import display_text
+from loceval.core.geometry import SimilarityTransform
 from loceval.options import Units, UpAxis, choice_default, number_default
 
 __all__ = ["ExportOptions", "Units", "UpAxis"]

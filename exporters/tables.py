@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from exporters.options import ExportOptions
-from loceval._typing import FloatArray, StampsNs
+from loceval.core.arrays import FloatArray, StampsNs
 from loceval.evaluation import EstimateResult, EvaluationResult
 
 __all__ = ["ERRORS_CSV_COLUMNS", "errors_csv_chunks", "export_errors_csv"]

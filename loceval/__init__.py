@@ -13,8 +13,6 @@ from typing import TYPE_CHECKING, Final
 from loceval._version import __version__
 
 if TYPE_CHECKING:  # the names as the type checker sees them; at run time see __getattr__
-    from loceval.alignment import AlignMethod, AlignWindow
-    from loceval.association import AssociationMethod
     from loceval.errors import (
         AlignmentError,
         AssociationError,
@@ -25,14 +23,16 @@ if TYPE_CHECKING:  # the names as the type checker sees them; at run time see __
         TrajectoryError,
     )
     from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
-    from loceval.metrics import RPEUnit
+    from loceval.metrics.pose_errors import RPEUnit
     from loceval.readers import read_trajectory
+    from loceval.registration.alignment import AlignMethod, AlignWindow
+    from loceval.registration.association import AssociationMethod
     from loceval.trajectory import Trajectory
 
 _LAZY: Final = {
-    "AlignMethod": "loceval.alignment",
-    "AlignWindow": "loceval.alignment",
-    "AssociationMethod": "loceval.association",
+    "AlignMethod": "loceval.registration.alignment",
+    "AlignWindow": "loceval.registration.alignment",
+    "AssociationMethod": "loceval.registration.association",
     "AlignmentError": "loceval.errors",
     "AssociationError": "loceval.errors",
     "InputError": "loceval.errors",
@@ -44,7 +44,7 @@ _LAZY: Final = {
     "EvaluationResult": "loceval.evaluation",
     "Tolerance": "loceval.evaluation",
     "evaluate": "loceval.evaluation",
-    "RPEUnit": "loceval.metrics",
+    "RPEUnit": "loceval.metrics.pose_errors",
     "read_trajectory": "loceval.readers",
     "Trajectory": "loceval.trajectory",
 }

@@ -1,7 +1,7 @@
 """A whole evaluation against control points: one survey, one or more estimates.
 
 :func:`evaluate_control_points` scores each estimate with
-:func:`loceval.checkpoints.evaluate_checkpoints` and returns a
+:func:`loceval.checkpoints.fit.evaluate_checkpoints` and returns a
 :class:`CheckpointEvaluation`, whose :meth:`~CheckpointEvaluation.to_dict` is the
 ``--json`` document of a control-point reference: the same top-level keys as a trajectory
 evaluation's (``loceval_version``, ``options``, ``inputs``, ``reference``, ``estimates``),
@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from loceval._version import __version__
-from loceval.checkpoint_config import CheckpointConfig
-from loceval.checkpoints import CheckpointResult, evaluate_checkpoints
+from loceval.checkpoints.config import CheckpointConfig
+from loceval.checkpoints.fit import CheckpointResult, evaluate_checkpoints
 from loceval.controlpoints import ControlPoints, Visits
 from loceval.evaluation import EvaluationConfig
 from loceval.trajectory import Trajectory
@@ -148,7 +148,7 @@ def evaluate_control_points(
         The evaluation.
 
     Raises:
-        InputError: see :func:`loceval.checkpoints.evaluate_checkpoints`.
+        InputError: see :func:`loceval.checkpoints.fit.evaluate_checkpoints`.
         AlignmentError: the alignment is undetermined or ambiguous.
     """
     report = progress or (lambda _stage, _fraction: None)

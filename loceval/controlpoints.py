@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from loceval._typing import FloatArray, StampsNs
+from loceval.core.arrays import FloatArray, StampsNs
 from loceval.errors import InputError
 
 __all__ = ["MIN_CONTROL_POINTS", "ControlPoints", "Visits"]

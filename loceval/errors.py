@@ -6,7 +6,8 @@ prints them without a traceback (exit code 1) and the service maps them to 4xx p
 
 from __future__ import annotations
 
-from typing import ClassVar
+import copy
+from typing import ClassVar, Self
 
 __all__ = [
     "AlignmentError",
@@ -41,6 +42,19 @@ class LocevalError(Exception):
         super().__init__(message)
         self.option = option
         self.suggest = suggest
+
+    def reworded(self, message: str) -> Self:
+        """Return the same error (its class, code and cause) saying ``message`` instead.
+
+        For a front door that names the option in its own words inside the message (a
+        template's ``options.max_dt_s``): ``option`` and ``suggest`` are dropped, so it is
+        not named a second time.
+        """
+        clone = copy.copy(self)
+        clone.args = (message,)
+        clone.option = None
+        clone.suggest = None
+        return clone
 
 
 class InputError(LocevalError):

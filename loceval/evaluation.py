@@ -9,14 +9,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from loceval._typing import IntArray
 from loceval._version import __version__
-from loceval.alignment import Alignment, AlignMethod, AlignWindow, align
-from loceval.association import Association, AssociationMethod, associate
+from loceval.assessment.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
+from loceval.calibration.offsets import DeviceSource, OffsetCheck, check_offsets
+from loceval.core.arrays import IntArray
+from loceval.core.gaps import gap_threshold_ns
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
-from loceval.gaps import gap_threshold_ns
-from loceval.geometry import SimilarityTransform
-from loceval.metrics import (
+from loceval.metrics.pose_errors import (
     ErrorSeries,
     RPEUnit,
     WorstPose,
@@ -27,23 +27,23 @@ from loceval.metrics import (
     rpe_pairs,
     share_within,
 )
-from loceval.offsets import DeviceSource, OffsetCheck, check_offsets
 from loceval.options import (
     DEFAULT_THRESHOLDS_M,
     check_option,
     choice_default,
     number_default,
 )
+from loceval.registration.alignment import Alignment, AlignMethod, AlignWindow, align
+from loceval.registration.association import Association, AssociationMethod, associate
 from loceval.trajectory import MAX_OFFSET_M, Trajectory
-from loceval.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
 
 if TYPE_CHECKING:
-    from loceval.assessment import Assessment
-    from loceval.comparison import Comparison
-    from loceval.uncertainty import IntervalStats
+    from loceval.assessment.assess import Assessment
+    from loceval.assessment.comparison import Comparison
+    from loceval.assessment.uncertainty import IntervalStats
 
 if TYPE_CHECKING:
-    from loceval.ranging import RangingResult
+    from loceval.radio.ranging import RangingResult
 
 __all__ = [
     "EstimateResult",
@@ -226,7 +226,7 @@ class EvaluationResult:
     """A whole evaluation: one reference, one or more estimates, and how it was made.
 
     ``ranging`` holds the ranging evaluation when the estimates were positioned from radio
-    ranges (:mod:`loceval.radio`); its figures, with ``ranging_options``, are the
+    ranges (:mod:`loceval.radio_evaluation`); its figures, with ``ranging_options``, are the
     document's ``ranging`` object.
     """
 
@@ -358,7 +358,7 @@ def evaluate(
         results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
     comparisons = None
     if not config.no_ci:
-        from loceval.assessment import compare_estimates  # noqa: PLC0415  (scipy)
+        from loceval.assessment.assess import compare_estimates  # noqa: PLC0415  (scipy)
 
         found, notes = compare_estimates(
             [
@@ -482,7 +482,7 @@ def _assess(
     sigma = config.reference_sigma_m
     if config.no_ci and aligned.cov6 is None and sigma is None and reference.cov6 is None:
         return None  # nothing to assess: no scipy loaded
-    from loceval.assessment import SERIES, assess  # noqa: PLC0415  (scipy)
+    from loceval.assessment.assess import SERIES, assess  # noqa: PLC0415  (scipy)
 
     tolerance = config.tolerance
     return assess(

@@ -6,13 +6,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from loceval._quantiles import median
-from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
-from loceval.display import display_text
+from loceval.core.arrays import BoolArray, FloatArray, IntArray, StampsNs
+from loceval.core.display import display_text
+from loceval.core.gaps import tracking_losses
+from loceval.core.geometry import SimilarityTransform, skew
+from loceval.core.quantiles import median
+from loceval.core.rotation import Rotation
 from loceval.errors import TrajectoryError
-from loceval.gaps import tracking_losses
-from loceval.geometry import SimilarityTransform, skew
-from loceval.rotation import Rotation
 
 __all__ = ["MAX_COORDINATE_M", "MAX_OFFSET_M", "MAX_SPAN_S", "MIN_POSES", "Trajectory"]
 
@@ -210,7 +210,7 @@ class Trajectory:
         """Return the ``(start_ns, end_ns)`` of every tracking loss, judged by this rate.
 
         An interval is a loss when longer than ``min_gap_ns`` and than five median
-        intervals (:func:`loceval.gaps.gap_threshold_ns`).
+        intervals (:func:`loceval.core.gaps.gap_threshold_ns`).
 
         Args:
             min_gap_ns: the floor, in nanoseconds (the evaluation's maximum gap).

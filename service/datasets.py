@@ -17,14 +17,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Final
 
-from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 from sqlalchemy import ColumnElement, cast, column, exists, func, literal, select
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.exc import IntegrityError
 
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, get_owned, new_id
-from service.errors import ConflictError, UploadError
+from service.errors import ConflictError, InvalidFieldsError, UploadError
 from service.recordings import inspect_upload
 from service.runtime import Runtime
 from service.schemas import MAX_TAGS, DatasetFields, UploadPublic
@@ -47,7 +46,7 @@ def parse_tags(text: str | None) -> list[str]:
     """Split ``"site-a, level 2"`` into tags (trimmed, unique, in order).
 
     Raises:
-        RequestValidationError: too many tags, one too long, or one with control
+        InvalidFieldsError: too many tags, one too long, or one with control
             characters (each error names ``tags`` and the limit).
     """
     tags = list(dict.fromkeys(t.strip() for t in (text or "").split(",") if t.strip()))
@@ -59,7 +58,7 @@ def _fields(**values: object) -> DatasetFields:
     try:
         return DatasetFields.model_validate(values)
     except ValidationError as err:
-        raise RequestValidationError(err.errors()) from None
+        raise InvalidFieldsError(err.errors()) from None
 
 
 def _shown(text: str, limit: int = 80) -> str:
@@ -92,7 +91,7 @@ def _merge_tags(runtime: Runtime, dataset_id: str, tags: list[str]) -> tuple[Dat
     each write, so two requests merging at once both end with their tags present.
 
     Raises:
-        RequestValidationError: the merged tags would be more than a dataset holds.
+        InvalidFieldsError: the merged tags would be more than a dataset holds.
     """
     added: list[str] = []
     for _ in range(_MERGE_ATTEMPTS):
@@ -109,7 +108,7 @@ def _merge_tags(runtime: Runtime, dataset_id: str, tags: list[str]) -> tuple[Dat
                     f"of {MAX_TAGS} tags per dataset"
                 )
                 error = {"loc": ("tags",), "msg": msg, "type": "too_long", "input": tags}
-                raise RequestValidationError([error])
+                raise InvalidFieldsError([error])
             dataset.tags = [*dataset.tags, *missing]
             session.commit()
             added.extend(t for t in missing if t not in added)
@@ -162,7 +161,7 @@ def store_upload(
 
     Raises:
         ReaderError: the file is not a recording loceval can read (nothing is kept).
-        RequestValidationError: the name or the tags are over their limits.
+        InvalidFieldsError: the name or the tags are over their limits.
     """
     fields = _fields(name=name, tags=tags or [])
     tags = fields.tags
@@ -236,7 +235,7 @@ def store_form(
 
     Raises:
         UploadError: the form has no file, or a single-valued field twice.
-        RequestValidationError: the name or the tags are over their limits.
+        InvalidFieldsError: the name or the tags are over their limits.
         ReaderError: the file is not a recording loceval can read (nothing is kept).
     """
     name = form.value("name")

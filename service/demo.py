@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from loceval._typing import FloatArray
+from loceval.core.arrays import FloatArray
 
 __all__ = ["write_demo_recording"]
 

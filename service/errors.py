@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import uuid
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar, Final
 
 from fastapi import FastAPI, Request
@@ -21,7 +21,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match
 
 from exporters.errors import ExportUnavailableError
-from loceval.display import display_text
+from loceval.core.display import display_text
 from loceval.errors import (
     AlignmentError,
     AssociationError,
@@ -37,6 +37,7 @@ __all__ = [
     "AuthenticationError",
     "ConflictError",
     "InsufficientStorageError",
+    "InvalidFieldsError",
     "JobMemoryError",
     "JobTimeoutError",
     "NotFoundError",
@@ -84,6 +85,22 @@ class AuthenticationError(LocevalError):
     """No API key, or one that is unknown or revoked."""
 
     code: ClassVar[str] = "auth.unauthorized"
+
+
+class InvalidFieldsError(InputError):
+    """Fields of a request that do not validate, found below the routes.
+
+    A form's options or an upload's tags: answered exactly like FastAPI's own request
+    validation, a 422 whose ``errors`` name each field's place (``options.max_dt_s``,
+    ``tags``), so the resource modules raise no HTTP type.
+    """
+
+    code: ClassVar[str] = "request.invalid"
+
+    def __init__(self, errors: Sequence[Mapping[str, Any]]) -> None:
+        """Keep pydantic-style errors (``loc``, ``msg``, ``type``) for the problem document."""
+        self.errors = errors
+        super().__init__("; ".join(str(e.get("msg", "")) for e in errors) or "not valid")
 
 
 class UploadError(InputError):
@@ -180,7 +197,7 @@ def problem_for(exc: LocevalError) -> dict[str, Any]:
 
     This is the one place where messages are scrubbed of server paths (the data directory,
     temporary and extraction folders: :func:`service.redact.scrub`) and of control
-    characters (:func:`loceval.display.display_text`): every problem a
+    characters (:func:`loceval.core.display.display_text`): every problem a
     client sees, from a route or stored with a failed job, is built here. An error about an
     option names it as the API does: ``options.max_dt_s: ...`` in the detail, and
     ``"option": "options.max_dt_s"`` as a member a client can point at.
@@ -226,14 +243,15 @@ async def _handle_loceval_error(_request: Request, exc: Exception) -> JSONRespon
 
 
 async def _handle_validation_error(_request: Request, exc: Exception) -> JSONResponse:
-    assert isinstance(exc, RequestValidationError)  # noqa: S101
+    assert isinstance(exc, RequestValidationError | InvalidFieldsError)  # noqa: S101
+    found = exc.errors() if isinstance(exc, RequestValidationError) else exc.errors
     errors = [
         {
             "loc": list(e.get("loc", ())),
             "msg": str(e.get("msg", "")),
             "type": str(e.get("type", "")),
         }
-        for e in exc.errors()
+        for e in found
     ]
     where = "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in errors[:5])
     detail = f"The request is not valid: {where}." if where else "The request is not valid."
@@ -284,5 +302,6 @@ def install_error_handlers(app: FastAPI) -> None:
     """Register the problem+json handlers."""
     app.add_exception_handler(LocevalError, _handle_loceval_error)
     app.add_exception_handler(RequestValidationError, _handle_validation_error)
+    app.add_exception_handler(InvalidFieldsError, _handle_validation_error)
     app.add_exception_handler(StarletteHTTPException, _handle_http_error)
     app.add_exception_handler(Exception, _handle_bug)

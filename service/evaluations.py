@@ -10,7 +10,6 @@ import logging
 from collections.abc import Sequence
 from typing import Any, Final
 
-from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, defer
@@ -21,6 +20,7 @@ from service.blobs import artifact_key
 from service.datasets import store_upload
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, JobStatus, get_owned, utcnow
 from service.errors import (
+    InvalidFieldsError,
     NotFoundError,
     NotReadyError,
     ServiceUnavailableError,
@@ -112,7 +112,8 @@ def create_ranging(runtime: Runtime, project_id: str, body: RangingCreate) -> Ev
 
     The record is an evaluation whose request holds the ranging body and, as its estimates,
     the solvers' outputs (named ``nlls`` / ``minmax``, from the ranges dataset); the job
-    runs :func:`loceval.radio.evaluate_radio` (see :func:`service.jobs.execute_evaluation`).
+    runs :func:`loceval.radio_evaluation.evaluate_radio` (see
+    :func:`service.jobs.execute_evaluation`).
 
     Raises:
         NotFoundError: a dataset is not in the project.
@@ -493,7 +494,7 @@ def evaluate_form(runtime: Runtime, project_id: str, form: ReceivedForm) -> Eval
 
     Raises:
         UploadError: the form's fields do not fit together.
-        RequestValidationError: the options or names are not valid (each error names its
+        InvalidFieldsError: the options or names are not valid (each error names its
             place, ``options.max_dt_s``, ``estimates.0.name``).
     """
     references = [f for f in form.files if f.field == "reference"]
@@ -533,7 +534,7 @@ def evaluate_form(runtime: Runtime, project_id: str, form: ReceivedForm) -> Eval
     try:  # checked before any file is stored; every error names its place (estimates.0.name)
         EvaluationCreate.model_validate(draft)
     except ValidationError as err:
-        raise RequestValidationError(err.errors()) from None
+        raise InvalidFieldsError(err.errors()) from None
     reference, _ = store_upload(runtime, project_id, references[0])
     stored = [store_upload(runtime, project_id, f)[0] for f in estimates]
     reference_ref["dataset_id"] = reference.id
@@ -554,4 +555,4 @@ def _form_options(text: str | None) -> EvaluationOptions:
         return EvaluationOptions.model_validate_json(text)
     except ValidationError as err:
         errors = [{**e, "loc": ("options", *e["loc"])} for e in err.errors()]
-        raise RequestValidationError(errors) from None
+        raise InvalidFieldsError(errors) from None

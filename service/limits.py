@@ -18,6 +18,11 @@ Children are forked from a *forkserver* that has the evaluation modules loaded: 
 process starts in milliseconds instead of importing NumPy, SciPy and the exporters anew,
 and no child is forked from the threaded server itself. The child reports its progress
 through a pipe; the parent stores it (and its heartbeat thread keeps beating) while it waits.
+
+The child configures no logging of its own: its one handler sends each record (and each
+Python warning, captured) through the same pipe, and the parent hands it to its loggers in
+the waiting thread, so the line is written by the service's one handler with the job's
+context (``job_id``, ``kind``, ``project``), exactly as if the job had run in the parent.
 """
 
 from __future__ import annotations
@@ -228,6 +233,9 @@ def _wait(
             message: tuple[Any, ...] = results.recv()
         except EOFError:  # the child exited without a word: killed or crashed
             return None
+        if message[0] == "log":
+            _log_from_child(message[1])
+            continue
         if message[0] != "progress":
             return message
         if progress is not None:
@@ -284,7 +292,9 @@ def _child(
             memory_bytes = min(memory_bytes, hard)
         resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, hard))
     threading.Thread(target=_orphaned, args=(lifeline,), daemon=True).start()
-    report = _Reporter(results)
+    sender = _Sender(results)
+    _log_to_parent(sender)
+    report = _Reporter(sender)
     outcome: tuple[object, ...]
     try:
         target(*args, progress=report)
@@ -296,16 +306,75 @@ def _child(
     except BaseException:  # noqa: BLE001  (a bug: the parent logs it under an error id)
         outcome = ("bug", traceback.format_exc())
     # The failed work's frames (and their arrays) are gone here, so sending needs no memory.
-    results.send(outcome)
+    sender(outcome)
     results.close()
+
+
+class _Sender:
+    """The child's end of the results pipe, shared by the work, its logging and its outcome."""
+
+    def __init__(self, results: Connection) -> None:
+        """Send on ``results``, one message at a time (threads of the work may log too)."""
+        self.results = results
+        self.lock = threading.Lock()
+
+    def __call__(self, message: tuple[object, ...]) -> None:
+        """Send one message."""
+        with self.lock:
+            self.results.send(message)
+
+
+class _ToParent(logging.Handler):
+    """The child's only log handler: each record goes to the parent as plain fields."""
+
+    def __init__(self, sender: _Sender) -> None:
+        """Send through ``sender``."""
+        super().__init__(logging.INFO)
+        self.sender = sender
+
+    def emit(self, record: logging.LogRecord) -> None:
+        """Send the record's fields (its message formatted here: its arguments may not pickle)."""
+        try:
+            fields = {
+                key: value if isinstance(value, str | int | float | bool | None) else str(value)
+                for key, value in record.__dict__.items()
+                if key not in _NOT_SENT
+            }
+            fields["msg"], fields["args"] = record.getMessage(), None
+            if record.exc_info and not record.exc_text:
+                fields["exc_text"] = logging.Formatter().formatException(record.exc_info)
+            self.sender(("log", fields))
+        except Exception:  # noqa: BLE001  (logging must never fail the work)
+            self.handleError(record)
+
+
+_NOT_SENT: Final = frozenset({"msg", "args", "exc_info", "stack_info", "context"})
+
+
+def _log_to_parent(sender: _Sender) -> None:
+    """Route every log record and Python warning of this (child) process to the parent."""
+    root = logging.getLogger()
+    for handler in list(root.handlers):
+        root.removeHandler(handler)
+    root.addHandler(_ToParent(sender))
+    root.setLevel(logging.INFO)
+    logging.captureWarnings(capture=True)
+
+
+def _log_from_child(fields: dict[str, Any]) -> None:
+    """Write a record the child sent, through this process's loggers and context."""
+    record = logging.makeLogRecord(fields)
+    child = logging.getLogger(record.name)
+    if child.isEnabledFor(record.levelno):
+        child.handle(record)
 
 
 class _Reporter:
     """The child's progress callback: sends (stage, fraction) to the parent, 10 times a second."""
 
-    def __init__(self, results: Connection) -> None:
-        """Send on ``results``."""
-        self.results = results
+    def __init__(self, send: Callable[[tuple[object, ...]], None]) -> None:
+        """Send through ``send``."""
+        self.send = send
         self.stage = ""
         self.at = 0.0
 
@@ -315,7 +384,7 @@ class _Reporter:
         if stage == self.stage and now - self.at < _PROGRESS_INTERVAL_S:
             return
         self.stage, self.at = stage, now
-        self.results.send(("progress", stage, float(fraction)))
+        self.send(("progress", stage, float(fraction)))
 
 
 def _portable(err: LocevalError) -> LocevalError:

@@ -13,19 +13,19 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
-from loceval.alignment import AlignMethod, AlignWindow
-from loceval.association import AssociationMethod
-from loceval.checkpoint_config import CheckpointConfig
+from loceval.calibration.offsets import DeviceSource
+from loceval.checkpoints.config import CheckpointConfig
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, Tolerance, parse_offset
-from loceval.geometry import SimilarityTransform
-from loceval.metrics import RPEUnit
-from loceval.offsets import DeviceSource
+from loceval.metrics.pose_errors import RPEUnit
 from loceval.options import AUTO, check_option
+from loceval.registration.alignment import AlignMethod, AlignWindow
+from loceval.registration.association import AssociationMethod
 
 if TYPE_CHECKING:
     from exporters.options import ExportOptions
-    from loceval.radio import RangingConfig
+    from loceval.radio_evaluation import RangingConfig
 
 __all__ = [
     "EvaluationValues",
@@ -196,7 +196,7 @@ def ranging_from_options(options: RangingValues) -> RangingConfig:
     Raises:
         InputError: a value cannot be used (the error carries the option's key).
     """
-    from loceval.radio import RangingConfig, parse_solvers, parse_tag_offset  # noqa: PLC0415
+    from loceval.radio_evaluation import RangingConfig, parse_solvers, parse_tag_offset  # noqa: PLC0415
 
     if str(options.dims) not in {"2", "3"}:
         msg = f"The number of dimensions must be 2 or 3, got {options.dims!r}."
@@ -300,14 +300,14 @@ def export_from_options(
         InputError: both a site and a site matrix, or an option's value cannot be used.
     """
     from exporters import ExportOptions  # noqa: PLC0415
-    from exporters.options import UpAxis  # noqa: PLC0415
-    from exporters.placement import (  # noqa: PLC0415
+    from exporters.cad.placement import (  # noqa: PLC0415
         check_options,
         parse_site,
         parse_units,
         read_site_matrix,
         site_from_values,
     )
+    from exporters.options import UpAxis  # noqa: PLC0415
 
     matrix = options.site_matrix
     if options.site and matrix is not None:
@@ -354,7 +354,7 @@ def device_offset(
         )
         raise InputError(msg, option="device")
     if path.suffix.lower() in {".urdf", ".xml"}:
-        from loceval.urdf import read_urdf_offset  # noqa: PLC0415
+        from loceval.readers.urdf import read_urdf_offset  # noqa: PLC0415
 
         return read_urdf_offset(path, from_link=from_link, to_link=to_link)
     from loceval.readers.rosbag import read_bag_static_transform  # noqa: PLC0415

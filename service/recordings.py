@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from exporters.site import BUILDING_SUFFIXES
+from exporters.cad.site import BUILDING_SUFFIXES
 from loceval.errors import LocevalError, ReaderError
 from loceval.inspection import URDF_SUFFIXES, inspect
 
@@ -58,7 +58,7 @@ def _inspect_building(path: Path, filename: str) -> dict[str, Any]:
     Mesh units are not stored in OBJ, PLY or STL files: they are read as metres here; the
     evaluation reads the model again in its own units and up axis.
     """
-    from exporters.building import BuildingModel, read_underlay  # noqa: PLC0415  (CAD libraries)
+    from exporters.cad.building import BuildingModel, read_underlay  # noqa: PLC0415  (CAD libraries)
     from exporters.options import Units, UpAxis  # noqa: PLC0415
 
     try:

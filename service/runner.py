@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from loceval.checkpoint_config import CheckpointConfig
+from loceval.checkpoints.config import CheckpointConfig
 from loceval.errors import InputError, LocevalError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, ProgressCallback, evaluate
 from loceval.options import choice_default
@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from exporters.options import ExportOptions
     from loceval.checkpoint_evaluation import CheckpointEvaluation
     from loceval.controlpoints import ControlPoints, Visits
-    from loceval.radio import RangingConfig
+    from loceval.radio_evaluation import RangingConfig
     from loceval.readers.radio import Ranges
 
 __all__ = [
@@ -134,7 +134,7 @@ class Job:
         export: artifact options; None writes no artifacts.
         formats: the artifacts to write (None: all).
         ranging: the radio inputs: the estimates are then positioned from the ranges
-            (:func:`loceval.radio.evaluate_radio`) and ``estimates`` is empty.
+            (:func:`loceval.radio_evaluation.evaluate_radio`) and ``estimates`` is empty.
         visits: a control-point reference: the visits table; None finds the stops.
         checkpoints: a control-point reference: its options.
     """
@@ -189,7 +189,7 @@ def run_job(
         report(stage, _READ + (_EVALUATE - _READ) * fraction)
 
     if job.ranging is not None:
-        from loceval.radio import evaluate_radio  # noqa: PLC0415
+        from loceval.radio_evaluation import evaluate_radio  # noqa: PLC0415
 
         report("reading the ranges", _READ / 2)
         result = evaluate_radio(

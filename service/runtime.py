@@ -22,7 +22,7 @@ from service.adapters import converted
 from service.blobs import Blobs
 from service.db import Evaluation, ScheduleRun
 from service.limits import warm_up
-from service.logs import configure_logging, log_transition
+from service.logs import log_transition
 from service.settings import Settings
 
 __all__ = ["JobKind", "JobModel", "Runtime", "create_huey"]
@@ -110,8 +110,11 @@ class Runtime:
         self.kinds[kind].execute(self, job_id)
 
     def start_consumer(self, *, periodic: bool = True) -> Consumer:
-        """Start queue consumer threads in this process (no signal handlers of its own)."""
-        configure_logging()
+        """Start queue consumer threads in this process (no signal handlers of its own).
+
+        Logging is the process's entry point's to configure (the app's start, ``loceval
+        worker``), once.
+        """
         warm_up()  # the jobs' forkserver imports the evaluation modules now, not at the first job
         consumer = _EmbeddedConsumer(
             self.huey,

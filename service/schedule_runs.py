@@ -23,7 +23,6 @@ import numpy as np
 from sqlalchemy import select, update
 
 from loceval.errors import InputError, LocevalError
-from loceval.evaluation import Tolerance
 from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
 from service.db import Dataset, Evaluation, JobStatus, Schedule, ScheduleRun, utcnow
 from service.errors import ServiceUnavailableError, problem_for
@@ -32,6 +31,7 @@ from service.runtime import Runtime
 from service.schedule_schemas import EvaluationTemplate, Produce, Selection, TemplateSource
 from service.schedules import RUN, SUMMARY_ARTIFACTS, describe_selection, select_datasets
 from service.schemas import EvaluationCreate, SourceRef
+from service.summaries import summary_files
 from service.tracking import ProgressWriter, tracked_job
 from service.webhooks import (
     AllowList,
@@ -255,23 +255,18 @@ def _render(
     staging: Path,
     templates_dir: Path,
 ) -> None:
-    from exporters.summary import SummaryInput, render_summary_files  # noqa: PLC0415  (heavy)
-
-    tolerance = EvaluationTemplate.model_validate(schedule.template).options.tolerance
-    summary = SummaryInput(
+    files = summary_files(
+        EvaluationTemplate.model_validate(schedule.template),
+        summary_runs,
+        Produce.model_validate(schedule.produce).summary_formats,
         title=schedule.name,
-        generated_at=utcnow(),
         selection=describe_selection(schedule.selection, as_of=run.due_at),
-        runs=summary_runs,
-        tolerance=Tolerance.parse(tolerance) if tolerance else None,
+        templates_dir=templates_dir,
+        generated_at=utcnow(),
         notes=[run.note] if run.note else [],
         schedule_id=schedule.id,
         run_id=run.id,
     )
-    wanted = Produce.model_validate(schedule.produce).summary_formats
-    # Only what the schedule asks for is rendered: an HTML-only schedule never lays out a
-    # PDF, so it runs where WeasyPrint's system libraries (pango) are missing.
-    files = render_summary_files(summary, wanted, templates_dir=templates_dir)
     staging.mkdir(parents=True, exist_ok=True)
     for name, data in files.items():
         (staging / name).write_bytes(data)

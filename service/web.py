@@ -17,7 +17,7 @@ from jinja2 import Environment, FileSystemLoader
 
 from exporters.report import pdf_available
 from loceval import __version__
-from loceval.display import shown_text
+from loceval.core.display import shown_text
 
 __all__ = ["router"]
 

@@ -15,7 +15,7 @@ from enum import StrEnum
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from loceval.geometry import SimilarityTransform
+from loceval.core.geometry import SimilarityTransform
 from loceval.trajectory import Trajectory
 
 T0_NS = 1_700_000_000 * 10**9

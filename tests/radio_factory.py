@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from loceval._typing import BoolArray, FloatArray
+from loceval.core.arrays import BoolArray, FloatArray
 from loceval.readers.radio import Anchors, Ranges
 from loceval.trajectory import Trajectory
 

@@ -80,6 +80,40 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("loceval", "exporters", "service")
 CORE_PACKAGES = ("loceval", "exporters")
 MAX_MODULE_LINES = 600
+MAX_TOP_MODULES = 10
+"""``loceval/`` keeps the value types, errors, options and the pipelines' entry points at its
+top; everything else lives in the folder of its stage."""
+
+STAGES: Final[tuple[tuple[str, ...], ...]] = (
+    ("loceval.errors", "loceval.optionspec", "loceval._version"),
+    ("loceval.options", "loceval.core"),
+    ("loceval.trajectory", "loceval.controlpoints"),
+    ("loceval.readers",),
+    ("loceval.inspection", "loceval.registration"),
+    ("loceval.metrics",),
+    ("loceval.calibration", "loceval.assessment"),
+    ("loceval.checkpoints", "loceval.radio"),
+    ("loceval.evaluation",),
+    ("loceval.checkpoint_evaluation", "loceval.radio_evaluation"),
+    ("loceval",),
+    ("exporters.errors",),
+    ("exporters.options",),
+    ("exporters.colours", "exporters.tables"),
+    ("exporters.cad",),
+    ("exporters.plots",),
+    ("exporters.report",),
+    ("exporters.summary", "exporters.checkpoints"),
+    ("exporters",),
+)
+"""The stages of the data flow, lowest first: a module imports only modules of its own stage
+folder or of a lower stage (readers never import metrics, metrics never import calibration,
+the core never imports the exporters, ...). Stages on one row are siblings that import
+neither each other nor anything above them."""
+
+HTTP_MODULES: Final = ("fastapi", "starlette", "uvicorn", "pydantic", "httpx")
+HTTP_ERROR_NAMES: Final = frozenset(
+    {"HTTPException", "RequestValidationError", "WebSocketException"}
+)
 _FLAG = re.compile(r"(?<![-!\w])--[A-Za-z]")
 """A command-line flag: ``--`` then a letter, not inside ``---`` or an XML ``<!--``."""
 
@@ -208,6 +242,103 @@ def flag_strings(root: Path, packages: Sequence[str]) -> list[str]:
     return sorted(hits, key=lambda hit: (hit.split(":")[0], int(hit.split(":")[1])))
 
 
+def stage_of(module: str, stages: Sequence[Sequence[str]]) -> tuple[int, str] | None:
+    """Return the rank and name of the stage holding ``module`` (its longest listed prefix)."""
+    best: tuple[int, str] | None = None
+    for rank, row in enumerate(stages):
+        for name in row:
+            if (module == name or module.startswith(name + ".")) and (
+                best is None or len(name) > len(best[1])
+            ):
+                best = (rank, name)
+    return best
+
+
+def upward_imports(
+    root: Path, packages: Sequence[str], stages: Sequence[Sequence[str]]
+) -> list[str]:
+    """Return ``importer -> imported`` for every import into another stage not below it."""
+    files = module_files(root, packages)
+    found: list[str] = []
+    for name, path in files.items():
+        own = stage_of(name, stages)
+        if own is None:
+            found.append(f"{name}: in no stage")
+            continue
+        for target in sorted(imported_modules(path, name, files)):
+            theirs = stage_of(target, stages)
+            if theirs is None or (theirs[1] != own[1] and theirs[0] >= own[0]):
+                found.append(f"{name} -> {target}")
+    return found
+
+
+def top_modules(root: Path, package: str) -> list[str]:
+    """Return the modules (files, ``__init__`` included) at the top of ``package``."""
+    return sorted(path.name for path in (root / package).glob("*.py"))
+
+
+def http_leaks(
+    root: Path, packages: Sequence[str], frameworks: Collection[str] = HTTP_MODULES
+) -> list[str]:
+    """Return ``module:line`` for every import of a web framework or raise of an HTTP error."""
+    hits: list[str] = []
+    for name, path in module_files(root, packages).items():
+        tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+        for node in ast.walk(tree):
+            imported: list[str] = []
+            if isinstance(node, ast.Import):
+                imported = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and not node.level:
+                imported = [node.module or ""]
+            raised = ""
+            if isinstance(node, ast.Raise) and node.exc is not None:
+                call = node.exc.func if isinstance(node.exc, ast.Call) else node.exc
+                raised = getattr(call, "id", None) or getattr(call, "attr", "")
+            if any(n.split(".")[0] in frameworks for n in imported) or raised in HTTP_ERROR_NAMES:
+                hits.append(f"{name}:{node.lineno}")
+    return hits
+
+
+def test_stages_import_only_downward() -> None:
+    """Each stage folder imports only its own modules and lower stages (see STAGES)."""
+    assert upward_imports(ROOT, CORE_PACKAGES, STAGES) == []
+
+
+def test_core_keeps_few_modules_at_its_top() -> None:
+    """A newcomer finds each stage of the data flow as one folder of ``loceval/``."""
+    top = top_modules(ROOT, "loceval")
+    assert len(top) <= MAX_TOP_MODULES, top
+
+
+def test_core_and_exporters_know_no_http() -> None:
+    """Nothing under loceval/ or exporters/ imports a web framework or raises HTTP types."""
+    assert http_leaks(ROOT, CORE_PACKAGES) == []
+
+
+RESOURCE_MODULES: Final = (
+    "service.datasets",
+    "service.evaluations",
+    "service.schedules",
+    "service.schedule_runs",
+    "service.recordings",
+    "service.jobs",
+    "service.runner",
+)
+"""The service's resource and job modules: below the routes, so they raise domain errors."""
+
+
+def test_resource_modules_raise_no_http_types() -> None:
+    """The service's resources raise domain errors; only the routes and adapters speak HTTP."""
+    files = module_files(ROOT, ("service",))
+    leaks = [
+        hit
+        for hit in http_leaks(ROOT, ("service",), ("fastapi", "starlette", "uvicorn"))
+        if hit.split(":")[0] in RESOURCE_MODULES
+    ]
+    assert set(RESOURCE_MODULES) <= set(files)
+    assert leaks == []
+
+
 def test_no_import_cycle() -> None:
     """No module of loceval, exporters or service reaches itself through its imports."""
     cycles = import_cycles(ROOT, PACKAGES)
@@ -290,6 +421,28 @@ class TestLayeringChecksOnFakeTrees:
         }
         root = _write_tree(tmp_path, tree)
         assert import_cycles(root, ("core",)) == [["core.b", "core.errors", "core.b"]]
+
+    def test_upward_import_is_found(self, tmp_path: Path) -> None:
+        """An import into a higher stage or a sibling, or a module in no stage, is named."""
+        stages = (("core.errors",), ("core.sub",), ("core.b",), ("core.a",), ("core",))
+        root = _write_tree(tmp_path, _CLEAN_TREE)
+        assert upward_imports(root, ("core",), stages) == []
+        siblings = (("core.errors",), ("core.sub",), ("core.a", "core.b"), ("core",))
+        assert upward_imports(root, ("core",), siblings) == ["core.a -> core.b"]
+        assert upward_imports(root, ("core",), stages[:-1]) == ["core: in no stage"]
+        tree = {**_CLEAN_TREE, "core/sub/helper.py": "from core.a import A\n"}
+        root = _write_tree(tmp_path, tree)
+        assert upward_imports(root, ("core",), stages) == ["core.sub.helper -> core.a"]
+
+    def test_http_types_are_found(self, tmp_path: Path) -> None:
+        """An import of a web framework, or an HTTP error raised, is named with its line."""
+        tree = {
+            **_CLEAN_TREE,
+            "core/a.py": "import fastapi\n",
+            "core/b.py": "from x import y\n\ndef f():\n    raise y.HTTPException(400)\n",
+        }
+        root = _write_tree(tmp_path, tree)
+        assert http_leaks(root, ("core",)) == ["core.a:1", "core.b:4"]
 
     def test_long_module_is_found(self, tmp_path: Path) -> None:
         """601 lines is too long; 600 is not."""

@@ -23,8 +23,8 @@ from exporters.plots.figure import (
     style_axes,
 )
 from exporters.plots.underlay import draw_floor_plan, floor_plan_note
-from loceval._typing import FloatArray
 from loceval.checkpoint_evaluation import CheckpointEvaluation
+from loceval.core.arrays import FloatArray
 
 __all__ = ["device_heights_m", "error_vector_scale", "plot_checkpoint_plan"]
 

@@ -29,9 +29,10 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
+from exporters.colours import ESTIMATE_COLOURS, estimate_colour
+from loceval.core.arrays import BoolArray, FloatArray, IntArray, StampsNs
+from loceval.core.gaps import path_breaks
 from loceval.evaluation import EvaluationResult
-from loceval.gaps import path_breaks
 
 __all__ = [
     "DEFAULT_MAX_POINTS",
@@ -77,17 +78,6 @@ MAX_SPAN_MARKERS = 5
 
 REFERENCE_COLOUR = "#00b5d8"
 """Ground truth: cyan (the framework paper's Fig. 5), darkened a little to read on white."""
-ESTIMATE_COLOURS: tuple[str, ...] = (
-    "#d4009a",  # magenta (RTAB-Map in the paper's Fig. 5)
-    "#1f9e34",  # green (ISAAC in the paper's Fig. 5)
-    "#f58a07",  # orange
-    "#3b4cc0",  # blue
-    "#8c564b",  # brown
-    "#6b6b6b",  # grey
-    "#b8a700",  # olive
-    "#7b2cbf",  # violet
-)
-"""Distinct estimate colours in order of the estimates."""
 GAP_COLOUR = "#9e9e9e"
 TOLERANCE_COLOUR = "#c62828"
 
@@ -169,11 +159,6 @@ def number_figures(plots: Iterable[Plot], image_format: ImageFormat) -> tuple[Fi
     return tuple(p.as_figure(n, image_format) for n, p in enumerate(plots, start=1))
 
 
-def estimate_colour(index: int) -> str:
-    """Return the colour of the ``index``-th estimate (cycling after eight)."""
-    return ESTIMATE_COLOURS[index % len(ESTIMATE_COLOURS)]
-
-
 def decimate_uniform(n: int, max_points: int) -> IntArray:
     """Return at most ``max_points`` evenly spaced indices into ``n`` samples.
 
@@ -243,7 +228,7 @@ def _min_gap_ns(result: EvaluationResult) -> int:
 
 
 def reference_losses(result: EvaluationResult) -> list[tuple[int, int]]:
-    """Return the reference's tracking losses (:mod:`loceval.gaps`), as the result reports."""
+    """Return the reference's tracking losses (:mod:`loceval.core.gaps`), as the result reports."""
     return result.reference.tracking_losses(_min_gap_ns(result))
 
 

@@ -9,7 +9,7 @@ from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
-from exporters.placement import ate_bins, ate_edges_m
+from exporters.cad.placement import ate_bins, ate_edges_m
 from exporters.plots.figure import (
     DEFAULT_MAX_POINTS,
     MAX_SPAN_MARKERS,
@@ -33,7 +33,7 @@ from exporters.plots.figure import (
     with_nan_breaks,
 )
 from exporters.plots.underlay import draw_floor_plan, floor_plan_note
-from loceval._typing import FloatArray
+from loceval.core.arrays import FloatArray
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.trajectory import Trajectory
 

@@ -28,7 +28,7 @@ from loceval.evaluation import EvaluationResult
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-    from loceval.ranging import RangingResult
+    from loceval.radio.ranging import RangingResult
 
 __all__ = ["plot_ranging"]
 

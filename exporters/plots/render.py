@@ -8,7 +8,7 @@ from exporters.plots.figure import DEFAULT_MAX_POINTS, ImageFormat, Plot
 from exporters.plots.maps import is_3d, plot_ate_path, plot_overlay_xy, plot_side_views
 from exporters.plots.ranging import plot_ranging
 from exporters.plots.series import plot_ate_over_time, plot_error_cdf, plot_rpe_over_time
-from loceval._typing import FloatArray
+from loceval.core.arrays import FloatArray
 from loceval.evaluation import EvaluationResult
 
 __all__ = ["render_plots"]

@@ -31,9 +31,9 @@ from exporters.plots.figure import (
     style_axes,
     with_nan_breaks,
 )
-from loceval._typing import BoolArray, FloatArray
+from loceval.core.arrays import BoolArray, FloatArray
 from loceval.evaluation import EvaluationConfig, EvaluationResult
-from loceval.metrics import ErrorSeries
+from loceval.metrics.pose_errors import ErrorSeries
 
 __all__ = [
     "describe_rpe_step",
@@ -87,7 +87,7 @@ def envelope(
     """Per-bucket minimum, maximum and mean of a long series, for drawing it as a band.
 
     Consecutive samples fall into about ``buckets`` equal buckets; a bucket never spans a
-    break (tracking loss, :func:`loceval.gaps.path_breaks`), and a NaN row separates the
+    break (tracking loss, :func:`loceval.core.gaps.path_breaks`), and a NaN row separates the
     stretches on either side of a break, so the band breaks there.
 
     Args:

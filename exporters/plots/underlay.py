@@ -14,9 +14,9 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 
-from exporters.building import georeferenced_options, read_underlay, section_segments
+from exporters.cad.building import georeferenced_options, read_underlay, section_segments
 from exporters.options import ExportOptions
-from loceval._typing import FloatArray
+from loceval.core.arrays import FloatArray
 
 __all__ = ["FLOOR_PLAN_GID", "draw_floor_plan", "floor_plan_note", "floor_plan_segments"]
 

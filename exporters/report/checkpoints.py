@@ -25,7 +25,7 @@ from loceval.checkpoint_evaluation import CheckpointEstimate, CheckpointEvaluati
 
 if TYPE_CHECKING:
     from exporters.plots.figure import ImageFormat
-    from loceval._typing import FloatArray
+    from loceval.core.arrays import FloatArray
 
 __all__ = [
     "CHECKPOINT_TEMPLATE",

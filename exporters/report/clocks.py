@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 from exporters.plots.clock import plot_clock_correlation
 from exporters.plots.figure import DEFAULT_MAX_POINTS, FigureView, ImageFormat
+from loceval.calibration.offsets import OffsetCheck
 from loceval.evaluation import EstimateResult, EvaluationConfig, EvaluationResult
-from loceval.offsets import OffsetCheck
 
 __all__ = ["ClockFigure", "ClockSection", "build_clock_section", "time_offset_text"]
 

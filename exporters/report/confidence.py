@@ -1,6 +1,6 @@
 """How sure the report's figures are: intervals in Tables 1-2, comparisons, NEES table.
 
-The evaluation's :class:`~loceval.assessment.Assessment` of each estimate and its
+The evaluation's :class:`~loceval.assessment.assess.Assessment` of each estimate and its
 comparisons, formatted for the templates: the 95 % interval after each RMSE, mean and
 median of Tables 1-2 ("0.194 m (0.180-0.210)"), every comparison of two estimates as a
 sentence for the verdict section, and the consistency (NEES) of a reported covariance.

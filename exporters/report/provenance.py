@@ -18,9 +18,9 @@ from exporters.plots import (
     estimate_colour,
 )
 from exporters.report.clocks import time_offset_text
-from loceval.alignment import AlignWindow
+from loceval.core.gaps import GAP_RATE_FACTOR
 from loceval.evaluation import EstimateResult, EvaluationResult
-from loceval.gaps import GAP_RATE_FACTOR
+from loceval.registration.alignment import AlignWindow
 
 __all__ = [
     "alignment_rows",

@@ -16,7 +16,7 @@ from exporters.options import ExportOptions
 from exporters.plots import DEFAULT_MAX_POINTS, render_plots
 from exporters.plots.underlay import floor_plan_segments
 from exporters.report.view import ReportView, build_report_view
-from loceval.display import shown_text
+from loceval.core.display import shown_text
 from loceval.evaluation import EvaluationResult
 
 __all__ = [

@@ -37,7 +37,7 @@ from exporters.report.provenance import (
 )
 from exporters.report.ranging import RangingView, build_ranging_view
 from loceval.evaluation import EvaluationResult
-from loceval.metrics import ErrorSeries, ErrorStats
+from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 
 __all__ = ["BEST_MARK", "ReportView", "build_report_view"]
 

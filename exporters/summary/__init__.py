@@ -12,7 +12,7 @@ Split by concern as the evaluation report is: :mod:`~exporters.summary.model` (t
 statistics and repeatability rows), :mod:`~exporters.summary.view` (the formatted view
 model), :mod:`~exporters.summary.plots` (the figures) and :mod:`~exporters.summary.render`
 (HTML and PDF). The distances behind the repeatability are the core's
-(:mod:`loceval.repeatability`, :mod:`loceval.polyline`).
+(:mod:`loceval.metrics.repeatability`, :mod:`loceval.core.polyline`).
 
 Repeatability follows the reference-robot paper's re-drive test: a path recorded once is
 driven again, and the re-driven path is compared with the first in space (the paper

@@ -1,7 +1,7 @@
 """A schedule summary's comparisons of systems across runs, as sentences.
 
 The runs of a schedule are different recordings, so two systems share no stamps across
-them; :func:`loceval.comparison.compare_runs` compares their mean per-run RMSE with an
+them; :func:`loceval.assessment.comparison.compare_runs` compares their mean per-run RMSE with an
 unpaired block bootstrap. A pair with fewer than 8 runs of either system is not compared
 (a percentile interval over so few values says little); one sentence says so.
 """
@@ -22,7 +22,7 @@ def across_runs(stats: Sequence[SystemStats]) -> list[str]:
     """Return one sentence per pair of systems and metric (A before B, in table order)."""
     if len(stats) < 2:
         return []
-    from loceval.comparison import ComparedMetric, compare_runs  # noqa: PLC0415  (scipy)
+    from loceval.assessment.comparison import ComparedMetric, compare_runs  # noqa: PLC0415  (scipy)
 
     sentences = []
     short = False

@@ -3,7 +3,7 @@
 A schedule's service builds a :class:`SummaryInput` (one :class:`SummaryRun` per selected
 recording); :func:`system_stats` sums each system up over the runs and :func:`repeatability`
 compares every run's reference path with the first run's, in space, through the core's
-:func:`loceval.repeatability.path_deviations`.
+:func:`loceval.metrics.repeatability.path_deviations`.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from loceval.evaluation import Tolerance
-from loceval.repeatability import finite_positions, path_deviations
+from loceval.metrics.repeatability import finite_positions, path_deviations
 
 __all__ = [
     "RepeatabilityRow",
@@ -383,7 +383,7 @@ def repeatability(runs: Sequence[SummaryRun]) -> list[RepeatabilityRow]:
     The runs with a reference path are taken by ``recorded_at``; the first is the
     baseline. For each later run, every reference position's distance to the baseline's
     path (a polyline through its positions, point-to-segment) is measured
-    (:func:`loceval.repeatability.path_deviations`); the median and the largest summarise
+    (:func:`loceval.metrics.repeatability.path_deviations`); the median and the largest summarise
     how closely the path was re-driven. The duration difference tells whether it was
     driven at the same pace.
 

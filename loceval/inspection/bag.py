@@ -29,7 +29,7 @@ from loceval.inspection.model import (
 )
 from loceval.readers import SourceSpec
 from loceval.readers.rosbag import PoseKind, TopicOverview, read_bag_overview
-from loceval.tftree import TfBuffer, compose_chain, describe_chain, find_chain
+from loceval.readers.tftree import TfBuffer, compose_chain, describe_chain, find_chain
 
 __all__ = ["inspect_bag"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from loceval.inspection.model import Inspection, JointInspection
 from loceval.readers import SourceSpec
-from loceval.urdf import read_urdf
+from loceval.readers.urdf import read_urdf
 
 __all__ = ["inspect_urdf"]
 
@@ -19,7 +19,7 @@ def inspect_urdf(spec: SourceSpec) -> Inspection:
         The inspection (kind and format ``urdf``, no sources).
 
     Raises:
-        ReaderError: the file is not a readable URDF (see :func:`loceval.urdf.read_urdf`).
+        ReaderError: the file is not a readable URDF (see :func:`loceval.readers.urdf.read_urdf`).
     """
     robot = read_urdf(spec.path)
     return Inspection(

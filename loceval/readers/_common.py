@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from loceval._typing import FloatArray, IntArray, StampsNs
+from loceval.core.arrays import FloatArray, IntArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.trajectory import MAX_COORDINATE_M, MIN_POSES, Trajectory
 

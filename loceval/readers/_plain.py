@@ -34,7 +34,7 @@ from typing import Final, NamedTuple, cast
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from loceval._typing import FloatArray, IntArray, StampsNs
+from loceval.core.arrays import FloatArray, IntArray, StampsNs
 
 __all__ = ["parse_plain"]
 

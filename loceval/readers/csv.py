@@ -37,7 +37,7 @@ from typing import Final
 
 import numpy as np
 
-from loceval._typing import IntArray, StampsNs
+from loceval.core.arrays import IntArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.readers._common import build_trajectory
 from loceval.readers.source import SourceSpec, TrajectoryFormat

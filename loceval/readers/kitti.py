@@ -7,12 +7,12 @@ from typing import Final
 
 import numpy as np
 
-from loceval._typing import FloatArray, IntArray, StampsNs
+from loceval.core.arrays import FloatArray, IntArray, StampsNs
+from loceval.core.rotation import Rotation
 from loceval.errors import ReaderError
 from loceval.readers._common import build_trajectory
 from loceval.readers.source import SourceSpec, TrajectoryFormat
 from loceval.readers.text import NS_PER_S, load_text, parse_table, stamps_from_values
-from loceval.rotation import Rotation
 from loceval.trajectory import Trajectory
 
 __all__ = ["KITTI_ROTATION_TOLERANCE", "read_kitti"]

@@ -36,8 +36,8 @@ from typing import Final
 
 import numpy as np
 
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import ReaderError
-from loceval.geometry import SimilarityTransform
 from loceval.readers._common import build_trajectory
 from loceval.readers.source import SourceSpec, TrajectoryFormat
 from loceval.readers.text import csv_rows, load_text, parse_table, stamps_from_values

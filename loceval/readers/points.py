@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from loceval._typing import FloatArray
 from loceval.controlpoints import ControlPoints, Visits
+from loceval.core.arrays import FloatArray
 from loceval.errors import InputError, ReaderError
 from loceval.readers._common import seconds_to_ns
 from loceval.readers.text import SURVEY_DELIMITERS, load_text, split_line

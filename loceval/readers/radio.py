@@ -28,7 +28,7 @@ from typing import Final
 
 import numpy as np
 
-from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
+from loceval.core.arrays import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import InputError, ReaderError
 from loceval.readers.csv import TIME_UNITS
 from loceval.readers.text import SURVEY_DELIMITERS, csv_rows, load_text, split_line

@@ -22,7 +22,7 @@ from typing import Final
 
 import numpy as np
 
-from loceval._typing import BoolArray, FloatArray, IntArray, StampsNs
+from loceval.core.arrays import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.readers._common import seconds_to_ns
 from loceval.readers._plain import parse_plain

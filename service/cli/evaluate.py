@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     import argparse
 
     from exporters.options import ExportOptions
-    from loceval.geometry import SimilarityTransform
+    from loceval.core.geometry import SimilarityTransform
     from loceval.readers import SourceSpec
 
 __all__ = ["export_options", "run_demo", "run_evaluate"]
@@ -95,7 +95,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         )
         result = run_job(job, args.out)
     if args.json:
-        from exporters.jsondoc import finite_json  # noqa: PLC0415
+        from exporters.cad.jsondoc import finite_json  # noqa: PLC0415
 
         print(finite_json(result.to_dict()))  # noqa: T201
     elif isinstance(result, EvaluationResult):

@@ -2,7 +2,7 @@
 
 Tables, inspections and messages hold names and paths from the inputs (a topic named with
 a terminal escape, a file name with a bidirectional override); :func:`emit` is the one
-place that prints them, through :func:`loceval.display.display_text`.
+place that prints them, through :func:`loceval.core.display.display_text`.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 from typing import TextIO
 
-from loceval.display import display_text
+from loceval.core.display import display_text
 
 __all__ = ["emit"]
 

@@ -26,7 +26,7 @@ from service.runner import Job, JobSource, RangingSources, default_name, file_pr
 if TYPE_CHECKING:
     import argparse
 
-    from loceval.ranging import RangingResult
+    from loceval.radio.ranging import RangingResult
 
 __all__ = ["format_ranging_table", "run_ranging"]
 
@@ -66,7 +66,7 @@ def run_ranging(args: argparse.Namespace) -> int:
         msg = "A ranging job produced a control-point evaluation; please report this."
         raise TypeError(msg)
     if args.json:
-        from exporters.jsondoc import finite_json  # noqa: PLC0415
+        from exporters.cad.jsondoc import finite_json  # noqa: PLC0415
 
         print(finite_json(result.to_dict()))  # noqa: T201
         return 0

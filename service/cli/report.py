@@ -34,22 +34,17 @@ def run_report(args: argparse.Namespace) -> int:
     be laid out: without WeasyPrint's system libraries (pango) the command stops there and
     says how to write the HTML alone.
     """
-    from exporters.summary import (  # noqa: PLC0415
-        SummaryInput,
-        SummaryRun,
-        render_summary_files,
-        summary_formats,
-    )
-    from loceval.evaluation import Tolerance  # noqa: PLC0415
+    from exporters.summary import SummaryRun, summary_formats  # noqa: PLC0415
+    from service.summaries import summary_files  # noqa: PLC0415
 
     formats = summary_formats(args.formats)
     template = _read_template(args.template)
     options = template.options
     try:
         config = config_from_options(options, reference_offset=offset_or_none(options.offset))
-    except LocevalError as err:
+    except LocevalError as err:  # the same error (its class and code), in the template's words
         msg = f"The template {str(args.template)!r}: {_api_words(err)}"
-        raise InputError(msg) from err
+        raise err.reworded(msg) from err
     if "summary.pdf" in formats:  # after the user's input is checked, before the work
         _check_pdf()
     runs = []
@@ -76,17 +71,16 @@ def run_report(args: argparse.Namespace) -> int:
                 else result.reference.positions_xyz,
             )
         )
-    tolerance = options.tolerance
-    summary = SummaryInput(
-        title=args.title,
-        generated_at=dt.datetime.now(dt.UTC),
-        selection=f"the {len(args.datasets)} recordings named on the command line",
-        runs=runs,
-        tolerance=Tolerance.parse(tolerance) if tolerance else None,
-    )
     from service.settings import Settings  # noqa: PLC0415
 
-    files = render_summary_files(summary, formats, templates_dir=Settings().templates_dir)
+    files = summary_files(
+        template,
+        runs,
+        formats,
+        title=args.title,
+        selection=f"the {len(args.datasets)} recordings named on the command line",
+        templates_dir=Settings().templates_dir,
+    )
     _write_all(args.out, files)
     for run in runs:
         figures = ", ".join(

@@ -55,10 +55,12 @@ def run_worker(_args: argparse.Namespace) -> int:
     import threading  # noqa: PLC0415
 
     from service.jobs import create_runtime, recover  # noqa: PLC0415
+    from service.logs import configure_logging  # noqa: PLC0415
     from service.preflight import check_data_dir  # noqa: PLC0415
     from service.schedules import tick  # noqa: PLC0415
     from service.settings import get_settings  # noqa: PLC0415
 
+    configure_logging()  # once, for the consumer threads and the jobs' processes alike
     settings = _settings(get_settings)
     runtime = _open_runtime(create_runtime, settings)
     if settings.queue_url == "immediate":

@@ -7,7 +7,7 @@ from typing import Any, cast
 
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.evaluation import EvaluationResult
-from loceval.metrics import ErrorSeries, ErrorStats, RPEUnit
+from loceval.metrics.pose_errors import ErrorSeries, ErrorStats, RPEUnit
 
 __all__ = ["format_checkpoint_tables", "format_tables"]
 

@@ -9,16 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from exporters.cad.placement import parse_site, place_evaluation
 from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units, UpAxis
-from exporters.placement import parse_site, place_evaluation
 from loceval.evaluation import EvaluationResult
 
 trimesh = pytest.importorskip("trimesh")
 ezdxf = pytest.importorskip("ezdxf")
 ifcopenshell = pytest.importorskip("ifcopenshell")
 
-from exporters import building, dxf, gltf, ifc  # noqa: E402  (after the importorskip of its libraries)
+from exporters.cad import building, dxf, gltf, ifc  # noqa: E402  (after the importorskip of its libraries)
 from tests.exporters.ifcfactory import DOOR_X_M, GRID_CONVERSION, GRID_YAW_DEG, write_room  # noqa: E402
 from tests.exporters.test_ifc import NAMES, assert_same_as_dxf  # noqa: E402
 

@@ -19,14 +19,14 @@ from exporters.checkpoints import (
 from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units
 from exporters.plots.checkpoints import error_vector_scale
-from loceval.alignment import AlignMethod
 from loceval.checkpoint_evaluation import (
     CheckpointConfig,
     CheckpointEvaluation,
     evaluate_control_points,
 )
+from loceval.core.geometry import SimilarityTransform
 from loceval.evaluation import EvaluationConfig
-from loceval.geometry import SimilarityTransform
+from loceval.registration.alignment import AlignMethod
 from tests.checkpoint_factory import grid_points, stop_and_go
 
 

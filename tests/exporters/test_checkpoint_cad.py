@@ -14,16 +14,16 @@ import ezdxf
 import numpy as np
 import pytest
 
+from exporters.cad.site import parse_site
 from exporters.checkpoints import write_checkpoint_artifacts
 from exporters.options import ExportOptions, Units
-from exporters.site import parse_site
-from loceval.alignment import AlignMethod
 from loceval.checkpoint_evaluation import (
     CheckpointConfig,
     CheckpointEvaluation,
     evaluate_control_points,
 )
 from loceval.evaluation import EvaluationConfig
+from loceval.registration.alignment import AlignMethod
 from tests.checkpoint_factory import grid_points, stop_and_go
 from tests.exporters.conftest import GRASSHOPPER_SCRIPT, Validator, grasshopper_script_keys
 

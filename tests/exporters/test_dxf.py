@@ -14,16 +14,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from exporters.cad.placement import ate_bins, ate_edges_m, parse_site
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import ate_bins, ate_edges_m, parse_site
+from loceval.core.polyline import polyline_distances
 from loceval.evaluation import EvaluationResult
-from loceval.polyline import polyline_distances
 from tests.conftest import require_tool
 from tests.exporters.conftest import expected_paths, with_reference_loss
 
 ezdxf = pytest.importorskip("ezdxf")
-from exporters import dxf  # noqa: E402  (after the importorskip of its library)
+from exporters.cad import dxf  # noqa: E402  (after the importorskip of its library)
 
 SITE = "2000.25 -1500.5 12.3 30"
 NAMES = ["OptiTrack", "RTAB-Map", "ISAAC"]

@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 
 from exporters.options import ExportOptions
-from loceval.alignment import AlignMethod
 from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points
 from loceval.evaluation import EvaluationConfig, EvaluationResult
+from loceval.registration.alignment import AlignMethod
 from tests.checkpoint_factory import grid_points, stop_and_go
 
 pytest.importorskip("trimesh")
 ezdxf = pytest.importorskip("ezdxf")
 pytest.importorskip("ifcopenshell")
 
-from exporters import gltf  # noqa: E402
+from exporters.cad import gltf  # noqa: E402
 from exporters.plots import render_plots  # noqa: E402  (after the importorskip of its libraries)
 from exporters.plots.underlay import FLOOR_PLAN_GID, floor_plan_segments  # noqa: E402
 from exporters.report import render_report  # noqa: E402

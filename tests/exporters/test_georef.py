@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from exporters.georef import crs_definition, utm_to_lat_lon, utm_zone
+from exporters.cad.georef import crs_definition, utm_to_lat_lon, utm_zone
+from exporters.cad.placement import parse_site, place_evaluation
 from exporters.options import ExportOptions, Units
-from exporters.placement import parse_site, place_evaluation
 from loceval.evaluation import EvaluationResult
 
 ezdxf = pytest.importorskip("ezdxf")
 rhino3dm = pytest.importorskip("rhino3dm")
 
-from exporters import dxf, rhino  # noqa: E402  (after the importorskip of its libraries)
+from exporters.cad import dxf, rhino  # noqa: E402  (after the importorskip of its libraries)
 
 SITE = "512340.0 5403210.5 112.3 30"
 """A site in ETRS89 / UTM zone 32N (Stuttgart area), yaw 30 degrees."""
@@ -63,6 +63,30 @@ def test_inverse_on_the_central_meridian(lat_deg: float) -> None:
     assert lat == pytest.approx(lat_deg, abs=1e-9)  # 1e-9 degrees ~ 0.1 mm
     assert lon == pytest.approx(9.0, abs=1e-12)
     assert convergence == pytest.approx(0.0, abs=1e-12)
+
+
+# Reference figures from PROJ, independent of our series: pyproj 3.7 in a scratch venv,
+# Transformer.from_crs("EPSG:25832", "EPSG:4326", always_xy=True).transform(E, N) for latitude
+# and longitude, Proj("EPSG:25832").get_factors(lon, lat).meridian_convergence for the last.
+PROJ_REFERENCE = [
+    (512340.0, 5403210.5, 48.78177219722457, 9.167979092305405, 0.12635492521225436),
+    (300000.0, 5000000.0, 45.125153848711875, 6.456876510190135, -1.802778816385707),
+    (699999.0, 7500000.0, 67.54752888848142, 13.696356092758135, 4.341777538453608),
+    (500000.0, 10000.0, 0.09047313620772447, 9.0, 0.0),
+]
+
+
+@pytest.mark.parametrize(("easting", "northing", "lat", "lon", "convergence"), PROJ_REFERENCE)
+def test_inverse_matches_proj(
+    easting: float, northing: float, lat: float, lon: float, convergence: float
+) -> None:
+    """Latitude and longitude equal PROJ's to 1e-9 degrees (0.1 mm), grid north to 1e-5 deg."""
+    zone = utm_zone("EPSG:25832")
+    assert zone is not None
+    got = utm_to_lat_lon(easting, northing, zone)
+    assert got[0] == pytest.approx(lat, abs=1e-9)
+    assert got[1] == pytest.approx(lon, abs=1e-9)
+    assert got[2] == pytest.approx(convergence, abs=1e-5)
 
 
 def test_inverse_is_symmetric_and_converges() -> None:
@@ -121,6 +145,7 @@ def test_3dm_earth_anchor(two_estimates: EvaluationResult) -> None:
     base = placement.base_point_m
     zone = utm_zone("EPSG:25832")
     assert zone is not None
+    # utm_to_lat_lon is checked against PROJ above (test_inverse_matches_proj).
     lat, lon, convergence = utm_to_lat_lon(float(base[0]), float(base[1]), zone)
     assert anchor.EarthBasepointLatitude == pytest.approx(lat, abs=1e-12)
     assert anchor.EarthBasepointLongitude == pytest.approx(lon, abs=1e-12)

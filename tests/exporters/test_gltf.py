@@ -9,16 +9,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from exporters.cad.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
+from loceval.core.polyline import polyline_distances
 from loceval.evaluation import EvaluationResult
-from loceval.polyline import polyline_distances
 from tests.exporters.conftest import Validator, with_reference_loss
 
 pygltflib = pytest.importorskip("pygltflib")
 trimesh = pytest.importorskip("trimesh")
-from exporters import gltf, gltf_scene  # noqa: E402  (after the importorskip of its libraries)
+from exporters.cad import gltf, gltf_scene  # noqa: E402  (after the importorskip of its libraries)
 
 FAR_SITE = "512340.25 5403210.5 112.3 37.5"
 NEAR_SITE = "20.5 -15.25 0.5 30"

@@ -8,10 +8,10 @@ import json
 import numpy as np
 import pytest
 
+from exporters.cad.placement import parse_site
 from exporters.options import ExportOptions, Units
-from exporters.placement import parse_site
+from loceval.core.polyline import polyline_distances
 from loceval.evaluation import EvaluationResult
-from loceval.polyline import polyline_distances
 from tests.exporters.conftest import (
     GRASSHOPPER_SCRIPT,
     curve_vertices,
@@ -21,7 +21,7 @@ from tests.exporters.conftest import (
 )
 
 rhino3dm = pytest.importorskip("rhino3dm")
-from exporters import rhino  # noqa: E402  (after the importorskip of its library)
+from exporters.cad import rhino  # noqa: E402  (after the importorskip of its library)
 
 SITE = "512340.25 5403210.5 112.3 37.5"
 

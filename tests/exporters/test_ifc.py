@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from exporters import ARTIFACTS, CAD_ARTIFACTS
+from exporters.cad.placement import parse_site
 from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import parse_site
+from loceval.core.geometry import SimilarityTransform
 from loceval.evaluation import AlignMethod, EvaluationConfig, EvaluationResult, evaluate
-from loceval.geometry import SimilarityTransform
 from loceval.readers import read_trajectory
 from tests.exporters.conftest import noisy, walk
 
@@ -23,7 +23,7 @@ ezdxf = pytest.importorskip("ezdxf")
 import ifcopenshell  # noqa: E402  (after the importorskip of its library)
 import ifcopenshell.validate  # noqa: E402
 
-from exporters import dxf, ifc  # noqa: E402
+from exporters.cad import dxf, ifc  # noqa: E402
 
 # ifcopenshell's EXPRESS-rule loader leaves its generated rules file open
 pytestmark = pytest.mark.filterwarnings(

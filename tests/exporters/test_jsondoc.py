@@ -7,8 +7,8 @@ import math
 
 import pytest
 
+from exporters.cad.jsondoc import finite_json
 from exporters.errors import ExportError
-from exporters.jsondoc import finite_json
 
 
 def test_finite_documents_are_written() -> None:

@@ -9,9 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exporters.errors import ExportOptionsError
-from exporters.options import ExportOptions, Units
-from exporters.placement import (
+from exporters.cad.placement import (
     PALETTE,
     PathKind,
     ate_bins,
@@ -24,9 +22,11 @@ from exporters.placement import (
     place_evaluation,
     read_site_matrix,
 )
+from exporters.errors import ExportOptionsError
+from exporters.options import ExportOptions, Units
+from loceval.core.geometry import SimilarityTransform
+from loceval.core.polyline import polyline_distances
 from loceval.evaluation import EvaluationResult
-from loceval.geometry import SimilarityTransform
-from loceval.polyline import polyline_distances
 from tests.exporters.conftest import with_reference_loss
 
 SITE = "512340.25 5403210.5 112.3 37.5"

@@ -17,15 +17,15 @@ import ezdxf
 import numpy as np
 import pytest
 
-from exporters import gltf
-from exporters.dxf import export_dxf
+from exporters.cad import gltf
+from exporters.cad.dxf import export_dxf
+from exporters.cad.placement import place_evaluation
 from exporters.options import ExportOptions, Units
-from exporters.placement import place_evaluation
 from exporters.plots import estimate_colour, plot_ate_over_time, plot_overlay_xy
-from loceval.alignment import AlignMethod
+from loceval.core.gaps import path_breaks
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
-from loceval.gaps import path_breaks
 from loceval.readers import read_trajectory
+from loceval.registration.alignment import AlignMethod
 
 from .conftest import Validator
 from .test_gltf import accessor, load

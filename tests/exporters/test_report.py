@@ -34,8 +34,8 @@ from exporters.report import (
     render_report_pdf,
     render_view_html,
 )
+from loceval.core.gaps import path_breaks
 from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
-from loceval.gaps import path_breaks
 from loceval.trajectory import Trajectory
 from tests.exporters._html_tables import html_tables
 from tests.exporters.conftest import noisy, walk

@@ -9,7 +9,7 @@ import numpy as np
 from exporters import ExportOptions
 from exporters.plots import render_plots
 from exporters.report.render import render_report_html
-from loceval.radio import RangingConfig, evaluate_radio
+from loceval.radio_evaluation import RangingConfig, evaluate_radio
 from tests.radio_factory import make_ranges, make_reference
 
 

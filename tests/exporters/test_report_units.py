@@ -8,7 +8,7 @@ from matplotlib.figure import Figure
 from exporters.plots.series import _label_thresholds
 from exporters.report.provenance import _window
 from exporters.report.view import MM_BELOW_M, length_unit
-from loceval.alignment import AlignWindow
+from loceval.registration.alignment import AlignWindow
 
 
 @pytest.mark.parametrize(

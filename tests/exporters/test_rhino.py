@@ -7,15 +7,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from exporters.cad.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
-from exporters.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
+from loceval.core.polyline import polyline_distances
 from loceval.evaluation import EvaluationResult
-from loceval.polyline import polyline_distances
 from tests.exporters.conftest import curve_vertices, expected_paths, with_reference_loss
 
 rhino3dm = pytest.importorskip("rhino3dm")
-from exporters import rhino  # noqa: E402  (after the importorskip of its library)
+from exporters.cad import rhino  # noqa: E402  (after the importorskip of its library)
 
 SITE = "512340.25 5403210.5 112.3 37.5"
 NAMES = ["OptiTrack", "RTAB-Map", "ISAAC"]

@@ -7,7 +7,6 @@ import io
 import json
 import math
 import re
-import time
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +27,8 @@ from exporters.summary import (
     repeatability,
     system_stats,
 )
+from loceval.core.polyline import PolylineIndex, path_distances, polyline_distances
 from loceval.evaluation import EvaluationConfig, Tolerance, evaluate
-from loceval.polyline import PolylineIndex, path_distances, polyline_distances
 from service.cli import main as cli_main
 from tests.exporters._html_tables import html_tables
 from tests.exporters.conftest import noisy, walk
@@ -376,13 +375,11 @@ def test_path_distances_match_brute_force(rng: np.random.Generator) -> None:
     np.testing.assert_allclose(single, np.linalg.norm(points[:5] - vertices[0], axis=1))
 
 
-def test_path_distances_fast_for_long_paths(rng: np.random.Generator) -> None:
-    """50,000 points against a 50,000-vertex path take well under a few seconds."""
+def test_path_distances_on_long_paths(rng: np.random.Generator) -> None:
+    """50,000 shuffled points against a 50,000-vertex path: each one's distance is found."""
     base = _loop(50_000)
     redriven = _loop(50_000, offset_m=0.03)[rng.permutation(50_000)]
-    start = time.perf_counter()
-    distances = path_distances(redriven, base)
-    assert time.perf_counter() - start < 3.0
+    distances = path_distances(redriven, base)  # how fast: benchmarks/polyline.py
     assert np.median(distances) == pytest.approx(0.03, abs=1e-3)
 
 

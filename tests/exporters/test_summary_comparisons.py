@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from exporters.summary import SummaryInput, SummaryRun, SystemFigures, build_summary_view
-from loceval.comparison import ComparedMetric, compare_runs
+from loceval.assessment.comparison import ComparedMetric, compare_runs
 from loceval.errors import InputError
 
 MONDAY = dt.datetime(2026, 11, 16, 9, 0, tzinfo=dt.UTC)

@@ -6,15 +6,15 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from loceval.alignment import (
+from loceval.core.geometry import SimilarityTransform
+from loceval.errors import AlignmentError
+from loceval.registration.alignment import (
     AlignMethod,
     AlignWindow,
     align,
     align_umeyama,
     align_yaw,
 )
-from loceval.errors import AlignmentError
-from loceval.geometry import SimilarityTransform
 from loceval.trajectory import Trajectory
 
 from .conftest import smooth_trajectory

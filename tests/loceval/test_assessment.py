@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from loceval.association import AssociationMethod
 from loceval.evaluation import EvaluationConfig, Tolerance, evaluate
+from loceval.registration.association import AssociationMethod
 from loceval.trajectory import Trajectory
 
 from .conftest import smooth_trajectory
@@ -226,7 +226,7 @@ def test_nav2_amcl_consistency_matches_an_independent_computation(public_data: P
 
 def test_long_runs_get_the_same_intervals_in_threads(rng: np.random.Generator) -> None:
     """Series of 20,000+ errors are bootstrapped in threads, with the sequential result."""
-    from loceval.uncertainty import interval_stats
+    from loceval.assessment.uncertainty import interval_stats
 
     truth = smooth_trajectory(rng, n=20_000)
     result = evaluate(truth, [_noisy(rng, truth, "A", 0.02)])

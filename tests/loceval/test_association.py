@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from loceval.association import AssociationMethod, associate
 from loceval.errors import AssociationError
+from loceval.registration.association import AssociationMethod, associate
 from loceval.trajectory import Trajectory
 
 from .conftest import T0_NS, smooth_trajectory

@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from loceval.alignment import AlignMethod
 from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points
-from loceval.checkpoints import evaluate_checkpoints
+from loceval.checkpoints.fit import evaluate_checkpoints
 from loceval.errors import InputError, ReaderError
 from loceval.evaluation import EvaluationConfig
 from loceval.inspection import input_kind, inspect
 from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory, sniff_format
+from loceval.registration.alignment import AlignMethod
 from tests.checkpoint_factory import NS, grid_points, stop_and_go, write_points, write_visits
 
 

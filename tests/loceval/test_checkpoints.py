@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from loceval.alignment import AlignMethod
-from loceval.checkpoints import evaluate_checkpoints, fit_points
+from loceval.checkpoints.fit import evaluate_checkpoints, fit_points
+from loceval.checkpoints.scores import hilti_score, lamaria_score
+from loceval.checkpoints.stops import find_stops
 from loceval.controlpoints import ControlPoints, Visits
 from loceval.errors import AlignmentError, InputError
 from loceval.readers.points import read_visits
-from loceval.scores import hilti_score, lamaria_score
-from loceval.stops import find_stops
+from loceval.registration.alignment import AlignMethod
 from loceval.trajectory import Trajectory
 from tests.checkpoint_factory import NS, grid_points, stop_and_go, write_visits
 
@@ -152,7 +152,7 @@ def test_an_outlying_point_moves_the_alignment_little(rng):
     moved = np.abs(robust.apply_positions(src) - clean.apply_positions(src)).max()
     assert moved < 0.002
     assert np.flatnonzero(far).tolist() == [7]
-    from loceval.alignment import align_umeyama
+    from loceval.registration.alignment import align_umeyama
 
     plain = align_umeyama(src, bad)
     assert np.abs(plain.apply_positions(src) - clean.apply_positions(src)).max() > 5 * moved

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from loceval.clock import (
+from loceval.calibration.clock import (
     MotionSignal,
     OffsetSource,
     describe_offset,

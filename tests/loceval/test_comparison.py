@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from loceval.comparison import (
+from loceval.assessment.comparison import (
     ComparedMetric,
     ComparisonVerdict,
     compare_errors,
     compare_series,
 )
 from loceval.errors import InputError, MetricError
-from loceval.metrics import ErrorSeries
+from loceval.metrics.pose_errors import ErrorSeries
 from tests.loceval.test_uncertainty import ar1
 
 T0 = 1_700_000_000 * 10**9

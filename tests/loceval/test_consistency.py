@@ -10,8 +10,7 @@ from rosbags.highlevel import AnyReader
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from loceval.association import associate
-from loceval.consistency import (
+from loceval.assessment.consistency import (
     ConsistencyVerdict,
     check_consistency,
     compute_nees,
@@ -22,6 +21,7 @@ from loceval.consistency import (
 )
 from loceval.errors import InputError, MetricError
 from loceval.readers.rosbag import read_bag_trajectory
+from loceval.registration.association import associate
 from loceval.trajectory import Trajectory
 
 

@@ -1,11 +1,12 @@
-"""Names and messages shown as text: :func:`loceval.display.display_text` and Jinja's finalize."""
+"""Names and messages shown as text: :func:`loceval.core.display.display_text` and Jinja's
+finalize."""
 
 from __future__ import annotations
 
 import pytest
 from markupsafe import Markup
 
-from loceval.display import REPLACEMENT, display_text, shown_text
+from loceval.core.display import REPLACEMENT, display_text, shown_text
 
 
 @pytest.mark.parametrize(

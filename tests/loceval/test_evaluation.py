@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from loceval.alignment import AlignMethod
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, Tolerance, evaluate, parse_offset
-from loceval.geometry import SimilarityTransform
+from loceval.registration.alignment import AlignMethod
 from loceval.trajectory import Trajectory
 
 from .conftest import smooth_trajectory

@@ -29,11 +29,11 @@ from pathlib import Path
 
 import pytest
 
-from loceval.alignment import AlignMethod
-from loceval.association import AssociationMethod
 from loceval.evaluation import EvaluationConfig, evaluate
-from loceval.metrics import RPEUnit, compute_rpe, rpe_pairs
+from loceval.metrics.pose_errors import RPEUnit, compute_rpe, rpe_pairs
 from loceval.readers import read_trajectory
+from loceval.registration.alignment import AlignMethod
+from loceval.registration.association import AssociationMethod
 
 FIGURES = json.loads((Path(__file__).parents[1] / "data" / "evo_1.38.1.json").read_text())
 RTOL = 1e-4

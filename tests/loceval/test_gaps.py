@@ -1,4 +1,4 @@
-"""Tracking loss judged against each source's own rate (loceval.gaps)."""
+"""Tracking loss judged against each source's own rate (loceval.core.gaps)."""
 
 from __future__ import annotations
 
@@ -7,16 +7,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from loceval.association import associate
-from loceval.evaluation import evaluate
-from loceval.gaps import (
+from loceval.core.gaps import (
     GAP_RATE_FACTOR,
     gap_threshold_ns,
     loss_indices,
     path_breaks,
     tracking_losses,
 )
+from loceval.evaluation import evaluate
 from loceval.readers import read_trajectory
+from loceval.registration.association import associate
 from loceval.trajectory import Trajectory
 
 from .conftest import T0_NS

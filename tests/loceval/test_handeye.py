@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from loceval.clock import estimate_time_offset
-from loceval.errors import InputError
-from loceval.evaluation import EvaluationConfig, evaluate
-from loceval.geometry import SimilarityTransform
-from loceval.handeye import (
+from loceval.calibration.clock import estimate_time_offset
+from loceval.calibration.handeye import (
     DeviceOffsetEstimate,
     DeviceOffsetSource,
     compare_device_offset,
     estimate_device_offset,
 )
+from loceval.core.geometry import SimilarityTransform
+from loceval.errors import InputError
+from loceval.evaluation import EvaluationConfig, evaluate
 from loceval.readers import read_trajectory
 from loceval.readers.rosbag import read_bag_static_transform, read_bag_trajectory
 from tests import bagfactory as bf

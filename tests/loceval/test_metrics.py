@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import MetricError
-from loceval.geometry import SimilarityTransform
-from loceval.metrics import (
+from loceval.metrics.pose_errors import (
     ErrorSeries,
     ErrorStats,
     RPEUnit,

@@ -8,11 +8,9 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from loceval.alignment import AlignMethod
-from loceval.association import AssociationMethod
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, evaluate
-from loceval.multilateration import (
+from loceval.radio.multilateration import (
     Solver,
     default_tag_height_m,
     make_epochs,
@@ -21,6 +19,8 @@ from loceval.multilateration import (
     solve_positions,
 )
 from loceval.readers.radio import Anchors, Ranges
+from loceval.registration.alignment import AlignMethod
+from loceval.registration.association import AssociationMethod
 from tests.radio_factory import (
     ANCHOR_XYZ,
     T0_NS,

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from loceval.calibration.offsets import check_offsets
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
-from loceval.geometry import SimilarityTransform
-from loceval.offsets import check_offsets
 from tests.calibration_factory import Motion, Recording, make_recording
 from tests.factories import make_trajectory
 

@@ -1,4 +1,4 @@
-"""Point-to-polyline distances and polyline simplification (loceval.polyline, the core).
+"""Point-to-polyline distances and polyline simplification (loceval.core.polyline, the core).
 
 Expected values come from an independent computation written here: the segments are
 sampled densely (every ~0.1 mm) and the nearest sample is taken, so no projection formula
@@ -8,20 +8,19 @@ of the module under test is reused; closed-form cases are worked out by hand nex
 from __future__ import annotations
 
 import itertools
-import time
 
 import numpy as np
 import pytest
 
-from loceval import polyline
-from loceval.errors import InputError
-from loceval.polyline import (
+from loceval.core import polyline
+from loceval.core.polyline import (
     PolylineIndex,
     path_distances,
     polyline_distances,
     segment_distances,
     simplify_rdp,
 )
+from loceval.errors import InputError
 
 
 def sampled_distances(
@@ -166,21 +165,19 @@ class TestSimplify:
         assert polyline_distances(loop, loop[kept]).max() <= deviation + 1e-12 <= 0.001 + 1e-12
 
     def test_large_inputs_are_fast_without_recursion(self, rng: np.random.Generator):
-        """100,000 noisy poses and a 100,000-vertex zigzag (ties everywhere) finish in seconds."""
+        """100,000 noisy poses and a 100,000-vertex zigzag (ties everywhere) need no recursion."""
         n = 100_000
         t = np.linspace(0, 60 * np.pi, n)
         walk = np.stack([5 * np.cos(t) + 0.01 * t, 3 * np.sin(t), 1.3 + 0.1 * np.sin(5 * t)], 1)
         noisy = walk + rng.normal(0, 0.0005, walk.shape)
         zigzag = np.stack([np.arange(n) * 0.01, (np.arange(n) % 2) * 0.1, np.zeros(n)], 1)
-        start = time.perf_counter()
+        # How fast: benchmarks/polyline.py (a timing here fails on a loaded machine).
         kept_walk, _ = simplify_rdp(walk, 0.001)
         _, dev_noisy = simplify_rdp(noisy, 0.001)
         kept_zigzag, _ = simplify_rdp(zigzag, 0.001)
-        elapsed = time.perf_counter() - start
         assert len(kept_walk) < n / 10
         assert len(kept_zigzag) == n
         assert dev_noisy <= 0.001
-        assert elapsed < 10.0
 
     def test_polyline_distances_brute_force(self, rng: np.random.Generator):
         """Distances to a polyline match a per-segment computation, including a single vertex."""

@@ -7,10 +7,10 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from loceval.alignment import AlignMethod, align, align_umeyama
-from loceval.association import AssociationMethod, associate
-from loceval.geometry import SimilarityTransform
-from loceval.metrics import compute_ate, compute_rpe
+from loceval.core.geometry import SimilarityTransform
+from loceval.metrics.pose_errors import compute_ate, compute_rpe
+from loceval.registration.alignment import AlignMethod, align, align_umeyama
+from loceval.registration.association import AssociationMethod, associate
 
 from .conftest import smooth_trajectory
 

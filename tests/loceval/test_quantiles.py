@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from loceval._quantiles import median, quantiles
+from loceval.core.quantiles import median, quantiles
 
 
 def _bits(value: object) -> list[int]:
@@ -48,8 +48,8 @@ def test_an_evaluation_does_not_import_numpy_ma() -> None:
     code = (
         "import sys\n"
         "import numpy as np\n"
-        "from loceval.uncertainty import interval_stats\n"
-        "from loceval.metrics import ErrorStats\n"
+        "from loceval.assessment.uncertainty import interval_stats\n"
+        "from loceval.metrics.pose_errors import ErrorStats\n"
         "x = np.abs(np.random.default_rng(1).normal(size=2000))\n"
         "interval_stats(x, thresholds_m=[0.5])\n"
         "ErrorStats.of(x)\n"

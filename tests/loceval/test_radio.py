@@ -1,4 +1,5 @@
-"""The radio pipeline (loceval.radio): options, the x-y only measurement, the evaluation."""
+"""The radio pipeline (loceval.radio_evaluation): options, the x-y only measurement, the
+evaluation."""
 
 from __future__ import annotations
 
@@ -7,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, evaluate
-from loceval.geometry import SimilarityTransform
-from loceval.multilateration import Solver
 from loceval.options import AlignMethod
-from loceval.radio import RangingConfig, evaluate_radio, parse_solvers, parse_tag_offset
+from loceval.radio.multilateration import Solver
+from loceval.radio_evaluation import RangingConfig, evaluate_radio, parse_solvers, parse_tag_offset
 from tests.radio_factory import make_ranges, make_reference
 
 

@@ -10,9 +10,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from loceval.association import DEFAULT_MAX_GAP_NS
 from loceval.errors import AssociationError, InputError
-from loceval.ranging import RangingResult, evaluate_ranging
+from loceval.radio.ranging import RangingResult, evaluate_ranging
+from loceval.registration.association import DEFAULT_MAX_GAP_NS
 from tests.radio_factory import ANCHOR_IDS, ANCHOR_XYZ, make_ranges, make_reference
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from loceval.assessment.reference_error import check_reference_error, reference_mean_square_m2
 from loceval.errors import InputError
-from loceval.reference_error import check_reference_error, reference_mean_square_m2
 
 
 def test_correction_recovers_the_system_rmse(rng):

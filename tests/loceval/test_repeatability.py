@@ -1,4 +1,5 @@
-"""Repeatability of a path in space (loceval.repeatability): re-driven paths against a baseline."""
+"""Repeatability of a path in space (loceval.metrics.repeatability): re-driven paths against a
+baseline."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 from loceval.errors import InputError
-from loceval.repeatability import PathDeviation, finite_positions, path_deviations
+from loceval.metrics.repeatability import PathDeviation, finite_positions, path_deviations
 
 
 def test_known_distances_give_median_and_max() -> None:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation as ScipyRotation
 
-from loceval.rotation import Rotation, compose_quat, conjugate_quat
+from loceval.core.rotation import Rotation, compose_quat, conjugate_quat
 
 
 def _random_quat(rng: np.random.Generator, n: int) -> np.ndarray:

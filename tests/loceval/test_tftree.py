@@ -1,4 +1,4 @@
-"""Tests for loceval.tftree: links, coverage, interpolation and chain composition."""
+"""Tests for loceval.readers.tftree: links, coverage, interpolation and chain composition."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import ReaderError
-from loceval.geometry import SimilarityTransform
-from loceval.tftree import (
+from loceval.readers.tftree import (
     DEFAULT_MIN_GAP_NS,
     TfBuffer,
     TfLink,

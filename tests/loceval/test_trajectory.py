@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from loceval.errors import InputError, TrajectoryError
-from loceval.geometry import (
+from loceval.core.geometry import (
     SimilarityTransform,
     compose_quat,
     conjugate_quat,
     relative_angle_deg,
     slerp_pairs,
 )
+from loceval.errors import InputError, TrajectoryError
 from loceval.trajectory import Trajectory
 
 

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from loceval.errors import InputError
-from loceval.uncertainty import (
+from loceval.assessment.uncertainty import (
     BlockBootstrap,
     ToleranceOutcome,
     _autocorrelation,
@@ -20,6 +19,7 @@ from loceval.uncertainty import (
     percentile_interval,
     tolerance_verdict,
 )
+from loceval.errors import InputError
 
 
 def ar1(rng: np.random.Generator, n: int, phi: float, sigma: float, dims: int = 3) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Tests for loceval.urdf: device offsets from fixed joints."""
+"""Tests for loceval.readers.urdf: device offsets from fixed joints."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from loceval.errors import ReaderError
-from loceval.urdf import read_urdf, read_urdf_joints, read_urdf_offset
+from loceval.readers.urdf import read_urdf, read_urdf_joints, read_urdf_offset
 
 
 def rx(a: float) -> np.ndarray:
@@ -135,9 +135,16 @@ def test_non_fixed_joint_on_path_is_named(device):
         read_urdf_offset(device, from_link="camera", to_link="wheel")
 
 
-def test_non_fixed_joint_elsewhere_is_fine(device):
-    """Moving joints off the path do not matter."""
-    read_urdf_offset(device, from_link="camera", to_link="rigid_body")
+def test_non_fixed_joint_elsewhere_is_fine(device, tmp_path):
+    """Moving joints off the path do not matter: the offset is the one without them."""
+    offset = read_urdf_offset(device, from_link="camera", to_link="rigid_body").as_matrix()
+    wheel = DEVICE.index('  <joint name="base_to_wheel"')
+    fixed_only = tmp_path / "fixed_only.urdf"
+    fixed_only.write_text(DEVICE[:wheel] + DEVICE[DEVICE.index("</joint>", wheel) + 9 :])
+    assert "continuous" not in fixed_only.read_text()
+    expected = read_urdf_offset(fixed_only, from_link="camera", to_link="rigid_body").as_matrix()
+    np.testing.assert_array_equal(offset, expected)
+    assert not np.allclose(offset, np.eye(4))
 
 
 def test_unknown_link_lists_links(device):

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from loceval.checkpoints import evaluate_checkpoints
+from loceval.checkpoints.fit import evaluate_checkpoints
 from loceval.readers.points import read_visits
 from tests.checkpoint_factory import (
     StopAndGo,

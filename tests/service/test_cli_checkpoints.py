@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from loceval.checkpoints import evaluate_checkpoints
+from loceval.checkpoints.fit import evaluate_checkpoints
 from loceval.controlpoints import Visits
 from loceval.readers.points import read_visits
 from service.cli import main

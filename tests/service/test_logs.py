@@ -9,9 +9,11 @@ import re
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from service.logs import configure_logging, log_context
+from tests import bagfactory as bf
 from tests.factories import make_trajectory, perturb, write_tum
 from tests.service._api_fixtures import open_api
 from tests.service.conftest import running_server, submit, upload, wait_for_evaluation
@@ -181,3 +183,44 @@ def test_loceval_serve_logs_requests_and_jobs_as_json(tmp_path: Path, rng) -> No
     assert any(
         line["logger"] == "uvicorn.error" and "Uvicorn running" in line["message"] for line in lines
     )
+
+
+def _bag_with_singular_covariances(tmp_path: Path, rng: Any) -> Path:
+    """Write an MCAP bag: ``/gt`` poses and a ``/est`` with covariance, every tenth singular."""
+    truth = bf.random_poses(rng, 300, dt_ns=100_000_000)
+    noisy = truth.positions + rng.normal(0.0, 0.02, truth.positions.shape)
+    estimate = bf.Poses(truth.stamps_ns, noisy, truth.quats)
+    records = bf.pose_records("/gt", "geometry_msgs/msg/PoseStamped", truth)
+    with_covariance = bf.pose_records("/est", bf.POSE_COV, estimate)
+    covariance = np.diag([4e-4] * 3 + [1e-4] * 3).ravel()
+    for k, record in enumerate(with_covariance):
+        if k % 10:  # the others keep an all-zero (singular) covariance
+            record.extra["covariance"] = covariance
+    folder = bf.write_bag(bf.bag_path(tmp_path, "mcap"), records + with_covariance, fmt="mcap")
+    return folder / "rec.mcap"
+
+
+@pytest.mark.slow
+def test_a_jobs_core_warnings_are_json_lines_with_its_job_id(tmp_path: Path, rng) -> None:
+    """Under ``loceval serve`` the core's log lines from the job's own process carry job_id."""
+    bag = _bag_with_singular_covariances(tmp_path, rng)
+    with running_server(tmp_path / "data") as server, server.client() as client:
+        dataset = upload(client, bag)
+        evaluation = submit(
+            client,
+            {"dataset_id": dataset["id"], "selector": "/gt"},
+            [{"dataset_id": dataset["id"], "selector": "/est"}],
+            {"formats": ["result.json"]},
+        )
+        assert wait_for_evaluation(client, evaluation["id"])["status"] == "succeeded"
+        server.stop()
+        output = server.output
+    lines = _json_lines(output)
+    core = [line for line in lines if line["logger"] == "loceval.assessment.consistency"]
+    assert [line["message"] for line in core] == [
+        "30 poses with a singular position covariance skipped in NEES",
+        "30 poses with a singular rotation covariance skipped in NEES",
+    ]
+    assert all(line["level"] == "warning" for line in core)
+    assert {line["job_id"] for line in core} == {evaluation["id"]}
+    assert {line["kind"] for line in core} == {"evaluation"}

@@ -12,7 +12,7 @@ types come from the definitions embedded in the bag, with ROS 2 Humble's as fall
 bags without them.
 
 A trajectory is selected by a topic of a type in :data:`SUPPORTED_MSGTYPES` or by a tf
-chain ``tf:PARENT:CHILD`` (composed by :mod:`loceval.tftree`). Only the connections needed
+chain ``tf:PARENT:CHILD`` (composed by :mod:`loceval.readers.tftree`). Only the connections needed
 are read and deserialized; image payloads are never decoded. Two shortcuts keep large
 camera bags cheap: standard ``tf2_msgs/msg/TFMessage`` payloads in CDR are decoded by a
 small struct-based parser instead of generic deserialization, and indexed, uncompressed
@@ -29,8 +29,8 @@ from pathlib import Path
 
 from rosbags.interfaces import Connection
 
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError, ReaderError
-from loceval.geometry import SimilarityTransform
 from loceval.readers.rosbag.bagfile import (
     is_tf,
     normalize_msgtype,
@@ -49,7 +49,7 @@ from loceval.readers.rosbag.messages import (
 from loceval.readers.rosbag.ranges import RANGE_MSGTYPE, read_range_topic
 from loceval.readers.rosbag.tf import parse_tf_selector, read_tf, read_tf_trajectory
 from loceval.readers.rosbag.topics import pose_topic_overview, read_topic_trajectory
-from loceval.tftree import TfBuffer, compose_static_chain
+from loceval.readers.tftree import TfBuffer, compose_static_chain
 from loceval.trajectory import Trajectory
 
 __all__ = [
@@ -108,7 +108,7 @@ def read_bag_trajectory(
         name: the trajectory's name; defaults to the selector.
         max_gap_ns: for tf chains, the longest interval between two samples of a dynamic
             link that is interpolated across; None for the per-link default of
-            :mod:`loceval.tftree` (max of 0.1 s and 3 median intervals).
+            :mod:`loceval.readers.tftree` (max of 0.1 s and 3 median intervals).
 
     Returns:
         The trajectory; ``source`` is ``FILE@SELECTOR``, ``frame_id`` and

@@ -10,6 +10,7 @@ import os
 import sqlite3
 import struct
 import sys
+import sysconfig
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
@@ -51,9 +52,8 @@ __all__ = [
 
 _MAX_LISTED = 40
 
-# rosbags reports damaged files through its own errors, and through these builtins when a
-# record is cut short or garbled (struct unpacking, text decoding, sqlite, decompressors).
-_FOREIGN_ERRORS: Final = (
+# rosbags reports damaged files through its own errors ...
+_LIBRARY_ERRORS: Final = (
     AnyReaderError,
     Rosbag1ReaderError,
     Rosbag2ReaderError,
@@ -62,18 +62,53 @@ _FOREIGN_ERRORS: Final = (
     sqlite3.Error,
     apsw.Error,
     ZstdError,
+)
+# ... and through these builtins when a record is cut short or garbled (struct unpacking, text
+# decoding, sqlite, decompressors) ...
+_DATA_ERRORS: Final = (
     struct.error,
     EOFError,
     OSError,
     ValueError,
-    RuntimeError,
-    KeyError,
     IndexError,
-    AssertionError,
     OverflowError,
     MemoryError,  # a damaged length field: the reader tries to allocate exabytes
+)
+# ... and, from inside rosbags only, through these. Raised by loceval's own code they are bugs,
+# not damage, and :func:`converted` lets them through.
+_LIBRARY_BUG_ERRORS: Final = (
+    RuntimeError,
+    KeyError,
+    AssertionError,
     TypeError,  # rosbags' MCAP reader calls ord() on an empty read of a truncated file
 )
+_LIBRARY_DIRS: Final = tuple(
+    Path(sysconfig.get_path(name)).resolve()
+    for name in ("stdlib", "platstdlib", "purelib", "platlib")
+)
+"""Where the standard library and installed packages (rosbags, zstandard, ...) live."""
+_LOCEVAL_DIR: Final = Path(__file__).resolve().parents[2]
+
+
+def _raised_by_library(err: BaseException) -> bool:
+    """Return whether ``err`` was raised inside a library (rosbags, the stdlib), not by us.
+
+    The innermost Python frame decides: in an installed package or the standard library, and
+    not in loceval itself, it is the library's report of a damaged file; anywhere else (our
+    code, a caller's) it is a bug that must not read as "the bag looks damaged".
+    """
+    tb = err.__traceback__
+    if tb is None:
+        return False
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    filename = tb.tb_frame.f_code.co_filename
+    if filename.startswith("<frozen "):  # the standard library's frozen modules (os, ...)
+        return True
+    where = Path(filename).resolve()
+    if where.is_relative_to(_LOCEVAL_DIR):
+        return False
+    return any(where.is_relative_to(folder) for folder in _LIBRARY_DIRS)
 
 
 def _read_within_file(read_exact: Callable[[BinaryIO, int], bytes]) -> Callable[..., bytes]:
@@ -210,7 +245,9 @@ def converted(label: str) -> Iterator[None]:
     except FileNotFoundError as err:
         msg = f"Bag {label!r} is incomplete ({err}); copy the whole bag folder or file."
         raise ReaderError(msg) from err
-    except _FOREIGN_ERRORS as err:
+    except (*_LIBRARY_ERRORS, *_DATA_ERRORS, *_LIBRARY_BUG_ERRORS) as err:
+        if not isinstance(err, _LIBRARY_ERRORS + _DATA_ERRORS) and not _raised_by_library(err):
+            raise  # a bug of loceval's own, not a damaged bag
         detail = " ".join(str(err).split())  # parsers' reports span lines (YAML carets)
         msg = (
             f"Bag {label!r} cannot be read; it looks truncated, damaged or of an unknown "

@@ -14,7 +14,7 @@ from types import MappingProxyType
 from typing import Final, Protocol
 
 from loceval.optionspec import StampSource
-from loceval.tftree import TfBuffer
+from loceval.readers.tftree import TfBuffer
 
 __all__ = [
     "NS",

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from rosbags.typesys import TypesysError
 from rosbags.typesys.store import Typestore
 
-from loceval._typing import FloatArray, IntArray, StampsNs
+from loceval.core.arrays import FloatArray, IntArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.readers._common import build_trajectory
 from loceval.readers.rosbag.bagfile import (
@@ -28,7 +28,7 @@ from loceval.readers.rosbag.bagfile import (
     raw_messages,
 )
 from loceval.readers.rosbag.messages import NS, TF_MSGTYPE, StampSource, TFMessageLike
-from loceval.tftree import TfBuffer, TfLink, compose_chain, describe_chain, find_chain
+from loceval.readers.tftree import TfBuffer, TfLink, compose_chain, describe_chain, find_chain
 from loceval.trajectory import MIN_POSES, Trajectory
 
 __all__ = ["parse_tf_selector", "read_tf", "read_tf_trajectory"]

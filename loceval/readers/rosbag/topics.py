@@ -8,7 +8,7 @@ from typing import cast
 import numpy as np
 from rosbags.interfaces import Connection
 
-from loceval._typing import FloatArray, StampsNs
+from loceval.core.arrays import FloatArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.readers._common import build_trajectory
 from loceval.readers.rosbag.bagfile import (

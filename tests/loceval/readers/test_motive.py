@@ -130,6 +130,10 @@ def test_missing_length_unit_assumes_metres(tmp_path, bodies):
     path.write_text(path.read_text().replace("Length Units,Meters,", ""))
     read = read_motive(path, rigid_body="Drone")
     assert any("no Length Units" in w for w in read.warnings)
+    # write_motive writes metres: read as metres, the positions are the bodies' own.
+    assert_trajectories_close(
+        read, bodies["Drone"], atol_m=ATOL_M, atol_ns=ATOL_NS, atol_rad=ATOL_RAD
+    )
 
 
 def test_euler_export_is_refused(tmp_path, bodies):

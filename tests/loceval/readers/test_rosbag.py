@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 import shutil
 import sqlite3
+import struct
 import zipfile
 from pathlib import Path
 
@@ -26,7 +28,8 @@ from loceval.readers.rosbag import (
     read_bag_trajectory,
 )
 from loceval.readers.rosbag import tf as rosbag_tf
-from loceval.tftree import TfBuffer, TfLink, compose_chain
+from loceval.readers.rosbag.bagfile import converted
+from loceval.readers.tftree import TfBuffer, TfLink, compose_chain
 from tests import bagfactory as bf
 
 NS = bf.NS
@@ -764,3 +767,30 @@ class TestPublicData:
         archive = bf.zip_directory(copy, tmp_path / "tf_example.zip")
         traj = read_bag_trajectory(archive, "tf:odom:base_link")
         assert len(traj) == 517
+
+
+class TestConvertedErrors:
+    """Damage reported by a library is a user's error; loceval's own mistakes stay bugs."""
+
+    def test_library_key_error_reads_as_a_damaged_bag(self) -> None:
+        """A KeyError raised inside a library (here the standard library's os) is damage."""
+        with (
+            pytest.raises(ReaderError, match=r"'x.bag' cannot be read.*KeyError"),
+            converted("x.bag"),
+        ):
+            os.environ["LOCEVAL_NO_SUCH_VARIABLE_" + "X" * 8]
+
+    @pytest.mark.parametrize("error", [KeyError, TypeError, AssertionError, RuntimeError])
+    def test_our_own_bug_is_not_called_damage(self, error: type[Exception]) -> None:
+        """A KeyError, TypeError, AssertionError or RuntimeError raised by our code passes."""
+
+        def buggy() -> None:
+            raise error("a bug")  # noqa: EM101, TRY003
+
+        with pytest.raises(error, match="a bug"), converted("x.bag"):
+            buggy()
+
+    def test_struct_error_from_our_parser_is_damage(self) -> None:
+        """Bytes cut short (struct.error) are damage wherever they are unpacked."""
+        with pytest.raises(ReaderError, match="truncated, damaged"), converted("x.bag"):
+            struct.unpack("<I", b"\x00")

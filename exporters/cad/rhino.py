@@ -1,0 +1,311 @@
+"""Rhino export: a .3dm model (version 7) and the 3DM-compatible JSON for Grasshopper.
+
+The .3dm holds, per trajectory, named ``PolylineCurve`` s on the layer
+``loceval::<title>::<trajectory>`` (coloured from the palette; one curve per continuous
+piece, so a tracking loss is a break, not a straight chord) with user strings (source,
+poses, simplification deviation, ATE statistics); for estimates the same path cut into
+curves coloured by ATE bin (the report's colours) on the visible sub-layer
+``...::<trajectory>::ATE`` and text dots at the greatest errors on ``...::markers``; and one
+text dot per tracking loss on ``loceval::<title>::tracking loss``. The model units are the
+output units; document user text carries the evaluation metadata and the ATE legend.
+
+Rhino stores doubles, so curves are in absolute model coordinates and drop onto the
+building model with File > Import. The base point (the reference's bounding-box centre in
+model coordinates, rounded to whole metres) is recorded as the EarthAnchorPoint's model
+base point.
+
+The JSON (``paths.3dm.json``) carries the same curves encoded by ``CommonObject.Encode()``
+(``{version, archive3dm, opennurbs, data}``, what RhinoCommon's ``CommonObject.FromJSON``
+and Rhino.Compute decode) with name, colour, layer and units, the ATE runs and the
+markers; ``grasshopper/loceval_paths.py`` reads it and bakes it to the same layers.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, Final
+
+import rhino3dm as _rhino3dm
+
+from exporters.cad.georef import set_earth_anchor
+from exporters.cad.jsondoc import finite_json
+from exporters.cad.placement import Marker, PlacedPath, Placement, layer_name, place_evaluation
+from exporters.errors import ExportError
+from exporters.options import ExportOptions, Units
+from loceval.core.arrays import FloatArray
+from loceval.evaluation import EvaluationResult
+
+# rhino3dm's bundled stubs mark writable properties (ModelUnitSystem, Name, LayerIndex, ...)
+# read-only and lack overloads the library has; use the module untyped.
+rhino3dm: Any = _rhino3dm
+
+__all__ = [
+    "FORMAT",
+    "LOSS_LAYER",
+    "RHINO_VERSION",
+    "evaluation_layer",
+    "export_3dm",
+    "export_3dm_json",
+    "layer_path",
+    "write_3dm",
+]
+
+RHINO_VERSION: Final = 7
+"""The .3dm version written: Rhino 7 and 8 both open it."""
+FORMAT: Final = "loceval.paths.3dm.json"
+"""The ``format`` field of the JSON document."""
+FORMAT_VERSION: Final = 2
+"""2: a path is ``curves`` (one per continuous piece), with ``ate`` runs and ``markers``."""
+ROOT_LAYER: Final = "loceval"
+LOSS_LAYER: Final = "tracking loss"
+"""The sub-layer of the evaluation's layer that holds one text dot per tracking loss."""
+_LOSS_RGB: Final = (158, 158, 158)
+_UNIT_SYSTEMS: Final = {
+    Units.MM: rhino3dm.UnitSystem.Millimeters,
+    Units.CM: rhino3dm.UnitSystem.Centimeters,
+    Units.M: rhino3dm.UnitSystem.Meters,
+}
+
+
+def evaluation_layer(placement: Placement) -> str:
+    """Return the evaluation's layer name: its title (the id when the title is empty)."""
+    return layer_name(placement.title.strip() or placement.evaluation_id)
+
+
+def layer_path(placement: Placement, path: PlacedPath) -> str:
+    """Return the Rhino layer full path of a trajectory: ``loceval::<title>::<name>``."""
+    return f"{ROOT_LAYER}::{evaluation_layer(placement)}::{path.layer}"
+
+
+def export_3dm(
+    result: EvaluationResult, options: ExportOptions, *, placement: Placement | None = None
+) -> bytes:
+    """Write the evaluation's trajectories as a Rhino 7 .3dm model.
+
+    Args:
+        result: the evaluation.
+        options: units, site transform, simplification, ids.
+        placement: the placed paths, when the caller computed them for several formats.
+
+    Returns:
+        The .3dm file.
+
+    Raises:
+        ExportOptionsError: unusable placement options.
+        ExportError: rhino3dm could not build or write the model.
+    """
+    placement = placement or place_evaluation(result, options)
+    return write_3dm(lambda: _model(placement))
+
+
+def write_3dm(build: Callable[[], Any]) -> bytes:
+    """Build a rhino3dm ``File3dm`` with ``build`` and return it written as a Rhino 7 file.
+
+    Raises:
+        ExportError: rhino3dm could not build or write the model.
+    """
+    try:
+        model = build()
+        with tempfile.TemporaryDirectory(prefix="loceval-3dm-") as tmp:
+            target = Path(tmp) / "paths.3dm"
+            if not model.Write(str(target), RHINO_VERSION):
+                msg = "rhino3dm could not write the .3dm model; please report this."
+                raise ExportError(msg)
+            return target.read_bytes()
+    except (RuntimeError, OSError) as err:
+        msg = f"rhino3dm could not build the .3dm model ({err}); please report this."
+        raise ExportError(msg) from err
+
+
+def export_3dm_json(
+    result: EvaluationResult, options: ExportOptions, *, placement: Placement | None = None
+) -> bytes:
+    """Write the 3DM-compatible JSON document that the Grasshopper script reads.
+
+    Layout: ``{"format", "format_version", "units", "rhino_unit_system", "base_point",
+    "metadata", "ate_bins": [{"label", "color"}], "markers": [{"kind", "path", "label",
+    "layer", "position"}], "paths": [{"name", "kind", "source", "layer", "color",
+    "color_hex", "poses", "vertices", "pieces", "max_deviation_m", "ate_translation_m",
+    "curves", "ate_layer", "ate": [{"bin", "color", "curve"}]}]}``, where each ``curve`` is
+    the ``CommonObject.Encode()`` dict of a ``PolylineCurve`` in model coordinates and
+    ``units``; ``curves`` holds one per continuous piece (a path breaks at tracking loss).
+
+    Args:
+        result: the evaluation.
+        options: units, site transform, simplification, ids.
+        placement: the placed paths, when the caller computed them for several formats.
+
+    Returns:
+        The JSON document as UTF-8 bytes.
+
+    Raises:
+        ExportOptionsError: unusable placement options.
+        ExportError: rhino3dm could not encode a curve.
+    """
+    placement = placement or place_evaluation(result, options)
+    paths = []
+    bins = placement.ate_bins()
+    try:
+        for path in placement.paths:
+            entry = path.metadata()
+            entry["layer"] = layer_path(placement, path)
+            entry["curves"] = [_curve(path, v).Encode() for v in _piece_vertices(path)]
+            entry["ate_layer"] = f"{entry['layer']}::ATE"
+            entry["ate"] = [
+                {
+                    "bin": run.bin_index,
+                    "color": list(bins[run.bin_index].color_rgb),
+                    "curve": _curve(path, run.vertices).Encode(),
+                }
+                for run in placement.ate_runs(path)
+            ]
+            paths.append(entry)
+    except RuntimeError as err:
+        msg = f"rhino3dm could not encode a curve ({err}); please report this."
+        raise ExportError(msg) from err
+    document = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "units": placement.units.value,
+        "rhino_unit_system": _UNIT_SYSTEMS[placement.units].name,
+        "base_point": placement.base_point.tolist(),
+        "metadata": placement.metadata(),
+        "ate_bins": [{"label": b.label, "color": list(b.color_rgb)} for b in bins],
+        "markers": [
+            {
+                "kind": m.kind,
+                "path": m.path,
+                "label": m.label,
+                "layer": _marker_layer(placement, m),
+                "position": list(m.position),
+            }
+            for m in placement.markers()
+        ],
+        "paths": paths,
+    }
+    return (finite_json(document, indent=1, what="The Grasshopper document") + "\n").encode()
+
+
+def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped here)
+    model = rhino3dm.File3dm()
+    model.ApplicationName = "loceval"
+    settings = model.Settings
+    settings.ModelUnitSystem = _UNIT_SYSTEMS[placement.units]
+    anchor = settings.EarthAnchorPoint
+    earth = set_earth_anchor(anchor, placement, rhino3dm)
+    anchor.Name = "loceval base point"
+    anchor.Description = (
+        "Centre of the reference path, rounded to whole metres, in model units; the "
+        f"evaluation frame {placement.frame!r} maps to model coordinates by "
+        f"loceval.site_matrix_m. {earth}"
+    )
+    settings.EarthAnchorPoint = anchor
+    for key, value in placement.metadata().items():
+        model.Strings[f"loceval.{key}"] = value if isinstance(value, str) else json.dumps(value)
+
+    root = _add_layer(model, ROOT_LAYER, (255, 255, 255), None)
+    evaluation = _add_layer(model, evaluation_layer(placement), (255, 255, 255), root)
+    bins = placement.ate_bins()
+    model.Strings["loceval.ate_bins"] = "; ".join(f"{b.label}: {_hex(b.color_rgb)}" for b in bins)
+    markers = placement.markers()
+    for path in placement.paths:
+        layer = _add_layer(model, path.layer, path.color_rgb, evaluation)
+        attributes = rhino3dm.ObjectAttributes()
+        attributes.Name = path.name
+        attributes.LayerIndex = layer
+        attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromLayer
+        for key, value in _user_strings(path).items():
+            attributes.SetUserString(key, value)
+        for vertices in _piece_vertices(path):  # one curve per continuous piece
+            model.Objects.AddCurve(_curve(path, vertices), attributes)
+        if path.estimate is None:
+            continue
+        ate_layer = _add_layer(model, "ATE", path.color_rgb, layer)
+        for run in placement.ate_runs(path):  # one curve per run of one colour
+            run_attributes = rhino3dm.ObjectAttributes()
+            run_attributes.Name = f"{path.name} ATE {bins[run.bin_index].label}"
+            run_attributes.LayerIndex = ate_layer
+            run_attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromObject
+            run_attributes.ObjectColor = (*bins[run.bin_index].color_rgb, 255)
+            run_attributes.SetUserString("loceval.ate_bin", bins[run.bin_index].label)
+            model.Objects.AddCurve(_curve(path, run.vertices), run_attributes)
+        worst = [m for m in markers if m.kind == "worst" and m.path == path.name]
+        if worst:
+            _add_dots(model, worst, _add_layer(model, "markers", path.color_rgb, layer))
+    losses = [m for m in markers if m.kind == "gap"]
+    if losses:
+        _add_dots(model, losses, _add_layer(model, LOSS_LAYER, _LOSS_RGB, evaluation))
+    return model
+
+
+def _add_dots(model: Any, markers: list[Marker], layer: int) -> None:  # noqa: ANN401
+    """Add a text dot per marker on the layer at index ``layer``."""
+    for marker in markers:  # one per marker (a few dozen at most)
+        attributes = rhino3dm.ObjectAttributes()
+        attributes.Name = marker.label
+        attributes.LayerIndex = layer
+        attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromLayer
+        model.Objects.AddTextDot(marker.label, rhino3dm.Point3d(*marker.position), attributes)
+
+
+def _marker_layer(placement: Placement, marker: Marker) -> str:
+    root = f"{ROOT_LAYER}::{evaluation_layer(placement)}"
+    if marker.kind == "gap":
+        return f"{root}::{LOSS_LAYER}"
+    path = next(p for p in placement.paths if p.name == marker.path)
+    return f"{root}::{path.layer}::markers"
+
+
+def _piece_vertices(path: PlacedPath) -> list[FloatArray]:
+    """Return the vertices of each piece that is a line (two vertices or more)."""
+    return [path.vertices[a:b] for a, b in path.pieces() if b - a >= 2]
+
+
+def _add_layer(
+    model: Any,  # noqa: ANN401
+    name: str,
+    rgb: tuple[int, int, int],
+    parent: int | None,
+    *,
+    visible: bool = True,
+) -> int:
+    """Add a layer below the layer at index ``parent`` and return its index."""
+    layer = rhino3dm.Layer()
+    layer.Name = name
+    layer.Color = (*rgb, 255)
+    layer.Visible = visible
+    if parent is not None:
+        layer.ParentLayerId = model.Layers[parent].Id
+    index: int = model.Layers.Add(layer)
+    return index
+
+
+def _curve(path: PlacedPath, vertices: FloatArray) -> Any:  # noqa: ANN401
+    points = rhino3dm.Point3dList(len(vertices))
+    for x, y, z in vertices.tolist():  # rhino3dm takes points one by one
+        points.Add(x, y, z)
+    curve = rhino3dm.PolylineCurve(points)
+    for key, value in _user_strings(path).items():
+        curve.SetUserString(key, value)
+    return curve
+
+
+def _user_strings(path: PlacedPath) -> dict[str, str]:
+    strings = {
+        "loceval.name": path.name,
+        "loceval.kind": path.kind.value,
+        "loceval.source": path.source,
+        "loceval.poses": str(path.poses),
+        "loceval.max_deviation_m": repr(path.max_deviation_m),
+    }
+    if path.estimate is not None:
+        stats = path.estimate.ate_translation.stats.to_dict()
+        strings.update({f"loceval.ate_{k}_m": repr(v) for k, v in stats.items() if k != "n"})
+    return strings
+
+
+def _hex(rgb: tuple[int, int, int]) -> str:
+    return "#{:02x}{:02x}{:02x}".format(*rgb)
