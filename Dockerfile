@@ -7,7 +7,17 @@
 # (`docker logs`); more keys: `docker exec CONTAINER .venv/bin/loceval keys create --project NAME`.
 # Settings are LOCEVAL_* environment variables (see service/settings.py), e.g.
 # LOCEVAL_DATABASE_URL=postgresql+psycopg://... and LOCEVAL_QUEUE_URL=redis://... to scale out
-# with more containers running `.venv/bin/loceval worker` on the same volume.
+# with more containers running `.venv/bin/loceval worker` on the same volume, or, with no volume
+# shared, on an S3-compatible bucket:
+#
+#   docker run -p 8000:8000 -e LOCEVAL_DATABASE_URL=... -e LOCEVAL_QUEUE_URL=... \
+#       -e LOCEVAL_BLOB_URL=s3://BUCKET/PREFIX -e AWS_ENDPOINT_URL=https://STORE \
+#       -e AWS_ACCESS_KEY_ID=... -e AWS_SECRET_ACCESS_KEY=... -e AWS_REGION=... \
+#       loceval .venv/bin/loceval serve --host 0.0.0.0 --port 8000 --no-consumer
+#   docker run (the same -e ...) loceval .venv/bin/loceval worker
+#
+# /data then holds only each container's input cache (LOCEVAL_BLOB_CACHE_BYTES); boto3 is in
+# the locked runtime dependencies. `loceval storage migrate` moves an existing /data into the bucket.
 #
 # It builds with the classic builder and with BuildKit (no cache mounts, no syntax line to
 # pull). BASE is any Debian bookworm image with python3 (3.11) and python3-venv on the PATH:

@@ -75,8 +75,7 @@ def _filename(received: ReceivedFile) -> tuple[str, list[str]]:
         notes = [f"The file came without a name; it is stored as {name!r}."]
     elif not changes:
         notes = []
-    with received.path.open("rb") as fh:
-        head = fh.read(16)
+    head = received.incoming.head
     for magic, suffix in _BAG_SUFFIXES.items():
         if head.startswith(magic) and not name.lower().endswith(suffix):
             what = _KINDS.get(suffix, "a zip archive")
@@ -174,7 +173,7 @@ def store_upload(
             )
         )
     if existing is not None:
-        received.path.unlink(missing_ok=True)
+        received.incoming.abort()
         return _existing(runtime, existing, name=fields.name, tags=tags, filename=filename)
     dataset_id = new_id()
     with runtime.store.publishing(dataset_id):  # a sweep removes the folder if we die inside
@@ -194,11 +193,19 @@ def _publish(
     filename: str,
 ) -> tuple[Dataset, UploadPublic]:
     """Move a new upload into its folder, inspect it there and record its row."""
-    relative = runtime.store.publish_dataset(received.path, dataset_id, filename)
+    relative = runtime.store.publish_upload(
+        received.incoming,
+        project_id=project_id,
+        dataset_id=dataset_id,
+        filename=filename,
+        sha256=received.sha256,
+    )
     try:  # its errors name the stored path: problem_for() scrubs the server's folders
-        inspection = inspect_upload(runtime.store.path(relative), filename)
+        with runtime.store.pinned():
+            local = runtime.store.local_path(relative, filename=filename, sha256=received.sha256)
+            inspection = inspect_upload(local, filename)
     except BaseException:
-        runtime.store.remove_dataset(dataset_id)
+        runtime.store.remove_upload(dataset_id, relative)
         raise
     dataset = Dataset(
         id=dataset_id,
@@ -218,17 +225,18 @@ def _publish(
             session.commit()
         except IntegrityError:
             session.rollback()
-            runtime.store.remove_dataset(dataset_id)
             winner = session.scalar(
                 select(Dataset).where(
                     Dataset.project_id == project_id, Dataset.sha256 == received.sha256
                 )
             )
+            if winner is None or winner.storage_path != relative:  # content-addressed: shared
+                runtime.store.remove_upload(dataset_id, relative)
             if winner is None:
                 raise
             return _existing(runtime, winner, name=fields.name, tags=fields.tags, filename=filename)
         except BaseException:
-            runtime.store.remove_dataset(dataset_id)
+            runtime.store.remove_upload(dataset_id, relative)
             raise
     report = UploadPublic(deduplicated=False, tags_added=fields.tags, notes=notes)
     return dataset, report
@@ -305,4 +313,4 @@ def delete_dataset(runtime: Runtime, project_id: str, dataset_id: str) -> None:
             raise ConflictError(msg)
         session.delete(session.get_one(Dataset, dataset.id))
         session.commit()
-    runtime.store.remove_dataset(dataset.id)
+    runtime.store.remove_upload(dataset.id, dataset.storage_path)

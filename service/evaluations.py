@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any, Final
 
 from pydantic import ValidationError
@@ -17,6 +16,7 @@ from sqlalchemy.orm import Session, defer
 
 from exporters import ARTIFACTS
 from loceval.errors import InputError
+from service.blobs import artifact_key
 from service.datasets import store_upload
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, JobStatus, get_owned, utcnow
 from service.errors import (
@@ -44,6 +44,7 @@ from service.schemas import (
     RangingCreate,
     SourceRef,
 )
+from service.storage import EVALUATIONS
 from service.uploads import ReceivedForm
 
 __all__ = [
@@ -493,8 +494,8 @@ def list_evaluations(
     return rows, int(count or 0)
 
 
-def artifact_path(runtime: Runtime, project_id: str, evaluation_id: str, name: str) -> Path:
-    """Return the file of an evaluation's artifact.
+def artifact_path(runtime: Runtime, project_id: str, evaluation_id: str, name: str) -> str:
+    """Return the blob key of an evaluation's artifact.
 
     Raises:
         NotFoundError: no such evaluation, artifact name, or file (its formats left it out).
@@ -511,11 +512,11 @@ def artifact_path(runtime: Runtime, project_id: str, evaluation_id: str, name: s
             else "; see its error."
         )
         raise NotReadyError(msg)
-    path = runtime.store.artifacts_dir(evaluation.id) / name
-    if not path.is_file():
+    key = artifact_key(EVALUATIONS, evaluation.id, name)
+    if not runtime.store.exists(key):
         msg = f"Evaluation {evaluation_id!r} did not write {name!r} (its formats left it out)."
         raise NotFoundError(msg)
-    return path
+    return key
 
 
 def evaluate_form(runtime: Runtime, project_id: str, form: ReceivedForm) -> Evaluation:

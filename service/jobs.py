@@ -27,6 +27,7 @@ from sqlalchemy.orm import Session
 from exporters import ARTIFACTS
 from loceval.errors import InputError
 from loceval.readers import SourceSpec, TrajectoryFormat
+from service.blobs import open_blobs
 from service.db import (
     Dataset,
     Evaluation,
@@ -77,15 +78,20 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
     with tracked_job(runtime, EVALUATION, evaluation_id) as job:
         if job is None:
             return
-        with runtime.sessions() as session:
-            evaluation = session.get_one(Evaluation, evaluation_id)
-            work = _job_for(session, runtime, evaluation)
-        runtime.store.clear_job(job.kind.folder, evaluation_id)
-        staging = job.staging_dir()
-        # In a child process: stopped at the wall-time limit, capped at the memory limit.
-        run_limited(
-            Limits.from_settings(runtime.settings), run_job, work, staging, progress=job.progress
-        )
+        with runtime.store.pinned():  # inputs from a bucket stay in the local cache meanwhile
+            with runtime.sessions() as session:
+                evaluation = session.get_one(Evaluation, evaluation_id)
+                work = _job_for(session, runtime, evaluation)
+            runtime.store.clear_job(job.kind.folder, evaluation_id)
+            staging = job.staging_dir()
+            # In a child process: stopped at the wall-time limit, capped at the memory limit.
+            run_limited(
+                Limits.from_settings(runtime.settings),
+                run_job,
+                work,
+                staging,
+                progress=job.progress,
+            )
         final = job.publish(staging)
         document = json.loads((final / "result.json").read_text())
         job.succeed(
@@ -140,7 +146,7 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     if isinstance(options.device, DeviceOffset):
         dataset = _dataset(session, project_id, options.device.dataset_id)
         offset = device_offset(
-            runtime.store.path(dataset.storage_path),
+            _file(runtime, dataset),
             from_link=options.device.from_link,
             to_link=options.device.to_link,
             offset=options.offset,
@@ -149,13 +155,13 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     visits_id = visits_dataset_id(options.visits)
     if visits_id is not None:
         table = _dataset(session, project_id, visits_id)
-        spec = SourceSpec(None, runtime.store.path(table.storage_path))
+        spec = SourceSpec(None, _file(runtime, table))
         provenance = file_provenance("visits", spec, sha256=table.sha256)
         provenance.update(path=table.filename, dataset_id=table.id)
         visits = JobSource(spec, Path(table.filename).stem, provenance, table.filename)
     building = None
     if options.building is not None:
-        building = runtime.store.path(_dataset(session, project_id, options.building).storage_path)
+        building = _file(runtime, _dataset(session, project_id, options.building))
     export = export_from_options(
         options, front_door="service", evaluation_id=evaluation.id, building=building
     )
@@ -163,7 +169,7 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     map_ref = options.map_ref
     if map_ref is not None:
         dataset = _dataset(session, project_id, map_ref.dataset_id)
-        source = str(runtime.store.path(dataset.storage_path))
+        source = str(_file(runtime, dataset))
         if map_ref.selector:
             source = f"{source}@{map_ref.selector}"
         the_map = map_source(
@@ -203,7 +209,7 @@ def _ranging_job_for(session: Session, runtime: Runtime, evaluation: Evaluation)
         bag = dataset.inspection.get("format") == "bag"
         spec = SourceSpec(
             TrajectoryFormat.BAG if bag else None,
-            runtime.store.path(dataset.storage_path),
+            _file(runtime, dataset),
             ranges_ref.selector if role == "ranges" else None,
         )
         provenance = file_provenance(role, spec, sha256=dataset.sha256)
@@ -227,6 +233,13 @@ def _ranging_job_for(session: Session, runtime: Runtime, evaluation: Evaluation)
     )
 
 
+def _file(runtime: Runtime, dataset: Dataset) -> Path:
+    """Return a local file with a dataset's bytes (from a bucket: the input cache's copy)."""
+    return runtime.store.local_path(
+        dataset.storage_path, filename=dataset.filename, sha256=dataset.sha256
+    )
+
+
 def _dataset(session: Session, project_id: str, dataset_id: str) -> Dataset:
     dataset = session.get(Dataset, dataset_id)
     if dataset is None or dataset.project_id != project_id:
@@ -245,7 +258,7 @@ def _source(
     if fmt not in {f.value for f in TrajectoryFormat}:
         msg = f"Dataset {dataset.name!r} is a {dataset.kind} file, not a trajectory recording."
         raise InputError(msg)
-    spec = SourceSpec(TrajectoryFormat(fmt), runtime.store.path(dataset.storage_path), ref.selector)
+    spec = SourceSpec(TrajectoryFormat(fmt), _file(runtime, dataset), ref.selector)
     provenance = file_provenance(role, spec, sha256=dataset.sha256)
     provenance.update(path=dataset.filename, dataset_id=dataset.id)
     name = ref.name or ref.selector or Path(dataset.filename).stem
@@ -311,7 +324,7 @@ def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runt
         settings=settings,
         engine=engine,
         sessions=make_session_factory(engine),
-        store=BlobStore(settings.data_dir),
+        store=open_blobs(settings),
         huey=huey,
         worker_id=f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}",
         kinds={kind.name: kind for kind in JOB_KINDS},

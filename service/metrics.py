@@ -52,6 +52,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from loceval import __version__
 from service.adapters import DATABASE_ERRORS, QUEUE_ERRORS
 from service.db import JobStatus
+from service.errors import ServiceUnavailableError
 from service.runtime import JobModel, Runtime
 from service.uploads import ReceivedForm
 
@@ -260,6 +261,8 @@ class StateCollector:
             HistogramMetricFamily("loceval_job_duration_seconds", "", labels=["kind", "outcome"]),
             GaugeMetricFamily("loceval_queue_depth", ""),
             GaugeMetricFamily("loceval_backend_up", "", labels=["backend"]),
+            GaugeMetricFamily("loceval_blob_store_info", "", labels=["kind"]),
+            GaugeMetricFamily("loceval_blob_cache_bytes", ""),
         ]
 
     def collect(self) -> Iterator[Metric]:
@@ -287,7 +290,31 @@ class StateCollector:
             yield GaugeMetricFamily(
                 "loceval_queue_depth", "Tasks waiting in the queue for a worker.", pending
             )
+        yield from self._store_families(up)
         yield up
+
+    def _store_families(self, up: GaugeMetricFamily) -> Iterator[Metric]:
+        """Yield the blob store's kind and cache size; add whether it answered to ``up``."""
+        store = self.runtime.store
+        try:
+            store.ping()
+        except ServiceUnavailableError:
+            logger.warning("/metrics could not reach the blob store", exc_info=True)
+            up.add_metric(["store"], 0.0)
+        else:
+            up.add_metric(["store"], 1.0)
+        info = GaugeMetricFamily(
+            "loceval_blob_store_info",
+            "Where uploads and artifacts live: local (the data folder) or s3 (always 1).",
+            labels=["kind"],
+        )
+        info.add_metric([store.kind], 1.0)
+        yield info
+        yield GaugeMetricFamily(
+            "loceval_blob_cache_bytes",
+            "Bytes of inputs this process's machine keeps in its local cache (s3 store only).",
+            store.cached_bytes(),
+        )
 
     def _read_jobs(self) -> tuple[dict[tuple[str, str], int], dict[tuple[str, str], _Durations]]:
         """Return the job counts by (kind, state) and the durations by (kind, outcome)."""

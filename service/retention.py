@@ -22,7 +22,6 @@ from __future__ import annotations
 import datetime as dt
 import logging
 import re
-import shutil
 import time
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
@@ -164,13 +163,13 @@ def _expired_batch(runtime: Runtime, cutoff: dt.datetime) -> tuple[int, int]:
     return len(ids), int(done.rowcount)  # type: ignore[attr-defined]
 
 
-def sweep_leftovers(runtime: Runtime) -> Swept:
+def sweep_leftovers(runtime: Runtime, *, startup: bool = False) -> Swept:
     """Remove what upload processes that are gone left: partial uploads, unrecorded datasets.
 
     Runs on every start, once a minute in the workers and in the hourly sweep; an owner
     still running (its lock held) keeps everything (:meth:`service.storage.BlobStore.sweep`).
     """
-    swept = runtime.store.sweep(lambda ids: _existing(runtime, Dataset, ids))
+    swept = runtime.store.sweep(lambda ids: _existing(runtime, Dataset, ids), startup=startup)
     if swept.partial_uploads or swept.datasets:
         logger.warning(
             "Removed %d partial uploads and %d unrecorded dataset folders left by processes "
@@ -209,15 +208,13 @@ def sweep_orphans(runtime: Runtime, *, grace_s: float = _ORPHAN_GRACE_S) -> int:
     removed = 0
     folders: Iterable[tuple[str, JobModel]] = ((EVALUATIONS, Evaluation), (RUNS, ScheduleRun))
     for folder, model in folders:
-        candidates = {}
-        for child in (runtime.store.root / folder).iterdir():
-            try:
-                if _ID.fullmatch(child.name) and child.stat().st_mtime < cutoff:
-                    candidates[child.name] = child
-            except FileNotFoundError:
-                continue
-        for job_id in sorted(set(candidates) - _existing(runtime, model, sorted(candidates))):
-            shutil.rmtree(candidates[job_id], ignore_errors=True)
+        candidates = {
+            job_id
+            for job_id, written in runtime.store.job_ids(folder).items()
+            if _ID.fullmatch(job_id) and written < cutoff
+        }
+        for job_id in sorted(candidates - _existing(runtime, model, sorted(candidates))):
+            runtime.store.remove_job(folder, job_id)
             removed += 1
     return removed
 

@@ -19,11 +19,11 @@ from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
 from service.adapters import converted
+from service.blobs import Blobs
 from service.db import Evaluation, ScheduleRun
 from service.limits import warm_up
 from service.logs import log_transition
 from service.settings import Settings
-from service.storage import BlobStore
 
 __all__ = ["JobKind", "JobModel", "Runtime", "create_huey"]
 
@@ -83,7 +83,7 @@ class Runtime:
     settings: Settings
     engine: Engine
     sessions: sessionmaker[Session]
-    store: BlobStore
+    store: Blobs
     huey: Huey
     worker_id: str
     kinds: Mapping[str, JobKind] = field(default_factory=dict)

@@ -242,7 +242,9 @@ def _reference_path(
     try:
         spec = SourceSpec(
             TrajectoryFormat(str(fmt)),
-            runtime.store.path(dataset.storage_path),
+            runtime.store.local_path(
+                dataset.storage_path, filename=dataset.filename, sha256=dataset.sha256
+            ),
             template.reference.selector,
         )
         found = read_trajectory(spec, stamp=template.options.stamp)

@@ -16,7 +16,6 @@ import fnmatch
 import logging
 import zoneinfo
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any, Final
 
 from croniter import CroniterBadCronError, croniter
@@ -24,6 +23,7 @@ from sqlalchemy import func, select, update
 from sqlalchemy.exc import IntegrityError
 
 from loceval.errors import InputError
+from service.blobs import artifact_key
 from service.db import (
     ACTIVE_STATUSES,
     Dataset,
@@ -46,6 +46,7 @@ from service.schedule_schemas import (
     Selection,
 )
 from service.schemas import ArtifactPublic, ProgressPublic
+from service.storage import RUNS
 from service.webhooks import AllowList, check_webhook_url, new_secret
 
 __all__ = [
@@ -424,7 +425,7 @@ def delete_schedule(runtime: Runtime, project_id: str, schedule_id: str) -> None
         session.delete(session.get_one(Schedule, schedule.id))
         session.commit()
     for run_id in run_ids:
-        runtime.store.remove_run(run_id)
+        runtime.store.remove_job(RUNS, run_id)
 
 
 def list_runs(
@@ -465,8 +466,8 @@ def get_run(runtime: Runtime, project_id: str, schedule_id: str, run_id: str) ->
 
 def run_artifact_path(
     runtime: Runtime, project_id: str, schedule_id: str, run_id: str, name: str
-) -> Path:
-    """Return the file of a run's summary report (summary.html or summary.pdf).
+) -> str:
+    """Return the blob key of a run's summary report (summary.html or summary.pdf).
 
     Raises:
         NotFoundError: no such run, report name, or file (the schedule's formats left it out).
@@ -482,8 +483,8 @@ def run_artifact_path(
             else "; see its error."
         )  # fmt: skip
         raise NotReadyError(msg)
-    path = runtime.store.run_artifacts_dir(run.id) / name
-    if not path.is_file():
+    key = artifact_key(RUNS, run.id, name)
+    if not runtime.store.exists(key):
         msg = f"Run {run_id!r} did not write {name!r} (the schedule's formats left it out)."
         raise NotFoundError(msg)
-    return path
+    return key

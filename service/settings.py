@@ -3,7 +3,7 @@
 The defaults run everything in one process with nothing installed: SQLite for metadata, a
 local folder for uploads and artifacts, and huey's SQLite queue. Scale-out changes settings,
 not code: ``LOCEVAL_DATABASE_URL=postgresql+psycopg://...``, ``LOCEVAL_QUEUE_URL=redis://...``
-and a shared ``LOCEVAL_DATA_DIR``.
+and either a shared ``LOCEVAL_DATA_DIR`` or a bucket, ``LOCEVAL_BLOB_URL=s3://bucket/prefix``.
 """
 
 from __future__ import annotations
@@ -54,6 +54,14 @@ class Settings(BaseSettings):
         job_memory_mb: the memory (address space, MiB) an evaluation's process may use
             before it fails with the reason, at least 1024 (the loaded libraries take about
             600); 0: no limit.
+        blob_url: ``s3://BUCKET[/PREFIX]`` keeps uploads, artifacts and schedule summaries in
+            an S3-compatible bucket (endpoint and credentials from ``AWS_ENDPOINT_URL``,
+            ``AWS_ACCESS_KEY_ID``, ``AWS_SECRET_ACCESS_KEY``, ``AWS_REGION``); empty keeps
+            them in ``data_dir``.
+        blob_cache_bytes: with a bucket, the size of each machine's local cache of inputs
+            (keyed by content hash, least recently used copies evicted).
+        blob_redirect_s: with a bucket, downloads answer 307 to a presigned URL valid this
+            many seconds (the client fetches from the store); 0 streams them through the API.
     """
 
     model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
@@ -74,6 +82,19 @@ class Settings(BaseSettings):
     min_free_bytes: Annotated[int, Field(ge=0, le=1 << 50)] = _GIB
     job_timeout_s: Annotated[float, Field(gt=0, le=7 * 86400)] = 1800.0
     job_memory_mb: Annotated[int, Field(ge=0, le=1 << 22)] = 4096
+    blob_url: str = ""
+    blob_cache_bytes: Annotated[int, Field(ge=1 << 20, le=1 << 50)] = 20 * _GIB
+    blob_redirect_s: Annotated[int, Field(ge=0, le=7 * 86400)] = 0
+
+    @field_validator("blob_url")
+    @classmethod
+    def _known_blob_url(cls, value: str) -> str:
+        if not value.strip():
+            return ""
+        from service.blobs.base import parse_blob_url  # noqa: PLC0415  (imports starlette)
+
+        parse_blob_url(value)  # ValueError says what is wrong
+        return value.strip()
 
     @field_validator("queue_url")
     @classmethod

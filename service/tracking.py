@@ -123,7 +123,8 @@ class TrackedJob:
     def publish(self, staging: Path) -> Path:
         """Rename the finished staging folder into place; return the artifacts folder."""
         final = self.runtime.store.publish_job_artifacts(self.kind.folder, self.job_id, staging)
-        self._staging = None
+        if final != staging:  # else the files were copied to the store: the folder goes at the end
+            self._staging = None
         return final
 
     def succeed(self, **values: Any) -> None:  # noqa: ANN401

@@ -1,11 +1,13 @@
-"""Receive a multipart upload straight to disk, with its SHA-256 and a size limit.
+"""Receive a multipart upload straight into the blob store, with its SHA-256 and a size limit.
 
 Starlette's form parser spools every file to a temporary file first and checks no size, so
 this module parses the request stream itself (``python-multipart``'s push parser): each
-file part is written to ``incoming/<uuid>.part`` in the data directory as it arrives, hashed
-on the way, and the request is refused with 413 the moment it passes the limit. Memory use
-is a few chunks whatever the file size. A file is fsynced before it is handed on; on any
-failure the partial files are deleted, so nothing half-received is ever visible.
+file part is written to the blob store as it arrives (``incoming/<uuid>.part`` in the data
+directory, or a multipart upload to the bucket: :meth:`service.blobs.Blobs.open_incoming`),
+hashed on the way, and the request is refused with 413 the moment it passes the limit. Memory
+use is a few chunks (with a bucket, a few parts) whatever the file size. A file is made
+durable before it is handed on; on any failure the partial files (or multipart uploads) are
+deleted, so nothing half-received is ever visible.
 
 The data directory keeps a reserve of free space (``min_free_bytes``): an upload whose
 announced size would eat into it is refused with 507 before a byte is read, and no write of
@@ -15,16 +17,12 @@ is asked again whenever the bytes written since the last answer would reach the 
 
 from __future__ import annotations
 
-import contextlib
-import errno
 import hashlib
-import os
 import re
-import shutil
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Final
+from typing import Final
 from urllib.parse import unquote_to_bytes
 
 import anyio.to_thread
@@ -32,6 +30,8 @@ from python_multipart.exceptions import FormParserError
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
+from service.blobs import Blobs, Incoming
+from service.blobs.local import STORAGE_FULL, LocalBlobs, LocalIncoming
 from service.errors import InsufficientStorageError, UploadError, UploadTooLargeError
 from service.storage import BlobStore
 
@@ -52,21 +52,29 @@ _EXTENDED_VALUE: Final = re.compile(rb"([A-Za-z0-9!#$&+^_`{}~-]+)'[A-Za-z0-9-]*'
 
 @dataclass(slots=True)
 class ReceivedFile:
-    """A file part, complete on disk.
+    """A file part, complete in the blob store.
 
     Attributes:
         field: the form field (``file``, ``reference``, ...).
         filename: the name the client gave.
-        path: where it lies (under ``incoming/``; publish or delete it).
+        incoming: the received bytes (publish them with the store, or abort them).
         size: bytes.
         sha256: hex digest.
     """
 
     field: str
     filename: str
-    path: Path
+    incoming: Incoming
     size: int
     sha256: str
+
+    @property
+    def path(self) -> Path:
+        """Where a file received into the data folder lies (under ``incoming/``)."""
+        if not isinstance(self.incoming, LocalIncoming):
+            msg = "the upload went to the object store, not to a local file"
+            raise TypeError(msg)
+        return self.incoming.path
 
 
 @dataclass(slots=True)
@@ -96,7 +104,7 @@ class ReceivedForm:
     def discard(self) -> None:
         """Delete the received files that were not published."""
         for received in self.files:
-            received.path.unlink(missing_ok=True)
+            received.incoming.abort()
 
 
 class _Receiver:
@@ -104,7 +112,7 @@ class _Receiver:
 
     def __init__(
         self,
-        store: BlobStore,
+        store: Blobs,
         *,
         file_fields: frozenset[str],
         text_fields: frozenset[str] | None,
@@ -128,8 +136,7 @@ class _Receiver:
         self._name = ""
         self._filename: str | None = None
         self._text: bytearray | None = None
-        self._fh: IO[bytes] | None = None
-        self._path: Path | None = None
+        self._fh: Incoming | None = None
         self._digest = hashlib.sha256()
         self._size = 0
         self._total = 0
@@ -205,8 +212,7 @@ class _Receiver:
             if len(self.form.files) >= self.max_files:
                 msg = f"Too many files in one request (at most {self.max_files}); send fewer."
                 raise UploadError(msg)
-            self._path = self.store.new_incoming()
-            self._fh = self._path.open("xb")
+            self._fh = self.store.open_incoming()
             self._digest = hashlib.sha256()
             self._size = 0
         else:
@@ -224,8 +230,7 @@ class _Receiver:
                 raise UploadTooLargeError(_too_large(self.max_bytes))
             if self.min_free_bytes:
                 self._make_room(len(chunk))
-            with _disk_full_refused():
-                self._fh.write(chunk)
+            self._fh.write(chunk)  # a local file's full disk is refused there (507)
             self._digest.update(chunk)
         elif self._text is not None:
             self._text += chunk
@@ -247,25 +252,24 @@ class _Receiver:
             InsufficientStorageError: less than ``size`` bytes above the reserve.
         """
         if self._room < size:
-            free = shutil.disk_usage(self.store.incoming).free
+            free = self.store.free_bytes()
+            if free is None:  # a bucket: the upload touches no local disk
+                self._room = _SPACE_CHECK_BYTES
+                return
             self._room = min(free - self.min_free_bytes, _SPACE_CHECK_BYTES)
             if self._room < size:
-                raise InsufficientStorageError(_STORAGE_FULL)
+                raise InsufficientStorageError(STORAGE_FULL)
         self._room -= size
 
     def _part_end(self) -> None:
-        if self._fh is not None and self._path is not None:
-            with _disk_full_refused():
-                self._fh.flush()
-                os.fsync(self._fh.fileno())
-            self._fh.close()
-            self._fh = None
+        if self._fh is not None:
+            self._fh.commit()
             received = ReceivedFile(
-                self._name, self._filename or "", self._path, self._size, self._digest.hexdigest()
+                self._name, self._filename or "", self._fh, self._size, self._digest.hexdigest()
             )
-            self._path = None
+            self._fh = None
             if received.size == 0 and not received.filename:
-                received.path.unlink(missing_ok=True)  # a browser's empty file input
+                received.incoming.abort()  # a browser's empty file input
             else:
                 self.form.files.append(received)
         elif self._text is not None:
@@ -279,12 +283,8 @@ class _Receiver:
     def abort(self) -> None:
         """Close and delete everything received so far."""
         if self._fh is not None:
-            with contextlib.suppress(OSError):  # an unflushable buffer (a full disk): it goes
-                self._fh.close()
+            self._fh.abort()
             self._fh = None
-        if self._path is not None:
-            self._path.unlink(missing_ok=True)
-            self._path = None
         self.form.discard()
 
 
@@ -341,40 +341,29 @@ def _too_large(max_bytes: int) -> str:
     )
 
 
-_STORAGE_FULL: Final = (
-    "The server's storage is nearly full, so the upload was not accepted (nothing of it was "
-    "kept); try again later, or ask the server's administrator to free space in the data "
-    "directory (LOCEVAL_DATA_DIR): delete old evaluations or datasets, set "
-    "LOCEVAL_RETENTION_DAYS, or give the volume more space."
-)
+def _blobs(store: Blobs | BlobStore) -> Blobs:
+    """Return the blob store to receive into (a bare data folder's store is the local one)."""
+    return store if isinstance(store, Blobs) else LocalBlobs(store.root)
 
 
-def check_free_space(store: BlobStore, min_free_bytes: int, *, incoming_bytes: int = 0) -> None:
-    """Refuse an upload that would leave less than ``min_free_bytes`` free in the data dir.
+def check_free_space(
+    store: Blobs | BlobStore, min_free_bytes: int, *, incoming_bytes: int = 0
+) -> None:
+    """Refuse an upload that would leave less than ``min_free_bytes`` free in the store.
+
+    With a bucket an upload touches no local disk and is not refused here (the workers'
+    input cache keeps the reserve on their disks).
 
     Args:
-        store: the data directory's blobs (uploads land in its ``incoming/`` folder).
+        store: the blob store (uploads land in its ``incoming/`` folder or its bucket).
         min_free_bytes: the reserve to keep; 0 checks nothing.
         incoming_bytes: bytes still to arrive (the announced size; 0 while receiving).
 
     Raises:
         InsufficientStorageError: the free space minus ``incoming_bytes`` is below the reserve.
     """
-    if min_free_bytes <= 0:
-        return
-    if shutil.disk_usage(store.incoming).free - incoming_bytes < min_free_bytes:
-        raise InsufficientStorageError(_STORAGE_FULL)
-
-
-@contextlib.contextmanager
-def _disk_full_refused() -> Iterator[None]:
-    """Turn a write that failed for a full disk (ENOSPC, EDQUOT) into the 507 refusal."""
-    try:
-        yield
-    except OSError as err:
-        if err.errno in {errno.ENOSPC, errno.EDQUOT}:
-            raise InsufficientStorageError(_STORAGE_FULL) from None
-        raise
+    if not _blobs(store).check_free_space(min_free_bytes, incoming_bytes=incoming_bytes):
+        raise InsufficientStorageError(STORAGE_FULL)
 
 
 async def _feed(request: Request, parser: MultipartParser) -> None:
@@ -392,7 +381,7 @@ async def _feed(request: Request, parser: MultipartParser) -> None:
 
 async def receive_multipart(
     request: Request,
-    store: BlobStore,
+    store: Blobs | BlobStore,
     *,
     max_bytes: int,
     file_fields: frozenset[str],
@@ -400,7 +389,7 @@ async def receive_multipart(
     max_files: int = 1,
     min_free_bytes: int = 0,
 ) -> ReceivedForm:
-    """Stream a ``multipart/form-data`` request to disk.
+    """Stream a ``multipart/form-data`` request into the blob store.
 
     Args:
         request: the request, body not yet read.
@@ -413,7 +402,7 @@ async def receive_multipart(
         min_free_bytes: the free space the data directory keeps (0: not checked).
 
     Returns:
-        The files (on disk, to be published or discarded by the caller) and text fields.
+        The files (received, to be published or discarded by the caller) and text fields.
 
     Raises:
         UploadError: not multipart, malformed or truncated body, or a stray file field.
@@ -422,6 +411,7 @@ async def receive_multipart(
         InsufficientStorageError: the upload would leave less than ``min_free_bytes`` free
             (checked on Content-Length first, then while receiving); nothing is kept.
     """
+    store = _blobs(store)
     content_type, params = parse_options_header(request.headers.get("content-type"))
     if content_type.lower() != b"multipart/form-data" or not params.get(b"boundary"):
         fields = " or ".join(repr(f) for f in sorted(file_fields))

@@ -137,14 +137,14 @@ def delete_evaluation(evaluation_id: str, runtime: RuntimeDep, project_id: Proje
 )
 def read_artifact(
     evaluation_id: str, name: str, runtime: RuntimeDep, project_id: ProjectDep
-) -> FileResponse:
+) -> Response:
     """Download an artifact: report.html, report.pdf, errors.csv, result.json, paths.*."""
-    path = evaluations.artifact_path(runtime, project_id, evaluation_id, name)
-    return FileResponse(
-        path,
+    key = evaluations.artifact_path(runtime, project_id, evaluation_id, name)
+    return runtime.store.response(
+        key,
         media_type=ARTIFACTS[name].media_type,
         filename=f"loceval-{evaluation_id[:8]}-{name}",
-        content_disposition_type="inline" if name in _INLINE else "attachment",
+        inline=name in _INLINE,
     )
 
 

@@ -32,8 +32,8 @@ def _check_space(runtime: Runtime) -> None:
     reserve = runtime.settings.min_free_bytes
     if reserve <= 0:
         return
-    free = shutil.disk_usage(runtime.store.root).free
-    if free < reserve:
+    free = runtime.store.free_bytes()
+    if free is not None and free < reserve:
         msg = (
             f"The data directory has {format_bytes(free)} free, less than the "
             f"{format_bytes(reserve)} it keeps in reserve (LOCEVAL_MIN_FREE_BYTES), so writes "
@@ -53,19 +53,26 @@ def _check(runtime: Runtime) -> dict[str, str]:
                 runtime.huey.pending_count()
         except InsufficientStorageError as err:  # not ready either: the probe answers 503
             raise ServiceUnavailableError(str(err)) from err
+            runtime.store.ping()
         _check_space(runtime)
     except ServiceUnavailableError as err:
         logger.warning("Readiness: %s", err)
         raise
-    return {"status": "ready", "database": "ok", "queue": "ok"}
+    answer = {"status": "ready", "database": "ok", "queue": "ok"}
+    if runtime.store.kind != "local":  # the data folder was checked at start; a bucket now
+        answer["store"] = runtime.store.kind
+    return answer
 
 
 @router.get(
     "/readyz",
     responses={
-        503: {"description": "database or queue unreachable, or less free space than the reserve"}
+        503: {
+            "description": "database, queue or object store unreachable, or less free space "
+            "than the reserve"
+        }
     },
 )
 async def read_readiness(runtime: RuntimeDep) -> dict[str, str]:
-    """The database and the job queue answer, and the data directory has its free reserve."""
+    """The database, the job queue and the blob store answer; the disk has its reserve."""
     return await anyio.to_thread.run_sync(_check, runtime)

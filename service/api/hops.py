@@ -38,9 +38,11 @@ from loceval.errors import InputError, LocevalError
 from service.api.deps import RuntimeDep
 from service.api.responses import problems
 from service.auth import authenticate
+from service.blobs import artifact_key
 from service.db import Evaluation, EvaluationStatus, get_owned
 from service.errors import AuthenticationError, NotFoundError, NotReadyError, status_for
 from service.jobs import Runtime
+from service.storage import EVALUATIONS
 
 __all__ = ["COMPONENTS", "router"]
 
@@ -294,16 +296,16 @@ def _solve_paths(
             "solve again when it has succeeded."
         )
         raise NotReadyError(msg)
-    folder = runtime.store.artifacts_dir(evaluation.id)
-    paths_file = folder / "paths.3dm.json"
-    if not paths_file.is_file():
+    paths_key = artifact_key(EVALUATIONS, evaluation.id, "paths.3dm.json")
+    if not runtime.store.exists(paths_key):
         msg = (
             f"Evaluation {evaluation_id!r} did not write 'paths.3dm.json' (its formats left it "
             "out); run it again with the CAD files."
         )
         raise NotFoundError(msg)
-    document = json.loads(paths_file.read_text(encoding="utf-8"))
-    result = json.loads((folder / "result.json").read_text(encoding="utf-8"))
+    document = json.loads(runtime.store.read_bytes(paths_key).decode("utf-8"))
+    result_key = artifact_key(EVALUATIONS, evaluation.id, "result.json")
+    result = json.loads(runtime.store.read_bytes(result_key).decode("utf-8"))
     paths: list[dict[str, Any]] = document["paths"]
     wanted = inputs.get("Trajectory", "").strip()
     if wanted:

@@ -150,12 +150,12 @@ def read_run(
 )
 def read_run_artifact(
     schedule_id: str, run_id: str, name: str, runtime: RuntimeDep, project_id: ProjectDep
-) -> FileResponse:
+) -> Response:
     """Download the summary report: summary.html or summary.pdf."""
-    path = schedules.run_artifact_path(runtime, project_id, schedule_id, run_id, name)
-    return FileResponse(
-        path,
+    key = schedules.run_artifact_path(runtime, project_id, schedule_id, run_id, name)
+    return runtime.store.response(
+        key,
         media_type=SUMMARY_ARTIFACTS[name],
         filename=f"loceval-run-{run_id[:8]}-{name}",
-        content_disposition_type="inline",
+        inline=True,
     )

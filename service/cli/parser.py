@@ -331,3 +331,20 @@ def _add_service(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpars
     revoke = keys_sub.add_parser("revoke", help="revoke a key")
     revoke.add_argument("key", help="the key, or its first 12 characters")
     revoke.set_defaults(handler="service.cli.serve:run_keys_revoke")
+
+    storage = sub.add_parser("storage", help="move the service's files into object storage")
+    storage_sub = storage.add_subparsers(
+        dest="storage_command", required=True, parser_class=_Parser
+    )
+    migrate = storage_sub.add_parser(
+        "migrate",
+        help="copy a data folder's uploads and artifacts into LOCEVAL_BLOB_URL's bucket and "
+        "point the database at them (stop the service first; running it again continues)",
+    )
+    migrate.add_argument(
+        "--from",
+        dest="source",
+        default=None,
+        help="the data folder to copy from (default: LOCEVAL_DATA_DIR)",
+    )
+    migrate.set_defaults(handler="service.cli.storage:run_storage_migrate")

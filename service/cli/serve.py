@@ -39,8 +39,8 @@ def run_serve(args: argparse.Namespace) -> int:
     port: int = args.port if args.port is not None else settings.port
     print(  # noqa: T201
         f"loceval {__version__}: http://{host}:{port}/ (data in "
-        f"{settings.data_dir.resolve()}, queue {settings.queue_url}; links start with "
-        f"{settings.public_url.rstrip('/')}/, set by LOCEVAL_PUBLIC_URL)",
+        f"{settings.data_dir.resolve()}, {_blobs(runtime)}queue {settings.queue_url}; "
+        f"links start with {settings.public_url.rstrip('/')}/, set by LOCEVAL_PUBLIC_URL)",
         flush=True,
     )
     run(app, host=host, port=port)
@@ -75,7 +75,9 @@ def run_worker(_args: argparse.Namespace) -> int:
     recover(runtime)
     tick(runtime)
     print(  # noqa: T201
-        f"loceval worker: {settings.workers} threads on queue {settings.queue_url}", flush=True
+        f"loceval worker: {settings.workers} threads on queue {settings.queue_url}"
+        f"{'; ' + runtime.store.description if runtime.store.kind != 'local' else ''}",
+        flush=True,
     )
     stop.wait()
     runtime.stop_consumer(consumer)
@@ -141,3 +143,8 @@ def _open_runtime(create: Callable[[Settings], Runtime], settings: Settings) -> 
             "check LOCEVAL_DATA_DIR."
         )
         raise InputError(msg) from err
+
+
+def _blobs(runtime: Runtime) -> str:
+    """Return where the blobs are for the start line, when not in the data folder."""
+    return "" if runtime.store.kind == "local" else f"{runtime.store.description}, "

@@ -386,7 +386,7 @@ def fake_free(monkeypatch: pytest.MonkeyPatch, *frees: int) -> list[int]:
         calls.append(free)
         return _Usage(1 << 40, (1 << 40) - free, free)
 
-    monkeypatch.setattr("service.uploads.shutil.disk_usage", disk_usage)
+    monkeypatch.setattr("service.blobs.local.shutil.disk_usage", disk_usage)
     return calls
 
 
@@ -517,7 +517,7 @@ def test_disk_full_on_write_is_507_and_leaves_nothing(
     def full(_fd: int) -> None:
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr("service.uploads.os.fsync", full)
+    monkeypatch.setattr("service.blobs.local.os.fsync", full)
     with pytest.raises(InsufficientStorageError, match="nearly full"):
         receive(store, _Body([multipart(b"0 0 0 0\n")]), length=None, min_free=0)
     assert incoming(store) == []

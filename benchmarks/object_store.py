@@ -1,0 +1,339 @@
+"""Benchmark: a large bag uploaded through the API and evaluated by a worker, folder vs bucket.
+
+Run by hand (not a test; needs PostgreSQL on 127.0.0.1:5432 as postgres, Redis on
+127.0.0.1:6379, and SeaweedFS's ``weed`` from the dev extra):
+
+    .venv/bin/python -m benchmarks.object_store [--size-mb 2000] [--backends local,s3]
+
+For each backend it starts ``loceval serve --no-consumer`` and one ``loceval worker`` on a
+fresh PostgreSQL database and an empty Redis database number (both removed afterwards):
+
+- ``local``: API and worker share one data folder (the NFS-style deployment on one machine);
+- ``s3``: API and worker have separate data folders and share a bucket of a SeaweedFS
+  started on loopback ports for the run (``weed server -s3``, its data in the work folder).
+
+It uploads one generated ROS 2 MCAP bag (``benchmarks.bags.generate_bag``: tf at 120 Hz,
+640x480 images at 15 Hz; cached in ``benchmarks/_work/object_store``), streaming it from disk,
+then evaluates ``tf:odom:base_link`` against ``tf:map:base_link`` of it (result.json only),
+and prints per backend: upload time and throughput, the job's time (queue to succeeded,
+including the worker's fetch into its cache), and the peak RSS growth of the API's and the
+worker's process trees (the job's own process included) over their idle baseline.
+
+Targets (issue 26): the bucket's upload throughput at least half the folder's; memory flat in
+the file's size (the API's growth well under the file's size).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import secrets
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import boto3
+import httpx2 as httpx
+import psycopg
+import redis
+from botocore.config import Config
+from psycopg import sql
+
+from benchmarks.upload_load import RssSampler, _free_port, prepare_recordings
+
+POSTGRES = "host=127.0.0.1 port=5432 user=postgres dbname=postgres connect_timeout=5"
+REDIS = "redis://127.0.0.1:6379"
+BASELINE_S = 2.0
+_MB = 1_000_000
+_CREDENTIALS = {"AWS_ACCESS_KEY_ID": "bench", "AWS_SECRET_ACCESS_KEY": "bench-secret"}
+
+
+@dataclass
+class Figures:
+    backend: str
+    size_bytes: int
+    upload_s: float
+    job_s: float
+    api_idle_mib: float
+    api_peak_mib: float
+    worker_idle_mib: float
+    worker_peak_mib: float
+    status: str
+
+
+def _loceval() -> str:
+    return str(Path(sys.executable).with_name("loceval"))
+
+
+@contextlib.contextmanager
+def _database() -> Iterator[str]:
+    name = f"loceval_bench_{secrets.token_hex(4)}"
+    with psycopg.connect(POSTGRES, autocommit=True) as admin:
+        admin.execute(sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
+    try:
+        yield f"postgresql+psycopg://postgres@127.0.0.1:5432/{name}"
+    finally:
+        with psycopg.connect(POSTGRES, autocommit=True) as admin:
+            admin.execute(
+                sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name))
+            )
+
+
+@contextlib.contextmanager
+def _redis() -> Iterator[str]:
+    for number in range(15, 0, -1):
+        client = redis.Redis.from_url(f"{REDIS}/{number}")
+        if client.dbsize() == 0:
+            break
+        client.close()
+    else:
+        msg = "no empty Redis database number (1..15) to use"
+        raise RuntimeError(msg)
+    try:
+        yield f"{REDIS}/{number}"
+    finally:
+        keys = list(client.scan_iter(match="*loceval*"))
+        if keys:
+            client.delete(*keys)
+        client.close()
+
+
+@contextlib.contextmanager
+def _seaweedfs(folder: Path) -> Iterator[dict[str, str]]:
+    """Run ``weed server -s3`` on loopback ports; yield the AWS_* variables for it."""
+    weed = Path(sys.executable).with_name("weed")
+    folder.mkdir(parents=True, exist_ok=True)
+    ports = []
+    while len(ports) < 4:
+        port = _free_port()
+        if port + 10000 <= 65535 and port not in ports:
+            ports.append(port)
+    master, volume, filer, s3 = ports
+    log = (folder / "weed.log").open("wb")
+    process = subprocess.Popen(
+        [
+            str(weed),
+            "server",
+            f"-dir={folder}",
+            "-ip=127.0.0.1",
+            "-ip.bind=127.0.0.1",
+            f"-master.port={master}",
+            f"-volume.port={volume}",
+            f"-filer.port={filer}",
+            "-s3",
+            f"-s3.port={s3}",
+            "-master.volumeSizeLimitMB=1024",
+            "-volume.max=200",
+            "-s3.port.iceberg=0",  # no Iceberg or Lance listeners on their fixed default ports
+            "-s3.port.lance=0",
+        ],
+        stdout=log,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+    )
+    env = {"AWS_ENDPOINT_URL": f"http://127.0.0.1:{s3}", "AWS_REGION": "us-east-1", **_CREDENTIALS}
+    try:
+        yield env
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+        log.close()
+
+
+def _bucket(env: dict[str, str]) -> str:
+    client = boto3.session.Session().client(
+        "s3",
+        endpoint_url=env["AWS_ENDPOINT_URL"],
+        region_name="us-east-1",
+        aws_access_key_id=_CREDENTIALS["AWS_ACCESS_KEY_ID"],
+        aws_secret_access_key=_CREDENTIALS["AWS_SECRET_ACCESS_KEY"],
+        config=Config(s3={"addressing_style": "path"}),
+    )
+    name = f"bench-{secrets.token_hex(4)}"
+    deadline = time.monotonic() + 60
+    while True:
+        try:
+            client.create_bucket(Bucket=name)
+        except Exception:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.5)
+            continue
+        return name
+
+
+@contextlib.contextmanager
+def _process(argv: list[str], env: dict[str, str], log: Path) -> Iterator[subprocess.Popen[bytes]]:
+    with log.open("wb") as out:
+        process = subprocess.Popen(
+            argv, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True
+        )
+    try:
+        yield process
+    finally:
+        if process.poll() is None:
+            process.terminate()
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+
+
+def _wait_ready(url: str, process: subprocess.Popen[bytes], log: Path) -> None:
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            msg = f"the server exited: {log.read_text()[-2000:]}"
+            raise RuntimeError(msg)
+        with contextlib.suppress(httpx.HTTPError):
+            if httpx.get(f"{url}/readyz", timeout=2).status_code == 200:
+                return
+        time.sleep(0.3)
+    msg = f"the server was not ready: {log.read_text()[-2000:]}"
+    raise RuntimeError(msg)
+
+
+def _peak(sampler: RssSampler, start: float, end: float) -> float:
+    window = sampler.window(start, end)
+    return max((s.rss_mib for s in window), default=0.0)
+
+
+def run_backend(backend: str, bag: Path, work: Path) -> Figures:
+    """Upload and evaluate ``bag`` with one backend; return the figures."""
+    folder = work / backend
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    with contextlib.ExitStack() as stack:
+        database = stack.enter_context(_database())
+        queue = stack.enter_context(_redis())
+        env = {k: v for k, v in os.environ.items() if not k.startswith(("LOCEVAL_", "AWS_"))}
+        env.update(
+            LOCEVAL_DATABASE_URL=database,
+            LOCEVAL_QUEUE_URL=queue,
+            LOCEVAL_WORKERS="1",
+            LOCEVAL_MAX_UPLOAD_BYTES=str(8 << 30),
+            LOCEVAL_JOB_TIMEOUT_S="3600",
+            LOCEVAL_JOB_MEMORY_MB="0",
+        )
+        api_dir, worker_dir = folder / "api", folder / "api"
+        if backend == "s3":
+            aws = stack.enter_context(_seaweedfs(folder / "seaweedfs"))
+            env.update(aws, LOCEVAL_BLOB_URL=f"s3://{_bucket(aws)}/bench")
+            worker_dir = folder / "worker"
+        port = _free_port()
+        url = f"http://127.0.0.1:{port}"
+        api_env = {**env, "LOCEVAL_DATA_DIR": str(api_dir), "LOCEVAL_PUBLIC_URL": url}
+        api = stack.enter_context(
+            _process(
+                [_loceval(), "serve", "--port", str(port), "--no-consumer"],
+                api_env,
+                folder / "api.log",
+            )
+        )
+        _wait_ready(url, api, folder / "api.log")
+        key = subprocess.run(
+            [_loceval(), "keys", "create", "--project", "bench"],
+            env=api_env,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        worker = stack.enter_context(
+            _process(
+                [_loceval(), "worker"],
+                {**env, "LOCEVAL_DATA_DIR": str(worker_dir)},
+                folder / "worker.log",
+            )
+        )
+        api_rss, worker_rss = RssSampler(api.pid), RssSampler(worker.pid)
+        api_rss.start()
+        worker_rss.start()
+        stack.callback(api_rss.stop)
+        stack.callback(worker_rss.stop)
+        time.sleep(BASELINE_S + 3)  # the worker warms up its job process meanwhile
+        idle_end = time.perf_counter()
+        timeout = httpx.Timeout(connect=30.0, read=3600.0, write=3600.0, pool=30.0)
+        headers = {"Authorization": f"Bearer {key}"}
+        with httpx.Client(base_url=url, headers=headers, timeout=timeout) as http:
+            with bag.open("rb") as fh:
+                start = time.perf_counter()
+                answer = http.post(
+                    "/api/v1/datasets",
+                    files={"file": (bag.name, fh, "application/octet-stream")},
+                )
+                uploaded = time.perf_counter()
+            if answer.status_code != 201:
+                msg = f"upload: {answer.status_code} {answer.text[:500]}"
+                raise RuntimeError(msg)
+            dataset = answer.json()["id"]
+            body: dict[str, Any] = {
+                "reference": {"dataset_id": dataset, "selector": "tf:map:base_link"},
+                "estimates": [{"dataset_id": dataset, "selector": "tf:odom:base_link"}],
+                "options": {"formats": ["result.json"], "max_dt_s": 0.001},
+            }
+            created = http.post("/api/v1/evaluations", json=body)
+            if created.status_code != 202:
+                msg = f"evaluation: {created.status_code} {created.text[:500]}"
+                raise RuntimeError(msg)
+            evaluation_id = created.json()["id"]
+            status = "queued"
+            while status not in {"succeeded", "failed"}:
+                time.sleep(0.5)
+                status = http.get(f"/api/v1/evaluations/{evaluation_id}").json()["status"]
+            finished = time.perf_counter()
+        return Figures(
+            backend,
+            bag.stat().st_size,
+            uploaded - start,
+            finished - uploaded,
+            _peak(api_rss, idle_end - BASELINE_S, idle_end),
+            _peak(api_rss, start, uploaded),
+            _peak(worker_rss, idle_end - BASELINE_S, idle_end),
+            _peak(worker_rss, uploaded, finished),
+            status,
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--size-mb", type=float, default=2000.0)
+    parser.add_argument("--backends", default="local,s3")
+    parser.add_argument("--workdir", type=Path, default=Path("benchmarks/_work/object_store"))
+    args = parser.parse_args(argv)
+    [recording] = prepare_recordings(args.workdir / "bags", args.size_mb, 1)
+    results = [
+        run_backend(b, recording.path, args.workdir / "runs") for b in args.backends.split(",")
+    ]
+    print(f"\nbag: {recording.size_bytes / _MB:,.0f} MB ({recording.path.name})")
+    print(
+        f"{'backend':8} {'upload s':>9} {'MB/s':>7} {'job s':>7} "
+        f"{'API idle→peak MiB':>19} {'worker idle→peak MiB':>22}  status"
+    )
+    for f in results:
+        print(
+            f"{f.backend:8} {f.upload_s:9.1f} {f.size_bytes / _MB / f.upload_s:7.1f} "
+            f"{f.job_s:7.1f} "
+            f"{f.api_idle_mib:8.0f} → {f.api_peak_mib:6.0f}   {f.worker_idle_mib:9.0f} → "
+            f"{f.worker_peak_mib:7.0f}    {f.status}"
+        )
+    if len(results) == 2:
+        ratio = (results[0].upload_s) / results[1].upload_s
+        print(f"bucket upload throughput / folder's: {ratio:.2f} (target >= 0.5)")
+    shutil.rmtree(args.workdir / "runs", ignore_errors=True)
+    return 0 if all(f.status == "succeeded" for f in results) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,101 @@
+"""The HTTP API with its blobs in a bucket (in-process app, jobs run inside the request)."""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.service._api_fixtures import Api, open_api, tum_pair
+from tests.service.s3.conftest import SeaweedFS, object_keys, open_multipart_uploads
+
+OPTIONS = {"formats": ["result.json", "errors.csv"]}
+
+
+@pytest.fixture
+def api(bucket: str, s3_env: dict[str, str], tmp_path: Path) -> Iterator[Api]:
+    """An app whose uploads and artifacts go to ``s3://<bucket>/site``."""
+    del s3_env
+    with open_api(tmp_path, blob_url=f"s3://{bucket}/site") as api:
+        yield api
+
+
+def _files(folder: Path) -> list[str]:
+    return sorted(
+        str(p.relative_to(folder))
+        for p in folder.rglob("*")
+        if p.is_file()
+        and not p.name.startswith(("loceval.db", "queue.db"))  # SQLite (and -wal, -shm)
+        and "cache" not in p.parts
+    )
+
+
+def test_upload_evaluate_download_and_delete_through_the_bucket(
+    api: Api, seaweedfs: SeaweedFS, bucket: str, rng: np.random.Generator, tmp_path: Path
+) -> None:
+    """Uploads and artifacts are objects; the data folder holds neither; deletes remove them."""
+    truth, estimate = tum_pair(rng, tmp_path)
+    reference = api.dataset("truth.txt", truth)
+    slam = api.dataset("slam.txt", estimate)
+    project = api.app.state.runtime.store
+    assert reference["inspection"]["sources"][0]["pose_count"] == 200
+    stored = object_keys(seaweedfs, bucket, "site/datasets/")
+    assert len(stored) == 2
+    assert f"/{hashlib.sha256(truth).hexdigest()}" in stored[0] + stored[1]
+    again = api.upload("copy.txt", truth)
+    assert again.status_code == 200  # the same bytes: found, not stored twice
+    assert len(object_keys(seaweedfs, bucket, "site/datasets/")) == 2
+    answer = api.evaluate(
+        {
+            "reference": {"dataset_id": reference["id"]},
+            "estimates": [{"dataset_id": slam["id"]}],
+            "options": OPTIONS,
+        }
+    )
+    assert answer.status_code == 202, answer.text
+    evaluation = answer.json()
+    assert evaluation["status"] == "succeeded", evaluation
+    url = f"/api/v1/evaluations/{evaluation['id']}"
+    full = api.client.get(url, headers=api.headers).json()
+    csv = api.client.get(f"{url}/artifacts/errors.csv", headers=api.headers)
+    assert csv.status_code == 200
+    assert b"," in csv.content.splitlines()[0]  # a CSV header
+    assert int(csv.headers["content-length"]) == len(csv.content)
+    sizes = {a["name"]: a["size_bytes"] for a in full["artifacts"]}
+    assert sizes["errors.csv"] == len(csv.content)
+    result = api.client.get(f"{url}/artifacts/result.json", headers=api.headers)
+    assert result.json() == full["result"]
+    assert object_keys(seaweedfs, bucket, f"site/evaluations/{evaluation['id']}/") == [
+        f"site/evaluations/{evaluation['id']}/artifacts/errors.csv",
+        f"site/evaluations/{evaluation['id']}/artifacts/result.json",
+    ]
+    assert _files(api.data_dir) == []  # nothing of the uploads or artifacts on local disk
+    missing = api.client.get(f"{url}/artifacts/report.pdf", headers=api.headers)
+    assert missing.status_code == 404
+    assert api.client.get("/readyz").json()["store"] == "s3"
+    assert api.client.delete(url, headers=api.headers).status_code == 204
+    assert object_keys(seaweedfs, bucket, "site/evaluations/") == []
+    for dataset in (reference, slam):
+        gone = api.client.delete(f"/api/v1/datasets/{dataset['id']}", headers=api.headers)
+        assert gone.status_code == 204
+    assert object_keys(seaweedfs, bucket) == []
+    assert open_multipart_uploads(seaweedfs, bucket) == []
+    assert project.kind == "s3"
+
+
+def test_a_refused_upload_leaves_no_object(api: Api, seaweedfs: SeaweedFS, bucket: str) -> None:
+    """A file that is no recording is refused (4xx) and leaves nothing in the bucket."""
+    answer = api.upload("noise.bag", b"#ROSBAG V2.0\n" + bytes(range(256)) * 100)
+    assert 400 <= answer.status_code < 500, answer.text
+    assert answer.headers["content-type"] == "application/problem+json"
+    assert object_keys(seaweedfs, bucket) == []
+
+
+def test_metrics_cover_the_store(api: Api) -> None:
+    """/metrics carries the store's kind and the input cache's size."""
+    text = api.client.get("/metrics").text
+    assert 'loceval_blob_store_info{kind="s3"} 1.0' in text
+    assert "loceval_blob_cache_bytes" in text
