@@ -31,7 +31,7 @@ __all__ = ["browser", "page"]  # the fixtures, used by name
 
 pytestmark = [pytest.mark.slow, pytest.mark.public_data]
 
-KEPT_FILES = ["result.json", "errors.csv", "report.html", "paths.dxf"]
+KEPT_FILES = ["result.json", "errors.csv", "report.html", "paths.dxf", "viewer.html"]
 
 
 def _open(page: Any, server: Any) -> None:
@@ -89,7 +89,7 @@ def test_every_api_option_is_sent(
     page.fill("#opt-site", "12.5  3.2 0 90")
     page.fill("#opt-simplify", "0.01")
     boxes = page.locator("#format-boxes input")
-    expect(boxes).to_have_count(8)
+    expect(boxes).to_have_count(9)
     assert page.is_disabled("#format-boxes input[value='result.json']")
     for name in ("report.pdf", "paths.3dm", "paths.3dm.json", "paths.glb"):
         page.uncheck(f"#format-boxes input[value='{name}']")
