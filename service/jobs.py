@@ -54,7 +54,7 @@ from service.schedule_runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, ex
 from service.schedules import RUN, tick
 from service.schemas import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
 from service.settings import Settings
-from service.storage import EVALUATIONS, RUNS, BlobStore
+from service.storage import EVALUATIONS, RUNS
 from service.tracking import JobDeferred, recover, release, tracked_job
 from service.watchdog import start_watchdog
 

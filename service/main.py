@@ -72,7 +72,7 @@ def create_app(
             raise
         if low_space:
             logger.warning("%s", low_space)
-        sweep_leftovers(runtime, startup=True)  # partial uploads and unrecorded datasets of dead processes
+        sweep_leftovers(runtime, startup=True)  # what processes that are gone left behind
         running = runtime.start_consumer() if consumer else None
         if running is not None:
             requeued = recover(runtime)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import logging
-import shutil
 
 import anyio.to_thread
 from fastapi import APIRouter
