@@ -52,7 +52,7 @@ def _check(runtime: Runtime) -> dict[str, str]:
                 runtime.huey.pending_count()
         except InsufficientStorageError as err:  # not ready either: the probe answers 503
             raise ServiceUnavailableError(str(err)) from err
-            runtime.store.ping()
+        runtime.store.ping()
         _check_space(runtime)
     except ServiceUnavailableError as err:
         logger.warning("Readiness: %s", err)

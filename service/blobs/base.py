@@ -141,6 +141,9 @@ class Blobs(abc.ABC):
         del dataset_id
         return contextlib.nullcontext()
 
+    def close(self) -> None:  # noqa: B027  (most stores hold nothing to let go)
+        """Let go of what this process holds (a local folder: its owner's lock)."""
+
     def free_bytes(self) -> int | None:
         """Return the free bytes where uploads are written (None: no local disk, a bucket)."""
         return None
