@@ -749,7 +749,9 @@ class TestPublicData:
         assert ros1.quat_xyzw is not None
         assert ros2.quat_xyzw is not None
         np.testing.assert_allclose(ros1.quat_xyzw, ros2.quat_xyzw, atol=1e-9)
-        assert any("base_footprint -> base_link" in w for w in ros1.warnings)
+        # The chain is information, not a warning (issue 30 item 12).
+        assert any("base_footprint -> base_link" in n for n in ros1.notes)
+        assert not ros1.warnings
 
     def test_tf_example_static_link_applied(self, public_data):
         """odom->base_link differs from odom->base_footprint by the static link."""
