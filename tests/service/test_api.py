@@ -501,6 +501,7 @@ def test_all_artifacts(api: Api, datasets: tuple[str, str]) -> None:
     expected = {
         "result.json": ("application/json", "attachment"),
         "errors.csv": ("text/csv", "attachment"),
+        "map_cells.csv": ("text/csv", "attachment"),
         "report.html": ("text/html", "inline"),
         "report.pdf": ("application/pdf", "inline"),
         "paths.dxf": ("image/vnd.dxf", "attachment"),

@@ -44,7 +44,9 @@ BAG = "nav2_turtlebot.mcap"
 BAG_OPTIONS = {"association": "nearest", "max_dt_s": 0.05}
 BAG_CLI_OPTIONS = ("--associate", "nearest", "--max-dt", "0.05")
 BAG_ESTIMATES = ("tf:map:base_link", "/odom")
-TEXT_ARTIFACTS = frozenset({"result.json", "errors.csv", "report.html", "paths.3dm.json"})
+TEXT_ARTIFACTS = frozenset(
+    {"result.json", "errors.csv", "report.html", "paths.3dm.json", "viewer.html", "map_cells.csv"}
+)
 
 
 @pytest.fixture(scope="module")
@@ -118,6 +120,12 @@ def _check_artifact(
         text = "".join(page.extract_text() for page in reader.pages)
         assert "ATE" in text
         assert evaluation["result"]["estimates"][0]["name"] in text
+    elif name == "viewer.html":  # one closed file: its scene names every trajectory
+        text = content.decode("utf-8")
+        assert text.lstrip().lower().startswith("<!doctype html")
+        assert "default-src 'none'" in text
+        for estimate in evaluation["result"]["estimates"]:
+            assert json.dumps(estimate["name"])[1:-1] in text
     elif name.startswith("paths."):
         _check_cad_artifact(name, content, evaluation, tmp_path)
     else:  # pragma: no cover  (a new artifact needs a check here)

@@ -257,7 +257,7 @@ def test_api_killed_mid_upload_leaves_no_object_and_no_open_upload(
     second = start_server(machines["a"], api_key=first.api_key, env=env, args=("--no-consumer",))
     try:
         assert open_multipart_uploads(seaweedfs, bucket) == []  # ... the next start aborted it
-        assert "left half-received by a crash" in second.output
+        assert "partial uploads and 0 unrecorded dataset folders left by processes" in second.output
         with second.client() as client:
             assert client.get("/api/v1/datasets").json()["count"] == 0
     finally:
