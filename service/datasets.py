@@ -58,7 +58,7 @@ def _fields(**values: object) -> DatasetFields:
     try:
         return DatasetFields.model_validate(values)
     except ValidationError as err:
-        raise InvalidFieldsError(err.errors()) from None
+        raise InvalidFieldsError(errors=err.errors()) from None
 
 
 def _shown(text: str, limit: int = 80) -> str:
@@ -108,7 +108,7 @@ def _merge_tags(runtime: Runtime, dataset_id: str, tags: list[str]) -> tuple[Dat
                     f"of {MAX_TAGS} tags per dataset"
                 )
                 error = {"loc": ("tags",), "msg": msg, "type": "too_long", "input": tags}
-                raise InvalidFieldsError([error])
+                raise InvalidFieldsError(errors=[error])
             dataset.tags = [*dataset.tags, *missing]
             session.commit()
             added.extend(t for t in missing if t not in added)

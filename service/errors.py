@@ -105,10 +105,21 @@ class InvalidFieldsError(InputError):
 
     code: ClassVar[str] = "request.invalid"
 
-    def __init__(self, errors: Sequence[Mapping[str, Any]]) -> None:
-        """Keep pydantic-style errors (``loc``, ``msg``, ``type``) for the problem document."""
-        self.errors = errors
-        super().__init__("; ".join(str(e.get("msg", "")) for e in errors) or "not valid")
+    def __init__(
+        self,
+        message: str = "",
+        *,
+        errors: Sequence[Mapping[str, Any]] = (),
+        option: str | None = None,
+        suggest: str | None = None,
+    ) -> None:
+        """Keep pydantic-style ``errors`` (``loc``, ``msg``, ``type``) for the problem document.
+
+        Without ``errors`` it is answered like any other error: ``message`` is the detail.
+        """
+        self.errors = list(errors)
+        text = message or "; ".join(str(e.get("msg", "")) for e in self.errors)
+        super().__init__(text or "The request is not valid.", option=option, suggest=suggest)
 
 
 class UploadError(InputError):
@@ -298,8 +309,10 @@ async def _handle_loceval_error(_request: Request, exc: Exception) -> JSONRespon
     return _response(body, problem_headers(exc))
 
 
-async def _handle_validation_error(_request: Request, exc: Exception) -> JSONResponse:
+async def _handle_validation_error(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, RequestValidationError | InvalidFieldsError)  # noqa: S101
+    if isinstance(exc, InvalidFieldsError) and not exc.errors:
+        return await _handle_loceval_error(request, exc)
     found = exc.errors() if isinstance(exc, RequestValidationError) else exc.errors
     errors = [
         {

@@ -566,7 +566,7 @@ def evaluate_form(runtime: Runtime, project_id: str, form: ReceivedForm) -> Eval
     try:  # checked before any file is stored; every error names its place (estimates.0.name)
         EvaluationCreate.model_validate(draft)
     except ValidationError as err:
-        raise InvalidFieldsError(err.errors()) from None
+        raise InvalidFieldsError(errors=err.errors()) from None
     reference, _ = store_upload(runtime, project_id, references[0])
     stored = [store_upload(runtime, project_id, f)[0] for f in estimates]
     reference_ref["dataset_id"] = reference.id
@@ -587,4 +587,4 @@ def _form_options(text: str | None) -> EvaluationOptions:
         return EvaluationOptions.model_validate_json(text)
     except ValidationError as err:
         errors = [{**e, "loc": ("options", *e["loc"])} for e in err.errors()]
-        raise InvalidFieldsError(errors) from None
+        raise InvalidFieldsError(errors=errors) from None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import subprocess
 import sys
@@ -144,7 +145,9 @@ def test_bounds_are_the_same_on_both_front_doors(spec: OptionSpec) -> None:
     for value in _beyond(spec):
         text = str(int(value)) if spec.kind is OptionKind.INTEGER else repr(value)
         command = ["evaluate", "r", "e"]
-        build: Any = export_from_options if spec.group == "export" else config_from_options
+        build: Any = config_from_options
+        if spec.group == "export":
+            build = functools.partial(export_from_options, front_door="cli")
         model: type[EvaluationOptions] = EvaluationOptions
         if spec.group == "ranging":
             command = ["ranging", "r", "--anchors", "a", "--ranges", "g"]
