@@ -104,9 +104,11 @@ _CRASHING_UPLOAD = textwrap.dedent(
         time.sleep(600)
 
     datasets.inspect_upload = inspect_upload  # the inspection of a big bag takes minutes
-    partial = runtime.store.new_incoming()
-    partial.write_bytes(source.read_bytes())
-    received = ReceivedFile("file", source.name, partial, partial.stat().st_size, sha256)
+    incoming = runtime.store.open_incoming()  # as the multipart receiver writes it
+    data = source.read_bytes()
+    incoming.write(data)
+    incoming.commit()
+    received = ReceivedFile("file", source.name, incoming, len(data), sha256)
     datasets.store_upload(runtime, project, received)
     """
 )
