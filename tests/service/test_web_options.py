@@ -32,7 +32,14 @@ __all__ = ["browser", "page"]  # the fixtures, used by name
 
 pytestmark = [pytest.mark.slow, pytest.mark.public_data]
 
-KEPT_FILES = ["result.json", "errors.csv", "report.html", "paths.dxf", "viewer.html"]
+KEPT_FILES = [
+    "result.json",
+    "errors.csv",
+    "map_cells.csv",
+    "report.html",
+    "paths.dxf",
+    "viewer.html",
+]
 
 
 def _open(page: Any, server: Any) -> None:
