@@ -13,7 +13,6 @@ the site transform, the output units, the survey's bounding-box centre as base p
 
 from __future__ import annotations
 
-import math
 from typing import Final
 
 import numpy as np
@@ -23,7 +22,13 @@ from exporters.colours import ate_bins, palette_color
 from exporters.options import ExportOptions, Units
 from exporters.viewer.page import DEFAULT_TEMPLATES_DIR, scene_fragment, viewer_page
 from exporters.viewer.reduce import display_indices
-from exporters.viewer.scene import building_scene, flat_rounded, hex_colour, vertex_decimals
+from exporters.viewer.scene import (
+    bins_json,
+    building_scene,
+    flat_rounded,
+    hex_colour,
+    vertex_decimals,
+)
 from loceval import __version__
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.core.arrays import FloatArray
@@ -107,14 +112,7 @@ def checkpoint_scene(evaluation: CheckpointEvaluation, options: ExportOptions) -
         "base": (base_m * scale).tolist(),
         "crs": options.crs,
         "t0_ns": str(t0_ns),
-        "bins": [
-            {
-                "high": None if math.isinf(b.high_m) else b.high_m,
-                "color": hex_colour(b.color_rgb),
-                "label": b.label,
-            }
-            for b in bins
-        ],
+        "bins": bins_json(bins),
         "paths": paths,
         "worst": [],
         "anchors": [],

@@ -18,7 +18,7 @@ reference position that error is measured to.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Final
 
@@ -26,7 +26,7 @@ import numpy as np
 
 from exporters.cad.building import BuildingModel, georeferenced_options, read_underlay
 from exporters.cad.site import check_options
-from exporters.colours import ate_bins, ate_edges_m, palette_color
+from exporters.colours import ATEBin, ate_bins, ate_edges_m, palette_color
 from exporters.options import ExportOptions, Units
 from exporters.tables import ERROR_DECIMALS
 from exporters.viewer.reduce import display_indices
@@ -39,7 +39,14 @@ from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import WorstPose
 from loceval.trajectory import Trajectory
 
-__all__ = ["building_scene", "flat_rounded", "hex_colour", "vertex_decimals", "viewer_scene"]
+__all__ = [
+    "bins_json",
+    "building_scene",
+    "flat_rounded",
+    "hex_colour",
+    "vertex_decimals",
+    "viewer_scene",
+]
 
 _NS_PER_S: Final = 1_000_000_000
 _WORST_SEPARATION_S: Final = 2.0  # as the CAD markers: one label per excursion
@@ -54,6 +61,18 @@ _SIGMAS: Final = 2.0  # the ellipses are 2-sigma (about 86 % of a 2D normal's ma
 def hex_colour(rgb: tuple[int, int, int]) -> str:
     """Return an RGB colour as ``#rrggbb``."""
     return "#{:02x}{:02x}{:02x}".format(*rgb)
+
+
+def bins_json(bins: Sequence[ATEBin]) -> list[dict[str, object]]:
+    """Return the ATE colour bins as the scene's legend (an open top bin has no ``high``)."""
+    return [
+        {
+            "high": None if math.isinf(b.high_m) else b.high_m,
+            "color": hex_colour(b.color_rgb),
+            "label": b.label,
+        }
+        for b in bins
+    ]
 
 
 def vertex_decimals(units: Units) -> int:
@@ -159,14 +178,7 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
         "base": (base_m * scale).tolist(),
         "crs": options.crs,
         "t0_ns": str(t0_ns),
-        "bins": [
-            {
-                "high": None if math.isinf(b.high_m) else b.high_m,
-                "color": hex_colour(b.color_rgb),
-                "label": b.label,
-            }
-            for b in bins
-        ],
+        "bins": bins_json(bins),
         "paths": paths,
         "worst": worst,
         "anchors": _anchors(result, local, decimals),
