@@ -30,7 +30,6 @@ from service.errors import (
 from service.options import (
     config_from_options,
     export_from_options,
-    offset_or_none,
     ranging_from_options,
 )
 from service.runtime import Runtime
@@ -283,10 +282,7 @@ def check_options(options: EvaluationOptions) -> None:
     Raises:
         InputError: an option's value cannot be used.
     """
-    if options.device is not None and options.offset:
-        msg = "Give the device offset either as offset or as device, not both."
-        raise InputError(msg)
-    config_from_options(options, reference_offset=offset_or_none(options.offset))
+    config_from_options(options)
     export_from_options(options, front_door="service")
 
 

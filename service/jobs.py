@@ -43,7 +43,6 @@ from service.options import (
     config_from_options,
     device_offset,
     export_from_options,
-    offset_or_none,
     ranging_from_options,
 )
 from service.preflight import check_data_dir, prepare_schema
@@ -142,14 +141,13 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     project_id = evaluation.project_id
     reference = _source(session, runtime, project_id, request.reference, "reference")
     estimates = [_source(session, runtime, project_id, e, "estimate") for e in request.estimates]
-    offset = offset_or_none(options.offset)
+    device_transform = None
     if isinstance(options.device, DeviceOffset):
         dataset = _dataset(session, project_id, options.device.dataset_id)
-        offset = device_offset(
+        device_transform = device_offset(
             _file(runtime, dataset),
             from_link=options.device.from_link,
             to_link=options.device.to_link,
-            offset=options.offset,
         )
     visits = None
     visits_id = visits_dataset_id(options.visits)
@@ -182,11 +180,7 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     return Job(
         reference=reference,
         estimates=estimates,
-        config=config_from_options(
-            options,
-            reference_offset=offset,
-            reference_offset_source="urdf" if isinstance(options.device, DeviceOffset) else "given",
-        ),
+        config=config_from_options(options, device_transform=device_transform),
         stamp=options.stamp,
         export=export,
         formats=options.formats,

@@ -2,18 +2,21 @@
 
 Both front doors hold the options of :data:`loceval.options.OPTIONS` under the same keys:
 the CLI in its parsed arguments (``args.max_dt_s``), the HTTP API in
-:class:`service.schemas.EvaluationOptions`. :func:`config_from_options` and
-:func:`export_from_options` take either, so a value means the same thing, and fails with
-the same message, on both. Nothing here supplies a default: the table does.
+:class:`service.schemas.EvaluationOptions`; both are made from the table, and
+:func:`option_values` reads either by key. :func:`config_from_options` and
+:func:`export_from_options` parse each value once into its typed value (``Tolerance``,
+``AlignWindow``, the enums, a transform), so a value means the same thing, and fails with
+the same message, on both. Nothing here supplies a default: the table does, and nothing
+here restates the options: a new one is read by key where it is used.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import argparse
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any
 
-from loceval.calibration.offsets import DeviceSource
 from loceval.checkpoints.config import CheckpointConfig
 from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
@@ -28,177 +31,42 @@ if TYPE_CHECKING:
     from loceval.radio_evaluation import RangingConfig
 
 __all__ = [
-    "EvaluationValues",
-    "ExportValues",
-    "RangingValues",
+    "OptionValues",
     "artifact_names",
+    "check_device_choice",
     "checkpoints_from_options",
     "config_from_options",
     "device_offset",
     "export_from_options",
     "is_auto",
     "offset_or_none",
+    "option_values",
     "ranging_from_options",
 ]
 
 
-class EvaluationValues(Protocol):
-    """The evaluation options as a front door holds them (keys of ``OPTIONS``)."""
-
-    @property
-    def association(self) -> str:
-        """The association method."""
-
-    @property
-    def max_dt_s(self) -> float:
-        """Nearest matching's largest time difference, seconds."""
-
-    @property
-    def max_gap_s(self) -> float:
-        """The longest reference gap bridged, seconds."""
-
-    @property
-    def time_offset_s(self) -> float | str:
-        """Added to the estimate's stamps, seconds; ``auto``: estimated from the motion."""
-
-    @property
-    def device(self) -> object:
-        """The device offset's source; ``auto``: estimated from the motion."""
-
-    @property
-    def align(self) -> str:
-        """The alignment method."""
-
-    @property
-    def align_first(self) -> str | None:
-        """The alignment window (``"100"`` poses or ``"5s"``)."""
-
-    @property
-    def calibrate_at_s(self) -> float | None:
-        """Calibrate alignment: seconds after the first matched pose."""
-
-    @property
-    def rpe_delta(self) -> float:
-        """The RPE delta."""
-
-    @property
-    def rpe_unit(self) -> str:
-        """What the RPE delta counts."""
-
-    @property
-    def rpe_all_pairs(self) -> bool:
-        """Every pose starts an RPE pair."""
-
-    @property
-    def thresholds_m(self) -> Sequence[float]:
-        """Distances of the share-within figures, metres."""
-
-    @property
-    def tolerance(self) -> str | None:
-        """The verdict's tolerance, ``METRES@PERCENT``."""
-
-    @property
-    def worst(self) -> int:
-        """How many greatest errors to list."""
-
-    @property
-    def no_ci(self) -> bool:
-        """Skip the confidence intervals and comparisons."""
-
-    @property
-    def reference_sigma_m(self) -> float | None:
-        """The reference's per-axis standard deviation, metres."""
-
-    @property
-    def planar(self) -> bool:
-        """Measure position errors in x-y only."""
-
-    @property
-    def min_excursion_s(self) -> float:
-        """The shortest reference loss that is an excursion, seconds."""
-
-    @property
-    def clutter_m(self) -> float:
-        """Map: the clutter distance, metres."""
-
-    @property
-    def visit_radius_m(self) -> float | None:
-        """Control points: how near a stop must be to a point, metres."""
-
-    @property
-    def align_points(self) -> Sequence[str] | None:
-        """Control points: the ids that fix the alignment."""
-
-    @property
-    def stop_speed_mps(self) -> float:
-        """Control points: the speed below which the device stands still."""
-
-    @property
-    def stop_min_s(self) -> float:
-        """Control points: how long the device must stand still, seconds."""
+OptionValues = Mapping[str, Any]
+"""The options as a front door holds them, by the table's keys (values as it typed them)."""
 
 
-class ExportValues(Protocol):
-    """The artifact options as a front door holds them (keys of ``OPTIONS``)."""
+def option_values(options: object) -> OptionValues:
+    """Return a front door's options by key: the CLI's parsed arguments or the API's model.
 
-    @property
-    def units(self) -> str:
-        """CAD units."""
-
-    @property
-    def site(self) -> str | None:
-        """The site transform, ``"tx ty tz yaw_deg"``."""
-
-    @property
-    def site_matrix(self) -> Path | Sequence[Sequence[float]] | None:
-        """The site as a 4x4 matrix (the CLI: a file holding it)."""
-
-    @property
-    def simplify_m(self) -> float:
-        """CAD polyline tolerance, metres."""
-
-    @property
-    def crs(self) -> str | None:
-        """The projected coordinate reference system, ``"EPSG:25832"``."""
-
-    @property
-    def building_up(self) -> str:
-        """The up axis of a building mesh file."""
+    Raises:
+        TypeError: neither (a bug).
+    """
+    if isinstance(options, Mapping):
+        return options
+    if isinstance(options, argparse.Namespace):
+        return vars(options)
+    fields = getattr(type(options), "model_fields", None)  # a pydantic model, not imported here
+    if fields is not None:
+        return {key: getattr(options, key) for key in fields}  # nested models kept
+    msg = f"Options come as parsed arguments, a model or a mapping, not {type(options).__name__}."
+    raise TypeError(msg)
 
 
-class RangingValues(Protocol):
-    """The ranging options as a front door holds them (group ``ranging`` of ``OPTIONS``)."""
-
-    @property
-    def solve(self) -> Sequence[str]:
-        """The positioning algorithms."""
-
-    @property
-    def dims(self) -> str:
-        """``"2"`` or ``"3"``."""
-
-    @property
-    def epoch_s(self) -> float:
-        """The epoch length, seconds."""
-
-    @property
-    def tag_height_m(self) -> float | None:
-        """The tag's height in 2D, metres."""
-
-    @property
-    def tag_offset_xyz(self) -> str | None:
-        """The tag in the reference body frame, ``"x y z"``."""
-
-    @property
-    def outlier_threshold_m(self) -> float:
-        """The outlier threshold, metres."""
-
-    @property
-    def distance_bin_m(self) -> float:
-        """The error-versus-distance bin width, metres."""
-
-
-def ranging_from_options(options: RangingValues) -> RangingConfig:
+def ranging_from_options(options: object) -> RangingConfig:
     """Return the core's ranging options.
 
     Raises:
@@ -206,62 +74,87 @@ def ranging_from_options(options: RangingValues) -> RangingConfig:
     """
     from loceval.radio_evaluation import RangingConfig, parse_solvers, parse_tag_offset  # noqa: PLC0415
 
-    if str(options.dims) not in {"2", "3"}:
-        msg = f"The number of dimensions must be 2 or 3, got {options.dims!r}."
+    values = option_values(options)
+    if str(values["dims"]) not in {"2", "3"}:
+        msg = f"The number of dimensions must be 2 or 3, got {values['dims']!r}."
         raise InputError(msg, option="dims")
     return RangingConfig(
-        solvers=parse_solvers(list(options.solve)),
-        dims=int(options.dims),
-        epoch_s=options.epoch_s,
-        tag_height_m=options.tag_height_m,
-        tag_offset_xyz=parse_tag_offset(options.tag_offset_xyz),
-        outlier_threshold_m=options.outlier_threshold_m,
-        distance_bin_m=options.distance_bin_m,
+        solvers=parse_solvers(list(values["solve"])),
+        dims=int(values["dims"]),
+        epoch_s=values["epoch_s"],
+        tag_height_m=values["tag_height_m"],
+        tag_offset_xyz=parse_tag_offset(values["tag_offset_xyz"]),
+        outlier_threshold_m=values["outlier_threshold_m"],
+        distance_bin_m=values["distance_bin_m"],
     )
 
 
 def config_from_options(
-    options: EvaluationValues,
+    options: object,
     *,
-    reference_offset: SimilarityTransform | None = None,
-    reference_offset_source: DeviceSource = "given",
+    front_door: str = "service",
+    device_transform: SimilarityTransform | None = None,
 ) -> EvaluationConfig:
-    """Return the core's options.
+    """Return the core's options: each value parsed once, here, into its typed value.
 
     Args:
-        options: the front door's options.
-        reference_offset: the device offset, already read (see :func:`device_offset`).
-        reference_offset_source: ``urdf`` when it was read from a URDF or a bag.
+        options: the front door's options (see :func:`option_values`).
+        front_door: ``cli`` or ``service``: how a message names an option.
+        device_transform: the device offset read from a device file (see
+            :func:`device_offset`); without it the ``offset`` option's, if given.
 
     Raises:
         InputError: a value cannot be used (the error carries the option's key).
     """
-    auto_time = is_auto(options.time_offset_s)
-    check_option("clutter_m", options.clutter_m, unit="metres")  # the map's, checked as early
-    checkpoints_from_options(options)  # control-point options fail as fast as the others
+    values = option_values(options)
+    check_device_choice(values, front_door=front_door)
+    auto_time = is_auto(values["time_offset_s"])
+    check_option("clutter_m", values["clutter_m"], unit="metres")  # the map's, checked as early
+    checkpoints_from_options(values)  # control-point options fail as fast as the others
+    tolerance = values["tolerance"]
     return EvaluationConfig(
-        association=AssociationMethod(options.association),
-        max_dt_s=options.max_dt_s,
-        max_gap_s=options.max_gap_s,
-        time_offset_s=0.0 if auto_time else float(options.time_offset_s),
-        align=AlignMethod(options.align),
-        align_first=AlignWindow.parse(options.align_first),
-        calibrate_at_s=options.calibrate_at_s,
-        reference_offset=reference_offset,
-        rpe_delta=options.rpe_delta,
-        rpe_unit=RPEUnit(options.rpe_unit),
-        rpe_all_pairs=options.rpe_all_pairs,
-        thresholds_m=tuple(options.thresholds_m),
-        tolerance=Tolerance.parse(options.tolerance) if options.tolerance else None,
-        worst_count=options.worst,
-        no_ci=options.no_ci,
-        reference_sigma_m=options.reference_sigma_m,
+        association=AssociationMethod(values["association"]),
+        max_dt_s=values["max_dt_s"],
+        max_gap_s=values["max_gap_s"],
+        time_offset_s=0.0 if auto_time else float(values["time_offset_s"]),
+        align=AlignMethod(values["align"]),
+        align_first=AlignWindow.parse(values["align_first"]),
+        calibrate_at_s=values["calibrate_at_s"],
+        reference_offset=device_transform or offset_or_none(values["offset"]),
+        rpe_delta=values["rpe_delta"],
+        rpe_unit=RPEUnit(values["rpe_unit"]),
+        rpe_all_pairs=values["rpe_all_pairs"],
+        thresholds_m=tuple(values["thresholds_m"]),
+        tolerance=Tolerance.parse(tolerance) if tolerance else None,
+        worst_count=values["worst"],
+        no_ci=values["no_ci"],
+        reference_sigma_m=values["reference_sigma_m"],
         auto_time_offset=auto_time,
-        auto_device=is_auto(options.device),
-        reference_offset_source=reference_offset_source,
-        planar=options.planar,
-        min_excursion_s=options.min_excursion_s,
+        auto_device=is_auto(values["device"]),
+        reference_offset_source="given" if device_transform is None else "urdf",
+        planar=values["planar"],
+        min_excursion_s=values["min_excursion_s"],
     )
+
+
+def check_device_choice(values: OptionValues, *, front_door: str) -> None:
+    """Refuse a device offset given twice: as ``offset`` and as ``device`` (a file or auto).
+
+    The one check of this rule; its words name the options the way ``front_door`` does.
+
+    Raises:
+        InputError: both are given.
+    """
+    device = values["device"]
+    if not values["offset"] or device is None:
+        return
+    if front_door != "cli":
+        msg = "Give the device offset either as offset or as device, not both."
+    elif is_auto(device):
+        msg = "Give the device offset either with --offset or as --device auto, not both."
+    else:
+        msg = "Give the device offset either with --offset or with --device, not both."
+    raise InputError(msg, option="device")
 
 
 def artifact_names(formats: Sequence[str] | None) -> list[str] | None:
@@ -282,22 +175,23 @@ def is_auto(value: object) -> bool:
     return isinstance(value, str) and value == AUTO
 
 
-def checkpoints_from_options(options: EvaluationValues) -> CheckpointConfig:
+def checkpoints_from_options(options: object) -> CheckpointConfig:
     """Return the options of a control-point reference.
 
     Raises:
         InputError: a value cannot be used (the error carries the option's key).
     """
+    values = option_values(options)
     return CheckpointConfig(
-        visit_radius_m=options.visit_radius_m,
-        align_points=tuple(options.align_points or ()),
-        stop_speed_mps=options.stop_speed_mps,
-        stop_min_s=options.stop_min_s,
+        visit_radius_m=values["visit_radius_m"],
+        align_points=tuple(values["align_points"] or ()),
+        stop_speed_mps=values["stop_speed_mps"],
+        stop_min_s=values["stop_min_s"],
     )
 
 
 def export_from_options(
-    options: ExportValues,
+    options: object,
     *,
     front_door: str,
     evaluation_id: str = "",
@@ -325,45 +219,42 @@ def export_from_options(
     )
     from exporters.options import FrontDoor, UpAxis  # noqa: PLC0415
 
-    matrix = options.site_matrix
-    if options.site and matrix is not None:
+    values = option_values(options)
+    matrix = values["site_matrix"]
+    site = values["site"]
+    if site and matrix is not None:
         msg = "Give the site transform either as a site or as a site matrix, not both."
         raise InputError(msg, option="site_matrix")
     transform = SimilarityTransform.identity()
-    if options.site:
-        transform = parse_site(options.site)
+    if site:
+        transform = parse_site(site)
     elif isinstance(matrix, Path):
         transform = read_site_matrix(matrix)
     elif matrix is not None:
-        values = [float(v) for row in matrix for v in row]
-        transform = site_from_values(values, where="the site matrix")
-    check_option("simplify_m", options.simplify_m, unit="metres")
+        numbers = [float(v) for row in matrix for v in row]
+        transform = site_from_values(numbers, where="the site matrix")
+    check_option("simplify_m", values["simplify_m"], unit="metres")
     export = ExportOptions(
-        units=parse_units(options.units),
+        units=parse_units(values["units"]),
         site=transform,
-        simplify_m=options.simplify_m,
+        simplify_m=values["simplify_m"],
         building=building,
         evaluation_id=evaluation_id,
-        crs=options.crs,
-        building_up=UpAxis(options.building_up),
+        crs=values["crs"],
+        building_up=UpAxis(values["building_up"]),
         front_door=FrontDoor(front_door),
     )
     check_options(export)
     return export
 
 
-def device_offset(
-    path: Path, *, from_link: str, to_link: str, offset: str | None = None
-) -> SimilarityTransform:
+def device_offset(path: Path, *, from_link: str, to_link: str) -> SimilarityTransform:
     """Return the rigid body -> sensor offset from a URDF or from a bag's ``/tf_static``.
 
     Raises:
-        InputError: an ``offset`` is given as well, or a link is not named.
+        InputError: a link is not named.
         ReaderError: the file cannot be read or the links are not connected.
     """
-    if offset:
-        msg = "Give the device offset either as an offset or from a device file, not both."
-        raise InputError(msg, option="device")
     if not (from_link and to_link):
         msg = (
             "A device file needs the rigid body's link and the sensor's link, e.g. "

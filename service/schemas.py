@@ -6,7 +6,7 @@ The schedules' bodies are in :mod:`service.schedule_schemas`.
 from __future__ import annotations
 
 import datetime as dt
-from typing import Annotated, Any, Final, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Final, Literal, cast
 
 from pydantic import (
     BaseModel,
@@ -14,13 +14,14 @@ from pydantic import (
     Field,
     GetCoreSchemaHandler,
     ValidationError,
+    create_model,
     field_validator,
 )
 from pydantic_core import core_schema
 
 from exporters import ARTIFACT_ALIASES, ARTIFACTS, artifact_name
 from exporters.errors import ExportOptionsError
-from loceval.options import AUTO, OptionKind, option
+from loceval.options import AUTO, OPTIONS, OptionKind, OptionSpec, option
 from service.schema_base import Id, Printable, Strict
 
 __all__ = [
@@ -174,10 +175,6 @@ class _OrAuto:
         )
 
 
-_TimeOffset = Annotated[
-    float | Literal["auto"],
-    _OrAuto(Annotated[float, _bounds("time_offset_s")], "a number of seconds"),
-]
 _Device = Annotated[
     DeviceOffset | Literal["auto"] | None,
     _OrAuto(DeviceOffset | None, "a device file's dataset and links"),
@@ -188,66 +185,98 @@ _Matrix4 = Annotated[
     Field(min_length=4, max_length=4),
 ]
 _Artifact = Annotated[str, Field(max_length=40, json_schema_extra={"enum": list(ARTIFACTS)})]
+_Name = Annotated[str, Field(min_length=1, max_length=200)]
+
+_API_SHAPES: Final[dict[str, Any]] = {
+    "formats": list[_Artifact] | None,
+    "map": MapRef | None,
+}
+"""The options whose API shape is not their kind's: artifact names; a map's dataset and topic."""
+
+_KIND_TYPES: Final[dict[OptionKind, Any]] = {
+    OptionKind.NUMBER: float,
+    OptionKind.INTEGER: int,
+    OptionKind.TEXT: str,
+    OptionKind.FILE: str,  # the API names an uploaded dataset by its id
+    OptionKind.MATRIX: _Matrix4,
+}
+"""The JSON type of each kind whose type needs nothing of the option itself."""
 
 
-class EvaluationOptions(Strict):
+def _base_type(spec: OptionSpec) -> Any:  # noqa: ANN401  (a type expression)
+    """Return the JSON type of one value of an option, from its kind."""
+    if spec.kind is OptionKind.CHOICE:
+        return Annotated[str, _Choices(spec.key)]
+    if spec.kind is OptionKind.NUMBERS:
+        return list[Annotated[float, _bounds(spec.key)]]
+    if spec.kind is OptionKind.NAMES:
+        item = Literal.__getitem__(spec.choices) if spec.choices else _Name
+        return list[item]  # type: ignore[valid-type]
+    return _KIND_TYPES[spec.kind]
+
+
+def _annotation(spec: OptionSpec) -> Any:  # noqa: ANN401  (a type expression)
+    """Return the JSON type of an option: its kind's, or ``auto``, or null when not set."""
+    if spec.key in _API_SHAPES:
+        return _API_SHAPES[spec.key]
+    if spec.kind is OptionKind.SWITCH:
+        return bool
+    if spec.kind is OptionKind.DEVICE:
+        return _Device
+    base = _base_type(spec)
+    if spec.auto:
+        inner = Annotated[base, _bounds(spec.key)] if spec.kind is OptionKind.NUMBER else base
+        base = Annotated[base | Literal["auto"], _OrAuto(inner, _other_than_auto(spec))]
+    return base | None if spec.default is None else base
+
+
+def _other_than_auto(spec: OptionSpec) -> str:
+    """Return how the message of a bad ``auto`` option names the other value it takes."""
+    if spec.kind is not OptionKind.NUMBER:
+        return f"{spec.words} as {spec.metavar or 'text'}"
+    unit = {"_s": " of seconds", "_m": " of metres"}.get(spec.key[-2:], "")
+    return f"a number{unit}"
+
+
+def _fields(group: str) -> dict[str, Any]:
+    """Return ``create_model``'s fields of the API's options of a group of the table."""
+    wanted = {"ranging"} if group == "ranging" else {"evaluation", "reading", "export", "map"}
+    return {
+        spec.key: (_annotation(spec), _field(spec.key))
+        for spec in OPTIONS
+        if spec.api and spec.group in wanted
+    }
+
+
+if TYPE_CHECKING:  # the fields are made from the table at run time; typed by key here
+
+    class _EvaluationFields(Strict):
+        def __getattr__(self, key: str) -> Any: ...  # noqa: ANN401
+
+else:
+    _EvaluationFields = create_model("_EvaluationFields", __base__=Strict, **_fields("evaluation"))
+
+
+class EvaluationOptions(_EvaluationFields):
     """The evaluation options, as ``POST /evaluations`` takes them.
 
-    Every field's default, bounds, choices and help come from :data:`loceval.options.OPTIONS`
-    (the CLI's flags are built from the same table); the annotations give the JSON types.
+    Its fields are made from :data:`loceval.options.OPTIONS` (the CLI's flags are made from
+    the same table): each option's key, JSON type (from its kind), default, bounds, choices,
+    example and help. An option added to the table is here with no other edit.
     """
-
-    association: Annotated[str, _Choices("association")] = _field("association")
-    max_dt_s: float = _field("max_dt_s")
-    max_gap_s: float = _field("max_gap_s")
-    time_offset_s: _TimeOffset = _field("time_offset_s")
-    stamp: Annotated[str, _Choices("stamp")] = _field("stamp")
-    align: Annotated[str, _Choices("align")] = _field("align")
-    align_first: str | None = _field("align_first")
-    calibrate_at_s: float | None = _field("calibrate_at_s")
-    offset: str | None = _field("offset")
-    device: _Device = _field("device")
-    rpe_delta: float = _field("rpe_delta")
-    rpe_unit: Annotated[str, _Choices("rpe_unit")] = _field("rpe_unit")
-    rpe_all_pairs: bool = _field("rpe_all_pairs")
-    thresholds_m: list[Annotated[float, _bounds("thresholds_m")]] = _field("thresholds_m")
-    tolerance: str | None = _field("tolerance")
-    worst: int = _field("worst")
-    units: Annotated[str, _Choices("units")] = _field("units")
-    site: str | None = _field("site")
-    site_matrix: _Matrix4 | None = _field("site_matrix")
-    simplify_m: float = _field("simplify_m")
-    crs: str | None = _field("crs")
-    building_up: Annotated[str, _Choices("building_up")] = _field("building_up")
-    formats: list[_Artifact] | None = _field("formats")
-    building: str | None = _field("building")
-    no_ci: bool = _field("no_ci")
-    reference_sigma_m: float | None = _field("reference_sigma_m")
-    planar: bool = _field("planar")
-    visits: str = _field("visits")
-    visit_radius_m: float | None = _field("visit_radius_m")
-    align_points: list[Annotated[str, Field(min_length=1, max_length=200)]] | None = _field(
-        "align_points"
-    )
-    stop_speed_mps: float = _field("stop_speed_mps")
-    stop_min_s: float = _field("stop_min_s")
-    map: MapRef | None = _field("map")
-    map_estimate: str | None = _field("map_estimate")
-    clutter_m: float = _field("clutter_m")
-    min_excursion_s: float = _field("min_excursion_s")
 
     @property
     def map_ref(self) -> MapRef | None:
         """Return the map's dataset and bag topic (None without a map)."""
-        return self.map
+        return cast("MapRef | None", self.map)
 
-    @field_validator("map", mode="before")
+    @field_validator("map", mode="before", check_fields=False)
     @classmethod
     def _map_id(cls, value: object) -> object:
         """Take a bare dataset id (a map zip) as ``{"dataset_id": id}``."""
         return {"dataset_id": value} if isinstance(value, str) else value
 
-    @field_validator("formats")
+    @field_validator("formats", check_fields=False)
     @classmethod
     def _known_formats(cls, value: list[str] | None) -> list[str] | None:
         """Accept file names and format aliases (``dxf``, ``pdf``, ``glb``); store file names."""
@@ -275,11 +304,18 @@ class EvaluationCreate(Strict):
     options: EvaluationOptions = Field(default_factory=EvaluationOptions)
 
 
-_Solver = Literal["nlls", "minmax"]
+if TYPE_CHECKING:
+
+    class _RangingFields(EvaluationOptions): ...
+
+else:
+    _RangingFields = create_model(
+        "_RangingFields", __base__=EvaluationOptions, **_fields("ranging")
+    )
 
 
-class RangingOptions(EvaluationOptions):
-    """The options of ``POST /ranging``: the evaluation's, then the ranging ones.
+class RangingOptions(_RangingFields):
+    """The options of ``POST /ranging``: the evaluation's, then the ranging ones (from the table).
 
     The alignment defaults to ``none``: the anchors are in building coordinates already.
     A device offset (``offset``, ``device``) is refused: the tag offset says where the tag is.
@@ -288,13 +324,6 @@ class RangingOptions(EvaluationOptions):
     align: Annotated[str, _Choices("align")] = Field(
         default="none", description=option("align").help
     )
-    solve: Annotated[list[_Solver], Field(min_length=1, max_length=2)] = _field("solve")
-    dims: Annotated[str, _Choices("dims")] = _field("dims")
-    epoch_s: float = _field("epoch_s")
-    tag_height_m: float | None = _field("tag_height_m")
-    tag_offset_xyz: str | None = _field("tag_offset_xyz")
-    outlier_threshold_m: float = _field("outlier_threshold_m")
-    distance_bin_m: float = _field("distance_bin_m")
 
 
 class RangingCreate(Strict):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING
 
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationResult
@@ -16,15 +16,13 @@ from loceval.readers import TrajectoryFormat, parse_source
 from service.cli.output import emit
 from service.mapjob import map_source
 from service.options import (
-    EvaluationValues,
-    ExportValues,
     artifact_names,
+    check_device_choice,
     checkpoints_from_options,
     config_from_options,
     device_offset,
     export_from_options,
     is_auto,
-    offset_or_none,
 )
 from service.runner import Job, JobSource, default_name, file_provenance, run_job, unique_names
 
@@ -46,7 +44,7 @@ def export_options(args: argparse.Namespace) -> ExportOptions | None:
     if args.out is None:
         return None
     return export_from_options(
-        cast("ExportValues", args),
+        args,
         front_door="cli",
         evaluation_id=args.out.resolve().name,
         building=args.building,
@@ -55,11 +53,7 @@ def export_options(args: argparse.Namespace) -> ExportOptions | None:
 
 def run_evaluate(args: argparse.Namespace) -> int:
     """Evaluate the estimates against the reference; print tables or JSON; write artifacts."""
-    config = config_from_options(
-        cast("EvaluationValues", args),
-        reference_offset=_device_offset(args),
-        reference_offset_source="given" if args.device is None else "urdf",
-    )
+    config = config_from_options(args, front_door="cli", device_transform=_device_file_offset(args))
     default_format = TrajectoryFormat(args.format) if args.format else None
     if args.name and len(args.name) != len(args.estimates):
         msg = (
@@ -70,9 +64,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     export = export_options(args)
     plan = export
     if args.map is not None and plan is None:  # --json without --out still needs the plan
-        plan = export_from_options(
-            cast("ExportValues", args), front_door="cli", building=args.building
-        )
+        plan = export_from_options(args, front_door="cli", building=args.building)
     the_map = map_source(args.map, plan, estimate=args.map_estimate, clutter_m=args.clutter_m)
     ref_spec = parse_source(args.reference, default_format=default_format)
     est_specs = [parse_source(s, default_format=default_format) for s in args.estimates]
@@ -99,7 +91,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             export=export,
             formats=artifact_names(args.formats),
             visits=_visits_source(args.visits),
-            checkpoints=checkpoints_from_options(cast("EvaluationValues", args)),
+            checkpoints=checkpoints_from_options(args),
             map=the_map,
         )
         result = run_job(job, args.out)
@@ -147,11 +139,14 @@ def _visits_source(visits: str) -> JobSource | None:
     return JobSource(spec, spec.path.stem, file_provenance("visits", spec))
 
 
-def _device_offset(args: argparse.Namespace) -> SimilarityTransform | None:
+def _device_file_offset(args: argparse.Namespace) -> SimilarityTransform | None:
+    """Return the offset read from ``--device FILE`` between its two links (None without one).
+
+    The CLI's own rules of ``--device-from`` and ``--device-to``; that ``--offset`` is not
+    given too is :func:`~service.options.check_device_choice`'s, checked first.
+    """
+    check_device_choice(vars(args), front_door="cli")
     if is_auto(args.device):
-        if args.offset:
-            msg = "Give the device offset either with --offset or as --device auto, not both."
-            raise InputError(msg)
         if args.device_from or args.device_to:
             msg = "--device auto estimates the offset; --device-from and --device-to need a file."
             raise InputError(msg)
@@ -160,10 +155,7 @@ def _device_offset(args: argparse.Namespace) -> SimilarityTransform | None:
         if args.device_from or args.device_to:
             msg = "--device-from and --device-to need --device FILE (a URDF or a bag)."
             raise InputError(msg)
-        return offset_or_none(args.offset)
-    if args.offset:
-        msg = "Give the device offset either with --offset or with --device, not both."
-        raise InputError(msg)
+        return None
     if not (args.device_from and args.device_to):
         msg = (
             "--device needs --device-from LINK (the rigid body) and --device-to LINK "

@@ -8,15 +8,13 @@ builders as the API's options (:mod:`service.options`); the job is run by
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING
 
 from loceval.evaluation import EvaluationResult
 from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
 from service.cli.evaluate import export_options
 from service.cli.output import emit
 from service.options import (
-    EvaluationValues,
-    RangingValues,
     artifact_names,
     config_from_options,
     ranging_from_options,
@@ -33,8 +31,8 @@ __all__ = ["format_ranging_table", "run_ranging"]
 
 def run_ranging(args: argparse.Namespace) -> int:
     """Evaluate the ranges and the solvers' positions; print tables or JSON; write artifacts."""
-    ranging = ranging_from_options(cast("RangingValues", args))
-    config = config_from_options(cast("EvaluationValues", args))
+    ranging = ranging_from_options(args)
+    config = config_from_options(args, front_door="cli")
     export = export_options(args)
     default_format = TrajectoryFormat(args.format) if args.format else None
     ref_spec = parse_source(args.reference, default_format=default_format)

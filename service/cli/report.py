@@ -14,7 +14,7 @@ from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec
 from service.cli.output import emit
-from service.options import config_from_options, offset_or_none
+from service.options import config_from_options
 from service.runner import Job, JobSource, default_name, file_provenance, run_job
 
 if TYPE_CHECKING:
@@ -41,7 +41,7 @@ def run_report(args: argparse.Namespace) -> int:
     template = _read_template(args.template)
     options = template.options
     try:
-        config = config_from_options(options, reference_offset=offset_or_none(options.offset))
+        config = config_from_options(options)
     except LocevalError as err:  # the same error (its class and code), in the template's words
         msg = f"The template {str(args.template)!r}: {_api_words(err)}"
         raise err.reworded(msg) from err

@@ -8,7 +8,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import pytest
 
@@ -19,7 +19,6 @@ from service.cli import describe
 from service.cli.parser import RANGING_SKIPPED, build_parser
 from service.errors import problem_for
 from service.options import (
-    EvaluationValues,
     config_from_options,
     export_from_options,
     ranging_from_options,
@@ -117,7 +116,7 @@ def test_api_schema_is_the_table() -> None:
 def test_both_front_doors_build_the_same_config() -> None:
     """CLI defaults and API defaults give the core's defaults, field for field."""
     args = build_parser().parse_args(["evaluate", "ref.txt", "est.txt"])
-    from_cli = config_from_options(cast("EvaluationValues", args))
+    from_cli = config_from_options(args)
     from_api = config_from_options(EvaluationOptions())
     assert from_cli == from_api == EvaluationConfig()
     assert args.stamp == EvaluationOptions().stamp == option("stamp").default
