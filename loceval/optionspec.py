@@ -156,6 +156,33 @@ class OptionSpec:
     cli: bool = True
     auto: bool = False
 
+    def document(self) -> dict[str, object]:
+        """Return the option as JSON: what a front door needs to offer and check it.
+
+        The API's ``GET /options`` and the browser page's form are made from these.
+        """
+        default = list(self.default) if isinstance(self.default, tuple) else self.default
+        return {
+            "key": self.key,
+            "kind": self.kind.value,
+            "default": default,
+            "help": self.help,
+            "words": self.words,
+            "flag": self.flag if self.cli else None,
+            "metavar": self.metavar,
+            "minimum": self.minimum,
+            "maximum": self.maximum,
+            "exclusive_minimum": self.exclusive_minimum,
+            "choices": [str(c) for c in self.choices],
+            "max_length": self.max_length,
+            "min_length": self.min_length,
+            "pattern": self.pattern,
+            "example": self.example,
+            "group": self.group,
+            "auto": self.auto,
+            "bounds": self.bounds_text,
+        }
+
     @property
     def flag(self) -> str:
         """Return the CLI's flag (``--max-dt``)."""

@@ -35,6 +35,8 @@ __all__ = [
     "EvaluationOptions",
     "EvaluationPublic",
     "EvaluationsPublic",
+    "OptionPublic",
+    "OptionsPublic",
     "Problem",
     "ProgressPublic",
     "RangingCreate",
@@ -42,6 +44,7 @@ __all__ = [
     "SourceRef",
     "SummaryRow",
     "UploadPublic",
+    "options_public",
 ]
 
 _Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -465,3 +468,44 @@ class EvaluationsPublic(BaseModel):
 
     items: list[EvaluationPublic]
     count: int
+
+
+class OptionPublic(BaseModel):
+    """One option of ``POST /evaluations`` and ``POST /ranging`` (a row of the table)."""
+
+    key: str = Field(examples=["max_dt_s"])
+    kind: Literal[tuple(OptionKind)] = Field(  # type: ignore[valid-type]
+        description="the type of the value: number, integer, switch, choice, text, numbers, "
+        "names, matrix, device or file (an uploaded dataset's id)"
+    )
+    default: Any = Field(description="the value when not given (null: not set)")
+    help: str
+    words: str = Field(description="how messages name the option")
+    flag: str | None = Field(description="the CLI's flag of the same option")
+    metavar: str | None
+    minimum: float | None = Field(description="the least value (of each item, for lists)")
+    maximum: float | None = Field(description="the greatest value (of each item, for lists)")
+    exclusive_minimum: bool = Field(description="the minimum itself is not allowed")
+    choices: list[str]
+    max_length: int | None
+    min_length: int | None
+    pattern: str | None
+    example: str | None
+    group: Literal["evaluation", "reading", "export", "map", "ranging"] = Field(
+        description="ranging: only POST /ranging takes it"
+    )
+    auto: bool = Field(description='the value may also be "auto" (estimated from the data)')
+    bounds: str = Field(description="the allowed range in words", examples=["more than 0"])
+
+
+class OptionsPublic(BaseModel):
+    """Every option the API takes, in the order of the schema (one table makes both)."""
+
+    items: list[OptionPublic]
+
+
+def options_public() -> OptionsPublic:
+    """Return the options document: the rows of :data:`loceval.options.OPTIONS` the API takes."""
+    return OptionsPublic.model_validate(
+        {"items": [spec.document() for spec in OPTIONS if spec.api]}
+    )

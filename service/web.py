@@ -21,6 +21,7 @@ from exporters.report import pdf_available
 from loceval import __version__
 from loceval.core.display import shown_text
 from loceval.options import option
+from service.schemas import options_public
 
 __all__ = ["router"]
 
@@ -63,8 +64,10 @@ def index(request: Request) -> HTMLResponse:
         process): when it cannot, the page asks for no ``report.pdf`` or ``summary.pdf``.
         ``<body data-artifacts>`` lists the files an evaluation can make (the server's
         :data:`exporters.ARTIFACTS`, in order), the upload hint names the building model
-        formats and the up-axis choice offers the option table's choices, so the page
-        copies none of these by hand.
+        formats and the up-axis choice offers the option table's choices, and
+        ``<body data-options>`` is the API's options document (``GET /api/v1/options``),
+        from which the form takes its fields' bounds, choices and help and makes a field
+        for every option it does not place itself; so the page copies none of these.
     """
     template = _environment(_templates_dir(request)).get_template(_PAGE)
     html = template.render(
@@ -73,6 +76,7 @@ def index(request: Request) -> HTMLResponse:
         artifacts=list(ARTIFACTS),
         building_formats=", ".join(s.lstrip(".").upper() for s in BUILDING_SUFFIXES),
         building_up=option("building_up"),
+        options=[item.model_dump() for item in options_public().items],
     )
     return HTMLResponse(
         html, headers={**_HEADERS, "X-Frame-Options": "DENY"}, media_type="text/html"

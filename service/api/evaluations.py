@@ -16,7 +16,14 @@ from service.db import Evaluation, get_owned
 from service.links import api_url, public_base
 from service.metrics import count_upload
 from service.runtime import Runtime
-from service.schemas import EvaluationCreate, EvaluationPublic, EvaluationsPublic, RangingCreate
+from service.schemas import (
+    EvaluationCreate,
+    EvaluationPublic,
+    EvaluationsPublic,
+    OptionsPublic,
+    RangingCreate,
+    options_public,
+)
 from service.uploads import receive_multipart
 
 __all__ = ["router"]
@@ -75,6 +82,16 @@ def create_ranging_job(
     """
     evaluation = evaluations.create_ranging(runtime, project_id, body)
     return _accepted(evaluation, response, runtime)
+
+
+@router.get("/options", response_model=OptionsPublic, responses=problems())
+def read_options(_project_id: ProjectDep) -> OptionsPublic:
+    """List the options of ``POST /evaluations`` and ``POST /ranging``.
+
+    Key, kind, default, bounds, choices and help of each, from the one table the API's
+    schema and the CLI's flags are made from (the browser page builds its form from it).
+    """
+    return options_public()
 
 
 @router.get("/evaluations", response_model=EvaluationsPublic, responses=problems())

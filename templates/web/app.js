@@ -18,6 +18,12 @@
   // The server renders whether it can write PDFs (WeasyPrint and pango): without, the page
   // asks for no report.pdf and its schedules for summary.html only.
   const PDF_REPORTS = document.body.dataset.pdfReports !== "no";
+  // The API's options document (GET /api/v1/options), rendered into the page by the server:
+  // key, kind, default, bounds, choices and help of every option, from the one table the
+  // API's schema and the CLI's flags are made from. The form's fields take their bounds,
+  // choices and help from it, and an option no field of the page holds gets one of its own.
+  const OPTION_DOCS = new Map(JSON.parse(document.body.dataset.options || "[]").map((o) => [o.key, o]));
+  const FORM_GROUPS = new Set(["evaluation", "reading", "export", "map"]); // not ranging's
 
   const state = {
     key: null,
@@ -528,6 +534,7 @@
       renderSourceSelects();
       renderDeviceSelect();
       renderBuildingSelect();
+      renderOtherDatasetChoices();
       renderRadioSelects();
       if (state.history) renderHistory(state.history.items, state.history.count);
     } catch (err) {
@@ -719,43 +726,186 @@
       units: $("opt-units").value,
       rpe_unit: $("opt-rpe-unit").value,
     };
-    const tolerance = $("opt-tolerance").value.replace(/\s+/g, "").replace(/%$/, "");
-    if (tolerance) {
-      if (!/^\d*\.?\d+@\d*\.?\d+$/.test(tolerance)) {
-        throw new Error("Write the tolerance as metres@percent, e.g. 0.10@95 (95 % of poses within 0.10 m).");
-      }
-      options.tolerance = tolerance;
+    // The tolerance (0.10@95, or a bare 0.10 for 95 %) is checked by the server's own parser;
+    // a refused one comes back naming this field.
+    const tolerance = $("opt-tolerance").value.trim();
+    if (tolerance) options.tolerance = tolerance;
+    const numbers = { time_offset_s: "opt-time-offset", max_gap_s: "opt-max-gap", max_dt_s: "opt-max-dt", rpe_delta: "opt-rpe-delta" };
+    for (const [key, id] of Object.entries(numbers)) {
+      const value = optionNumber(key, $(id).value);
+      if (value !== undefined) options[key] = value;
     }
-    const number = (id, label, { positive = false } = {}) => {
-      const text = $(id).value.trim();
-      if (!text) return undefined;
-      const value = Number(text);
-      if (!Number.isFinite(value) || (positive && value <= 0)) {
-        throw new Error(`${label} must be a${positive ? " positive" : ""} number.`);
-      }
-      return value;
-    };
-    const timeOffset = number("opt-time-offset", "The time offset");
-    if (timeOffset !== undefined) options.time_offset_s = timeOffset;
-    const maxGap = number("opt-max-gap", "The longest gap", { positive: true });
-    if (maxGap !== undefined) options.max_gap_s = maxGap;
-    const maxDt = number("opt-max-dt", "The nearest max Δt", { positive: true });
-    if (maxDt !== undefined) options.max_dt_s = maxDt;
     const alignFirst = $("opt-align-first").value.replace(/\s+/g, "");
     if (alignFirst) {
-      if (!/^(\d+|\d*\.?\d+s)$/.test(alignFirst)) {
-        throw new Error("Align on the first: write a number of poses (50) or seconds (10s).");
-      }
+      checkPattern("align_first", alignFirst);
       options.align_first = alignFirst;
     }
-    if ($("opt-stamp").value !== "header") options.stamp = $("opt-stamp").value;
-    const delta = $("opt-rpe-delta").value.trim();
-    if (delta) {
-      const number = Number(delta);
-      if (!Number.isFinite(number) || number <= 0) throw new Error("The RPE delta must be a positive number.");
-      options.rpe_delta = number;
+    if ($("opt-stamp").value !== OPTION_DOCS.get("stamp")?.default) options.stamp = $("opt-stamp").value;
+    Object.assign(options, readVerdictOptions(), readDeviceOptions(), readCadOptions(), readOtherOptions());
+    return options;
+  }
+
+  // --- the options document: bounds, choices and help of the form's fields ------------------
+
+  /** The page's name of an option's field (its data-label), or the option's words. */
+  function optionLabel(key) {
+    const field = optionField(key);
+    const doc = OPTION_DOCS.get(key);
+    return field ? `“${field.dataset.label}”` : (doc ? doc.words : key);
+  }
+
+  /** What is wrong with a number for an option (its kind and bounds); "" when it is fine. */
+  function numberProblem(key, value) {
+    const doc = OPTION_DOCS.get(key);
+    const label = optionLabel(key);
+    if (!Number.isFinite(value)) return `${label}: write a number.`;
+    if (!doc) return "";
+    if (doc.kind === "integer" && !Number.isInteger(value)) return `${label}: write a whole number.`;
+    const low = doc.minimum;
+    const high = doc.maximum;
+    const below = low !== null && (value < low || (doc.exclusive_minimum && value === low));
+    if (below || (high !== null && value > high)) return `${label} must be ${doc.bounds}, got ${value}.`;
+    return "";
+  }
+
+  /** A number typed into an option's field, checked on the page; undefined when empty. */
+  function optionNumber(key, text) {
+    const trimmed = String(text).trim();
+    if (!trimmed) return undefined;
+    const doc = OPTION_DOCS.get(key);
+    if (doc && doc.auto && trimmed.toLowerCase() === "auto") return "auto";
+    const value = Number(trimmed);
+    const problem = numberProblem(key, value);
+    if (problem) throw new FieldError(key, problem);
+    return value;
+  }
+
+  /** Check a text against the option's pattern, if the document gives one. */
+  function checkPattern(key, text) {
+    const doc = OPTION_DOCS.get(key);
+    if (!doc || !doc.pattern || new RegExp(doc.pattern).test(text)) return;
+    const example = doc.example || doc.metavar;
+    throw new FieldError(key, `${optionLabel(key)}: “${text}” is not of the form ${example}.`);
+  }
+
+  /** Give each field of the page its option's bounds, choices, default and help. */
+  function applyOptionDocs() {
+    for (const field of document.querySelectorAll("[data-option]")) {
+      const doc = OPTION_DOCS.get(field.dataset.option);
+      if (!doc) continue;
+      if (!field.title) field.title = doc.help;
+      const inputs = "input:not([type=checkbox]), select, textarea";
+      const input = field.matches(inputs) ? field : field.querySelector(inputs);
+      if (!input) continue;
+      if (input.tagName === "SELECT" && doc.choices.length) {
+        syncChoices(input, doc);
+      } else if (input.type === "number") {
+        if (doc.minimum !== null) input.min = String(doc.minimum);
+        if (doc.maximum !== null) input.max = String(doc.maximum);
+        if (!input.placeholder && doc.default !== null) input.placeholder = String(doc.default);
+      } else if (doc.pattern && input.tagName === "INPUT") {
+        input.pattern = doc.pattern;
+      }
     }
-    Object.assign(options, readVerdictOptions(), readDeviceOptions(), readCadOptions());
+  }
+
+  /** Offer exactly the option's choices, keeping the page's words for the ones it has. */
+  function syncChoices(select, doc) {
+    const words = new Map(Array.from(select.options).map((o) => [o.value, o.textContent]));
+    const chosen = select.value;
+    select.replaceChildren(...doc.choices.map((choice) => el("option", {
+      value: choice, text: words.get(choice) || choice, selected: choice === doc.default,
+    })));
+    if (doc.choices.includes(chosen)) select.value = chosen;
+  }
+
+  /** Make a field for every option of the document that no field of the page holds. */
+  function renderOtherOptions() {
+    const grid = $("other-options-grid");
+    const fields = [];
+    for (const doc of OPTION_DOCS.values()) {
+      if (!FORM_GROUPS.has(doc.group) || optionField(doc.key)) continue;
+      const input = otherOptionInput(doc);
+      if (!input) continue;
+      const words = doc.words.replace(/^the /, "");
+      const label = words.charAt(0).toUpperCase() + words.slice(1);
+      const hint = doc.bounds || (doc.kind === "file" ? "an uploaded dataset" : "");
+      fields.push(el("label", {
+        className: doc.kind === "switch" ? "field field-switch" : "field",
+        title: doc.help, dataset: { option: doc.key, label, kind: doc.kind, generated: "" },
+      }, el("span", {}, label, hint ? " " : "", hint ? el("small", { text: `(${hint})` }) : ""), input));
+    }
+    grid.replaceChildren(...fields);
+    $("other-options").hidden = !fields.length;
+  }
+
+  /** The input of an option made from its document (null: the page cannot offer its kind). */
+  function otherOptionInput(doc) {
+    const shown = Array.isArray(doc.default) ? doc.default.join(", ") : doc.default;
+    const placeholder = shown === null || shown === undefined ? (doc.example || "") : String(shown);
+    switch (doc.kind) {
+      case "switch":
+        return el("input", { type: "checkbox", checked: doc.default === true });
+      case "choice":
+        return el("select", {}, ...doc.choices.map((c) => el("option", { value: c, text: c, selected: c === doc.default })));
+      case "number":
+      case "integer":
+        if (doc.auto) return el("input", { type: "text", placeholder: `${placeholder} or auto`, spellcheck: "false", inputmode: "decimal" });
+        return el("input", {
+          type: "number", step: doc.kind === "integer" ? "1" : "any", placeholder,
+          min: doc.minimum === null ? null : String(doc.minimum), max: doc.maximum === null ? null : String(doc.maximum),
+          inputmode: doc.kind === "integer" ? "numeric" : "decimal",
+        });
+      case "text":
+      case "numbers":
+      case "names":
+        return el("input", { type: "text", placeholder, spellcheck: "false", pattern: doc.pattern || null });
+      case "file":
+        return el("select", { className: "dataset-choice" }, el("option", { value: "", text: "— none —" }));
+      default:
+        return null; // a matrix or a device file: the page's own fields hold these
+    }
+  }
+
+  /** Offer the uploaded datasets in the made fields that name one (kind file). */
+  function renderOtherDatasetChoices() {
+    for (const select of document.querySelectorAll("#other-options-grid select.dataset-choice")) {
+      const previous = select.value;
+      select.replaceChildren(el("option", { value: "", text: "— none —" }),
+        ...state.datasets.map((d) => el("option", { value: d.id, text: datasetLabel(d) })));
+      select.value = Array.from(select.options).some((o) => o.value === previous) ? previous : "";
+    }
+  }
+
+  /** The made fields' options, as the API's ``options`` (left out when empty or the default). */
+  function readOtherOptions() {
+    const options = {};
+    for (const field of document.querySelectorAll("#other-options-grid [data-option]")) {
+      const key = field.dataset.option;
+      const doc = OPTION_DOCS.get(key);
+      const input = field.querySelector("input, select");
+      if (doc.kind === "switch") {
+        if (input.checked !== (doc.default === true)) options[key] = input.checked;
+        continue;
+      }
+      const text = input.value.trim();
+      if (!text || text === String(doc.default)) continue;
+      if (doc.kind === "number" || doc.kind === "integer") {
+        options[key] = optionNumber(key, text);
+      } else if (doc.kind === "numbers") {
+        const values = numberList(text, key, field.dataset.label);
+        for (const value of values) {
+          const problem = numberProblem(key, value);
+          if (problem) throw new FieldError(key, problem);
+        }
+        options[key] = values;
+      } else if (doc.kind === "names") {
+        options[key] = text.split(/[\s,;]+/).filter(Boolean);
+      } else {
+        if (doc.kind === "text") checkPattern(key, text);
+        options[key] = text;
+      }
+    }
     return options;
   }
 
@@ -773,15 +923,14 @@
     const thresholds = $("opt-thresholds").value.trim();
     if (thresholds) {
       const values = numberList(thresholds, "thresholds_m", "Thresholds");
-      if (values.some((v) => v <= 0)) throw new FieldError("thresholds_m", "Thresholds: every distance must be more than 0 m.");
+      for (const value of values) {
+        const problem = numberProblem("thresholds_m", value);
+        if (problem) throw new FieldError("thresholds_m", problem);
+      }
       options.thresholds_m = values;
     }
-    const worst = $("opt-worst").value.trim();
-    if (worst) {
-      const value = Number(worst);
-      if (!Number.isInteger(value) || value < 0) throw new FieldError("worst", "Worst poses listed: write a whole number, 0 or more.");
-      options.worst = value;
-    }
+    const worst = optionNumber("worst", $("opt-worst").value);
+    if (worst !== undefined) options.worst = worst;
     return options;
   }
 
@@ -815,12 +964,8 @@
       }
       options.site_matrix = values;
     }
-    const simplify = $("opt-simplify").value.trim();
-    if (simplify) {
-      const value = Number(simplify);
-      if (!Number.isFinite(value) || value < 0) throw new FieldError("simplify_m", "Simplify paths: write a distance in metres, 0 or more.");
-      options.simplify_m = value;
-    }
+    const simplify = optionNumber("simplify_m", $("opt-simplify").value);
+    if (simplify !== undefined) options.simplify_m = simplify;
     const building = $("opt-building").value;
     if (building) options.building = building;
     const up = $("opt-building-up");
@@ -994,17 +1139,15 @@
     if (!solve.length) throw new FieldError("solve", "Solvers: choose at least one (nlls or minmax).");
     options.solve = solve;
     options.dims = $("ranging-dims").value;
-    const number = (id, key, label) => {
-      const text = $(id).value.trim();
-      if (!text || $(id).disabled) return;
-      const value = Number(text);
-      if (!Number.isFinite(value)) throw new FieldError(key, `${label}: “${text}” is not a number.`);
-      options[key] = value;
+    const numbers = {
+      epoch_s: "ranging-epoch", tag_height_m: "ranging-tag-height",
+      outlier_threshold_m: "ranging-outlier", distance_bin_m: "ranging-distance-bin",
     };
-    number("ranging-epoch", "epoch_s", "Epoch");
-    number("ranging-tag-height", "tag_height_m", "Tag height");
-    number("ranging-outlier", "outlier_threshold_m", "Outlier threshold");
-    number("ranging-distance-bin", "distance_bin_m", "Distance bins");
+    for (const [key, id] of Object.entries(numbers)) {
+      if ($(id).disabled) continue;
+      const value = optionNumber(key, $(id).value);
+      if (value !== undefined) options[key] = value;
+    }
     const offset = $("ranging-tag-offset").value.trim();
     if (offset) options.tag_offset_xyz = offset.replace(/[\s,]+/g, " ");
     return options;
@@ -1741,6 +1884,8 @@
     $("schedules-refresh").addEventListener("click", loadSchedules);
     $("opt-device-dataset").addEventListener("change", renderDeviceLinks);
     renderFormatBoxes();
+    renderOtherOptions();
+    applyOptionDocs();
     numberSteps();
     // A card shown or hidden (the current evaluation's) renumbers the cards after it.
     new MutationObserver(numberSteps).observe($("app"), { attributes: true, attributeFilter: ["hidden"], subtree: true });
