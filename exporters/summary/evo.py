@@ -82,7 +82,8 @@ def evo_summary_run(
         placed = f"its RMSE {_number(rmse)} m is shown as {system}'s {column}"
     else:
         placed = (
-            f"RMSE {_number(rmse)}: not a translation error in metres, so it is in neither "
+            f"RMSE {_number(rmse)} {result.unit or 'without a unit'}: not a translation "
+            "error in metres, so it is in neither "
             "the ATE nor the RPE column"
         )
     note = (

@@ -71,6 +71,12 @@ class ResultZip:
         return next((m.lower() for m in ("APE", "RPE") if head.startswith(m)), None)
 
     @property
+    def unit(self) -> str:
+        """Return the errors' unit from the label (``APE (m)``: ``m``), or "" without one."""
+        label = str(self.info.get("label", ""))
+        return label[label.find("(") + 1 : label.rfind(")")].strip() if "(" in label else ""
+
+    @property
     def translation_m(self) -> bool:
         """Return whether the errors are metres (pose relation trans_part or point_distance)."""
         head = self.title.lower()

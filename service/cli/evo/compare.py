@@ -106,15 +106,10 @@ def _paired(a: Row, b: Row) -> Comparison | str:
     try:
         return compare_errors(
             t_a[keep_a], e_a[keep_a], t_a[a_idx], e_b[b_idx], a=a.label, b=b.label, metric=metric,
-            unit=_unit(a.result),
+            unit=a.result.unit,
         )  # fmt: skip
     except LocevalError as err:
         return str(err)
-
-
-def _unit(result: ResultZip) -> str:
-    label = str(result.info.get("label", ""))
-    return label[label.find("(") + 1 : label.rfind(")")] if "(" in label else ""
 
 
 def run_res(args: argparse.Namespace) -> int:
