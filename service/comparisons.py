@@ -101,12 +101,12 @@ def _evo_system(
     except LocevalError as err:
         msg = f"{where}: {err}"
         raise err.reworded(msg) from None
-    wanted = metric.removesuffix("_rmse")
+    wanted = {"ate_rmse": "ape", "rpe_rmse": "rpe"}[metric]
     if result.metric != wanted or not result.translation_m:
         msg = (
             f"{where}: {dataset.name!r} holds {result.title or 'no title'!r}, and "
             f"metric={metric!r} compares the {wanted.upper()} of the translation in metres; "
-            "name zips of that (evo's -r trans_part), or change metric."
+            f"name zips of evo_{wanted} -r trans_part, or change metric."
         )
         raise InputError(msg)
     from exporters.summary.evo import evo_system_name  # noqa: PLC0415  (matplotlib)
