@@ -31,8 +31,10 @@ def evo_system_name(result: ResultZip) -> str:
     raw = str(result.info.get("est_name", "")).strip()
     if not raw:
         return result.path.stem
+    if raw.startswith("/tf:"):
+        return raw  # evo's tf chain (/tf:map.base_link)
     last = PurePosixPath(raw.replace("\\", "/")).name
-    if raw.startswith("/") and "." not in last:
+    if raw.startswith("/") and not PurePosixPath(last).suffix:
         return raw  # a topic (/odom), as loceval names a bag's source
     return PurePosixPath(last).stem or raw
 
