@@ -395,6 +395,7 @@ def webhook_payload(runtime: Runtime, run: ScheduleRun, schedule: Schedule) -> d
         "recordings": [
             {
                 "dataset": row.get("dataset"),
+                "source": row.get("source", "loceval"),
                 "status": row.get("status"),
                 "error": row.get("error"),
                 "evaluation_url": (

@@ -218,7 +218,9 @@ class ScheduleRunPublic(BaseModel):
         default=None,
         description=(
             "per recording: dataset, status, error, evaluation_id, summary "
-            "(and evaluation_deleted: true once that evaluation was deleted)"
+            "(and evaluation_deleted: true once that evaluation was deleted); an uploaded "
+            "evo result zip adds source: evo and note (what its figures are), and has no "
+            "evaluation_id"
         ),
     )
     error: Problem | None = None

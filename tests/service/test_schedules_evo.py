@@ -11,6 +11,8 @@ from typing import Any
 
 import numpy as np
 
+from service.db import Schedule, ScheduleRun
+from service.schedule_runs import webhook_payload
 from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
 from tests.service._api_fixtures import Api, assert_no_server_paths, schedule_body
 
@@ -83,6 +85,14 @@ def test_evo_zips_join_the_summary_with_their_source_marked(api: Api, tmp_path: 
     assert f"{RPE_RMSE:.3f}" in html
     assert "2 rows marked evo are an uploaded result zip" in html
     assert "and 1 evo result zip named by id" in html
+
+    runtime = api.app.state.runtime
+    with runtime.sessions() as session:
+        stored = session.get_one(ScheduleRun, run["id"])
+        schedule = session.get_one(Schedule, stored.schedule_id)
+    payload = webhook_payload(runtime, stored, schedule)
+    sources = {r["dataset"]: r["source"] for r in payload["recordings"]}
+    assert sources == {"level2-run0.bag": "loceval", picked["name"]: "evo", named["name"]: "evo"}
 
 
 def test_a_zip_in_degrees_is_shown_without_a_figure_in_metres(api: Api) -> None:
