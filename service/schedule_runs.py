@@ -217,13 +217,15 @@ def _evaluate_all(
     summary_runs = []
     for k, entry in enumerate(entries):
         dataset = entry[0]
-        name = dataset if isinstance(dataset, str) else dataset.name
-        progress(f"evaluating {name}", 0.8 * k / max(len(entries), 1))
+        fraction = 0.8 * k / max(len(entries), 1)
         if isinstance(dataset, str) or is_evo_result(dataset):
+            name = dataset if isinstance(dataset, str) else dataset.name
+            progress(f"reading the evo result {name}", fraction)
             evo_row, evo_run = _evo_entry(runtime, run, entry)
             rows.append(evo_row)
             summary_runs.append(evo_run)
             continue
+        progress(f"evaluating {dataset.name}", fraction)
         row: dict[str, Any] = {"dataset_id": dataset.id, "dataset": dataset.name}
         options = template.options
         if not per_run:
