@@ -33,7 +33,7 @@ from exporters.options import ExportOptions
 from loceval.core.arrays import FloatArray, StampsNs
 from loceval.evaluation import EstimateResult, EvaluationResult
 
-__all__ = ["ERRORS_CSV_COLUMNS", "errors_csv_chunks", "export_errors_csv"]
+__all__ = ["ERRORS_CSV_COLUMNS", "errors_csv_chunks", "export_errors_csv", "read_ate_series"]
 
 ERRORS_CSV_COLUMNS: Final = (
     "estimate",
@@ -223,3 +223,35 @@ def export_errors_csv(result: EvaluationResult, options: ExportOptions) -> bytes
     """
     del options
     return b"".join(errors_csv_chunks(result))
+
+
+def read_ate_series(data: bytes, name: str) -> tuple[StampsNs, FloatArray]:
+    """Read one estimate's ATE series back from an ``errors.csv`` this module wrote.
+
+    Vectorised: the estimate's rows are found by their first cell (quoted as written) and
+    their numbers parsed by :func:`numpy.loadtxt`; the stamps as int64, exactly.
+
+    Args:
+        data: the file's bytes.
+        name: the estimate's name, as in the file's first column.
+
+    Returns:
+        ``(stamps_ns, ate_m)``, (N,) each, in the file's order; empty without rows.
+
+    Raises:
+        ValueError: the file is not an ``errors.csv`` of this layout.
+    """
+    header, _, body = data.partition(b"\n")
+    if header.decode("utf-8", "replace").strip() != ",".join(ERRORS_CSV_COLUMNS):
+        msg = "Not an errors.csv of loceval: its header differs."
+        raise ValueError(msg)
+    prefix = _csv_cell(name) + b","
+    lines = np.asarray(body.split(b"\n"), dtype=np.bytes_)
+    mine = lines[np.char.startswith(lines, prefix)]
+    if not mine.size:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
+    block = b"\n".join(mine.tolist()).replace(b"\n" + prefix, b"\n")[len(prefix) :]
+    ate_column = ERRORS_CSV_COLUMNS.index("ate_m") - 1
+    stamps = np.loadtxt(io.BytesIO(block), delimiter=",", usecols=0, dtype=np.int64, ndmin=1)
+    ate = np.loadtxt(io.BytesIO(block), delimiter=",", usecols=ate_column, ndmin=1)
+    return stamps, ate

@@ -9,13 +9,25 @@ broken one is refused with the reader's message.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from loceval.errors import InputError, ReaderError
-from loceval.readers.evo_result import is_result_zip, read_result_zip
+from loceval.readers.evo_result import ResultZip, is_result_zip, read_result_zip
+from service.db import Dataset
 
-__all__ = ["EVO_RESULT_KIND", "inspect_result_zip"]
+if TYPE_CHECKING:
+    from service.runtime import Runtime
+    from service.schedule_schemas import EvoResultRef
+
+__all__ = [
+    "EVO_RESULT_KIND",
+    "check_evo_results",
+    "inspect_result_zip",
+    "is_evo_result",
+    "read_evo_dataset",
+]
 
 EVO_RESULT_KIND = "evo_result"
 
@@ -48,3 +60,61 @@ def inspect_result_zip(path: Path, filename: str) -> dict[str, Any] | None:
             "series": "error_array" in result.arrays and "timestamps" in result.arrays,
         },
     }
+
+
+def is_evo_result(dataset: Dataset) -> bool:
+    """Return whether a dataset is an uploaded evo result zip."""
+    return dataset.inspection.get("kind") == EVO_RESULT_KIND
+
+
+def read_evo_dataset(runtime: Runtime, dataset: Dataset) -> ResultZip:
+    """Read an uploaded evo result zip from the store.
+
+    Raises:
+        ReaderError: the stored zip cannot be read; the message names the dataset, never
+            the server's path.
+    """
+    try:
+        path = runtime.store.local_path(
+            dataset.storage_path, filename=dataset.filename, sha256=dataset.sha256
+        )
+    except OSError as err:
+        msg = (
+            f"The evo result {dataset.name!r} cannot be read from the store ({err.strerror}); "
+            "upload it again."
+        )
+        raise ReaderError(msg) from None
+    try:
+        return read_result_zip(path)
+    except InputError as err:
+        detail = str(err).replace(str(path), repr(dataset.name))
+        msg = f"The evo result {dataset.name!r} cannot be read: {detail}"
+        raise ReaderError(msg) from None
+
+
+def check_evo_results(runtime: Runtime, project_id: str, refs: Sequence[EvoResultRef]) -> None:
+    """Check that each named dataset is an evo result zip of the project.
+
+    Raises:
+        InputError: a named dataset is missing (or another project's), or is not an evo
+            result zip; the message names ``selection.evo_results[k].dataset_id`` and what
+            to name instead (a 422 problem).
+    """
+    with runtime.sessions() as session:
+        for k, ref in enumerate(refs):
+            field = f"selection.evo_results[{k}].dataset_id"
+            dataset = session.get(Dataset, ref.dataset_id) if "\x00" not in ref.dataset_id else None
+            if dataset is None or dataset.project_id != project_id:
+                msg = (
+                    f"{field}: no dataset {ref.dataset_id!r} in this project; upload the evo "
+                    "result zip (POST /datasets) and name the id it answers."
+                )
+                raise InputError(msg)
+            if not is_evo_result(dataset):
+                kind = dataset.inspection.get("format") or dataset.inspection.get("kind")
+                msg = (
+                    f"{field}: the dataset {dataset.name!r} is a {kind} upload, not an evo "
+                    "result zip; name a zip evo_ape or evo_rpe wrote with --save_results (its "
+                    "inspection's kind is evo_result)."
+                )
+                raise InputError(msg)

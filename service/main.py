@@ -15,7 +15,7 @@ from fastapi import APIRouter, FastAPI
 from loceval import __version__
 from service import web
 from service.adapters import OUTAGE_ERRORS, unavailable
-from service.api import datasets, docs, evaluations, health, hops, schedules
+from service.api import comparisons, datasets, docs, evaluations, health, hops, schedules
 from service.api.middleware import ApiKeyMiddleware
 from service.errors import StartupError, install_error_handlers
 from service.jobs import create_runtime
@@ -111,6 +111,7 @@ def create_app(
     api.include_router(datasets.router)
     api.include_router(evaluations.router)
     api.include_router(schedules.router)
+    api.include_router(comparisons.router)
     app.include_router(api)
     app.include_router(health.router)
     app.include_router(metrics_router)  # GET /metrics: Prometheus, no key, no names or ids

@@ -27,8 +27,15 @@ from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
 from service.db import Dataset, Evaluation, JobStatus, Schedule, ScheduleRun, utcnow
 from service.errors import ServiceUnavailableError, problem_for
 from service.evaluations import EVALUATION, create_evaluation
+from service.evo_datasets import is_evo_result, read_evo_dataset
 from service.runtime import Runtime
-from service.schedule_schemas import EvaluationTemplate, Produce, Selection, TemplateSource
+from service.schedule_schemas import (
+    EvaluationTemplate,
+    EvoResultRef,
+    Produce,
+    Selection,
+    TemplateSource,
+)
 from service.schedules import RUN, SUMMARY_ARTIFACTS, describe_selection, select_datasets
 from service.schemas import EvaluationCreate, SourceRef
 from service.summaries import summary_files
@@ -76,7 +83,8 @@ def execute_schedule_run(runtime: Runtime, run_id: str) -> None:
         run, schedule, datasets = _load(runtime, run_id)
         selection = Selection.model_validate(schedule.selection)
         picked = select_datasets(datasets, selection.model_dump(), as_of=run.due_at)
-        rows, summary_runs = _evaluate_all(runtime, run, schedule, picked, job.progress)
+        entries = _with_named_evo_results(picked, datasets, selection)
+        rows, summary_runs = _evaluate_all(runtime, run, schedule, entries, job.progress)
         staging = job.staging_dir()
         job.progress("writing the summary report", 0.85)
         _render(run, schedule, summary_runs, staging, runtime.settings.templates_dir)
@@ -113,14 +121,93 @@ def _load(runtime: Runtime, run_id: str) -> tuple[ScheduleRun, Schedule, Sequenc
         return run, schedule, datasets.all()
 
 
+_Entry = tuple[Dataset | str, EvoResultRef | None]
+"""A run's entry: a picked dataset (or the id of a named one that is gone) and its naming."""
+
+
+def _with_named_evo_results(
+    picked: Sequence[Dataset], datasets: Sequence[Dataset], selection: Selection
+) -> list[_Entry]:
+    """Return the picked datasets, then the evo result zips the selection names by id.
+
+    A named zip the conditions picked too stays in its place with the given name; a named
+    id no longer in the project stays as its id, so the run reports it as failed.
+    """
+    named = {ref.dataset_id: ref for ref in selection.evo_results}
+    by_id = {d.id: d for d in datasets}
+    entries: list[_Entry] = [(d, named.get(d.id)) for d in picked]
+    seen = {d.id for d in picked}
+    for dataset_id, ref in named.items():
+        if dataset_id not in seen:
+            entries.append((by_id.get(dataset_id, dataset_id), ref))
+    return entries
+
+
+def _evo_entry(runtime: Runtime, run: ScheduleRun, entry: _Entry) -> tuple[dict[str, Any], Any]:
+    """Return the row and summary run of an evo result zip: its figures, marked as evo's."""
+    from exporters.summary import SummaryRun  # noqa: PLC0415  (heavy, see _evaluate_all)
+    from exporters.summary.evo import evo_summary_run  # noqa: PLC0415
+
+    dataset, ref = entry
+    if isinstance(dataset, str):
+        reason = (
+            f"The evo result {dataset!r} named in selection.evo_results is no longer in the "
+            "project; upload it again and name its new id, or remove it from the schedule."
+        )
+        row = {"dataset_id": dataset, "dataset": dataset, "source": "evo"}
+        failed = SummaryRun(
+            dataset=dataset, recorded_at=run.due_at, status="failed", error=reason, source="evo"
+        )
+        return {**row, "status": "failed", "error": reason, "evaluation_id": None}, failed
+    row = {"dataset_id": dataset.id, "dataset": dataset.name, "source": "evo"}
+    try:
+        result = read_evo_dataset(runtime, dataset)
+    except LocevalError as err:
+        reason = problem_for(err)["detail"]
+        failed_run = _failed_run(dataset, reason)
+        return {**row, "status": "failed", "error": reason, "evaluation_id": None}, failed_run
+    first_s = result.first_stamp_s
+    recorded_at, is_upload = recording_start(
+        {} if first_s is None else {"start_s": first_s}, dataset.created_at
+    )
+    summary_run = evo_summary_run(
+        result,
+        dataset=dataset.name,
+        recorded_at=recorded_at,
+        recorded_at_is_upload=is_upload,
+        name=None if ref is None else ref.name,
+    )
+    systems = [
+        {
+            "name": name,
+            "ate_rmse_m": figures.ate_rmse_m,
+            "rpe_rmse_m": figures.rpe_rmse_m,
+            "matched": figures.matched,
+            "verdict": None,
+        }
+        for name, figures in summary_run.systems.items()
+    ]
+    return {
+        **row,
+        "status": "succeeded",
+        "error": None,
+        "evaluation_id": None,
+        "summary": systems,
+        "note": summary_run.source_note,
+    }, summary_run
+
+
 def _evaluate_all(
     runtime: Runtime,
     run: ScheduleRun,
     schedule: Schedule,
-    picked: Sequence[Dataset],
+    entries: Sequence[_Entry],
     progress: ProgressWriter,
 ) -> tuple[list[dict[str, Any]], list[Any]]:
-    """Run the template on every picked recording; failures become rows with the reason."""
+    """Run the template on every picked recording; failures become rows with the reason.
+
+    An evo result zip is not evaluated: its row and summary run hold evo's figures.
+    """
     # exporters.summary draws with matplotlib: imported when a run renders, not at start-up.
     from exporters.summary import SummaryRun  # noqa: PLC0415
 
@@ -128,8 +215,17 @@ def _evaluate_all(
     per_run = Produce.model_validate(schedule.produce).per_run_artifacts
     rows: list[dict[str, Any]] = []
     summary_runs = []
-    for k, dataset in enumerate(picked):
-        progress(f"evaluating {dataset.name}", 0.8 * k / max(len(picked), 1))
+    for k, entry in enumerate(entries):
+        dataset = entry[0]
+        fraction = 0.8 * k / max(len(entries), 1)
+        if isinstance(dataset, str) or is_evo_result(dataset):
+            name = dataset if isinstance(dataset, str) else dataset.name
+            progress(f"reading the evo result {name}", fraction)
+            evo_row, evo_run = _evo_entry(runtime, run, entry)
+            rows.append(evo_row)
+            summary_runs.append(evo_run)
+            continue
+        progress(f"evaluating {dataset.name}", fraction)
         row: dict[str, Any] = {"dataset_id": dataset.id, "dataset": dataset.name}
         options = template.options
         if not per_run:
@@ -301,6 +397,7 @@ def webhook_payload(runtime: Runtime, run: ScheduleRun, schedule: Schedule) -> d
         "recordings": [
             {
                 "dataset": row.get("dataset"),
+                "source": row.get("source", "loceval"),
                 "status": row.get("status"),
                 "error": row.get("error"),
                 "evaluation_url": (

@@ -19,6 +19,7 @@ from service.schemas import (
 
 __all__ = [
     "EvaluationTemplate",
+    "EvoResultRef",
     "Produce",
     "ScheduleCreate",
     "SchedulePatch",
@@ -54,8 +55,23 @@ class EvaluationTemplate(Strict):
     options: EvaluationOptions = Field(default_factory=EvaluationOptions)
 
 
+class EvoResultRef(Strict):
+    """An uploaded evo result zip (a dataset of kind ``evo_result``) that joins every run."""
+
+    dataset_id: Id
+    name: Annotated[str, Field(min_length=1, max_length=120), Printable] | None = Field(
+        default=None,
+        description="the system's name in the summary (default: the zip's est_name, a "
+        "topic as is, a file by its stem, as loceval names estimates)",
+    )
+
+
 class Selection(Strict):
-    """Which recordings a run covers; every given condition must hold."""
+    """Which recordings a run covers; every given condition must hold.
+
+    Uploaded evo result zips the conditions pick join the run as evo's figures, and so do
+    those named in ``evo_results`` (whatever the conditions).
+    """
 
     tags: Annotated[
         list[Annotated[str, Field(min_length=1, max_length=50)]], Field(max_length=20)
@@ -65,6 +81,11 @@ class Selection(Strict):
     )
     uploaded_within_days: Annotated[float, Field(gt=0, le=3660)] | None = Field(
         default=None, description="uploaded within this many days before the run"
+    )
+    evo_results: Annotated[list[EvoResultRef], Field(max_length=200)] = Field(
+        default_factory=list,
+        description="uploaded evo result zips (datasets of kind evo_result) shown in every "
+        "run's summary beside the evaluated recordings, their figures marked as evo's",
     )
 
 
@@ -197,7 +218,9 @@ class ScheduleRunPublic(BaseModel):
         default=None,
         description=(
             "per recording: dataset, status, error, evaluation_id, summary "
-            "(and evaluation_deleted: true once that evaluation was deleted)"
+            "(and evaluation_deleted: true once that evaluation was deleted); an uploaded "
+            "evo result zip adds source: evo and note (what its figures are), and has no "
+            "evaluation_id"
         ),
     )
     error: Problem | None = None

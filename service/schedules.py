@@ -36,6 +36,7 @@ from service.db import (
 )
 from service.errors import NotFoundError, NotReadyError
 from service.evaluations import check_options
+from service.evo_datasets import check_evo_results
 from service.runtime import Runtime
 from service.schedule_schemas import (
     ScheduleCreate,
@@ -228,7 +229,9 @@ def select_datasets(
     A selection has ``tags`` (all must be present), ``name_pattern`` (a shell pattern,
     case-insensitive, matched against the name and the file name) and
     ``uploaded_within_days`` (counted back from ``as_of``); a missing key selects all.
-    Recordings uploaded after ``as_of`` are not included.
+    Recordings uploaded after ``as_of`` are not included. Uploaded evo result zips the
+    conditions match are picked like recordings (a run takes their figures); the zips named
+    in ``evo_results`` are added by the run (:mod:`service.schedule_runs`).
     """
     chosen = _selection(selection)
     tags = set(chosen.tags)
@@ -264,6 +267,9 @@ def describe_selection(selection: Selection | Mapping[str, Any], *, as_of: dt.da
         parts.append(f"uploaded in the {days:g} days before {as_of:%Y-%m-%d %H:%M} UTC")
     else:
         parts.append(f"uploaded before {as_of:%Y-%m-%d %H:%M} UTC")
+    named = len(chosen.evo_results)
+    if named:
+        parts.append(f"and {named} evo result zip{'s' if named > 1 else ''} named by id")
     return " ".join(parts)
 
 
@@ -324,11 +330,12 @@ def create_schedule(runtime: Runtime, project_id: str, body: ScheduleCreate) -> 
     The schedule gets its webhook signing secret here; only the create answer shows it.
 
     Raises:
-        InputError: the cron, the time zone, an option of the template or the webhook URL
-            is not usable.
+        InputError: the cron, the time zone, an option of the template, a named evo
+            result or the webhook URL is not usable.
     """
     check_cron(body.cron, body.timezone)
     check_options(body.template.options)
+    check_evo_results(runtime, project_id, body.selection.evo_results)
     _check_webhook(runtime, body.webhook_url)
     now = utcnow()
     schedule = Schedule(
@@ -379,6 +386,8 @@ def update_schedule(
     check_cron(cron, timezone)
     if body.template is not None:
         check_options(body.template.options)
+    if body.selection is not None:
+        check_evo_results(runtime, project_id, body.selection.evo_results)
     _check_webhook(runtime, changes.get("webhook_url"))
     now = utcnow()
     resumed = schedule.paused and changes.get("paused") is False

@@ -118,6 +118,10 @@ class SummaryRun:
         recorded_at_is_upload: ``recorded_at`` is the upload time (the table marks it).
         reference_t_s: (N,) the reference's times (seconds), one per ``reference_xyz`` row,
             for the re-drive timing (:mod:`loceval.metrics.redrive`); None leaves timing out.
+        source: who computed the figures: ``"loceval"`` (an evaluation of this run) or
+            ``"evo"`` (an uploaded result zip of evo_ape/evo_rpe, taken as evo wrote it).
+        source_note: what the figures are when they are not loceval's own (the zip's
+            metric, pose relation and alignment, and what it lacks), one sentence.
     """
 
     dataset: str
@@ -130,6 +134,8 @@ class SummaryRun:
     duration_s: float | None = None
     recorded_at_is_upload: bool = False
     reference_t_s: NDArray[np.float64] | None = None
+    source: Literal["loceval", "evo"] = "loceval"
+    source_note: str | None = None
 
     def __post_init__(self) -> None:
         """Check the status and the path's shape; keep the date in UTC.
@@ -140,6 +146,9 @@ class SummaryRun:
         object.__setattr__(self, "recorded_at", _aware_utc(self.recorded_at, "recorded_at"))
         if self.status not in {"succeeded", "failed"}:
             msg = f"status must be 'succeeded' or 'failed', got {self.status!r}."
+            raise ValueError(msg)
+        if self.source not in {"loceval", "evo"}:
+            msg = f"source must be 'loceval' or 'evo', got {self.source!r}."
             raise ValueError(msg)
         if self.reference_xyz is not None:
             xyz = np.asarray(self.reference_xyz, dtype=np.float64)

@@ -69,6 +69,8 @@ class RunRowView:
     failed: bool
     error: str
     cells: tuple[SystemCell, ...]
+    source: str = "loceval"
+    source_note: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,6 +216,8 @@ def _run_rows(runs: Sequence[SummaryRun], names: Sequence[str]) -> tuple[RunRowV
             if run.status == "failed"
             else "",
             cells=tuple(_cell(run.systems.get(name)) for name in names),
+            source=run.source,
+            source_note=run.source_note or "",
         )
         for n, run in enumerate(runs, start=1)
     )
@@ -275,6 +279,20 @@ def _best_sentence(stats: Sequence[SystemStats], best: Sequence[str]) -> str:
         )
     names = ", ".join(x.name for x in winners[:-1]) + " and " + winners[-1].name
     return f"{names} share the lowest mean ATE RMSE: {figures}."
+
+
+def _evo_note(runs: Sequence[SummaryRun]) -> tuple[str, ...]:
+    """Say which rows are evo's figures, and what they lack, when any is."""
+    evo = sum(r.source == "evo" and r.status == "succeeded" for r in runs)
+    if not evo:
+        return ()
+    note = (
+        f"{_plural(evo, 'row')} marked evo {'is' if evo == 1 else 'are'} an uploaded result "
+        "zip of evo_ape or evo_rpe: evo's RMSE as evo computed it (its association and "
+        "alignment, named in the row), counted with the others in the statistics. evo gives "
+        "no confidence interval and judges no tolerance, so these rows have no verdict (—)."
+    )
+    return (note,)
 
 
 def _stats_notes(stats: Sequence[SystemStats], succeeded: int) -> tuple[str, ...]:
@@ -434,7 +452,7 @@ def build_summary_view(
         runs=_run_rows(runs, names),
         stats=_stats_view(stats, best),
         best_sentence=_best_sentence(stats, best),
-        stats_notes=_stats_notes(stats, succeeded) if stats else (),
+        stats_notes=(_stats_notes(stats, succeeded) if stats else ()) + _evo_note(runs),
         figures=figures,
         trend_figure=figure_of.get("trend"),
         paths_figure=figure_of.get("paths_xy"),

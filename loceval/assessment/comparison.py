@@ -29,6 +29,7 @@ from loceval.assessment.uncertainty import (
 from loceval.core.arrays import FloatArray, StampsNs
 from loceval.errors import InputError, MetricError
 from loceval.metrics.pose_errors import ErrorSeries
+from loceval.registration.stamps import match_nearest_seconds
 
 __all__ = [
     "ComparedMetric",
@@ -36,6 +37,7 @@ __all__ = [
     "ComparisonVerdict",
     "compare_error_series",
     "compare_errors",
+    "compare_errors_nearest",
     "compare_runs",
     "compare_series",
 ]
@@ -261,6 +263,75 @@ def compare_errors(
         unit=unit,
         block=boot.block,
     )
+
+
+def compare_errors_nearest(
+    stamps_a_ns: StampsNs,
+    errors_a: FloatArray,
+    stamps_b_ns: StampsNs,
+    errors_b: FloatArray,
+    *,
+    a: str,
+    b: str,
+    metric: ComparedMetric,
+    unit: str = "m",
+    max_dt_s: float = 0.01,
+    resamples: int = DEFAULT_RESAMPLES,
+    seed: int = DEFAULT_SEED,
+) -> Comparison:
+    """Compare two error series written by different tools, pairing instants by nearest stamp.
+
+    Two tools (evo and loceval, or two evo runs) evaluating systems over the same run stamp
+    their errors with their own matched poses, which need not coincide to the nanosecond:
+    each of A's instants takes B's error at the nearest stamp within ``max_dt_s`` (evo's
+    default tolerance, 10 ms; float seconds as evo matches), one B error per A instant,
+    and the RMSEs are compared on those pairs with :func:`compare_errors`.
+
+    Args:
+        stamps_a_ns: (N_A,) stamps of A's errors, sorted.
+        errors_a: (N_A,) A's errors.
+        stamps_b_ns: (N_B,) stamps of B's errors, sorted.
+        errors_b: (N_B,) B's errors.
+        a: A's name in sentences.
+        b: B's name in sentences.
+        metric: which RMSE this is.
+        unit: unit of the errors ("m", "deg" or "%").
+        max_dt_s: the largest stamp difference of a pair, seconds.
+        resamples: bootstrap resamples (≥ 100).
+        seed: bootstrap seed.
+
+    Returns:
+        The difference A - B on the paired instants, its interval and the verdict.
+
+    Raises:
+        InputError: see :func:`compare_errors`.
+        MetricError: fewer than 8 paired instants, or the same errors at every instant
+            (one result given twice: nothing to compare).
+    """
+    t_a = np.asarray(stamps_a_ns, dtype=np.int64)
+    t_b = np.asarray(stamps_b_ns, dtype=np.int64)
+    e_a = np.asarray(errors_a, dtype=np.float64)
+    e_b = np.asarray(errors_b, dtype=np.float64)
+    if t_a.shape != e_a.shape or t_b.shape != e_b.shape:
+        msg = f"{a!r} or {b!r}: stamps and errors of a comparison must be as long."
+        raise InputError(msg)
+    keep_a = np.unique(t_a, return_index=True)[1]
+    t_a, e_a = t_a[keep_a], e_a[keep_a]
+    order_b = np.argsort(t_b, kind="stable")
+    t_b, e_b = t_b[order_b], e_b[order_b]
+    a_idx, b_idx = match_nearest_seconds(t_a, t_b, max_dt_s=max_dt_s)
+    first = np.unique(a_idx, return_index=True)[1]  # one B error per A instant
+    a_idx, b_idx = a_idx[first], b_idx[first]
+    if a_idx.size == t_a.size and np.allclose(e_a[a_idx], e_b[b_idx], rtol=1e-9, atol=0.0):
+        msg = (
+            f"{a!r} and {b!r} have the same errors at every instant (equal within 1e-9): "
+            "the same result given twice, nothing to compare."
+        )
+        raise MetricError(msg)
+    return compare_errors(
+        t_a[a_idx], e_a[a_idx], t_a[a_idx], e_b[b_idx], a=a, b=b, metric=metric, unit=unit,
+        resamples=resamples, seed=seed,
+    )  # fmt: skip
 
 
 def compare_error_series(

@@ -18,10 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from loceval.core.arrays import FloatArray
+from loceval.core.arrays import FloatArray, StampsNs
 from loceval.errors import InputError
 
 __all__ = ["ResultZip", "is_result_zip", "read_result_zip"]
+
+_METRES = ("translation part", "point distance")
+"""Pose relations whose errors are distances in metres (the others are angles or unit-less)."""
 
 _STATS = ("rmse", "mean", "median", "std", "min", "max", "sse")
 _MAX_MEMBER_BYTES = 1 << 30
@@ -50,6 +53,61 @@ class ResultZip:
     def title(self) -> str:
         """Return the title's first line (``APE w.r.t. translation part (m)``)."""
         return str(self.info.get("title", "")).split("\n", 1)[0]
+
+    @property
+    def settings(self) -> str:
+        """Return the title's other lines in one (``for delta = 1 (frames) ...; (with ...)``)."""
+        lines = (line.strip() for line in str(self.info.get("title", "")).split("\n")[1:])
+        return "; ".join(
+            line[1:-1] if line.startswith("(") and line.endswith(")") else line
+            for line in lines
+            if line
+        )
+
+    @property
+    def metric(self) -> str | None:
+        """Return ``"ape"`` or ``"rpe"`` from the title, or None when it names neither."""
+        head = self.title.strip().upper()
+        return next((m.lower() for m in ("APE", "RPE") if head.startswith(m)), None)
+
+    @property
+    def unit(self) -> str:
+        """Return the errors' unit from the label (``APE (m)``: ``m``), or "" without one."""
+        label = str(self.info.get("label", ""))
+        return label[label.find("(") + 1 : label.rfind(")")].strip() if "(" in label else ""
+
+    @property
+    def translation_m(self) -> bool:
+        """Return whether the errors are metres (pose relation trans_part or point_distance)."""
+        head = self.title.lower()
+        return any(f"w.r.t. {words} (m)" in head for words in _METRES)
+
+    @property
+    def first_stamp_s(self) -> float | None:
+        """Return the first error's stamp (``timestamps[0]``, seconds), or None without one."""
+        stamps = self.arrays.get("timestamps")
+        if stamps is None or stamps.ndim != 1 or stamps.size == 0:
+            return None
+        finite = stamps[np.isfinite(stamps)]
+        return float(finite.min()) if finite.size else None
+
+    def error_series(self) -> tuple[StampsNs, FloatArray] | None:
+        """Return the errors and their stamps, both sorted by time, or None without them.
+
+        Returns:
+            ``(stamps_ns, errors)``, (N,) each: ``timestamps`` (seconds, rounded to the
+            nanosecond) and ``error_array``; None when the zip lacks either, their lengths
+            differ, or a value is not finite.
+        """
+        errors = self.arrays.get("error_array")
+        stamps = self.arrays.get("timestamps")
+        if errors is None or stamps is None or errors.ndim != 1 or errors.shape != stamps.shape:
+            return None
+        if not (np.isfinite(errors).all() and np.isfinite(stamps).all()):
+            return None
+        stamps_ns = np.round(stamps * 1e9).astype(np.int64)
+        order = np.argsort(stamps_ns, kind="stable")
+        return stamps_ns[order], errors[order]
 
 
 def is_result_zip(path: Path) -> bool:

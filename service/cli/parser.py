@@ -280,7 +280,12 @@ def _add_report(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparse
         ),
     )
     report.add_argument(
-        "--datasets", nargs="+", required=True, type=Path, metavar="FILE", help="recordings"
+        "--datasets",
+        nargs="+",
+        required=True,
+        type=Path,
+        metavar="FILE",
+        help="recordings, and result zips of evo_ape/evo_rpe (their figures, marked evo)",
     )
     report.add_argument(
         "--template",

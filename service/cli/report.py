@@ -1,18 +1,20 @@
 """``loceval report``: one summary report over many recordings, as a schedule run makes it.
 
 The template is the API's ``EvaluationTemplate`` (validated by pydantic, so its options are
-the API's, named ``options.<key>`` in messages).
+the API's, named ``options.<key>`` in messages). A result zip of evo_ape/evo_rpe among the
+files is not evaluated: its figures join the summary marked as evo's, as a schedule does.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec
+from loceval.readers.evo_result import is_result_zip, read_result_zip
 from service.cli.output import emit
 from service.options import config_from_options
 from service.runner import Job, JobSource, default_name, file_provenance, run_job
@@ -54,6 +56,9 @@ def run_report(args: argparse.Namespace) -> int:
             if path.exists()
             else (dt.datetime.now(dt.UTC))
         )
+        if is_result_zip(path):  # an evo result: its figures, not a recording to evaluate
+            runs.append(_evo_run(path, recorded))
+            continue
         job = _template_job(path, template, config)
         try:
             result = run_job(job, None)
@@ -93,6 +98,26 @@ def run_report(args: argparse.Namespace) -> int:
         emit(f"{run.dataset}: {run.status}" + (f" ({run.error})" if run.error else f", {figures}"))
     emit(f"\nSummary written to {args.out}")
     return 0
+
+
+def _evo_run(path: Path, modified: dt.datetime) -> Any:  # noqa: ANN401  (a SummaryRun)
+    """Return an evo result zip as a summary run (evo's figures), or as failed with the reason.
+
+    Dated by its first error stamp when that is a date, else by the file's time (marked).
+    """
+    from exporters.summary import SummaryRun  # noqa: PLC0415
+    from exporters.summary.evo import evo_summary_run  # noqa: PLC0415
+    from service.schedule_runs import recording_start  # noqa: PLC0415
+
+    try:
+        result = read_result_zip(path)
+    except InputError as err:
+        return SummaryRun(path.name, modified, "failed", error=str(err), source="evo")
+    first_s = result.first_stamp_s
+    recorded, is_upload = recording_start({} if first_s is None else {"start_s": first_s}, modified)
+    return evo_summary_run(
+        result, dataset=path.name, recorded_at=recorded, recorded_at_is_upload=is_upload
+    )
 
 
 def _check_pdf() -> None:

@@ -17,8 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from loceval.errors import InputError, LocevalError
 from service.cli.evo.results import ResultZip, read_result_zip
 from service.cli.output import emit
@@ -74,47 +72,23 @@ def format_table(rows: list[Row]) -> str:
     return "\n".join(lines)
 
 
-def _series(result: ResultZip) -> tuple[np.ndarray, np.ndarray] | None:
-    """Return the error series' (stamps_ns, errors) when the zip holds them."""
-    errors = result.arrays.get("error_array")
-    stamps = result.arrays.get("timestamps")
-    if errors is None or stamps is None or errors.shape != stamps.shape or errors.ndim != 1:
-        return None
-    return np.round(stamps * 1e9).astype(np.int64), errors
-
-
 def _paired(a: Row, b: Row) -> Comparison | str:
     """Compare two results' RMSE on their shared instants, or say why not."""
-    from loceval.assessment.comparison import ComparedMetric, compare_errors  # noqa: PLC0415  (scipy)
-    from loceval.registration.stamps import match_nearest_seconds  # noqa: PLC0415
+    from loceval.assessment.comparison import ComparedMetric, compare_errors_nearest  # noqa: PLC0415  (scipy)
 
-    series_a, series_b = _series(a.result), _series(b.result)
+    series_a, series_b = a.result.error_series(), b.result.error_series()
     if series_a is None or series_b is None:
         return "a zip holds no error series with stamps"
     if a.result.title != b.result.title:
         return "the two results measure different things"
-    (t_a, e_a), (t_b, e_b) = series_a, series_b
-    order_a, order_b = np.argsort(t_a, kind="stable"), np.argsort(t_b, kind="stable")
-    t_a, e_a, t_b, e_b = t_a[order_a], e_a[order_a], t_b[order_b], e_b[order_b]
-    a_idx, b_idx = match_nearest_seconds(t_a, t_b, max_dt_s=_PAIR_DT_S)
-    first = np.unique(a_idx, return_index=True)[1]  # one B error per A instant
-    a_idx, b_idx = a_idx[first], b_idx[first]
-    keep_a = np.unique(t_a, return_index=True)[1]
-    if a_idx.size == t_a.size and np.allclose(e_a[a_idx], e_b[b_idx], rtol=1e-9, atol=0.0):
-        return "the same errors at every instant (equal within 1e-9): the same result"
     metric = ComparedMetric.RPE_RMSE if "RPE" in a.result.title else ComparedMetric.ATE_RMSE
     try:
-        return compare_errors(
-            t_a[keep_a], e_a[keep_a], t_a[a_idx], e_b[b_idx], a=a.label, b=b.label, metric=metric,
-            unit=_unit(a.result),
+        return compare_errors_nearest(
+            *series_a, *series_b, a=a.label, b=b.label, metric=metric, unit=a.result.unit,
+            max_dt_s=_PAIR_DT_S,
         )  # fmt: skip
     except LocevalError as err:
         return str(err)
-
-
-def _unit(result: ResultZip) -> str:
-    label = str(result.info.get("label", ""))
-    return label[label.find("(") + 1 : label.rfind(")")] if "(" in label else ""
 
 
 def run_res(args: argparse.Namespace) -> int:
