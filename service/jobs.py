@@ -17,6 +17,7 @@ import json
 import os
 import socket
 import uuid
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Final
 
@@ -47,7 +48,15 @@ from service.options import (
 )
 from service.preflight import check_data_dir, prepare_schema
 from service.retention import sweep, sweep_leftovers
-from service.runner import Job, JobSource, RangingSources, file_provenance, run_job
+from service.runner import (
+    Job,
+    JobSource,
+    RangingJob,
+    RangingSources,
+    evaluation_job,
+    file_provenance,
+    run_job,
+)
 from service.runtime import JobKind, Runtime, create_huey
 from service.schedule_runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run
 from service.schedules import RUN, tick
@@ -65,6 +74,7 @@ __all__ = [
     "execute_evaluation",
     "recover",
     "release",
+    "stored_request",
 ]
 
 _DEFERRED_DELAY_S: Final = 2.0
@@ -133,10 +143,25 @@ def evaluation_summary(document: dict[str, Any]) -> list[dict[str, Any]]:
     return rows
 
 
+def stored_request(request: Mapping[str, Any]) -> EvaluationCreate | RangingCreate:
+    """Read a stored request as the model of its kind, checked as when it was made.
+
+    A ``POST /ranging`` request names its anchors; its stored copy also lists the solvers
+    as its estimates (for the evaluations list), which the model does not take.
+
+    Raises:
+        pydantic.ValidationError: the stored request no longer fits its model.
+    """
+    if "anchors" in request:
+        return RangingCreate.model_validate({k: v for k, v in request.items() if k != "estimates"})
+    return EvaluationCreate.model_validate(request)
+
+
 def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
-    if "anchors" in evaluation.request:  # a ranging evaluation (POST /ranging)
-        return _ranging_job_for(session, runtime, evaluation)
-    request = EvaluationCreate.model_validate(evaluation.request)
+    """Return the job of a stored evaluation, of its request's kind."""
+    request = stored_request(evaluation.request)
+    if isinstance(request, RangingCreate):
+        return _ranging_job_for(session, runtime, evaluation, request)
     options = request.options
     project_id = evaluation.project_id
     reference = _source(session, runtime, project_id, request.reference, "reference")
@@ -177,7 +202,7 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
             clutter_m=options.clutter_m,
             display=dataset.filename + (f"@{map_ref.selector}" if map_ref.selector else ""),
         )
-    return Job(
+    return evaluation_job(
         reference=reference,
         estimates=estimates,
         config=config_from_options(options, device_transform=device_transform),
@@ -186,13 +211,13 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
         formats=options.formats,
         visits=visits,
         checkpoints=checkpoints_from_options(options),
-        map=the_map,
+        the_map=the_map,
     )
 
 
-def _ranging_job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
-    body = {k: v for k, v in evaluation.request.items() if k != "estimates"}
-    request = RangingCreate.model_validate(body)
+def _ranging_job_for(
+    session: Session, runtime: Runtime, evaluation: Evaluation, request: RangingCreate
+) -> RangingJob:
     options = request.options
     project_id = evaluation.project_id
     reference = _source(session, runtime, project_id, request.reference, "reference")
@@ -210,9 +235,8 @@ def _ranging_job_for(session: Session, runtime: Runtime, evaluation: Evaluation)
         provenance.update(path=dataset.filename, dataset_id=dataset.id)
         records.append((spec, provenance, dataset.filename))
     (anchors, anchors_record, anchors_name), (ranges, ranges_record, ranges_name) = records
-    return Job(
+    return RangingJob(
         reference=reference,
-        estimates=[],
         config=config_from_options(options),
         stamp=options.stamp,
         export=export_from_options(options, front_door="service", evaluation_id=evaluation.id),

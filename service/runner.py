@@ -1,7 +1,12 @@
 """One evaluation job, run the same way by the CLI and by the service's queue.
 
-:func:`run_job` reads the sources, evaluates and writes the artifacts. The options it runs
-with are built from the front doors' options by :mod:`service.options`.
+A job is of one of three kinds, each a type: :class:`TrajectoryJob` (estimates against a
+reference trajectory), :class:`ControlPointJob` (estimates scored at surveyed points) and
+:class:`RangingJob` (a radio system's ranges and solved positions). :func:`evaluation_job`
+picks the kind of ``loceval evaluate`` and ``POST /evaluations`` from the reference, once;
+``loceval ranging`` and ``POST /ranging`` build a :class:`RangingJob`. :func:`run_job` reads
+the sources, evaluates and writes the artifacts. The options a job runs with are built from
+the front doors' options by :mod:`service.options`.
 """
 
 from __future__ import annotations
@@ -10,7 +15,7 @@ import hashlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, overload
 
 from loceval.checkpoints.config import CheckpointConfig
 from loceval.errors import InputError, LocevalError
@@ -28,10 +33,14 @@ if TYPE_CHECKING:
     from service.mapjob import MapSource
 
 __all__ = [
+    "ControlPointJob",
     "Job",
     "JobSource",
+    "RangingJob",
     "RangingSources",
+    "TrajectoryJob",
     "default_name",
+    "evaluation_job",
     "file_provenance",
     "run_job",
     "unique_names",
@@ -124,34 +133,144 @@ class RangingSources:
         return replace(ranges, warnings=tuple(warnings))
 
 
-@dataclass(frozen=True, slots=True)
-class Job:
-    """Everything one evaluation needs.
+@dataclass(frozen=True, slots=True, kw_only=True)
+class _JobBase:
+    """What every kind of job takes besides its inputs.
 
     Attributes:
-        reference: the ground truth.
-        estimates: the systems under evaluation.
+        reference: the ground truth (a trajectory, or a control-point survey).
         config: the core's options.
         stamp: bags: ``header`` or ``receive`` stamps.
         export: artifact options; None writes no artifacts.
         formats: the artifacts to write (None: all).
-        ranging: the radio inputs: the estimates are then positioned from the ranges
-            (:func:`loceval.radio_evaluation.evaluate_radio`) and ``estimates`` is empty.
-        visits: a control-point reference: the visits table; None finds the stops.
-        checkpoints: a control-point reference: its options.
-        map: the robot's occupancy grid map to measure against the building plan.
     """
 
     reference: JobSource
-    estimates: Sequence[JobSource]
     config: EvaluationConfig
     stamp: str = choice_default("stamp")
     export: ExportOptions | None = None
     formats: Sequence[str] | None = None
-    ranging: RangingSources | None = None
+
+    def artifact_names(self) -> list[str] | None:
+        """Return the files to write, ``result.json`` first (None: all)."""
+        return None if self.formats is None else list(dict.fromkeys(["result.json", *self.formats]))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TrajectoryJob(_JobBase):
+    """Estimated trajectories evaluated pose by pose against a reference trajectory.
+
+    Attributes:
+        estimates: the systems under evaluation.
+        map: the robot's occupancy grid map to measure against the building plan.
+    """
+
+    estimates: Sequence[JobSource]
+    map: MapSource | None = None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ControlPointJob(_JobBase):
+    """Estimated trajectories scored at the surveyed control points they visit.
+
+    Attributes:
+        estimates: the systems under evaluation.
+        visits: the visits table (or a bag's arrivals); None finds the stops.
+        checkpoints: the control-point options.
+    """
+
+    estimates: Sequence[JobSource]
     visits: JobSource | None = None
     checkpoints: CheckpointConfig = field(default_factory=CheckpointConfig)
-    map: MapSource | None = None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RangingJob(_JobBase):
+    """A radio system's ranges, and the positions solved from them, against the reference.
+
+    Attributes:
+        ranging: the anchors, the ranges and the ranging options; the solvers' positions
+            are the estimates (:func:`loceval.radio_evaluation.evaluate_radio`).
+    """
+
+    ranging: RangingSources
+
+
+Job = TrajectoryJob | ControlPointJob | RangingJob
+"""One evaluation job, of one of the three kinds; each front door builds its kind."""
+
+
+def evaluation_job(
+    *,
+    reference: JobSource,
+    estimates: Sequence[JobSource],
+    config: EvaluationConfig,
+    stamp: str = choice_default("stamp"),
+    export: ExportOptions | None = None,
+    formats: Sequence[str] | None = None,
+    visits: JobSource | None = None,
+    checkpoints: CheckpointConfig | None = None,
+    the_map: MapSource | None = None,
+) -> TrajectoryJob | ControlPointJob:
+    """Return the job of ``loceval evaluate`` and ``POST /evaluations``: its kind by its reference.
+
+    A control-point survey (``points:survey.csv``, or a file sniffed as one) makes a
+    :class:`ControlPointJob`; any other reference a :class:`TrajectoryJob`.
+
+    Raises:
+        InputError: an input of the other kind: a visits table beside a trajectory
+            reference, or a map beside a control-point survey.
+    """
+    if is_control_points(reference.spec):
+        if the_map is not None:
+            msg = (
+                "A map is measured along an evaluated trajectory, and the reference is a "
+                "control-point survey; evaluate the map with a trajectory reference."
+            )
+            raise InputError(msg, option="map")
+        return ControlPointJob(
+            reference=reference,
+            config=config,
+            stamp=stamp,
+            export=export,
+            formats=formats,
+            estimates=estimates,
+            visits=visits,
+            checkpoints=checkpoints or CheckpointConfig(),
+        )
+    if visits is not None:
+        msg = (
+            "A visits table applies to a control-point reference (points:FILE), and the "
+            "reference is a trajectory; leave the visits out."
+        )
+        raise InputError(msg, option="visits")
+    return TrajectoryJob(
+        reference=reference,
+        config=config,
+        stamp=stamp,
+        export=export,
+        formats=formats,
+        estimates=estimates,
+        map=the_map,
+    )
+
+
+@overload
+def run_job(
+    job: TrajectoryJob | RangingJob, out_dir: Path | None, progress: ProgressCallback | None = None
+) -> EvaluationResult: ...
+
+
+@overload
+def run_job(
+    job: ControlPointJob, out_dir: Path | None, progress: ProgressCallback | None = None
+) -> CheckpointEvaluation: ...
+
+
+@overload
+def run_job(
+    job: Job, out_dir: Path | None, progress: ProgressCallback | None = None
+) -> EvaluationResult | CheckpointEvaluation: ...
 
 
 def run_job(
@@ -159,62 +278,24 @@ def run_job(
 ) -> EvaluationResult | CheckpointEvaluation:
     """Read, evaluate and (with ``out_dir`` and ``job.export``) write the artifacts.
 
-    A control-point reference (``points:survey.csv``) is scored visit by visit
-    (:func:`loceval.checkpoint_evaluation.evaluate_control_points`); any other is a
-    trajectory evaluated pose by pose.
-
     Args:
-        job: the job.
+        job: the job; its kind says how it is evaluated.
         out_dir: the artifact folder, written all or nothing; None writes nothing.
         progress: called with (stage, overall fraction done).
 
     Returns:
-        The evaluation result.
+        The evaluation result (a control-point job's: its scores at the points).
 
     Raises:
         LocevalError: bad input (reader, association, alignment, metric or export errors).
     """
     report = progress or (lambda _stage, _fraction: None)
-    if is_control_points(job.reference.spec):
+    if isinstance(job, ControlPointJob):
         return _run_checkpoints(job, out_dir, report)
-    if job.visits is not None:
-        msg = (
-            "A visits table applies to a control-point reference (points:FILE), and the "
-            "reference is a trajectory; leave the visits out."
-        )
-        raise InputError(msg, option="visits")
-    sources = [job.reference, *job.estimates]
-    trajectories = []
-    for k, source in enumerate(sources):
-        report(f"reading {source.name}", _READ * k / len(sources))
-        trajectories.append(source.read(stamp=job.stamp))
-
-    evaluating = _evaluating(report)
-    if job.ranging is not None:
-        from loceval.radio_evaluation import evaluate_radio  # noqa: PLC0415
-
-        report("reading the ranges", _READ / 2)
-        result = evaluate_radio(
-            trajectories[0],
-            job.ranging.read(stamp=job.stamp),
-            job.ranging.config,
-            job.config,
-            inputs=[dict(job.reference.provenance), *map(dict, job.ranging.provenance)],
-            progress=evaluating,
-        )
+    if isinstance(job, RangingJob):
+        result = _run_ranging(job, report)
     else:
-        result = evaluate(
-            trajectories[0],
-            trajectories[1:],
-            job.config,
-            inputs=[dict(s.provenance) for s in sources],
-            progress=evaluating,
-        )
-    if job.map is not None:
-        from service.mapjob import measure_map  # noqa: PLC0415  (CAD libraries)
-
-        report("measuring the map", _EVALUATE)
-        result = replace(result, map=measure_map(result, job.map))
+        result = _run_trajectories(job, report)
     if out_dir is not None and job.export is not None:
         from exporters import write_artifacts  # noqa: PLC0415
 
@@ -223,14 +304,61 @@ def run_job(
 
         report("preparing the files", _EVALUATE)  # placing the paths comes before any file
         title = f"{result.reference.name} vs {', '.join(e.name for e in result.estimates)}"
-        names = None
-        if job.formats is not None:
-            names = list(dict.fromkeys(["result.json", *job.formats]))
         write_artifacts(
-            result, out_dir, replace(job.export, title=title), names=names, progress=writing
+            result,
+            out_dir,
+            replace(job.export, title=title),
+            names=job.artifact_names(),
+            progress=writing,
         )
     report("done", 1.0)
     return result
+
+
+def _read_sources(
+    sources: Sequence[JobSource], stamp: str, report: ProgressCallback
+) -> list[Trajectory]:
+    """Read each trajectory, reporting the reading share of the bar."""
+    trajectories = []
+    for k, source in enumerate(sources):
+        report(f"reading {source.name}", _READ * k / len(sources))
+        trajectories.append(source.read(stamp=stamp))
+    return trajectories
+
+
+def _run_trajectories(job: TrajectoryJob, report: ProgressCallback) -> EvaluationResult:
+    """Read the reference and the estimates, evaluate, and measure the map if one is given."""
+    sources = [job.reference, *job.estimates]
+    trajectories = _read_sources(sources, job.stamp, report)
+    result = evaluate(
+        trajectories[0],
+        trajectories[1:],
+        job.config,
+        inputs=[dict(s.provenance) for s in sources],
+        progress=_evaluating(report),
+    )
+    if job.map is not None:
+        from service.mapjob import measure_map  # noqa: PLC0415  (CAD libraries)
+
+        report("measuring the map", _EVALUATE)
+        result = replace(result, map=measure_map(result, job.map))
+    return result
+
+
+def _run_ranging(job: RangingJob, report: ProgressCallback) -> EvaluationResult:
+    """Read the reference and the ranges; position the tag; evaluate ranges and positions."""
+    from loceval.radio_evaluation import evaluate_radio  # noqa: PLC0415
+
+    (reference,) = _read_sources([job.reference], job.stamp, report)
+    report("reading the ranges", _READ / 2)
+    return evaluate_radio(
+        reference,
+        job.ranging.read(stamp=job.stamp),
+        job.ranging.config,
+        job.config,
+        inputs=[dict(job.reference.provenance), *map(dict, job.ranging.provenance)],
+        progress=_evaluating(report),
+    )
 
 
 def _evaluating(report: ProgressCallback) -> ProgressCallback:
@@ -258,7 +386,7 @@ def is_control_points(spec: SourceSpec) -> bool:
 
 
 def _run_checkpoints(
-    job: Job, out_dir: Path | None, report: ProgressCallback
+    job: ControlPointJob, out_dir: Path | None, report: ProgressCallback
 ) -> CheckpointEvaluation:
     """Read the survey, the visits and the estimates; score; write the artifacts."""
     from loceval.checkpoint_evaluation import evaluate_control_points  # noqa: PLC0415
@@ -296,13 +424,12 @@ def _run_checkpoints(
         report("writing", _EVALUATE)
         title = f"{result.reference_name} vs {', '.join(e.name for e in result.estimates)}"
         export = replace(job.export, title=title)
-        names = None if job.formats is None else dict.fromkeys(["result.json", *job.formats])
-        write_checkpoint_artifacts(result, out_dir, export, names=names)
+        write_checkpoint_artifacts(result, out_dir, export, names=job.artifact_names())
     report("done", 1.0)
     return result
 
 
-def _read_visits(spec: SourceSpec, points: ControlPoints, job: Job) -> Visits:
+def _read_visits(spec: SourceSpec, points: ControlPoints, job: ControlPointJob) -> Visits:
     """Read a visits table, or the arrivals on a bag topic (``run.bag@/arrivals``)."""
     try:
         fmt = spec.format or sniff_format(spec.path)

@@ -24,7 +24,14 @@ from service.options import (
     export_from_options,
     is_auto,
 )
-from service.runner import Job, JobSource, default_name, file_provenance, run_job, unique_names
+from service.runner import (
+    JobSource,
+    default_name,
+    evaluation_job,
+    file_provenance,
+    run_job,
+    unique_names,
+)
 
 if TYPE_CHECKING:
     import argparse
@@ -76,7 +83,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         def provenance(role: str, spec: SourceSpec) -> Mapping[str, object]:
             return _PendingProvenance(hashing.submit(file_provenance, role, spec))
 
-        job = Job(
+        job = evaluation_job(
             reference=JobSource(
                 ref_spec,
                 args.reference_name or default_name(ref_spec),
@@ -92,7 +99,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             formats=artifact_names(args.formats),
             visits=_visits_source(args.visits),
             checkpoints=checkpoints_from_options(args),
-            map=the_map,
+            the_map=the_map,
         )
         result = run_job(job, args.out)
     if args.json:

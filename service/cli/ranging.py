@@ -10,7 +10,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from loceval.evaluation import EvaluationResult
 from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
 from service.cli.evaluate import export_options
 from service.cli.output import emit
@@ -19,7 +18,14 @@ from service.options import (
     config_from_options,
     ranging_from_options,
 )
-from service.runner import Job, JobSource, RangingSources, default_name, file_provenance, run_job
+from service.runner import (
+    JobSource,
+    RangingJob,
+    RangingSources,
+    default_name,
+    file_provenance,
+    run_job,
+)
 
 if TYPE_CHECKING:
     import argparse
@@ -38,13 +44,12 @@ def run_ranging(args: argparse.Namespace) -> int:
     ref_spec = parse_source(args.reference, default_format=default_format)
     ranges_spec = parse_source(args.ranges)
     anchors_spec = SourceSpec(None, Path(args.anchors))
-    job = Job(
+    job = RangingJob(
         reference=JobSource(
             ref_spec,
             args.reference_name or default_name(ref_spec),
             file_provenance("reference", ref_spec),
         ),
-        estimates=[],
         config=config,
         stamp=args.stamp,
         export=export,
@@ -60,9 +65,6 @@ def run_ranging(args: argparse.Namespace) -> int:
         ),
     )
     result = run_job(job, args.out)
-    if not isinstance(result, EvaluationResult):  # a ranging job is never a control-point one
-        msg = "A ranging job produced a control-point evaluation; please report this."
-        raise TypeError(msg)
     if args.json:
         from exporters.cad.jsondoc import finite_json  # noqa: PLC0415
 

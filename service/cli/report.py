@@ -17,7 +17,7 @@ from loceval.readers import SourceSpec
 from loceval.readers.evo_result import is_result_zip, read_result_zip
 from service.cli.output import emit
 from service.options import config_from_options
-from service.runner import Job, JobSource, default_name, file_provenance, run_job
+from service.runner import Job, JobSource, default_name, evaluation_job, file_provenance, run_job
 
 if TYPE_CHECKING:
     import argparse
@@ -159,6 +159,8 @@ def _read_template(path: Path) -> EvaluationTemplate:
 
 
 def _template_job(path: Path, template: EvaluationTemplate, config: EvaluationConfig) -> Job:
+    """Return the job of one recording: the template's sources read from ``path``."""
+
     def source(entry: TemplateSource, role: str) -> JobSource:
         if entry.dataset_id is not None:
             msg = (
@@ -170,7 +172,7 @@ def _template_job(path: Path, template: EvaluationTemplate, config: EvaluationCo
         name = entry.name or default_name(spec)
         return JobSource(spec, name, file_provenance(role, spec))
 
-    return Job(
+    return evaluation_job(
         reference=source(template.reference, "reference"),
         estimates=[source(e, "estimate") for e in template.estimates],
         config=config,

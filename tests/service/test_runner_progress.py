@@ -9,7 +9,7 @@ import numpy as np
 from exporters.options import ExportOptions
 from loceval.evaluation import EvaluationConfig
 from loceval.readers import SourceSpec
-from service.runner import Job, JobSource, run_job
+from service.runner import JobSource, TrajectoryJob, run_job
 from tests.factories import make_trajectory, write_tum
 
 
@@ -18,7 +18,7 @@ def test_done_is_reported_only_at_the_end(tmp_path: Path, rng: np.random.Generat
     truth = make_trajectory(rng, 300)
     ref = write_tum(tmp_path / "ref.txt", truth)
     est = write_tum(tmp_path / "est.txt", truth)
-    job = Job(
+    job = TrajectoryJob(
         reference=JobSource(SourceSpec(None, ref), "ref"),
         estimates=[JobSource(SourceSpec(None, est), "est")],
         config=EvaluationConfig(),
