@@ -115,3 +115,81 @@ def test_the_glb_has_the_map_as_coloured_points(result: EvaluationResult, valida
     assert found is not None
     assert gltf.accessors[primitive.attributes.POSITION].count == len(found.cells_xy)
     assert gltf.accessors[primitive.attributes.COLOR_0].count == len(found.cells_xy)
+
+
+@pytest.mark.filterwarnings(  # ifcopenshell's EXPRESS-rule loader leaves its rules file open
+    r"ignore:Exception ignored in. <_io.FileIO name='.*ifcopenshell"
+    ":pytest.PytestUnraisableExceptionWarning"
+)
+def test_the_ifc_has_the_map_and_excursions_and_validates(result: EvaluationResult) -> None:
+    """paths.ifc: the plan's walls, the wall cells per bin and clutter, the excursion; valid.
+
+    ifcopenshell's validator (schema and EXPRESS rules) reports nothing; the plan has one
+    curve per wall segment, the clouds together hold every wall cell (fewer than the CAD
+    cap here), the clutter cloud the clutter count, and the excursion its label and figures.
+    """
+    pytest.importorskip("ifcopenshell")
+    import ifcopenshell.util.element
+    import ifcopenshell.validate
+
+    data = render_artifact("paths.ifc", result, ExportOptions(units="m"))
+    model = ifcopenshell.file.from_string(data.decode())
+    logger = ifcopenshell.validate.json_logger()
+    ifcopenshell.validate.validate(model, logger, express_rules=True)
+    assert logger.statements == []
+    found = result.map
+    assert found is not None
+    by_type: dict[str, list[object]] = {}
+    for annotation in model.by_type("IfcAnnotation"):
+        by_type.setdefault(annotation.ObjectType, []).append(annotation)
+    (plan,) = by_type["map plan"]
+    (shape,) = plan.Representation.Representations
+    assert len(shape.Items) == len(found.plan_xy)
+    ends = np.array(shape.Items[0].Points.CoordList)
+    assert ends.shape == (2 * len(found.plan_xy), 3)
+    np.testing.assert_allclose(ends[:, :2].reshape(-1, 2, 2), found.plan_xy, atol=1e-6)
+    figures = ifcopenshell.util.element.get_psets(plan)["Loceval_Map"]
+    assert figures["WallDistance_rmse"] == pytest.approx(found.placed.rmse)
+    assert figures["similarity_scale"] == pytest.approx(found.similarity[0].scale)
+    clouds = {a.Name: a.Representation.Representations[0] for a in by_type["map walls"]}
+    assert {s.RepresentationType for s in clouds.values()} == {"PointCloud"}
+    counts = {name: len(s.Items[0].CoordList) for name, s in clouds.items()}
+    assert sum(counts.values()) == len(found.cells_xy)
+    assert counts["map clutter"] == found.clutter_cells
+    (excursion,) = by_type["excursion"]
+    assert excursion.Name == "slam excursion: 45 s, 45 m, error 0.00 -> 0.22 m"
+    drift = ifcopenshell.util.element.get_psets(excursion)["Loceval_Excursion"]
+    (expected,) = result.estimates[0].excursions
+    assert drift["DriftPerMetre"] == pytest.approx(expected.drift_per_m)
+    curve = excursion.Representation.Representations[0].Items[0]
+    assert len(curve.Points.CoordList) >= 2
+
+
+def test_the_3dm_and_glb_mark_the_excursion_like_the_dxf(result: EvaluationResult) -> None:
+    """The same path and label as the DXF: a 3DM curve and text dot, a GLB line strip."""
+    rhino3dm = pytest.importorskip("rhino3dm")
+    pygltflib = pytest.importorskip("pygltflib")
+    options = ExportOptions(units="m")
+    doc = ezdxf.read(io.StringIO(render_artifact("paths.dxf", result, options).decode()))
+    (polyline,) = doc.modelspace().query('POLYLINE[layer=="excursions"]')
+    dxf_xyz = np.array([v.dxf.location for v in polyline.vertices])
+    label = "slam excursion: 45 s, 45 m, error 0.00 -> 0.22 m"
+
+    model = rhino3dm.File3dm.FromByteArray(render_artifact("paths.3dm", result, options))
+    (layer,) = [k for k, layer in enumerate(model.Layers) if layer.Name == "excursions"]
+    mine = [o for o in model.Objects if o.Attributes.LayerIndex == layer]
+    (curve,) = [o for o in mine if isinstance(o.Geometry, rhino3dm.PolylineCurve)]
+    (dot,) = [o for o in mine if isinstance(o.Geometry, rhino3dm.TextDot)]
+    assert dot.Geometry.Text == label == curve.Attributes.Name
+    points = curve.Geometry.ToPolyline()
+    rhino_xyz = np.array([[points[i].X, points[i].Y, points[i].Z] for i in range(points.Count)])
+    np.testing.assert_allclose(rhino_xyz, dxf_xyz, atol=1e-9)
+
+    gltf = pygltflib.GLTF2.load_from_bytes(render_artifact("paths.glb", result, options))
+    (node,) = [n for n in gltf.nodes if n.name == "excursions"]
+    (primitive,) = gltf.meshes[node.mesh].primitives
+    assert primitive.mode == pygltflib.LINE_STRIP
+    assert gltf.accessors[primitive.attributes.POSITION].count == len(dxf_xyz)
+    (record,) = node.extras["excursions"]
+    assert record["label"] == label
+    assert record["duration_s"] == pytest.approx(45.0, abs=0.5)
