@@ -41,6 +41,7 @@ class ExcursionPath:
 
     Attributes:
         estimate: the estimate's name.
+        index: the estimate's position in the evaluation's estimates.
         excursion: the figures (:class:`~loceval.metrics.excursions.Excursion`).
         positions_xyz: (M, 3) the aligned estimate's positions inside the excursion,
             evaluation frame, metres (two or more).
@@ -51,6 +52,7 @@ class ExcursionPath:
     """
 
     estimate: str
+    index: int
     excursion: Excursion
     positions_xyz: FloatArray
     label: str
@@ -81,7 +83,7 @@ def excursion_paths(result: EvaluationResult) -> list[ExcursionPath]:
     """
     out = []
     t0_ns = int(result.reference.stamps_ns[0]) if len(result.reference) else 0
-    for estimate in result.estimates:
+    for index, estimate in enumerate(result.estimates):
         if not estimate.excursions:
             continue
         stamps = estimate.estimate.stamps_ns + np.int64(estimate.association.offset_ns)
@@ -95,7 +97,7 @@ def excursion_paths(result: EvaluationResult) -> list[ExcursionPath]:
             )
             label = excursion_label(estimate.name, excursion)
             out.append(
-                ExcursionPath(estimate.name, excursion, xyz, label, excursion.to_dict(t0_ns))
+                ExcursionPath(estimate.name, index, excursion, xyz, label, excursion.to_dict(t0_ns))
             )
     return out
 

@@ -193,3 +193,20 @@ def test_the_3dm_and_glb_mark_the_excursion_like_the_dxf(result: EvaluationResul
     (record,) = node.extras["excursions"]
     assert record["label"] == label
     assert record["duration_s"] == pytest.approx(45.0, abs=0.5)
+
+
+def test_the_viewer_scene_has_the_excursion_the_dxf_draws(result: EvaluationResult) -> None:
+    """scene.py's ``excursions``: the DXF's vertices (local + base), label and figures."""
+    from exporters.viewer.scene import viewer_scene
+
+    options = ExportOptions(units="m")
+    doc = ezdxf.read(io.StringIO(render_artifact("paths.dxf", result, options).decode()))
+    (polyline,) = doc.modelspace().query('POLYLINE[layer=="excursions"]')
+    dxf_xyz = np.array([v.dxf.location for v in polyline.vertices])
+    scene = viewer_scene(result, options)
+    (shown,) = scene["excursions"]  # type: ignore[misc]
+    assert shown["path"] == 1
+    assert shown["label"] == "slam excursion: 45 s, 45 m, error 0.00 -> 0.22 m"
+    xyz = np.array(shown["xyz"]).reshape(-1, 3) + np.array(scene["base"])
+    np.testing.assert_allclose(xyz, dxf_xyz, atol=1e-4)  # the viewer rounds to 0.1 mm
+    assert shown["drift_per_m"] == result.estimates[0].excursions[0].drift_per_m
