@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +35,9 @@ from loceval.errors import InputError, MetricError
 from loceval.maps.fit import Fit2D, fit_to_plan
 from loceval.maps.grid import FREE, OCCUPIED, OccupancyGrid
 from loceval.maps.plan import PlanIndex, sample_segments
+
+if TYPE_CHECKING:
+    from loceval.maps.history import MapSnapshot
 
 __all__ = ["MapEvaluation", "WallFigures", "evaluate_map"]
 
@@ -117,6 +120,10 @@ class MapEvaluation:
         regions: the errors by region: tile centre, cells and RMSE as placed.
         plan_xy: (K, 2, 2) the plan's segments, evaluation frame (for the figures).
         warnings: what the user should know.
+        history: a bag topic's messages judged one by one, the last included
+            (:mod:`loceval.maps.history`); empty for a map file.
+        history_note: how the messages were chosen when the topic held more than were
+            judged.
     """
 
     source: str
@@ -137,6 +144,8 @@ class MapEvaluation:
     regions: tuple[dict[str, float | int], ...] = ()
     plan_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     warnings: tuple[str, ...] = ()
+    history: tuple[MapSnapshot, ...] = ()
+    history_note: str | None = None
 
     @property
     def scale_error_pct(self) -> float:
@@ -168,6 +177,8 @@ class MapEvaluation:
             "fit": fit,
             "regions": [dict(r) for r in self.regions],
             "warnings": list(self.warnings),
+            "history": [snapshot.to_dict() for snapshot in self.history],
+            "history_note": self.history_note,
         }
 
 
