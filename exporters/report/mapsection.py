@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from loceval.evaluation import EvaluationResult
-from loceval.maps import WallFigures
+from loceval.maps import MapSnapshot, WallFigures
 
 __all__ = ["MapView", "build_map_view"]
 
@@ -30,6 +30,10 @@ class MapView:
             shares, coverage and the fit's transform.
         regions: the worst regions (tile centre, cells, RMSE).
         warnings: the map evaluation's warnings.
+        history: a bag topic's messages, one row each: time, size, wall cells, RMSE as
+            placed and after each fit, the similarity scale error, the rigid fit's
+            rotation, coverage, or why the message was not judged.
+        history_note: how the messages were chosen, when not all were judged.
     """
 
     source: str
@@ -40,6 +44,8 @@ class MapView:
     rows: tuple[Mapping[str, object], ...]
     regions: tuple[str, ...]
     warnings: tuple[str, ...]
+    history: tuple[Mapping[str, str], ...] = ()
+    history_note: str | None = None
 
 
 def _row(name: str, figures: WallFigures, transform: str) -> dict[str, object]:
@@ -87,4 +93,30 @@ def build_map_view(result: EvaluationResult) -> MapView | None:
         rows=tuple(rows),
         regions=regions,
         warnings=found.warnings,
+        history=tuple(_history_row(s) for s in found.history),
+        history_note=found.history_note,
     )
+
+
+def _number(value: float | None, spec: str) -> str:
+    return "–" if value is None else format(value, spec)
+
+
+def _history_row(snapshot: MapSnapshot) -> dict[str, str]:
+    """One message of a map topic, formatted."""
+    cols, rows = snapshot.size_cells
+    return {
+        "index": str(snapshot.index),
+        "t": _number(snapshot.t_s, ".1f"),
+        "size": f"{cols} x {rows}",
+        "wall_cells": "–" if snapshot.wall_cells is None else f"{snapshot.wall_cells:,}",
+        "placed": _number(snapshot.placed_rmse_m, ".3f"),
+        "rigid": _number(snapshot.rigid_rmse_m, ".3f"),
+        "similarity": _number(snapshot.similarity_rmse_m, ".3f"),
+        "scale": _number(snapshot.scale_error_pct, "+.2f"),
+        "rotation": _number(snapshot.rigid_rotation_deg, "+.2f"),
+        "coverage": _number(
+            None if snapshot.plan_coverage is None else snapshot.plan_coverage * 100, ".1f"
+        ),
+        "note": snapshot.note or "",
+    }

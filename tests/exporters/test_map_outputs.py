@@ -210,3 +210,37 @@ def test_the_viewer_scene_has_the_excursion_the_dxf_draws(result: EvaluationResu
     xyz = np.array(shown["xyz"]).reshape(-1, 3) + np.array(scene["base"])
     np.testing.assert_allclose(xyz, dxf_xyz, atol=1e-4)  # the viewer rounds to 0.1 mm
     assert shown["drift_per_m"] == result.estimates[0].excursions[0].drift_per_m
+
+
+def test_the_report_shows_the_map_over_time(
+    result: EvaluationResult, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    """A bag topic's messages: one table row each (the unjudged one with its reason), a plot."""
+    from exporters.plots.mapplan import MAP_HISTORY_KEY, plot_map_history
+    from loceval.maps import OccupancyGrid, evaluate_map_source
+    from tests.loceval.maps.test_map_history import _write_bag
+
+    plan = office_plan()
+    rng = np.random.default_rng(3)
+    grids = [
+        (s, draw_map(plan, Distortion(scale=k), resolution_m=0.05, rng=rng))
+        for s, k in ((30, 0.995), (60, 0.99))
+    ]
+    empty = OccupancyGrid(np.full(grids[0][1].shape, -1, dtype=np.int8), 0.05)
+    bag = _write_bag(tmp_path_factory.mktemp("bag"), [(10, empty), *grids])
+    t0 = int(result.reference.stamps_ns[0])
+    found = evaluate_map_source(f"{bag}@/map", plan, SimilarityTransform.identity(), t0_ns=t0)
+    with_history = replace(result, map=found)
+    view = build_map_view(with_history)
+    assert view is not None
+    assert [row["index"] for row in view.history] == ["0", "1", "2"]
+    assert "no occupied cell" in view.history[0]["note"]
+    assert view.history[2]["scale"] == f"{found.scale_error_pct:+.2f}"
+    (plot,) = plot_map_history(with_history)
+    assert plot.key == MAP_HISTORY_KEY
+    assert b"<svg" in (plot.svg or b"")
+    assert "2 map messages" in plot.caption
+    html = render_artifact("report.html", with_history, ExportOptions()).decode()
+    assert "The map over time" in html
+    assert html.count('<tr class="strong">') == 1
+    assert plot_map_history(result) == ()  # a map file: no history, no figure
