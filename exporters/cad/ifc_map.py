@@ -195,6 +195,9 @@ def _map_properties(figures: dict[str, object]) -> dict[str, object]:
         for name, found in fit.items():
             if not isinstance(found, dict):
                 continue
+            if name == "axis_scales":
+                values.update({f"axis_{k}": v for k, v in found.items() if v is not None})
+                continue
             values[f"{name}_scale"] = found["scale"]
             values[f"{name}_rotation_deg"] = found["rotation_deg"]
             values[f"{name}_translation_m"] = found["translation_m"]

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 from loceval.evaluation import EvaluationResult
 from loceval.maps import MapSnapshot, WallFigures
+from loceval.maps.axis_scale import AxisScales
 
 __all__ = ["MapView", "build_map_view"]
 
@@ -34,6 +35,7 @@ class MapView:
             placed and after each fit, the similarity scale error, the rigid fit's
             rotation, coverage, or why the message was not judged.
         history_note: how the messages were chosen, when not all were judged.
+        axis_scales: the per-axis lengths in words, or None when unobservable.
     """
 
     source: str
@@ -46,6 +48,7 @@ class MapView:
     warnings: tuple[str, ...]
     history: tuple[Mapping[str, str], ...] = ()
     history_note: str | None = None
+    axis_scales: str | None = None
 
 
 def _row(name: str, figures: WallFigures, transform: str) -> dict[str, object]:
@@ -95,6 +98,26 @@ def build_map_view(result: EvaluationResult) -> MapView | None:
         warnings=found.warnings,
         history=tuple(_history_row(s) for s in found.history),
         history_note=found.history_note,
+        axis_scales=_axis_sentence(found.axis_scales),
+    )
+
+
+def _axis_sentence(scales: AxisScales | None) -> str | None:
+    """``"along its x axis (0° on the plan) 2.00 % long (± 0.001 %), along y 1.00 % short"``."""
+    if scales is None:
+        return None
+    parts = []
+    for axis, pct, scale, sigma in (
+        ("x", scales.length_error_x_pct, scales.scale_x, scales.sigma_x),
+        ("y", scales.length_error_y_pct, scales.scale_y, scales.sigma_y),
+    ):
+        if pct is None or scale is None:
+            parts.append(f"along {axis} not observable")
+            continue
+        spread = "" if sigma is None else f" (± {100.0 * sigma / scale**2:.3f} %)"
+        parts.append(f"along {axis} {abs(pct):.2f} % {'short' if pct < 0 else 'long'}{spread}")
+    return f"per axis of the map (its x axis at {scales.axes_deg:.1f}° on the plan): " + ", ".join(
+        parts
     )
 
 

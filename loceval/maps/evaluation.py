@@ -32,6 +32,7 @@ from loceval.core.arrays import BoolArray, FloatArray
 from loceval.core.geometry import SimilarityTransform
 from loceval.core.quantiles import quantiles
 from loceval.errors import InputError, MetricError
+from loceval.maps.axis_scale import AxisScales, fit_axis_scales
 from loceval.maps.fit import Fit2D, fit_to_plan
 from loceval.maps.grid import FREE, OCCUPIED, OccupancyGrid
 from loceval.maps.plan import PlanIndex, sample_segments
@@ -124,6 +125,8 @@ class MapEvaluation:
             (:mod:`loceval.maps.history`); empty for a map file.
         history_note: how the messages were chosen when the topic held more than were
             judged.
+        axis_scales: the per-axis scales along the map's grid axes
+            (:mod:`loceval.maps.axis_scale`), None when unobservable.
     """
 
     source: str
@@ -146,6 +149,7 @@ class MapEvaluation:
     warnings: tuple[str, ...] = ()
     history: tuple[MapSnapshot, ...] = ()
     history_note: str | None = None
+    axis_scales: AxisScales | None = None
 
     @property
     def scale_error_pct(self) -> float:
@@ -159,9 +163,10 @@ class MapEvaluation:
 
     def to_dict(self) -> dict[str, object]:
         """Return the result document's ``map`` object."""
-        fit = {}
+        fit: dict[str, object] = {}
         for name, (found, figures) in (("rigid", self.rigid), ("similarity", self.similarity)):
             fit[name] = {**found.to_dict(), **figures.to_dict(), "cells_fitted": found.kept}
+        fit["axis_scales"] = None if self.axis_scales is None else self.axis_scales.to_dict()
         return {
             "source": self.source,
             "resolution_m": self.resolution_m,
@@ -248,6 +253,10 @@ def evaluate_map(
         )
         raise MetricError(msg, option="map")
     rigid_d, _ = plan.measure(rigid.apply(cells), near)
+    axes = _grid_axes_rad(grid, placement) + similarity.rotation_rad
+    per_axis = fit_axis_scales(
+        fitted_cells[::step], plan, axes_rad=axes, start_m=clutter_m, floor_m=resolution
+    )
     tolerance = max(max(thresholds_m, default=0.15), 2.0 * resolution)
     coverage = _Coverage.of(grid, walls, rows[~clutter], cols[~clutter], tolerance)
     plan_samples, _ = sample_segments(plan.segments_xy, 2.0 * resolution)
@@ -278,7 +287,15 @@ def evaluate_map(
         regions=_regions(cells[~clutter], distance[~clutter]),
         plan_xy=plan.segments_xy,
         warnings=_warnings(similarity, int(clutter.sum()), len(cells)),
+        axis_scales=None if per_axis is None else per_axis.times(similarity.scale),
     )
+
+
+def _grid_axes_rad(grid: OccupancyGrid, placement: SimilarityTransform) -> float:
+    """The direction of the grid's x axis (its columns) in the evaluation frame."""
+    yaw = grid.origin_yaw_rad
+    axis = placement.rotation @ np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    return math.atan2(float(axis[1]), float(axis[0]))
 
 
 def _check_overlap(cells: FloatArray, segments: FloatArray, source: str) -> None:

@@ -87,6 +87,8 @@ def test_the_report_has_the_map_figure_and_section(result: EvaluationResult) -> 
     assert view is not None
     assert [row["name"] for row in view.rows] == ["as placed", "rigid fit", "similarity fit"]
     assert view.drift in plot.caption
+    assert view.axis_scales is not None
+    assert view.axis_scales.startswith("per axis of the map (its x axis at 0.0° on the plan)")
     assert build_map_view(replace(result, map=None)) is None
 
 
@@ -151,6 +153,8 @@ def test_the_ifc_has_the_map_and_excursions_and_validates(result: EvaluationResu
     figures = ifcopenshell.util.element.get_psets(plan)["Loceval_Map"]
     assert figures["WallDistance_rmse"] == pytest.approx(found.placed.rmse)
     assert figures["similarity_scale"] == pytest.approx(found.similarity[0].scale)
+    assert found.axis_scales is not None
+    assert figures["axis_scale_x"] == pytest.approx(found.axis_scales.scale_x)
     clouds = {a.Name: a.Representation.Representations[0] for a in by_type["map walls"]}
     assert {s.RepresentationType for s in clouds.values()} == {"PointCloud"}
     counts = {name: len(s.Items[0].CoordList) for name, s in clouds.items()}
