@@ -116,9 +116,8 @@ def _axis_sentence(scales: AxisScales | None) -> str | None:
             continue
         spread = "" if sigma is None else f" (± {100.0 * sigma / scale**2:.3f} %)"
         parts.append(f"along {axis} {abs(pct):.2f} % {'short' if pct < 0 else 'long'}{spread}")
-    return f"per axis of the map (its x axis at {scales.axes_deg:.1f}° on the plan): " + ", ".join(
-        parts
-    )
+    axes = round(scales.axes_deg, 1) + 0.0  # never "-0.0"
+    return f"per axis of the map (its x axis at {axes:.1f}° on the plan): " + ", ".join(parts)
 
 
 def _number(value: float | None, spec: str) -> str:
