@@ -241,10 +241,8 @@ def evaluate_map(
     )
     rigid = fit_to_plan(cells[::step], plan, with_scale=False, start_m=start, floor_m=resolution)
     distance, _ = plan.nearest(cells)
-    # the fitted cells moved little: the segments found for them serve the rigid fit too
     fitted_cells = similarity.apply(cells)
-    near = plan.candidates(fitted_cells)
-    fitted, _ = plan.measure(fitted_cells, near)
+    fitted, _ = plan.nearest(fitted_cells)
     clutter = fitted > clutter_m
     if clutter.all():
         msg = (
@@ -252,7 +250,7 @@ def evaluate_map(
             "the plan even after the best fit; the map and the plan do not overlap."
         )
         raise MetricError(msg, option="map")
-    rigid_d, _ = plan.measure(rigid.apply(cells), near)
+    rigid_d, _ = plan.nearest(rigid.apply(cells))
     axes = _grid_axes_rad(grid, placement) + similarity.rotation_rad
     per_axis = fit_axis_scales(
         fitted_cells[::step], plan, axes_rad=axes, start_m=clutter_m, floor_m=resolution

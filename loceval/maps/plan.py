@@ -10,7 +10,7 @@ Everything runs on arrays of points; nothing loops over cells or segments.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,11 +19,18 @@ from scipy.spatial import KDTree
 from loceval.core.arrays import FloatArray
 from loceval.errors import InputError
 
+if TYPE_CHECKING:
+    from loceval.maps.buckets import SegmentBuckets
+
 __all__ = ["PlanIndex", "sample_segments"]
 
 _MAX_SAMPLES: Final = 4_000_000
 _NEIGHBOURS: Final = 4
 _CHUNK: Final = 500_000
+_BUCKET_M: Final = 1.0
+"""The side of the lookup table's buckets (:mod:`loceval.maps.buckets`), metres."""
+_REACH_M: Final = 1.0
+"""Distances up to this are found through the lookup table; farther points use the tree."""
 
 
 def sample_segments(
@@ -59,6 +66,8 @@ class PlanIndex:
         tree: KD-tree over the samples.
         owner: (S,) the segment of each sample.
         frames: (K, 5) each segment's start x, y, unit direction x, y and length.
+        buckets: the lookup table of the segments near each square metre (None: a plan
+            too large for one; the tree answers every point).
     """
 
     segments_xy: FloatArray
@@ -66,6 +75,7 @@ class PlanIndex:
     tree: KDTree
     owner: NDArray[np.intp]
     frames: FloatArray
+    buckets: SegmentBuckets | None = None
 
     @classmethod
     def build(cls, segments_xy: FloatArray, *, spacing_m: float) -> PlanIndex:
@@ -91,7 +101,10 @@ class PlanIndex:
         ab = segments[:, 1] - segments[:, 0]
         length = np.linalg.norm(ab, axis=1)
         frames = np.column_stack([segments[:, 0], ab / length[:, None], length])
-        return cls(segments, spacing, KDTree(samples), owner, frames)
+        from loceval.maps.buckets import SegmentBuckets  # noqa: PLC0415  (it samples with us)
+
+        buckets = SegmentBuckets.build(segments, size_m=_BUCKET_M, reach_m=_REACH_M)
+        return cls(segments, spacing, KDTree(samples), owner, frames, buckets)
 
     @property
     def length_m(self) -> float:
@@ -147,10 +160,24 @@ class PlanIndex:
     def nearest(self, points_xy: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Return each point's distance to the plan and the nearest point on it.
 
+        Points within the lookup table's reach of a wall are measured against their
+        bucket's segments (exact); the others against their nearest samples' segments.
+
         Args:
             points_xy: (N, 2) points, metres.
 
         Returns:
             (N,) distances, metres, and (N, 2) the nearest plan points.
         """
-        return self.measure(points_xy, self.candidates(points_xy))
+        points = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+        if self.buckets is None:
+            return self.measure(points, self.candidates(points))
+        listed, ok = self.buckets.lookup(points)
+        distance, closest = self.measure(points, listed)
+        rest = np.flatnonzero(~ok | (distance > self.buckets.reach_m))
+        if len(rest):  # far from every wall, or off the table: the tree's candidates
+            far, far_closest = self.measure(points[rest], self.candidates(points[rest]))
+            better = ~ok[rest] | (far < distance[rest])
+            distance[rest[better]] = far[better]
+            closest[rest[better]] = far_closest[better]
+        return distance, closest
