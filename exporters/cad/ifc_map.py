@@ -22,26 +22,55 @@ Everything sits at the reference's median height, where the plan was cut.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Final
+from collections.abc import Sequence
+from typing import Final, Protocol
 
+import ifcopenshell
 import numpy as np
 
 from exporters.cad.dxf_map import placed_cells
 from exporters.cad.excursions import EXCURSION_RGB, placed_excursions
+from exporters.cad.placement import Placement
 from exporters.colours import map_bins
+from loceval.core.arrays import FloatArray
 
-if TYPE_CHECKING:
-    import ifcopenshell
-
-    from exporters.cad.ifc import IfcBuilder
-
-__all__ = ["EXCURSION_TYPE", "MAP_TYPES", "add_excursions", "add_map"]
+__all__ = ["EXCURSION_TYPE", "MAP_TYPES", "IfcBuilder", "add_excursions", "add_map"]
 
 MAP_TYPES: Final = {"plan": "map plan", "walls": "map walls"}
 """``ObjectType`` of the map's annotations."""
 EXCURSION_TYPE: Final = "excursion"
 """``ObjectType`` of a stretch outside the tracked room."""
 _PLAN_RGB: Final = (158, 158, 158)
+
+
+class IfcBuilder(Protocol):
+    """What these annotations need of :class:`exporters.cad.ifc.IfcBuilder`."""
+
+    f: ifcopenshell.file
+    placement: Placement
+    annotation_ctx: ifcopenshell.entity_instance
+
+    def point_list(self, points: FloatArray) -> ifcopenshell.entity_instance:
+        """An ``IfcCartesianPointList3D`` of (M, 3) file coordinates."""
+
+    def coords(self, model: FloatArray) -> FloatArray:
+        """Model coordinates -> the file's coordinates."""
+
+    def guid(self, key: str) -> str:
+        """A GlobalId stable for the evaluation and ``key``."""
+
+    def local_placement(self) -> ifcopenshell.entity_instance:
+        """A placement at the site's origin."""
+
+    def style(self, item: ifcopenshell.entity_instance, name: str, rgb: Sequence[int]) -> None:
+        """Colour a representation item."""
+
+    def pset(
+        self, target: ifcopenshell.entity_instance, name: str, values: dict[str, object]
+    ) -> None:
+        """Attach a property set."""
+
+
 _CLUTTER_RGB: Final = (194, 24, 91)
 
 
@@ -190,13 +219,13 @@ def _map_properties(figures: dict[str, object]) -> dict[str, object]:
     values["scale_error_pct"] = figures["scale_error_pct"]
     values["drift"] = figures["drift"]
     values["within"] = figures["within"]
+    axis_scales = figures["axis_scales"]
+    if isinstance(axis_scales, dict):
+        values.update({f"axis_{k}": v for k, v in axis_scales.items() if v is not None})
     fit = figures["fit"]
     if isinstance(fit, dict):
         for name, found in fit.items():
             if not isinstance(found, dict):
-                continue
-            if name == "axis_scales":
-                values.update({f"axis_{k}": v for k, v in found.items() if v is not None})
                 continue
             values[f"{name}_scale"] = found["scale"]
             values[f"{name}_rotation_deg"] = found["rotation_deg"]

@@ -91,7 +91,7 @@ class AxisScales:
         )
 
     def to_dict(self) -> dict[str, float | int | None]:
-        """Return the result document's ``map.fit.axis_scales``."""
+        """Return the result document's ``map.axis_scales``."""
         return {
             "scale_x": self.scale_x,
             "scale_y": self.scale_y,

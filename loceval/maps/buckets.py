@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from loceval.core.arrays import BoolArray, FloatArray
-from loceval.maps.plan import sample_segments
+from loceval.maps.samples import sample_segments
 
 __all__ = ["MAX_PER_BUCKET", "MAX_TABLE_ENTRIES", "SegmentBuckets"]
 

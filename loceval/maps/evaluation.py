@@ -38,7 +38,7 @@ from loceval.maps.grid import FREE, OCCUPIED, OccupancyGrid
 from loceval.maps.plan import PlanIndex, sample_segments
 
 if TYPE_CHECKING:
-    from loceval.maps.history import MapSnapshot
+    from loceval.maps.snapshot import MapSnapshot
 
 __all__ = ["MapEvaluation", "WallFigures", "evaluate_map"]
 
@@ -163,10 +163,9 @@ class MapEvaluation:
 
     def to_dict(self) -> dict[str, object]:
         """Return the result document's ``map`` object."""
-        fit: dict[str, object] = {}
+        fit = {}
         for name, (found, figures) in (("rigid", self.rigid), ("similarity", self.similarity)):
             fit[name] = {**found.to_dict(), **figures.to_dict(), "cells_fitted": found.kept}
-        fit["axis_scales"] = None if self.axis_scales is None else self.axis_scales.to_dict()
         return {
             "source": self.source,
             "resolution_m": self.resolution_m,
@@ -180,6 +179,7 @@ class MapEvaluation:
             "scale_error_pct": self.scale_error_pct,
             "drift": self.drift_sentence(),
             "fit": fit,
+            "axis_scales": None if self.axis_scales is None else self.axis_scales.to_dict(),
             "regions": [dict(r) for r in self.regions],
             "warnings": list(self.warnings),
             "history": [snapshot.to_dict() for snapshot in self.history],

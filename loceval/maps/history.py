@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Final
 
@@ -24,6 +24,7 @@ from loceval.errors import InputError, MetricError, ReaderError
 from loceval.maps.evaluation import MapEvaluation, evaluate_map
 from loceval.maps.grid import OccupancyGrid
 from loceval.maps.reading import iter_bag_maps, read_map, split_bag_source
+from loceval.maps.snapshot import MapSnapshot
 
 __all__ = ["MAX_MAP_MESSAGES", "MapSnapshot", "evaluate_map_source"]
 
@@ -32,87 +33,27 @@ MAX_MAP_MESSAGES: Final = 30
 _NS_PER_S: Final = 1_000_000_000
 
 
-@dataclass(frozen=True, slots=True)
-class MapSnapshot:
-    """The figures of one map message.
-
-    Attributes:
-        index: the message's position on its topic (0: the first).
-        stamp_ns: its header stamp.
-        t_s: seconds since the reference's first stamp (as ``errors.csv``), or None.
-        size_cells: (columns, rows).
-        wall_cells: wall cells (occupied with a free 4-neighbour).
-        placed_rmse_m: wall distance RMSE as placed.
-        rigid_rmse_m: after the best rigid fit.
-        similarity_rmse_m: after the best similarity fit.
-        similarity_scale: the similarity fit's scale.
-        scale_error_pct: how much longer (+) or shorter (-) the map is than the plan.
-        rigid_rotation_deg: the rigid fit's rotation (how far the map turned off).
-        rigid_translation_m: the rigid fit's (x, y) translation.
-        plan_coverage: share of the plan's walls seen (after the similarity fit).
-        clutter_cells: cells not in the plan.
-        note: why the message was not judged (then the figures are None).
-    """
-
-    index: int
-    stamp_ns: int | None
-    t_s: float | None
-    size_cells: tuple[int, int]
-    wall_cells: int | None = None
-    placed_rmse_m: float | None = None
-    rigid_rmse_m: float | None = None
-    similarity_rmse_m: float | None = None
-    similarity_scale: float | None = None
-    scale_error_pct: float | None = None
-    rigid_rotation_deg: float | None = None
-    rigid_translation_m: tuple[float, float] | None = None
-    plan_coverage: float | None = None
-    clutter_cells: int | None = None
-    note: str | None = None
-
-    @classmethod
-    def of(
-        cls, index: int, t0_ns: int | None, found: MapEvaluation, grid: OccupancyGrid
-    ) -> MapSnapshot:
-        """Return the figures of a judged message."""
-        rigid = found.rigid[0]
-        return cls(
-            index=index,
-            stamp_ns=grid.stamp_ns,
-            t_s=_seconds(grid.stamp_ns, t0_ns),
-            size_cells=(grid.shape[1], grid.shape[0]),
-            wall_cells=len(found.cells_xy),
-            placed_rmse_m=found.placed.rmse,
-            rigid_rmse_m=found.rigid[1].rmse,
-            similarity_rmse_m=found.similarity[1].rmse,
-            similarity_scale=found.similarity[0].scale,
-            scale_error_pct=found.scale_error_pct,
-            rigid_rotation_deg=math.degrees(rigid.rotation_rad),
-            rigid_translation_m=rigid.translation_m,
-            plan_coverage=found.similarity[1].plan_coverage,
-            clutter_cells=found.clutter_cells,
-        )
-
-    def to_dict(self) -> dict[str, object]:
-        """Return the record of the result document's ``map.history``."""
-        return {
-            "index": self.index,
-            "t_s": self.t_s,
-            "size_cells": list(self.size_cells),
-            "wall_cells": self.wall_cells,
-            "placed_rmse_m": self.placed_rmse_m,
-            "rigid_rmse_m": self.rigid_rmse_m,
-            "similarity_rmse_m": self.similarity_rmse_m,
-            "similarity_scale": self.similarity_scale,
-            "scale_error_pct": self.scale_error_pct,
-            "rigid_rotation_deg": self.rigid_rotation_deg,
-            "rigid_translation_m": (
-                None if self.rigid_translation_m is None else list(self.rigid_translation_m)
-            ),
-            "plan_coverage": self.plan_coverage,
-            "clutter_cells": self.clutter_cells,
-            "note": self.note,
-        }
+def _judged(
+    index: int, t0_ns: int | None, found: MapEvaluation, grid: OccupancyGrid
+) -> MapSnapshot:
+    """Return the figures of a judged message."""
+    rigid = found.rigid[0]
+    return MapSnapshot(
+        index=index,
+        stamp_ns=grid.stamp_ns,
+        t_s=_seconds(grid.stamp_ns, t0_ns),
+        size_cells=(grid.shape[1], grid.shape[0]),
+        wall_cells=len(found.cells_xy),
+        placed_rmse_m=found.placed.rmse,
+        rigid_rmse_m=found.rigid[1].rmse,
+        similarity_rmse_m=found.similarity[1].rmse,
+        similarity_scale=found.similarity[0].scale,
+        scale_error_pct=found.scale_error_pct,
+        rigid_rotation_deg=math.degrees(rigid.rotation_rad),
+        rigid_translation_m=rigid.translation_m,
+        plan_coverage=found.similarity[1].plan_coverage,
+        clutter_cells=found.clutter_cells,
+    )
 
 
 def _seconds(stamp_ns: int | None, t0_ns: int | None) -> float | None:
@@ -181,7 +122,7 @@ def evaluate_map_source(
         raise ReaderError(msg, option="map")
     index, total, grid = last
     found = judge(grid)
-    history.append(MapSnapshot.of(index, t0_ns, found, grid))
+    history.append(_judged(index, t0_ns, found, grid))
     note = None
     if total > len(history):
         note = (
@@ -208,4 +149,4 @@ def _snapshot(
             size_cells=(grid.shape[1], grid.shape[0]),
             note=str(err),
         )
-    return MapSnapshot.of(index, t0_ns, found, grid)
+    return _judged(index, t0_ns, found, grid)

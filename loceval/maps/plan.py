@@ -10,7 +10,7 @@ Everything runs on arrays of points; nothing loops over cells or segments.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final
+from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,9 +18,8 @@ from scipy.spatial import KDTree
 
 from loceval.core.arrays import FloatArray
 from loceval.errors import InputError
-
-if TYPE_CHECKING:
-    from loceval.maps.buckets import SegmentBuckets
+from loceval.maps.buckets import SegmentBuckets
+from loceval.maps.samples import sample_segments
 
 __all__ = ["PlanIndex", "sample_segments"]
 
@@ -31,29 +30,6 @@ _BUCKET_M: Final = 1.0
 """The side of the lookup table's buckets (:mod:`loceval.maps.buckets`), metres."""
 _REACH_M: Final = 1.0
 """Distances up to this are found through the lookup table; farther points use the tree."""
-
-
-def sample_segments(
-    segments_xy: FloatArray, spacing_m: float
-) -> tuple[FloatArray, NDArray[np.intp]]:
-    """Sample segments every ``spacing_m`` (both ends included).
-
-    Args:
-        segments_xy: (K, 2, 2) segment end points, metres.
-        spacing_m: the largest distance between neighbouring samples of a segment.
-
-    Returns:
-        (S, 2) samples and (S,) the index of each sample's segment.
-    """
-    a, b = segments_xy[:, 0], segments_xy[:, 1]
-    lengths = np.linalg.norm(b - a, axis=1)
-    counts = np.ceil(lengths / spacing_m).astype(np.intp) + 1
-    owner = np.repeat(np.arange(len(segments_xy)), counts)
-    first = np.cumsum(counts) - counts
-    step = np.arange(len(owner)) - np.repeat(first, counts)
-    t = step / np.maximum(np.repeat(counts, counts) - 1, 1)
-    samples: FloatArray = a[owner] + t[:, None] * (b - a)[owner]
-    return samples, owner
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -101,8 +77,6 @@ class PlanIndex:
         ab = segments[:, 1] - segments[:, 0]
         length = np.linalg.norm(ab, axis=1)
         frames = np.column_stack([segments[:, 0], ab / length[:, None], length])
-        from loceval.maps.buckets import SegmentBuckets  # noqa: PLC0415  (it samples with us)
-
         buckets = SegmentBuckets.build(segments, size_m=_BUCKET_M, reach_m=_REACH_M)
         return cls(segments, spacing, KDTree(samples), owner, frames, buckets)
 

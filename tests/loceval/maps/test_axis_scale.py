@@ -56,7 +56,7 @@ def test_a_map_stretched_per_axis_is_recovered() -> None:
     assert 0.0 < scales.sigma_y < 1e-3
     # the similarity fit's one scale lies between the two
     assert scales.scale_x < found.similarity[0].scale < scales.scale_y
-    doc = found.to_dict()["fit"]["axis_scales"]  # type: ignore[index]
+    doc = found.to_dict()["axis_scales"]  # type: ignore[index]
     assert doc["length_error_x_pct"] == scales.length_error_x_pct  # type: ignore[index]
     assert doc["axes_deg"] == pytest.approx(0.0, abs=1e-9)  # type: ignore[index]
 
@@ -87,4 +87,4 @@ def test_a_corridor_leaves_its_length_scale_unobservable() -> None:
     grid = draw_map(plan, Distortion(scale=0.99), resolution_m=0.05, rng=np.random.default_rng(6))
     found = evaluate_map(grid, plan, SimilarityTransform.identity())
     assert found.axis_scales is None
-    assert found.to_dict()["fit"]["axis_scales"] is None  # type: ignore[index]
+    assert found.to_dict()["axis_scales"] is None  # type: ignore[index]
