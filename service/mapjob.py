@@ -3,12 +3,13 @@
 Run by :func:`service.runner.run_job` after the trajectories are evaluated, the same way for
 the CLI (``--map SOURCE --building PLAN``) and the API (``options.map``): the plan is the
 building model cut at the reference's median height (:mod:`exporters.plots.underlay`,
-placed by the site transform), the map is placed by the chosen estimate's alignment.
+placed by the site transform), the map is placed by the chosen estimate's alignment; a bag
+topic's messages are judged one by one (:mod:`loceval.maps.history`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from loceval.errors import InputError
@@ -74,7 +75,7 @@ def measure_map(result: EvaluationResult, source: MapSource) -> MapEvaluation:
         InputError: no estimate of that name, an unreadable map or plan, no overlap.
     """
     from exporters.plots.underlay import floor_plan_segments  # noqa: PLC0415  (CAD)
-    from loceval.maps import evaluate_map, read_map  # noqa: PLC0415
+    from loceval.maps import evaluate_map_source  # noqa: PLC0415
 
     names = [e.name for e in result.estimates]
     chosen = result.estimates[0]
@@ -87,18 +88,18 @@ def measure_map(result: EvaluationResult, source: MapSource) -> MapEvaluation:
             )
             raise InputError(msg, option="map_estimate")
         chosen = found[0]
-    grid = read_map(source.source)
-    if source.display is not None:
-        grid = replace(grid, source=source.display)
     segments = floor_plan_segments(result.reference.positions_xyz[:, 2], source.plan)
     if segments is None or not len(segments):
         msg = "The building plan has no wall at the device's height; check the plan."
         raise InputError(msg, option="building")
-    return evaluate_map(
-        grid,
+    reference = result.reference.stamps_ns
+    return evaluate_map_source(
+        source.source,
         segments,
         chosen.alignment.transform,
         thresholds_m=result.config.thresholds_m,
         clutter_m=source.clutter_m,
         estimate=chosen.name,
+        t0_ns=int(reference[0]) if len(reference) else None,
+        display=source.display,
     )

@@ -21,6 +21,7 @@ from ezdxf import colors
 from ezdxf.document import Drawing
 from ezdxf.layouts.layout import Modelspace
 
+from exporters.cad.excursions import EXCURSION_LAYER, EXCURSION_RGB, placed_excursions
 from exporters.cad.placement import Placement
 from exporters.colours import map_bins
 from loceval.core.arrays import FloatArray
@@ -31,7 +32,6 @@ MAX_CAD_CELLS: Final = 20_000
 """Most wall cells drawn into a CAD file (one entity each)."""
 _PLAN_RGB: Final = (158, 158, 158)
 _CLUTTER_RGB: Final = (194, 24, 91)
-_EXCURSION_RGB: Final = (106, 27, 154)
 
 
 def placed_cells(placement: Placement) -> tuple[FloatArray, FloatArray, np.ndarray] | None:
@@ -77,25 +77,14 @@ def _layer(doc: Drawing, name: str, rgb: tuple[int, int, int], description: str)
 
 def add_excursion_layer(doc: Drawing, msp: Modelspace, placement: Placement, text_h: float) -> None:
     """Add ``excursions``: each estimate's path outside the tracked room and its drift label."""
-    result = placement.result
-    todo = [(e, x) for e in result.estimates for x in e.excursions]
-    if not todo:
+    placed = placed_excursions(placement)
+    if not placed:
         return
-    _layer(doc, "excursions", _EXCURSION_RGB, "loceval: estimate paths outside the tracked room")
-    for estimate, excursion in todo:  # a few stretches per run
-        stamps = estimate.estimate.stamps_ns + np.int64(estimate.association.offset_ns)
-        inside = (stamps >= excursion.start_ns) & (stamps <= excursion.end_ns)
-        xyz = estimate.alignment.transform.apply_positions(estimate.estimate.positions_xyz[inside])
-        if len(xyz) < 2:
-            continue
-        model = placement.to_model(xyz)
-        msp.add_polyline3d(model.tolist(), dxfattribs={"layer": "excursions"})
-        before = "-" if excursion.error_before_m is None else f"{excursion.error_before_m:.2f}"
-        after = "-" if excursion.error_after_m is None else f"{excursion.error_after_m:.2f}"
-        duration = (excursion.end_ns - excursion.start_ns) / 1e9
+    _layer(doc, EXCURSION_LAYER, EXCURSION_RGB, "loceval: estimate paths outside the tracked room")
+    for path, model in placed:  # a few stretches per run
+        msp.add_polyline3d(model.tolist(), dxfattribs={"layer": EXCURSION_LAYER})
         msp.add_text(
-            f"{estimate.name} excursion: {duration:.0f} s, {excursion.path_length_m:.0f} m, "
-            f"error {before} -> {after} m",
+            path.label,
             height=text_h,
-            dxfattribs={"layer": "excursions", "insert": tuple(model[0].tolist())},
+            dxfattribs={"layer": EXCURSION_LAYER, "insert": tuple(model[0].tolist())},
         )

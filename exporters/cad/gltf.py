@@ -8,7 +8,10 @@ Nodes, named from the trajectories (the scene from the evaluation's title):
   (``COLOR_0``, linear RGB; colour runs of one piece share a duplicated joint vertex, so
   the colour changes sharply, not in a blend);
 - ``<name> markers`` (estimates) and ``tracking loss``: empty nodes whose children sit at the
-  greatest errors and at each tracking loss, named by their labels.
+  greatest errors and at each tracking loss, named by their labels;
+- ``map walls`` (with a measured map): the wall cells as points coloured by their distance
+  to the plan; ``excursions``: one purple ``LINE_STRIP`` per stretch outside the tracked
+  room (:mod:`exporters.cad.excursions`), its label and figures in the node's extras.
 
 Conventions (glTF 2.0 §3.4): distances are metres and +Y is up, whatever the CAD units say
 (the DXF and 3DM files follow the units; glTF importers such as Rhino's and Blender's
@@ -42,6 +45,7 @@ import pygltflib
 from numpy.typing import NDArray
 
 from exporters.cad.building import read_building
+from exporters.cad.excursions import EXCURSION_LAYER, EXCURSION_RGB, placed_excursions
 from exporters.cad.gltf_scene import Z_UP_TO_Y_UP, GlbScene, linear_rgba, node_matrix
 from exporters.cad.placement import ATERun, Marker, Placement, place_evaluation
 from exporters.colours import map_bins
@@ -105,6 +109,7 @@ def export_glb(
     losses = [m for m in markers if m.kind == "gap"]
     scene.add_markers("tracking loss", losses, placement.base_point, per_metre)
     _add_map(scene, placement)
+    _add_excursions(scene, placement)
     plan_only = options.building is not None and options.building.suffix.lower() == ".dxf"
     if options.building is not None and not plan_only:
         building = read_building(options.building, units=placement.units, up=options.building_up)
@@ -143,6 +148,22 @@ def _add_map(scene: _SceneBuilder, placement: Placement) -> None:
         "clutter_color": list(_CLUTTER_RGB),
     }
     scene.add_points("map walls", local, palette[index], extras)
+
+
+def _add_excursions(scene: _SceneBuilder, placement: Placement) -> None:
+    """Add ``excursions``: a purple LINE_STRIP per path outside the tracked room, labelled."""
+    placed = placed_excursions(placement)
+    if not placed:
+        return
+    per_metre = placement.units.per_metre
+    strips = [((v - placement.base_point) / per_metre).astype(np.float32) for _, v in placed]
+    extras: dict[str, object] = {
+        "kind": "excursions",
+        "excursions": [  # in the order of the node's primitives
+            {"label": p.label, "estimate": p.estimate, **p.figures} for p, _ in placed
+        ],
+    }
+    scene.add_lines(EXCURSION_LAYER, strips, linear_rgba(EXCURSION_RGB), extras)
 
 
 def _ate_strips(

@@ -9,7 +9,10 @@ set ``Loceval_Path`` holds its kind, source, vertex counts, ATE/RPE statistics a
 the project's ``Loceval_Evaluation`` holds the file-level metadata. The greatest errors
 and the tracking losses are ``IfcAnnotation`` points (``ObjectType`` ``"greatest error"``
 or ``"tracking loss"``) whose name is their label; a greatest error also has the line to
-the reference pose its error is measured to.
+the reference pose its error is measured to. A measured map adds the plan's walls
+(``map plan``, with the map's figures in ``Loceval_Map``) and the wall cells as point
+clouds per distance bin (``map walls``); each stretch outside the tracked room is an
+``excursion`` curve (:mod:`exporters.cad.ifc_map`).
 
 Length units are the output units (``IfcSIUnit`` metre with prefix MILLI, CENTI or none).
 
@@ -45,6 +48,7 @@ import ifcopenshell.guid
 import numpy as np
 
 from exporters.cad.building import georeferenced_options
+from exporters.cad.ifc_map import add_excursions, add_map
 from exporters.cad.placement import Marker, PlacedPath, Placement, place_evaluation
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
@@ -149,7 +153,7 @@ def export_ifc(
     if placement is None or not same_site:
         placement = place_evaluation(result, options)
     try:
-        builder = _IfcBuilder(placement, geo)
+        builder = IfcBuilder(placement, geo)
         text = builder.build().to_string()  # type: ignore[no-untyped-call]
     except (RuntimeError, TypeError, ValueError) as err:
         msg = f"ifcopenshell could not write the IFC model ({err}); please report this."
@@ -157,7 +161,7 @@ def export_ifc(
     return builder.splice_point_lists(text).encode("utf-8")
 
 
-class _IfcBuilder:
+class IfcBuilder:
     """Builds the IFC entities of one placement.
 
     ifcopenshell spends about 80 us per coordinate serializing a point list (16 s for
@@ -251,12 +255,13 @@ class _IfcBuilder:
             RelatingObject=project,
             RelatedObjects=[site],
         )
-        self._pset(project, "Loceval_Evaluation", _evaluation_properties(placement))
+        self.pset(project, "Loceval_Evaluation", _evaluation_properties(placement))
         elements = []
         markers = placement.markers()
         for path in placement.paths:
             elements.append(self._path(path))
             elements += [self._marker(m, k) for k, m in enumerate(markers) if m.path == path.name]
+        elements += add_map(self) + add_excursions(self)
         f.create_entity(
             "IfcRelContainedInSpatialStructure",
             GlobalId=self.guid("site/contents"),
@@ -287,12 +292,14 @@ class _IfcBuilder:
             Scale=float(geo.site.scale) / self.placement.units.per_metre,
         )
 
-    def _local_placement(self) -> ifcopenshell.entity_instance:
+    def local_placement(self) -> ifcopenshell.entity_instance:
+        """Return a new ``IfcLocalPlacement`` at the site's origin (one per product)."""
         f = self.f
         axis = f.createIfcAxis2Placement3D(f.createIfcCartesianPoint((0.0, 0.0, 0.0)))
         return f.createIfcLocalPlacement(self.site_placement, axis)
 
-    def _style(self, item: ifcopenshell.entity_instance, name: str, rgb: Sequence[int]) -> None:
+    def style(self, item: ifcopenshell.entity_instance, name: str, rgb: Sequence[int]) -> None:
+        """Give a representation item a named curve colour (0-255 sRGB)."""
         f = self.f
         r, g, b = (c / 255.0 for c in rgb)
         colour = f.create_entity("IfcColourRgb", Name=name, Red=r, Green=g, Blue=b)
@@ -317,7 +324,7 @@ class _IfcBuilder:
             else:  # a lone pose between two tracking losses
                 items.append(f.createIfcCartesianPoint(tuple(points[0].tolist())))
         for item in items:
-            self._style(item, path.layer, path.color_rgb)
+            self.style(item, path.layer, path.color_rgb)
         curves_only = all(len(vertices[p]) >= 2 for p in pieces)
         representation = f.create_entity(
             "IfcShapeRepresentation",
@@ -332,11 +339,11 @@ class _IfcBuilder:
             Name=path.name,
             Description=f"loceval {path.kind.value}: {path.source}",
             ObjectType=TRAJECTORY_TYPE,
-            ObjectPlacement=self._local_placement(),
+            ObjectPlacement=self.local_placement(),
             Representation=f.createIfcProductDefinitionShape(None, None, [representation]),
         )
         properties = _path_properties(path, pieces=len(pieces))
-        self._pset(annotation, "Loceval_Path", properties)
+        self.pset(annotation, "Loceval_Path", properties)
         return annotation
 
     def _marker(self, marker: Marker, index: int) -> ifcopenshell.entity_instance:
@@ -349,7 +356,7 @@ class _IfcBuilder:
             items.append(f.createIfcPolyline(line))
         rgb = next(p.color_rgb for p in self.placement.paths if p.name == marker.path)
         for item in items:
-            self._style(item, f"{marker.path} markers", rgb)
+            self.style(item, f"{marker.path} markers", rgb)
         representation = f.create_entity(
             "IfcShapeRepresentation",
             ContextOfItems=self.annotation_ctx,
@@ -363,13 +370,14 @@ class _IfcBuilder:
             Name=marker.label[:255],
             Description=marker.path,
             ObjectType=MARKER_TYPES[marker.kind],
-            ObjectPlacement=self._local_placement(),
+            ObjectPlacement=self.local_placement(),
             Representation=f.createIfcProductDefinitionShape(None, None, [representation]),
         )
 
-    def _pset(
+    def pset(
         self, target: ifcopenshell.entity_instance, name: str, values: dict[str, object]
     ) -> None:
+        """Attach a property set ``name`` of ``values`` (None left out) to ``target``."""
         f = self.f
         properties = [
             f.create_entity("IfcPropertySingleValue", Name=key, NominalValue=self._value(value))

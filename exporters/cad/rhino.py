@@ -6,7 +6,10 @@ piece, so a tracking loss is a break, not a straight chord) with user strings (s
 poses, simplification deviation, ATE statistics); for estimates the same path cut into
 curves coloured by ATE bin (the report's colours) on the visible sub-layer
 ``...::<trajectory>::ATE`` and text dots at the greatest errors on ``...::markers``; and one
-text dot per tracking loss on ``loceval::<title>::tracking loss``. The model units are the
+text dot per tracking loss on ``loceval::<title>::tracking loss``. With a measured map,
+its wall cells are point clouds per distance bin on ``...::map walls``; each stretch
+outside the tracked room (:mod:`exporters.cad.excursions`) is a purple curve and a text
+dot with its label on ``loceval::<title>::excursions``. The model units are the
 output units; document user text carries the evaluation metadata and the ATE legend.
 
 Rhino stores doubles, so curves are in absolute model coordinates and drop onto the
@@ -32,6 +35,7 @@ import numpy as np
 import rhino3dm as _rhino3dm
 
 from exporters.cad.dxf_map import placed_cells
+from exporters.cad.excursions import EXCURSION_LAYER, EXCURSION_RGB, placed_excursions
 from exporters.cad.georef import set_earth_anchor
 from exporters.cad.jsondoc import finite_json
 from exporters.cad.placement import Marker, PlacedPath, Placement, layer_name, place_evaluation
@@ -242,7 +246,28 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
     if losses:
         _add_dots(model, losses, _add_layer(model, LOSS_LAYER, _LOSS_RGB, evaluation))
     _add_map(model, placement, evaluation)
+    _add_excursions(model, placement, evaluation)
     return model
+
+
+def _add_excursions(model: Any, placement: Placement, parent: int) -> None:  # noqa: ANN401
+    """Add ``excursions``: each path outside the tracked room, a curve and a labelled dot."""
+    placed = placed_excursions(placement)
+    if not placed:
+        return
+    layer = _add_layer(model, EXCURSION_LAYER, EXCURSION_RGB, parent)
+    for path, vertices in placed:  # a few stretches per run
+        attributes = rhino3dm.ObjectAttributes()
+        attributes.Name = path.label
+        attributes.LayerIndex = layer
+        attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromLayer
+        for key, value in {"estimate": path.estimate, **path.figures}.items():
+            attributes.SetUserString(f"loceval.{key}", str(value))
+        points = rhino3dm.Point3dList(len(vertices))
+        for x, y, z in vertices.tolist():  # rhino3dm takes points one by one
+            points.Add(x, y, z)
+        model.Objects.AddCurve(rhino3dm.PolylineCurve(points), attributes)
+        model.Objects.AddTextDot(path.label, rhino3dm.Point3d(*vertices[0].tolist()), attributes)
 
 
 def _add_map(model: Any, placement: Placement, parent: int) -> None:  # noqa: ANN401

@@ -33,9 +33,10 @@ if TYPE_CHECKING:
     from loceval.core.arrays import FloatArray
     from loceval.maps import MapEvaluation
 
-__all__ = ["MAP_FIGURE_KEY", "plot_map"]
+__all__ = ["MAP_FIGURE_KEY", "MAP_HISTORY_KEY", "plot_map", "plot_map_history"]
 
 MAP_FIGURE_KEY: Final = "map_plan"
+MAP_HISTORY_KEY: Final = "map_history"
 _CLUTTER: Final = "#c2185b"
 _PLAN_GREY: Final = "0.55"
 
@@ -91,6 +92,47 @@ def plot_map(
                 f"{found.estimate or 'the given transform'}'s alignment; right: after the best "
                 f"similarity fit (scale {fit['scale']:.4f}, {fit['rotation_deg']:+.2f}°: "
                 f"{found.drift_sentence()})."
+            ),
+        ),
+    )
+
+
+def plot_map_history(
+    result: EvaluationResult, *, formats: Sequence[ImageFormat] = ("svg",)
+) -> tuple[Plot, ...]:
+    """Return the map-over-time figure (none without two judged messages of a topic)."""
+    found = result.map
+    judged = [] if found is None else [s for s in found.history if s.placed_rmse_m is not None]
+    if found is None or len(judged) < 2:
+        return ()
+    timed = all(s.t_s is not None for s in judged)
+    x = np.array([s.t_s if timed else s.index for s in judged], dtype=np.float64)
+    fig = new_figure(3.2)
+    ax, scale_ax = fig.subplots(1, 2, sharex=True)
+    for label, key, style in (
+        ("as placed", "placed_rmse_m", "o-"),
+        ("rigid fit", "rigid_rmse_m", "s--"),
+        ("similarity fit", "similarity_rmse_m", "^:"),
+    ):
+        ax.plot(x, [getattr(s, key) for s in judged], style, markersize=3, label=label)
+    ax.set_ylabel("wall distance RMSE [m]")
+    ax.legend(fontsize=7)
+    scale_ax.plot(x, [s.scale_error_pct for s in judged], "o-", markersize=3, color="#6a1b9a")
+    scale_ax.axhline(0.0, color=_PLAN_GREY, linewidth=0.6)
+    scale_ax.set_ylabel("length error [%]")
+    for axis in (ax, scale_ax):
+        style_axes(axis)
+        axis.set_xlabel("t [s] since the reference's first stamp" if timed else "message")
+    return (
+        encode_plot(
+            fig,
+            formats,
+            key=MAP_HISTORY_KEY,
+            title="The map over time",
+            caption=(
+                f"Each of {len(judged)} map messages judged against the plan: the wall cells' "
+                "RMSE as placed and after the best rigid and similarity fits (left), and how "
+                "much longer (+) or shorter (-) than the plan the map is (right)."
             ),
         ),
     )

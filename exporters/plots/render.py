@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from exporters.plots.figure import DEFAULT_MAX_POINTS, ImageFormat, Plot
-from exporters.plots.mapplan import plot_map
+from exporters.plots.mapplan import plot_map, plot_map_history
 from exporters.plots.maps import is_3d, plot_ate_path, plot_overlay_xy, plot_side_views
 from exporters.plots.ranging import plot_ranging
 from exporters.plots.series import plot_ate_over_time, plot_error_cdf, plot_rpe_over_time
@@ -47,4 +47,5 @@ def render_plots(
         plots.append(plot_side_views(result, max_points=max_points, formats=formats))
     plots.extend(plot_ranging(result, max_points=max_points, formats=formats))
     plots.extend(plot_map(result, max_points=max_points, formats=formats))
+    plots.extend(plot_map_history(result, formats=formats))
     return tuple(plots)

@@ -11,7 +11,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from loceval.evaluation import EvaluationResult
-from loceval.maps import WallFigures
+from loceval.maps import MapSnapshot, WallFigures
+from loceval.maps.axis_scale import AxisScales
 
 __all__ = ["MapView", "build_map_view"]
 
@@ -30,6 +31,11 @@ class MapView:
             shares, coverage and the fit's transform.
         regions: the worst regions (tile centre, cells, RMSE).
         warnings: the map evaluation's warnings.
+        history: a bag topic's messages, one row each: time, size, wall cells, RMSE as
+            placed and after each fit, the similarity scale error, the rigid fit's
+            rotation, coverage, or why the message was not judged.
+        history_note: how the messages were chosen, when not all were judged.
+        axis_scales: the per-axis lengths in words, or None when unobservable.
     """
 
     source: str
@@ -40,6 +46,9 @@ class MapView:
     rows: tuple[Mapping[str, object], ...]
     regions: tuple[str, ...]
     warnings: tuple[str, ...]
+    history: tuple[Mapping[str, str], ...] = ()
+    history_note: str | None = None
+    axis_scales: str | None = None
 
 
 def _row(name: str, figures: WallFigures, transform: str) -> dict[str, object]:
@@ -87,4 +96,49 @@ def build_map_view(result: EvaluationResult) -> MapView | None:
         rows=tuple(rows),
         regions=regions,
         warnings=found.warnings,
+        history=tuple(_history_row(s) for s in found.history),
+        history_note=found.history_note,
+        axis_scales=_axis_sentence(found.axis_scales),
     )
+
+
+def _axis_sentence(scales: AxisScales | None) -> str | None:
+    """``"along its x axis (0° on the plan) 2.00 % long (± 0.001 %), along y 1.00 % short"``."""
+    if scales is None:
+        return None
+    parts = []
+    for axis, pct, scale, sigma in (
+        ("x", scales.length_error_x_pct, scales.scale_x, scales.sigma_x),
+        ("y", scales.length_error_y_pct, scales.scale_y, scales.sigma_y),
+    ):
+        if pct is None or scale is None:
+            parts.append(f"along {axis} not observable")
+            continue
+        spread = "" if sigma is None else f" (± {100.0 * sigma / scale**2:.3f} %)"
+        parts.append(f"along {axis} {abs(pct):.2f} % {'short' if pct < 0 else 'long'}{spread}")
+    axes = round(scales.axes_deg, 1) + 0.0  # never "-0.0"
+    return f"per axis of the map (its x axis at {axes:.1f}° on the plan): " + ", ".join(parts)
+
+
+def _number(value: float | None, spec: str) -> str:
+    return "–" if value is None else format(value, spec)
+
+
+def _history_row(snapshot: MapSnapshot) -> dict[str, str]:
+    """One message of a map topic, formatted."""
+    cols, rows = snapshot.size_cells
+    return {
+        "index": str(snapshot.index),
+        "t": _number(snapshot.t_s, ".1f"),
+        "size": f"{cols} x {rows}",
+        "wall_cells": "–" if snapshot.wall_cells is None else f"{snapshot.wall_cells:,}",
+        "placed": _number(snapshot.placed_rmse_m, ".3f"),
+        "rigid": _number(snapshot.rigid_rmse_m, ".3f"),
+        "similarity": _number(snapshot.similarity_rmse_m, ".3f"),
+        "scale": _number(snapshot.scale_error_pct, "+.2f"),
+        "rotation": _number(snapshot.rigid_rotation_deg, "+.2f"),
+        "coverage": _number(
+            None if snapshot.plan_coverage is None else snapshot.plan_coverage * 100, ".1f"
+        ),
+        "note": snapshot.note or "",
+    }

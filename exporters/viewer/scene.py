@@ -12,7 +12,9 @@ stamps in seconds since the reference's first stamp (as the report and ``errors.
 local vertices, the display indices after which a piece ends (a tracking loss of the path
 or of the reference, :func:`loceval.core.gaps.path_breaks`: drawn as a break, never a chord)
 and, for an estimate, its ATE at each vertex (rounded as in ``errors.csv``) with the
-reference position that error is measured to.
+reference position that error is measured to. ``excursions`` lists each stretch an
+estimate spent outside the tracked room (:mod:`exporters.cad.excursions`, the CAD files'
+selection): its path (every pose inside it), label and figures.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from typing import Final
 import numpy as np
 
 from exporters.cad.building import BuildingModel, georeferenced_options, read_underlay
+from exporters.cad.excursions import EXCURSION_RGB, excursion_paths
 from exporters.cad.site import check_options
 from exporters.colours import ATEBin, ate_bins, ate_edges_m, palette_color
 from exporters.options import ExportOptions, Units
@@ -104,7 +107,8 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
 
     Returns:
         The document ``viewer.js`` draws: ``paths`` (the reference first), ``bins`` (the
-        ATE colour scale), ``worst`` (labels), ``anchors``, ``building`` and the frame.
+        ATE colour scale), ``worst`` (labels), ``anchors``, ``excursions``, ``building``
+        and the frame.
 
     Raises:
         ExportOptionsError: bad units or site, or a building file that cannot be read.
@@ -179,9 +183,19 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
         "crs": options.crs,
         "t0_ns": str(t0_ns),
         "bins": bins_json(bins),
+        "excursion_color": hex_colour(EXCURSION_RGB),
         "paths": paths,
         "worst": worst,
         "anchors": _anchors(result, local, decimals),
+        "excursions": [
+            {
+                "path": x.index + 1,  # the reference is path 0
+                "label": display_text(x.label),
+                "xyz": flat_rounded(local(x.positions_xyz), decimals),
+                **x.figures,
+            }
+            for x in excursion_paths(result)
+        ],
         "building": building_scene(options, base_m, scale, decimals),
     }
 

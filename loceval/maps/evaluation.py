@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,9 +32,13 @@ from loceval.core.arrays import BoolArray, FloatArray
 from loceval.core.geometry import SimilarityTransform
 from loceval.core.quantiles import quantiles
 from loceval.errors import InputError, MetricError
+from loceval.maps.axis_scale import AxisScales, fit_axis_scales
 from loceval.maps.fit import Fit2D, fit_to_plan
 from loceval.maps.grid import FREE, OCCUPIED, OccupancyGrid
 from loceval.maps.plan import PlanIndex, sample_segments
+
+if TYPE_CHECKING:
+    from loceval.maps.snapshot import MapSnapshot
 
 __all__ = ["MapEvaluation", "WallFigures", "evaluate_map"]
 
@@ -117,6 +121,12 @@ class MapEvaluation:
         regions: the errors by region: tile centre, cells and RMSE as placed.
         plan_xy: (K, 2, 2) the plan's segments, evaluation frame (for the figures).
         warnings: what the user should know.
+        history: a bag topic's messages judged one by one, the last included
+            (:mod:`loceval.maps.history`); empty for a map file.
+        history_note: how the messages were chosen when the topic held more than were
+            judged.
+        axis_scales: the per-axis scales along the map's grid axes
+            (:mod:`loceval.maps.axis_scale`), None when unobservable.
     """
 
     source: str
@@ -137,6 +147,9 @@ class MapEvaluation:
     regions: tuple[dict[str, float | int], ...] = ()
     plan_xy: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     warnings: tuple[str, ...] = ()
+    history: tuple[MapSnapshot, ...] = ()
+    history_note: str | None = None
+    axis_scales: AxisScales | None = None
 
     @property
     def scale_error_pct(self) -> float:
@@ -166,8 +179,11 @@ class MapEvaluation:
             "scale_error_pct": self.scale_error_pct,
             "drift": self.drift_sentence(),
             "fit": fit,
+            "axis_scales": None if self.axis_scales is None else self.axis_scales.to_dict(),
             "regions": [dict(r) for r in self.regions],
             "warnings": list(self.warnings),
+            "history": [snapshot.to_dict() for snapshot in self.history],
+            "history_note": self.history_note,
         }
 
 
@@ -225,10 +241,8 @@ def evaluate_map(
     )
     rigid = fit_to_plan(cells[::step], plan, with_scale=False, start_m=start, floor_m=resolution)
     distance, _ = plan.nearest(cells)
-    # the fitted cells moved little: the segments found for them serve the rigid fit too
     fitted_cells = similarity.apply(cells)
-    near = plan.candidates(fitted_cells)
-    fitted, _ = plan.measure(fitted_cells, near)
+    fitted, _ = plan.nearest(fitted_cells)
     clutter = fitted > clutter_m
     if clutter.all():
         msg = (
@@ -236,7 +250,11 @@ def evaluate_map(
             "the plan even after the best fit; the map and the plan do not overlap."
         )
         raise MetricError(msg, option="map")
-    rigid_d, _ = plan.measure(rigid.apply(cells), near)
+    rigid_d, _ = plan.nearest(rigid.apply(cells))
+    axes = _grid_axes_rad(grid, placement) + similarity.rotation_rad
+    per_axis = fit_axis_scales(
+        fitted_cells[::step], plan, axes_rad=axes, start_m=clutter_m, floor_m=resolution
+    )
     tolerance = max(max(thresholds_m, default=0.15), 2.0 * resolution)
     coverage = _Coverage.of(grid, walls, rows[~clutter], cols[~clutter], tolerance)
     plan_samples, _ = sample_segments(plan.segments_xy, 2.0 * resolution)
@@ -267,7 +285,15 @@ def evaluate_map(
         regions=_regions(cells[~clutter], distance[~clutter]),
         plan_xy=plan.segments_xy,
         warnings=_warnings(similarity, int(clutter.sum()), len(cells)),
+        axis_scales=None if per_axis is None else per_axis.times(similarity.scale),
     )
+
+
+def _grid_axes_rad(grid: OccupancyGrid, placement: SimilarityTransform) -> float:
+    """The direction of the grid's x axis (its columns) in the evaluation frame."""
+    yaw = grid.origin_yaw_rad
+    axis = placement.rotation @ np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    return math.atan2(float(axis[1]), float(axis[0]))
 
 
 def _check_overlap(cells: FloatArray, segments: FloatArray, source: str) -> None:

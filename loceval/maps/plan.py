@@ -18,35 +18,18 @@ from scipy.spatial import KDTree
 
 from loceval.core.arrays import FloatArray
 from loceval.errors import InputError
+from loceval.maps.buckets import SegmentBuckets
+from loceval.maps.samples import sample_segments
 
 __all__ = ["PlanIndex", "sample_segments"]
 
 _MAX_SAMPLES: Final = 4_000_000
 _NEIGHBOURS: Final = 4
 _CHUNK: Final = 500_000
-
-
-def sample_segments(
-    segments_xy: FloatArray, spacing_m: float
-) -> tuple[FloatArray, NDArray[np.intp]]:
-    """Sample segments every ``spacing_m`` (both ends included).
-
-    Args:
-        segments_xy: (K, 2, 2) segment end points, metres.
-        spacing_m: the largest distance between neighbouring samples of a segment.
-
-    Returns:
-        (S, 2) samples and (S,) the index of each sample's segment.
-    """
-    a, b = segments_xy[:, 0], segments_xy[:, 1]
-    lengths = np.linalg.norm(b - a, axis=1)
-    counts = np.ceil(lengths / spacing_m).astype(np.intp) + 1
-    owner = np.repeat(np.arange(len(segments_xy)), counts)
-    first = np.cumsum(counts) - counts
-    step = np.arange(len(owner)) - np.repeat(first, counts)
-    t = step / np.maximum(np.repeat(counts, counts) - 1, 1)
-    samples: FloatArray = a[owner] + t[:, None] * (b - a)[owner]
-    return samples, owner
+_BUCKET_M: Final = 1.0
+"""The side of the lookup table's buckets (:mod:`loceval.maps.buckets`), metres."""
+_REACH_M: Final = 1.0
+"""Distances up to this are found through the lookup table; farther points use the tree."""
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -59,6 +42,8 @@ class PlanIndex:
         tree: KD-tree over the samples.
         owner: (S,) the segment of each sample.
         frames: (K, 5) each segment's start x, y, unit direction x, y and length.
+        buckets: the lookup table of the segments near each square metre (None: a plan
+            too large for one; the tree answers every point).
     """
 
     segments_xy: FloatArray
@@ -66,6 +51,7 @@ class PlanIndex:
     tree: KDTree
     owner: NDArray[np.intp]
     frames: FloatArray
+    buckets: SegmentBuckets | None = None
 
     @classmethod
     def build(cls, segments_xy: FloatArray, *, spacing_m: float) -> PlanIndex:
@@ -91,7 +77,8 @@ class PlanIndex:
         ab = segments[:, 1] - segments[:, 0]
         length = np.linalg.norm(ab, axis=1)
         frames = np.column_stack([segments[:, 0], ab / length[:, None], length])
-        return cls(segments, spacing, KDTree(samples), owner, frames)
+        buckets = SegmentBuckets.build(segments, size_m=_BUCKET_M, reach_m=_REACH_M)
+        return cls(segments, spacing, KDTree(samples), owner, frames, buckets)
 
     @property
     def length_m(self) -> float:
@@ -147,10 +134,24 @@ class PlanIndex:
     def nearest(self, points_xy: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Return each point's distance to the plan and the nearest point on it.
 
+        Points within the lookup table's reach of a wall are measured against their
+        bucket's segments (exact); the others against their nearest samples' segments.
+
         Args:
             points_xy: (N, 2) points, metres.
 
         Returns:
             (N,) distances, metres, and (N, 2) the nearest plan points.
         """
-        return self.measure(points_xy, self.candidates(points_xy))
+        points = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+        if self.buckets is None:
+            return self.measure(points, self.candidates(points))
+        listed, ok = self.buckets.lookup(points)
+        distance, closest = self.measure(points, listed)
+        rest = np.flatnonzero(~ok | (distance > self.buckets.reach_m))
+        if len(rest):  # far from every wall, or off the table: the tree's candidates
+            far, far_closest = self.measure(points[rest], self.candidates(points[rest]))
+            better = ~ok[rest] | (far < distance[rest])
+            distance[rest[better]] = far[better]
+            closest[rest[better]] = far_closest[better]
+        return distance, closest

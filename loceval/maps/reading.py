@@ -19,8 +19,9 @@ import math
 import re
 import warnings
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path, PurePosixPath
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,13 +29,19 @@ from numpy.typing import NDArray
 from loceval.errors import InputError, ReaderError
 from loceval.maps.grid import FREE, MAX_MAP_CELLS, OCCUPIED, UNKNOWN, OccupancyGrid, check_map_size
 
+if TYPE_CHECKING:
+    from loceval.readers.rosbag.grid import GridMessage
+
 __all__ = [
     "MAP_SUFFIXES",
     "grid_from_image",
+    "grid_from_message",
+    "iter_bag_maps",
     "read_bag_map",
     "read_map",
     "read_map_yaml",
     "read_map_zip",
+    "split_bag_source",
 ]
 
 MAP_SUFFIXES: Final = (".yaml", ".yml", ".zip")
@@ -60,9 +67,9 @@ def read_map(source: str) -> OccupancyGrid:
     path = Path(source)
     if path.suffix.lower() in MAP_SUFFIXES and path.is_file():
         return read_map_zip(path) if path.suffix.lower() == ".zip" else read_map_yaml(path)
-    bag, sep, topic = source.rpartition("@")
-    if sep and bag and topic:
-        return read_bag_map(Path(bag), topic)
+    in_bag = split_bag_source(source)
+    if in_bag is not None:
+        return read_bag_map(*in_bag)
     if not path.exists():
         msg = f"The map {source!r} does not exist; give map.yaml, a zip of it or BAG@TOPIC."
         raise InputError(msg, option="map")
@@ -86,7 +93,37 @@ def read_bag_map(path: Path, topic: str) -> OccupancyGrid:
     """
     from loceval.readers.rosbag.grid import read_grid_topic  # noqa: PLC0415  (rosbags)
 
-    found = read_grid_topic(path, topic)
+    return grid_from_message(read_grid_topic(path, topic))
+
+
+def iter_bag_maps(
+    path: Path, topic: str, *, limit: int
+) -> Iterator[tuple[int, int, OccupancyGrid]]:
+    """Yield each ``nav_msgs/msg/OccupancyGrid`` of a bag topic as a grid, in receive order.
+
+    At most ``limit`` messages, evenly spread, the last always among them
+    (:func:`loceval.readers.rosbag.grid.kept_indices`); one grid is built at a time.
+
+    Yields:
+        ``(index, total, grid)``: the message's position among the topic's ``total``.
+
+    Raises:
+        ReaderError: no such topic, no message, data that do not match the declared size.
+        InputError: a declared size over the limit.
+    """
+    from loceval.readers.rosbag.grid import iter_grid_topic  # noqa: PLC0415  (rosbags)
+
+    for index, total, found in iter_grid_topic(path, topic, limit=limit):
+        yield index, total, grid_from_message(found)
+
+
+def grid_from_message(found: GridMessage) -> OccupancyGrid:
+    """Turn a ``nav_msgs/msg/OccupancyGrid`` as read into a grid (size checked first).
+
+    Raises:
+        ReaderError: data that do not match the declared size.
+        InputError: the declared size is over the limit.
+    """
     check_map_size(found.width, found.height, where=found.where)
     if found.values.size != found.width * found.height:
         msg = (
@@ -106,6 +143,15 @@ def read_bag_map(path: Path, topic: str) -> OccupancyGrid:
         source=found.where,
         stamp_ns=found.stamp_ns,
     )
+
+
+def split_bag_source(source: str) -> tuple[Path, str] | None:
+    """Return ``(bag, topic)`` of a ``BAG@TOPIC`` source that is no map file, else None."""
+    path = Path(source)
+    if path.suffix.lower() in MAP_SUFFIXES and path.is_file():
+        return None
+    bag, sep, topic = source.rpartition("@")
+    return (Path(bag), topic) if sep and bag and topic else None
 
 
 def read_map_yaml(path: Path) -> OccupancyGrid:

@@ -138,6 +138,7 @@
     drawBuilding();
     const layers = paths.map(drawPath);
     const anchorLabels = drawAnchors().concat(drawControls());
+    const excursions = drawExcursions();
     if (ellipses.length) {
       const box = el("input", { type: "checkbox", "data-action": "uncertainty" });
       box.addEventListener("change", () => showUncertainty(box.checked));
@@ -262,6 +263,37 @@
       lines.name = "uncertainty";
       ellipses.push(lines);
       return lines;
+    }
+
+    // stretches outside the tracked room (scene.py's excursions, the CAD files' selection):
+    // a dashed purple line over the estimate's path and its label, with their own box
+    function drawExcursions() {
+      const list = scene.excursions || [];
+      if (!list.length) return [];
+      const material = new THREE.LineDashedMaterial({
+        color: new THREE.Color(scene.excursion_color), dashSize: radius / 60, gapSize: radius / 120,
+        depthTest: false, transparent: true,
+      });
+      const out = list.map((x) => {
+        const g = new THREE.BufferGeometry();
+        g.setAttribute("position", new THREE.Float32BufferAttribute(x.xyz, 3));
+        const line = new THREE.Line(g, material);
+        line.computeLineDistances();
+        line.renderOrder = 35;
+        line.name = "excursion";
+        world.add(line);
+        const node = overlay.appendChild(el("div", { className: "lv-label lv-excursion", text: x.label }));
+        node.style.color = scene.excursion_color;
+        return { path: x.path, xyz: x.xyz, line, node, on: true };
+      });
+      const box = el("input", { type: "checkbox", checked: "", "data-action": "excursions" });
+      box.addEventListener("change", () => {
+        for (const x of out) x.on = box.checked;
+        requestRender();
+      });
+      toggles.append(el("label", { title: "Stretches where the reference was lost while the estimate went on" }, box,
+        el("span", { className: "lv-swatch", style: `background:${scene.excursion_color}` }), "Outside the tracked room"));
+      return out;
     }
 
     function makeMarker(color, order) {
@@ -594,6 +626,7 @@
       if (r.width < 2 || r.height < 2) return; // hidden (a closed section): drawn when shown
       renderer.setSize(r.width, r.height, false);
       updateCamera();
+      for (const x of excursions) x.line.visible = x.on && layers[x.path].visible;
       renderer.render(world, camera);
       for (const w of worstLabels) {
         const xyz = paths[w.path].xyz;
@@ -601,6 +634,10 @@
         place(w.node, xyz[3 * w.index], xyz[3 * w.index + 1], xyz[3 * w.index + 2]);
       }
       for (const a of anchorLabels) place(a.node, a.xyz[0], a.xyz[1], a.xyz[2]);
+      for (const x of excursions) {
+        x.node.hidden = !x.line.visible;
+        place(x.node, x.xyz[0], x.xyz[1], x.xyz[2]);
+      }
       for (const { k, j } of now.estimates) {
         const p = paths[k];
         place(layers[k].label, p.xyz[3 * j], p.xyz[3 * j + 1], p.xyz[3 * j + 2]);

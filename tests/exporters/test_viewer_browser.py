@@ -267,6 +267,37 @@ def nav2(public_data: Path) -> EvaluationResult:
 
 
 @pytest.mark.public_data
+def test_excursions_are_drawn_and_labelled(browser: Any, tmp_path: Path) -> None:
+    """A run that leaves the tracked room: its stretch outside is a purple line with its label.
+
+    The label is shown at the first vertex outside, the line's colour is on the canvas only
+    while the excursions' box is ticked, and unticking hides the label too.
+    """
+    from tests.loceval.test_excursions import _run
+
+    reference, estimate, _ = _run()
+    result = evaluate(reference, [estimate], EvaluationConfig(no_ci=True))
+    path = tmp_path / "viewer.html"
+    path.write_bytes(export_viewer_html(result, ExportOptions(title="excursion")))
+    viewer = open_viewer(browser, path)
+    (shown,) = viewer.scene["excursions"]
+    label = viewer.page.locator(f"{ROOT} .lv-excursion")
+    assert label.inner_text() == shown["label"]
+    assert label.is_visible()
+    purple = hex_rgb(viewer.scene["excursion_color"])
+
+    def purple_pixels() -> int:
+        pixels = viewer.canvas_pixels().astype(int)
+        return int((np.abs(pixels - purple).max(axis=2) <= 3).sum())
+
+    viewer.shoot("viewer_excursion.png", tmp_path)
+    assert purple_pixels() > 50  # a dashed line of 45 m across most of the view
+    viewer.page.locator(f"{ROOT} input[data-action=excursions]").uncheck()
+    assert purple_pixels() == 0
+    assert not label.is_visible()
+    viewer.assert_closed()
+
+
 def test_fr2_desk_viewer(browser: Any, fr2: EvaluationResult, tmp_path: Path) -> None:
     """fr2_desk: drawn where the data puts it; timeline and click give errors.csv's figures."""
     path = tmp_path / "viewer.html"

@@ -1,18 +1,21 @@
-"""Occupancy grid maps from a bag topic of ``nav_msgs/msg/OccupancyGrid`` (the last message).
+"""Occupancy grid maps from a bag topic of ``nav_msgs/msg/OccupancyGrid``: the last, or each.
 
 A SLAM system publishes its map again and again as it grows; the last message is the map
-it ended with. The message is returned as read; :mod:`loceval.maps.reading` checks its size
-and turns its values into cell states.
+it ended with; :func:`iter_grid_topic` yields each (at most a limit, evenly spread) for
+the map's figures over time. Messages are returned as read; :mod:`loceval.maps.reading`
+checks their size and turns their values into cell states.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final, Protocol, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 from loceval.core.arrays import FloatArray
 from loceval.errors import ReaderError
@@ -25,7 +28,7 @@ from loceval.readers.rosbag.bagfile import (
 )
 from loceval.readers.rosbag.messages import NS, HeaderLike, QuaternionLike
 
-__all__ = ["GRID_MSGTYPE", "GridMessage", "read_grid_topic"]
+__all__ = ["GRID_MSGTYPE", "GridMessage", "iter_grid_topic", "kept_indices", "read_grid_topic"]
 
 GRID_MSGTYPE: Final = "nav_msgs/msg/OccupancyGrid"
 
@@ -88,6 +91,47 @@ def read_grid_topic(path: Path, topic: str) -> GridMessage:
     Raises:
         ReaderError: no such topic, another type or no message.
     """
+    last = None
+    for _, _, message in iter_grid_topic(path, topic, limit=1):
+        last = message
+    if last is None:  # pragma: no cover  (iter_grid_topic raises on an empty topic)
+        msg = f"{path.name}@{topic}: the topic holds no map message."
+        raise ReaderError(msg, option="map")
+    return last
+
+
+def kept_indices(total: int, limit: int) -> NDArray[np.intp]:
+    """Return which of ``total`` messages are read: all, or ``limit`` evenly spread.
+
+    The last message is always among them (it is the map the run ended with); with
+    ``limit`` 1 it is the only one.
+    """
+    if total <= limit:
+        return np.arange(total, dtype=np.intp)
+    if limit <= 1:
+        return np.array([total - 1], dtype=np.intp)
+    return np.unique(np.rint(np.linspace(0, total - 1, limit)).astype(np.intp))
+
+
+def iter_grid_topic(
+    path: Path, topic: str, *, limit: int
+) -> Iterator[tuple[int, int, GridMessage]]:
+    """Yield the ``nav_msgs/msg/OccupancyGrid`` messages of a topic in receive order.
+
+    Only the messages :func:`kept_indices` keeps are deserialized (one at a time: a
+    caller that drops each before the next holds one map in memory).
+
+    Args:
+        path: a bag (file, folder or zip, as for trajectories).
+        topic: the map's topic (a ROS 1 topic with or without its leading slash).
+        limit: the most messages yielded; more are subsampled evenly, the last kept.
+
+    Yields:
+        ``(index, total, message)``: the message's position among the topic's ``total``.
+
+    Raises:
+        ReaderError: no such topic, another type or no message.
+    """
     with open_bag(path) as bag:
         topics = bag.reader.topics
         names = [t for t in topics if t == topic or t.lstrip("/") == topic.lstrip("/")]
@@ -110,15 +154,19 @@ def read_grid_topic(path: Path, topic: str) -> GridMessage:
                 f"{GRID_MSGTYPE}; name the map's topic."
             )
             raise ReaderError(msg, option="map")
-        last: tuple[int, bytes, str] | None = None
-        for conn, receive_ns, raw in raw_messages(bag, conns):
-            if last is None or receive_ns >= last[0]:
-                last = (receive_ns, raw, conn.msgtype)
-        if last is None:
-            msg = f"{bag.label}@{names[0]}: the topic holds no map message."
-            raise ReaderError(msg, option="map")
         where = f"{bag.label}@{names[0]}"
-        message = cast("_GridLike", deserialize(bag, last[1], last[2]))
+        total = sum(c.msgcount for c in conns)
+        if total == 0:
+            msg = f"{where}: the topic holds no map message."
+            raise ReaderError(msg, option="map")
+        keep = set(kept_indices(total, limit).tolist())
+        for index, (conn, _, raw) in enumerate(raw_messages(bag, conns)):  # one per message
+            if index in keep:
+                message = cast("_GridLike", deserialize(bag, raw, conn.msgtype))
+                yield index, total, _grid_message(message, where)
+
+
+def _grid_message(message: _GridLike, where: str) -> GridMessage:
     info = message.info
     q = info.origin.orientation
     yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
