@@ -35,6 +35,7 @@ from exporters.plots.figure import (
 from loceval.core.arrays import BoolArray, FloatArray
 from loceval.evaluation import EvaluationConfig, EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries
+from loceval.trajectory import Trajectory
 
 __all__ = [
     "describe_rpe_step",
@@ -188,8 +189,19 @@ def _time_plot(
         style_axes(ax)
         if r == 0:
             legend_above(fig, ax)
-    axes[-1].set_xlabel("time since the start of the reference [s]")
+    axes[-1].set_xlabel(time_axis_label(result.reference))
     return fig
+
+
+def time_axis_label(reference: Trajectory) -> str:
+    """Return the x label of a plot over time: seconds, or pose numbers without times.
+
+    A reference without times (a KITTI file without its times file) is stamped 0, 1, 2 s
+    by its pose numbers, so its axis counts poses, not seconds.
+    """
+    if reference.indexed:
+        return "pose number since the start of the reference (the reference has no times)"
+    return "time since the start of the reference [s]"
 
 
 def _time_plot_notes(
