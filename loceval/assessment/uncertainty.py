@@ -48,6 +48,7 @@ __all__ = [
     "ToleranceOutcome",
     "ToleranceVerdict",
     "block_length",
+    "check_tolerance",
     "format_length_m",
     "integrated_autocorrelation_time",
     "interval_stats",
@@ -505,6 +506,20 @@ class ToleranceVerdict:
         }
 
 
+def check_tolerance(distance_m: float, share: float) -> None:
+    """Check a tolerance: positive metres, and a share in (0, 1] (the one check of both).
+
+    Raises:
+        InputError: either is out of range; the error carries the option ``tolerance``.
+    """
+    if not (math.isfinite(distance_m) and distance_m > 0):
+        msg = f"The tolerance distance must be positive metres, got {distance_m!r}."
+        raise InputError(msg, option="tolerance")
+    if not (0.0 < share <= 1.0):
+        msg = f"The tolerance share must be in (0, 100] percent, got {share * 100!r}."
+        raise InputError(msg, option="tolerance")
+
+
 def tolerance_verdict(
     values: FloatArray,
     *,
@@ -528,12 +543,7 @@ def tolerance_verdict(
     Raises:
         InputError: a distance or share out of range, or too few errors.
     """
-    if not (math.isfinite(distance_m) and distance_m > 0):
-        msg = f"The tolerance distance must be positive metres, got {distance_m!r}."
-        raise InputError(msg, option="tolerance")
-    if not (0.0 < required_share <= 1.0):
-        msg = f"The tolerance share must be in (0, 100] percent, got {required_share * 100!r}."
-        raise InputError(msg, option="tolerance")
+    check_tolerance(distance_m, required_share)
     x = _check_series(values, "tolerance verdict")
     if intervals is None or distance_m not in intervals.within_ci95:
         intervals = interval_stats(x, resamples=resamples, seed=seed, thresholds_m=[distance_m])

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from loceval.assessment.uncertainty import check_tolerance
 from loceval.core.arrays import BoolArray
 from loceval.errors import InputError
 from loceval.metrics.pose_errors import ErrorSeries, share_within
@@ -32,13 +33,8 @@ class Tolerance:
     share: float
 
     def __post_init__(self) -> None:
-        """Check the values."""
-        if not (np.isfinite(self.distance_m) and self.distance_m > 0):
-            msg = f"The tolerance distance must be positive metres, got {self.distance_m!r}."
-            raise InputError(msg, option="tolerance")
-        if not (0.0 < self.share <= 1.0):
-            msg = f"The tolerance share must be in (0, 100] percent, got {self.share * 100!r}."
-            raise InputError(msg, option="tolerance")
+        """Check the values (:func:`~loceval.assessment.uncertainty.check_tolerance`)."""
+        check_tolerance(self.distance_m, self.share)
 
     @classmethod
     def parse(cls, text: str) -> Tolerance:
