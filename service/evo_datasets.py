@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 from loceval.errors import InputError, ReaderError
 from loceval.readers.evo_result import ResultZip, is_result_zip, read_result_zip
 from service.db import Dataset
+from service.errors import is_storage_full
 
 if TYPE_CHECKING:
     from service.runtime import Runtime
@@ -79,6 +80,8 @@ def read_evo_dataset(runtime: Runtime, dataset: Dataset) -> ResultZip:
             dataset.storage_path, filename=dataset.filename, sha256=dataset.sha256
         )
     except OSError as err:
+        if is_storage_full(err):  # the cache has no room: 507, not a broken upload
+            raise
         msg = (
             f"The evo result {dataset.name!r} cannot be read from the store ({err.strerror}); "
             "upload it again."

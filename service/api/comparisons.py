@@ -14,9 +14,13 @@ __all__ = ["router"]
 router = APIRouter(prefix="/comparisons", tags=["comparisons"])
 
 
-@router.post("", response_model=ComparisonPublic, responses=problems(404, 409))
+@router.post("", response_model=ComparisonPublic, responses=problems(404, 409, 507))
 def create_comparison(
     body: ComparisonCreate, runtime: RuntimeDep, project_id: ProjectDep
 ) -> ComparisonPublic:
-    """Compare estimates of evaluations and uploaded evo result zips on one RMSE, pair by pair."""
+    """Compare estimates of evaluations and uploaded evo result zips on one RMSE, pair by pair.
+
+    Nothing is stored, but an evo zip in object storage is first copied into this machine's
+    read cache: with its disk full the answer is 507.
+    """
     return comparisons.compare_items(runtime, project_id, body)
