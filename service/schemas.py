@@ -128,7 +128,9 @@ def _field(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any b
     if spec.kind is OptionKind.NAMES:
         extra["min_length"] = spec.min_length
     if spec.pattern is not None:
-        extra["pattern"] = spec.pattern
+        # Declared, not checked here: the service checks it after the option's parser
+        # (loceval.options.check_pattern), so a bad value gets the parser's message.
+        extra["json_schema_extra"] = {"pattern": spec.pattern}
     if spec.example is not None:
         extra["examples"] = [spec.example]
     default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
