@@ -131,9 +131,8 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "the maximum gap",
         "max-gap",
         "S",
-        minimum=0.0,
+        minimum=1e-9,  # 1 ns, the resolution of stamps
         maximum=1e6,
-        exclusive_minimum=True,
     ),
     OptionSpec(
         "time_offset_s",
