@@ -19,7 +19,7 @@ from pydantic import (
 from pydantic.json_schema import JsonSchemaValue
 from pydantic_core import PydanticCustomError, core_schema
 
-__all__ = ["NO_NUL", "PRINTABLE", "Declared", "Id", "Printable", "Strict"]
+__all__ = ["NO_NUL", "PRINTABLE", "Declared", "Id", "Printable", "Strict", "strict_schema"]
 
 NO_NUL: Final = r"^[^\x00]*$"
 """The pattern of a text that holds no NUL character (the OpenAPI document says so)."""
@@ -56,7 +56,11 @@ def _declare_no_nul(schema: dict[str, Any]) -> None:
                     _declare_no_nul(item)
 
 
-def _strict_schema(schema: dict[str, Any], _cls: type[BaseModel]) -> None:
+def strict_schema(schema: dict[str, Any], _cls: type[BaseModel] | None = None) -> None:
+    """Declare the NUL-free pattern on every text property of a model's JSON schema.
+
+    The ``json_schema_extra`` of :class:`Strict`; a subclass that has its own calls this.
+    """
     for prop in schema.get("properties", {}).values():
         _declare_no_nul(prop)
 
@@ -70,7 +74,7 @@ class Strict(BaseModel):
     stricter one), while the check stays here, so its message names the NUL.
     """
 
-    model_config = ConfigDict(extra="forbid", json_schema_extra=_strict_schema)
+    model_config = ConfigDict(extra="forbid", json_schema_extra=strict_schema)
 
     @field_validator("*", mode="after")
     @classmethod

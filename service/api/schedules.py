@@ -37,7 +37,7 @@ router = APIRouter(prefix="/schedules", tags=["schedules"])
     "",
     status_code=status.HTTP_201_CREATED,
     response_model=ScheduleWithSecret,
-    responses=problems(507),
+    responses=problems(404, 507),
 )
 def create_schedule(
     body: ScheduleCreate, response: Response, runtime: RuntimeDep, project_id: ProjectDep
