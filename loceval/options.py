@@ -1,22 +1,19 @@
 """The one table of evaluation options: key, kind, default, bounds, choices and help of each.
 
-Every front door is built from :data:`OPTIONS`: the CLI's ``loceval evaluate`` flags, the
-HTTP API's ``EvaluationOptions`` schema, and the defaults and checks of
-:class:`~loceval.evaluation.EvaluationConfig`. A key (``max_dt_s``) is what the API and the
-options document call the option; ``flag`` (``--max-dt``, from ``cli_name``) is the CLI's
-name for it and ``words`` ("the maximum time difference") is how messages name it without
-naming a front door. Errors about an option carry its key (``InputError(msg, option="max_dt_s")``).
-
-This module is pure Python (no numpy), so the CLI can build its parser without the
-numeric stack; the enums of the choices live here and are re-exported where they are used.
+Every front door is built from :data:`OPTIONS`: the CLI's ``loceval evaluate`` flags, the HTTP
+API's ``EvaluationOptions`` schema, the defaults and checks of ``EvaluationConfig``. A key
+(``max_dt_s``) is what the API and the options document call the option; ``flag`` (``--max-dt``,
+from ``cli_name``) is the CLI's name for it and ``words`` ("the maximum time difference") is how
+messages name it without naming a front door. Errors about an option carry its key
+(``InputError(msg, option="max_dt_s")``). Pure Python: the CLI's parser needs no numpy.
 """
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping
 from typing import Final
 
+from loceval import optionpatterns as grammar
 from loceval.errors import InputError
 from loceval.optionspec import (
     AlignMethod,
@@ -44,7 +41,6 @@ __all__ = [
     "Units",
     "UpAxis",
     "check_option",
-    "check_pattern",
     "choice_default",
     "number_default",
     "option",
@@ -56,50 +52,7 @@ DEFAULT_THRESHOLDS_M: Final[tuple[float, ...]] = (0.05, 0.10, 0.15)
 AUTO: Final = "auto"
 """The value of an ``auto`` option that has the data decide."""
 
-_MAX_S: Final = 1e9
-"""Largest span of seconds an option takes (about 31 years; more is a mistake)."""
-
-_SEP: Final = "[ ,]"
-"""What separates the numbers of a text option: spaces or commas (the parsers' rule)."""
-
-
-def _decimal_at_most(integer_digits: int, maximum: str) -> str:
-    """Return a pattern of a signed plain decimal whose magnitude is at most ``maximum``.
-
-    ``integer_digits`` digits before the point stay below ``maximum``, which is then
-    allowed as itself (``1000``, ``1000.000``). No exponent: a pattern cannot bound it.
-    """
-    return rf"[+\-]?0*([0-9]{{1,{integer_digits}}}(\.[0-9]*)?|\.[0-9]+|{maximum}(\.0*)?)"
-
-
-_ANY_DECIMAL: Final = r"[+\-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)"
-_POSITIVE: Final = r"\+?([0-9]*[1-9][0-9]*(\.[0-9]*)?|[0-9]*\.[0-9]*[1-9][0-9]*)"
-"""A plain decimal above zero (at least one digit that is not 0)."""
-_PERCENT: Final = r"\+?0*([1-9][0-9]?(\.[0-9]*)?|\.[0-9]*[1-9][0-9]*|100(\.0*)?)"
-"""A plain decimal above 0 and at most 100."""
-_OFFSET_M: Final = _decimal_at_most(3, "1000")  # MAX_OFFSET_M
-_COORDINATE_M: Final = _decimal_at_most(9, "1000000000")  # MAX_COORDINATE_M
-_YAW_DEG: Final = r"[+\-]?0*(([0-9]{1,2}|[12][0-9]{2}|3[0-5][0-9])(\.[0-9]*)?|\.[0-9]+|360(\.0*)?)"
-
-
-def _numbers(*items: str) -> str:
-    """Return the pattern of numbers separated by spaces or commas (leading, trailing too)."""
-    return f"{_SEP}*" + f"{_SEP}+".join(f"({item})" for item in items) + f"{_SEP}*"
-
-
-_XYZ: Final = _numbers(_OFFSET_M, _OFFSET_M, _OFFSET_M)
-_OFFSET_PATTERN: Final = (
-    f"^({_numbers(_OFFSET_M, _OFFSET_M, _OFFSET_M)}"
-    f"|{_numbers(_OFFSET_M, _OFFSET_M, _OFFSET_M, *[_ANY_DECIMAL] * 4)})?$"
-)
-_SITE_PATTERN: Final = (
-    f"^({_numbers(*[_COORDINATE_M] * 3)}|{_numbers(*[_COORDINATE_M] * 3, _YAW_DEG)})?$"
-)
-_TAG_OFFSET_PATTERN: Final = f"^( *|{_XYZ})$"
-_TOLERANCE_PATTERN: Final = f"^ *({_POSITIVE}) *m? *(@ *({_PERCENT}) *%?)? *$"
-_SECONDS: Final = r"0*([1-9][0-9]{0,8}(\.[0-9]*)?|0?\.[0-9]*[1-9][0-9]*|1000000000(\.0*)?)"
-"""A plain decimal of seconds above 0 and at most MAX_SPAN_S (1e9)."""
-_ALIGN_FIRST_PATTERN: Final = rf"^( *(0*[1-9][0-9]*|{_SECONDS} *s) *)?$"
+_MAX_S: Final = 1e9  # the largest span of seconds an option takes (31 years; more is a mistake)
 
 OPTIONS: Final[tuple[OptionSpec, ...]] = (
     OptionSpec(
@@ -174,7 +127,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "align-first",
         "N|Ns",
         max_length=32,
-        pattern=_ALIGN_FIRST_PATTERN,
+        pattern=grammar.ALIGN_FIRST_PATTERN,
     ),
     OptionSpec(
         "calibrate_at_s",
@@ -196,8 +149,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "offset",
         '"x y z qx qy qz qw"',
         max_length=300,
-        pattern=_OFFSET_PATTERN,
-        example="0 0 0.1 0 0 0 1",
+        pattern=grammar.OFFSET_PATTERN,
     ),
     OptionSpec(
         "device",
@@ -261,7 +213,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "tolerance",
         "M@PCT",
         max_length=40,
-        pattern=_TOLERANCE_PATTERN,
+        pattern=grammar.TOLERANCE_PATTERN,
         example="0.10@95",
     ),
     OptionSpec(
@@ -295,7 +247,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "site",
         '"tx ty tz yaw_deg"',
         max_length=200,
-        pattern=_SITE_PATTERN,
+        pattern=grammar.SITE_PATTERN,
         example="12.5 3.2 0 90",
         group="export",
     ),
@@ -331,7 +283,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "crs",
         "AUTHORITY:CODE",
         max_length=64,
-        pattern=r"^[A-Za-z][A-Za-z0-9_.\-]*:[A-Za-z0-9_.\-]+$",
+        pattern=grammar.CRS_PATTERN,
         example="EPSG:25832",
         group="export",
     ),
@@ -566,7 +518,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "tag-offset",
         '"x y z"',
         max_length=100,
-        pattern=_TAG_OFFSET_PATTERN,
+        pattern=grammar.TAG_OFFSET_PATTERN,
         example="0 0 0.3",
         group="ranging",
     ),
@@ -646,28 +598,3 @@ def check_option(key: str, value: float, *, unit: str = "") -> None:
     problem = option(key).bounds_problem(value, unit=unit)
     if problem:
         raise InputError(problem, option=key)
-
-
-def check_pattern(key: str, value: str | None) -> None:
-    """Check a text option against its pattern (the HTTP API's grammar of the option).
-
-    The API's schema declares the pattern and the API holds its requests to it, so that
-    the schema and the server take the same texts. Call this after the option's parser,
-    whose message says more about a text that is wrong in form; what is left for the
-    pattern is what the parser is lenient about (exponents, other digits and spaces).
-
-    Raises:
-        InputError: the text does not match; the error carries ``key``.
-    """
-    spec = option(key)
-    if value is None or spec.pattern is None or re.fullmatch(spec.pattern, value):
-        return
-    words = spec.words[0].upper() + spec.words[1:]
-    like = f" like {spec.example!r}" if spec.example else ""
-    numbers = (
-        ", in plain decimal numbers (no exponent) within the bounds, separated by spaces"
-        if "[0-9]" in spec.pattern
-        else ""
-    )
-    msg = f"{words} must read {spec.metavar}{like}{numbers}, got {value!r}."
-    raise InputError(msg, option=key)

@@ -8,6 +8,7 @@ the numeric stack.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -127,7 +128,8 @@ class OptionSpec:
         choices: the allowed values of a ``CHOICE``.
         max_length: the longest text, or the most items of a list.
         min_length: the fewest items of a list.
-        pattern: a regular expression the text must match (the API checks it).
+        pattern: a regular expression the text must match (the API declares it in its
+            schema and checks it after the option's parser; see :meth:`pattern_problem`).
         example: an example value for the API's documentation.
         group: ``evaluation`` (the core's), ``reading``, ``export`` or ``ranging`` (only
             ``loceval ranging`` and the ranging request take these).
@@ -217,3 +219,16 @@ class OptionSpec:
         ):
             return False
         return self.maximum is None or value <= self.maximum
+
+    def pattern_problem(self, value: str | None) -> str:
+        """Return what is wrong with a text for this option's pattern ("" when it matches)."""
+        if value is None or self.pattern is None or re.fullmatch(self.pattern, value):
+            return ""
+        words = self.words[0].upper() + self.words[1:]
+        like = f" like {self.example!r}" if self.example else ""
+        numbers = (
+            ", in plain decimal numbers (no exponent) within the bounds, separated by spaces"
+            if "[0-9]" in self.pattern
+            else ""
+        )
+        return f"{words} must read {self.metavar}{like}{numbers}, got {value!r}."

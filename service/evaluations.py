@@ -16,7 +16,6 @@ from sqlalchemy.orm import Session, defer
 
 from exporters import ARTIFACTS
 from loceval.errors import InputError
-from loceval.options import check_pattern
 from service.blobs import artifact_key
 from service.datasets import store_upload
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, JobStatus, get_owned, utcnow
@@ -29,6 +28,7 @@ from service.errors import (
     problem_for,
 )
 from service.options import (
+    check_pattern,
     config_from_options,
     export_from_options,
     option_values,

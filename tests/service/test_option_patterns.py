@@ -18,11 +18,10 @@ from exporters.cad.site import parse_site
 from exporters.options import ExportOptions
 from loceval.assessment.verdict import Tolerance
 from loceval.errors import InputError, LocevalError
-from loceval.evaluation import parse_offset
-from loceval.options import OPTIONS, OptionKind, check_pattern, option
+from loceval.options import OPTIONS, OptionKind, option
 from loceval.radio_evaluation import parse_tag_offset
 from loceval.registration.alignment import AlignWindow
-from service.options import offset_or_none
+from service.options import check_pattern, offset_or_none
 
 
 def _site(text: str) -> object:
@@ -66,7 +65,7 @@ def test_what_the_pattern_admits_the_parser_takes(key: str, data: st.DataObject)
 def _unit_quaternion(text: str) -> str:
     """Replace the quaternion of a 7-number offset by a unit one (a pattern cannot say unit)."""
     numbers = text.replace(",", " ").split()
-    return " ".join(numbers[:3] + ["0", "0", "0", "1"]) if len(numbers) == 7 else text
+    return " ".join([*numbers[:3], "0", "0", "0", "1"]) if len(numbers) == 7 else text
 
 
 @pytest.mark.parametrize(
