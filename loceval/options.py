@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Final
 
-from loceval import optionpatterns as grammar
+from loceval import optionspec as grammar
 from loceval.errors import InputError
 from loceval.optionspec import (
     AlignMethod,
