@@ -1,14 +1,11 @@
 """The one table of evaluation options: key, kind, default, bounds, choices and help of each.
 
-Every front door is built from :data:`OPTIONS`: the CLI's ``loceval evaluate`` flags, the
-HTTP API's ``EvaluationOptions`` schema, and the defaults and checks of
-:class:`~loceval.evaluation.EvaluationConfig`. A key (``max_dt_s``) is what the API and the
-options document call the option; ``flag`` (``--max-dt``, from ``cli_name``) is the CLI's
-name for it and ``words`` ("the maximum time difference") is how messages name it without
-naming a front door. Errors about an option carry its key (``InputError(msg, option="max_dt_s")``).
-
-This module is pure Python (no numpy), so the CLI can build its parser without the
-numeric stack; the enums of the choices live here and are re-exported where they are used.
+Every front door is built from :data:`OPTIONS`: the CLI's ``loceval evaluate`` flags, the HTTP
+API's ``EvaluationOptions`` schema, the defaults and checks of ``EvaluationConfig``. A key
+(``max_dt_s``) is what the API and the options document call the option; ``flag`` (``--max-dt``,
+from ``cli_name``) is the CLI's name for it and ``words`` ("the maximum time difference") is how
+messages name it without naming a front door. Errors about an option carry its key
+(``InputError(msg, option="max_dt_s")``). Pure Python: the CLI's parser needs no numpy.
 """
 
 from __future__ import annotations
@@ -16,6 +13,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Final
 
+from loceval import optionspec as grammar
 from loceval.errors import InputError
 from loceval.optionspec import (
     AlignMethod,
@@ -54,8 +52,7 @@ DEFAULT_THRESHOLDS_M: Final[tuple[float, ...]] = (0.05, 0.10, 0.15)
 AUTO: Final = "auto"
 """The value of an ``auto`` option that has the data decide."""
 
-_MAX_S: Final = 1e9
-"""Largest span of seconds an option takes (about 31 years; more is a mistake)."""
+_MAX_S: Final = 1e9  # the largest span of seconds an option takes (31 years; more is a mistake)
 
 OPTIONS: Final[tuple[OptionSpec, ...]] = (
     OptionSpec(
@@ -87,9 +84,8 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "the maximum gap",
         "max-gap",
         "S",
-        minimum=0.0,
+        minimum=1e-9,  # 1 ns, the resolution of stamps
         maximum=1e6,
-        exclusive_minimum=True,
     ),
     OptionSpec(
         "time_offset_s",
@@ -131,7 +127,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "align-first",
         "N|Ns",
         max_length=32,
-        pattern=r"^\s*\d+(\.\d+)?\s*s?\s*$",
+        pattern=grammar.ALIGN_FIRST_PATTERN,
     ),
     OptionSpec(
         "calibrate_at_s",
@@ -153,6 +149,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "offset",
         '"x y z qx qy qz qw"',
         max_length=300,
+        pattern=grammar.OFFSET_PATTERN,
     ),
     OptionSpec(
         "device",
@@ -216,6 +213,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "tolerance",
         "M@PCT",
         max_length=40,
+        pattern=grammar.TOLERANCE_PATTERN,
         example="0.10@95",
     ),
     OptionSpec(
@@ -249,6 +247,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "site",
         '"tx ty tz yaw_deg"',
         max_length=200,
+        pattern=grammar.SITE_PATTERN,
         example="12.5 3.2 0 90",
         group="export",
     ),
@@ -284,7 +283,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "crs",
         "AUTHORITY:CODE",
         max_length=64,
-        pattern=r"^[A-Za-z][A-Za-z0-9_.-]*:[A-Za-z0-9_.-]+$",
+        pattern=grammar.CRS_PATTERN,
         example="EPSG:25832",
         group="export",
     ),
@@ -519,6 +518,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "tag-offset",
         '"x y z"',
         max_length=100,
+        pattern=grammar.TAG_OFFSET_PATTERN,
         example="0 0 0.3",
         group="ranging",
     ),

@@ -8,10 +8,18 @@ the numeric stack.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Final
 
 __all__ = [
+    "ALIGN_FIRST_PATTERN",
+    "CRS_PATTERN",
+    "OFFSET_PATTERN",
+    "SITE_PATTERN",
+    "TAG_OFFSET_PATTERN",
+    "TOLERANCE_PATTERN",
     "AlignMethod",
     "AssociationMethod",
     "OptionKind",
@@ -127,7 +135,8 @@ class OptionSpec:
         choices: the allowed values of a ``CHOICE``.
         max_length: the longest text, or the most items of a list.
         min_length: the fewest items of a list.
-        pattern: a regular expression the text must match (the API checks it).
+        pattern: a regular expression the text must match (the API declares it in its
+            schema and checks it after the option's parser; see :meth:`pattern_problem`).
         example: an example value for the API's documentation.
         group: ``evaluation`` (the core's), ``reading``, ``export`` or ``ranging`` (only
             ``loceval ranging`` and the ranging request take these).
@@ -217,3 +226,68 @@ class OptionSpec:
         ):
             return False
         return self.maximum is None or value <= self.maximum
+
+    def pattern_problem(self, value: str | None) -> str:
+        """Return what is wrong with a text for this option's pattern ("" when it matches)."""
+        if value is None or self.pattern is None or re.fullmatch(self.pattern, value):
+            return ""
+        words = self.words[0].upper() + self.words[1:]
+        like = f" like {self.example!r}" if self.example else ""
+        numbers = (
+            ", in plain decimal numbers (no exponent) within the bounds, separated by spaces"
+            if "[0-9]" in self.pattern
+            else ""
+        )
+        return f"{words} must read {self.metavar}{like}{numbers}, got {value!r}."
+
+
+# The grammars of the text options: regular expressions the HTTP API declares and checks.
+# Each takes a subset of what the option's parser takes (plain decimals, no exponent, the
+# option's bounds spelled out in digits), so that the API's schema says exactly which texts
+# the server takes: a pattern cannot bound "1e3" but can bound "1000". The CLI keeps the
+# parsers' wider forms. Only ASCII classes, groups and counts: the same in Python, in JSON
+# Schema (ECMA-262) and in a browser's ``pattern``.
+
+_SEP: Final = "[ ,]"
+"""What separates the numbers of a text option: spaces or commas (the parsers' rule)."""
+
+
+def _decimal_at_most(integer_digits: int, maximum: str) -> str:
+    """Return a pattern of a signed plain decimal whose magnitude is at most ``maximum``.
+
+    ``integer_digits`` digits before the point stay below ``maximum``, which is then
+    allowed as itself (``1000``, ``1000.000``). No exponent: a pattern cannot bound it.
+    """
+    return rf"[+\-]?0*([0-9]{{1,{integer_digits}}}(\.[0-9]*)?|\.[0-9]+|{maximum}(\.0*)?)"
+
+
+_ANY_DECIMAL: Final = r"[+\-]?([0-9]+(\.[0-9]*)?|\.[0-9]+)"
+_POSITIVE: Final = r"\+?([0-9]*[1-9][0-9]*(\.[0-9]*)?|[0-9]*\.[0-9]*[1-9][0-9]*)"
+"""A plain decimal above zero (at least one digit that is not 0)."""
+_PERCENT: Final = r"\+?0*([1-9][0-9]?(\.[0-9]*)?|\.[0-9]*[1-9][0-9]*|100(\.0*)?)"
+"""A plain decimal above 0 and at most 100."""
+_OFFSET_M: Final = _decimal_at_most(3, "1000")  # MAX_OFFSET_M
+_COORDINATE_M: Final = _decimal_at_most(9, "1000000000")  # MAX_COORDINATE_M
+_YAW_DEG: Final = r"[+\-]?0*(([0-9]{1,2}|[12][0-9]{2}|3[0-5][0-9])(\.[0-9]*)?|\.[0-9]+|360(\.0*)?)"
+
+
+def _numbers(*items: str) -> str:
+    """Return the pattern of numbers separated by spaces or commas (leading, trailing too)."""
+    return f"{_SEP}*" + f"{_SEP}+".join(f"({item})" for item in items) + f"{_SEP}*"
+
+
+_XYZ: Final = _numbers(_OFFSET_M, _OFFSET_M, _OFFSET_M)
+OFFSET_PATTERN: Final = (
+    f"^({_numbers(_OFFSET_M, _OFFSET_M, _OFFSET_M)}"
+    f"|{_numbers(_OFFSET_M, _OFFSET_M, _OFFSET_M, *[_ANY_DECIMAL] * 4)})?$"
+)
+SITE_PATTERN: Final = (
+    f"^({_numbers(*[_COORDINATE_M] * 3)}|{_numbers(*[_COORDINATE_M] * 3, _YAW_DEG)})?$"
+)
+TAG_OFFSET_PATTERN: Final = f"^( *|{_XYZ})$"
+TOLERANCE_PATTERN: Final = f"^ *({_POSITIVE}) *m? *(@ *({_PERCENT}) *%?)? *$"
+_SECONDS: Final = r"0*([1-9][0-9]{0,8}(\.[0-9]*)?|0?\.[0-9]*[1-9][0-9]*|1000000000(\.0*)?)"
+"""A plain decimal of seconds above 0 and at most MAX_SPAN_S (1e9)."""
+ALIGN_FIRST_PATTERN: Final = rf"^( *(0*[1-9][0-9]*|{_SECONDS} *s) *)?$"
+CRS_PATTERN: Final = r"^[A-Za-z][A-Za-z0-9_.\-]*:[A-Za-z0-9_.\-]+$"
+"""AUTHORITY:CODE, e.g. EPSG:25832 (the exporters' own check, spelled the same)."""

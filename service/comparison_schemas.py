@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from service.schema_base import Id, Printable, Strict
+from service.schema_base import Id, Printable, Strict, strict_schema
 
 __all__ = [
     "ComparedItem",
@@ -17,8 +17,30 @@ __all__ = [
 ]
 
 
+def _one_source(schema: dict[str, Any], cls: type[BaseModel] | None = None) -> None:
+    """Declare the NUL-free texts and the rule of :meth:`ComparedItem._one_source`."""
+    strict_schema(schema, cls)
+    text, null = {"type": "string"}, {"type": "null"}
+    schema["anyOf"] = [
+        {
+            "required": ["evaluation_id"],
+            "properties": {"evaluation_id": text, "dataset_id": null},
+        },
+        {
+            "required": ["dataset_id"],
+            "properties": {"dataset_id": text, "evaluation_id": null, "estimate": null},
+        },
+    ]
+
+
 class ComparedItem(Strict):
-    """One system: an estimate of a succeeded evaluation, or an uploaded evo result zip."""
+    """One system: an estimate of a succeeded evaluation, or an uploaded evo result zip.
+
+    Exactly one of ``evaluation_id`` and ``dataset_id`` is given, and ``estimate`` only with
+    an evaluation (the schema's ``anyOf``).
+    """
+
+    model_config = ConfigDict(json_schema_extra=_one_source)
 
     evaluation_id: Id | None = Field(default=None, description="a succeeded evaluation")
     estimate: Annotated[str, Field(min_length=1, max_length=120)] | None = Field(

@@ -28,8 +28,10 @@ from service.errors import (
     problem_for,
 )
 from service.options import (
+    check_pattern,
     config_from_options,
     export_from_options,
+    option_values,
     ranging_from_options,
 )
 from service.runtime import Runtime
@@ -41,6 +43,7 @@ from service.schemas import (
     EvaluationPublic,
     ProgressPublic,
     RangingCreate,
+    RangingOptions,
     SourceRef,
 )
 from service.storage import EVALUATIONS
@@ -175,8 +178,6 @@ def check_ranging_options(options: EvaluationOptions) -> None:
     Raises:
         InputError: a device offset is given, or an option's value cannot be used.
     """
-    from service.schemas import RangingOptions  # noqa: PLC0415
-
     if options.offset or options.device is not None:
         msg = (
             "A ranging evaluation takes no device offset; give the tag's position in the "
@@ -184,8 +185,6 @@ def check_ranging_options(options: EvaluationOptions) -> None:
         )
         raise InputError(msg, option="tag_offset_xyz")
     check_options(options)
-    if isinstance(options, RangingOptions):
-        ranging_from_options(options)
 
 
 def _check_radio(anchors: Dataset, ranges: Dataset, ref: SourceRef) -> None:
@@ -284,6 +283,11 @@ def check_options(options: EvaluationOptions) -> None:
     """
     config_from_options(options)
     export_from_options(options, front_door="service")
+    if isinstance(options, RangingOptions):
+        ranging_from_options(options)
+    for key, value in option_values(options).items():
+        if isinstance(value, str):
+            check_pattern(key, value)
 
 
 def visits_dataset_id(visits: str) -> str | None:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from loceval.errors import InputError, ReaderError
 from loceval.readers.evo_result import ResultZip, is_result_zip, read_result_zip
 from service.db import Dataset
-from service.errors import is_storage_full
+from service.errors import NotFoundError, is_storage_full
 
 if TYPE_CHECKING:
     from service.runtime import Runtime
@@ -99,9 +99,10 @@ def check_evo_results(runtime: Runtime, project_id: str, refs: Sequence[EvoResul
     """Check that each named dataset is an evo result zip of the project.
 
     Raises:
-        InputError: a named dataset is missing (or another project's), or is not an evo
-            result zip; the message names ``selection.evo_results[k].dataset_id`` and what
-            to name instead (a 422 problem).
+        NotFoundError: a named dataset is missing (or another project's): a 404, as for
+            the datasets of ``POST /evaluations``.
+        InputError: a named dataset is not an evo result zip (a 422 problem).
+        Both messages name ``selection.evo_results[k].dataset_id`` and what to name instead.
     """
     with runtime.sessions() as session:
         for k, ref in enumerate(refs):
@@ -112,7 +113,7 @@ def check_evo_results(runtime: Runtime, project_id: str, refs: Sequence[EvoResul
                     f"{field}: no dataset {ref.dataset_id!r} in this project; upload the evo "
                     "result zip (POST /datasets) and name the id it answers."
                 )
-                raise InputError(msg)
+                raise NotFoundError(msg)
             if not is_evo_result(dataset):
                 kind = dataset.inspection.get("format") or dataset.inspection.get("kind")
                 msg = (

@@ -22,7 +22,7 @@ from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, Tolerance, parse_offset
 from loceval.metrics.pose_errors import RPEUnit
-from loceval.options import AUTO, check_option
+from loceval.options import AUTO, check_option, option
 from loceval.registration.alignment import AlignMethod, AlignWindow
 from loceval.registration.association import AssociationMethod
 
@@ -34,6 +34,7 @@ __all__ = [
     "OptionValues",
     "artifact_names",
     "check_device_choice",
+    "check_pattern",
     "checkpoints_from_options",
     "config_from_options",
     "device_offset",
@@ -273,3 +274,19 @@ def device_offset(path: Path, *, from_link: str, to_link: str) -> SimilarityTran
 def offset_or_none(offset: str | None) -> SimilarityTransform | None:
     """Parse an ``"x y z qx qy qz qw"`` offset; None when not given."""
     return parse_offset(offset) if offset else None
+
+
+def check_pattern(key: str, value: str | None) -> None:
+    """Check a text option against its pattern: the HTTP API's grammar of the option.
+
+    The API's schema declares the pattern and the service holds requests to it, so that
+    schema and server take the same texts. Call this after the option's parser, whose
+    message says more about a text of the wrong form; what is left for the pattern is what
+    the parser forgives (exponents, other digits and spaces). The CLI keeps the parsers'.
+
+    Raises:
+        InputError: the text does not match; the error carries ``key``.
+    """
+    problem = option(key).pattern_problem(value)
+    if problem:
+        raise InputError(problem, option=key)

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import datetime as dt
+import zoneinfo
 from typing import Annotated, Any, Final, Literal
 
 from pydantic import BaseModel, Field, field_validator
 from pydantic.json_schema import SkipJsonSchema
 from pydantic_core import PydanticCustomError
 
-from service.schema_base import Id, Printable, Strict
+from service.schema_base import Declared, Id, Printable, Strict
 from service.schemas import (
     ArtifactPublic,
     EvaluationOptions,
@@ -18,6 +19,9 @@ from service.schemas import (
 )
 
 __all__ = [
+    "CRON_PATTERN",
+    "TIME_ZONES",
+    "Cron",
     "EvaluationTemplate",
     "EvoResultRef",
     "Produce",
@@ -31,6 +35,76 @@ __all__ = [
     "Selection",
     "TemplateSource",
 ]
+
+
+def _either_case(word: str) -> str:
+    return "".join(f"[{c.upper()}{c}]" for c in word)
+
+
+def _cron_field(low: int, high: int, names: tuple[str, ...] = ()) -> str:
+    """Return the pattern of one cron field: ``*``, values, ranges, lists, ``/steps``."""
+    value = "|".join([str(i) for i in range(high, low - 1, -1)] + [_either_case(n) for n in names])
+    step = "/[1-9][0-9]?"
+    item = rf"(\*({step})?|({value})(-({value}))?({step})?)"
+    return f"{item}(,{item})*"
+
+
+CRON_PATTERN: Final = (
+    "^ *"
+    + " +".join(
+        [
+            _cron_field(0, 59),
+            _cron_field(0, 23),
+            _cron_field(1, 31),
+            _cron_field(
+                1,
+                12,
+                (
+                    "jan",
+                    "feb",
+                    "mar",
+                    "apr",
+                    "may",
+                    "jun",
+                    "jul",
+                    "aug",
+                    "sep",
+                    "oct",
+                    "nov",
+                    "dec",
+                ),
+            ),
+            _cron_field(0, 7, ("sun", "mon", "tue", "wed", "thu", "fri", "sat")),
+        ]
+    )
+    + " *$"
+)
+"""The cron lines a schedule takes: five fields (minute hour day month weekday) of numbers in
+range, month and day names, ``*``, ranges, lists and steps; croniter's extensions (``L``,
+``#``, ``?``, seconds) are not taken. :func:`service.schedules.check_cron` holds requests to it.
+"""
+
+TIME_ZONES: Final = tuple(sorted(zoneinfo.available_timezones()))
+"""The IANA time zones a schedule takes (those of this machine's time zone database)."""
+
+Cron = Annotated[
+    str,
+    Field(min_length=1, max_length=200, examples=["0 7 * * mon"]),
+    Declared(
+        pattern=CRON_PATTERN,
+        description="five fields 'minute hour day month weekday', e.g. '0 7 * * mon' "
+        "(Mondays at 07:00); a day of the month that none of the months has (30 in "
+        "February only) never fires and is refused",
+    ),
+]
+"""A cron line (checked by :func:`service.schedules.check_cron`, with its message)."""
+
+TimeZone = Annotated[
+    str,
+    Field(min_length=1, max_length=64, examples=["Europe/Berlin"]),
+    Declared(enum=list(TIME_ZONES)),
+]
+"""An IANA time zone name (checked by :func:`service.schedules.check_cron`)."""
 
 
 class TemplateSource(Strict):
@@ -107,15 +181,15 @@ class Produce(Strict):
     )
 
 
-_Url = Annotated[str, Field(max_length=2000, pattern=r"^https?://[^\s]+$")]
+_Url = Annotated[str, Field(max_length=2000, pattern=r"^https?://[^\x00-\x20\x7f]+$")]
 
 
 class ScheduleCreate(Strict):
     """A recurring summary report."""
 
     name: Annotated[str, Field(min_length=1, max_length=200), Printable]
-    cron: Annotated[str, Field(min_length=1, max_length=200, examples=["0 7 * * mon"])]
-    timezone: Annotated[str, Field(min_length=1, max_length=64, examples=["Europe/Berlin"])] = "UTC"
+    cron: Cron
+    timezone: TimeZone = "UTC"
     selection: Selection = Field(default_factory=Selection)
     template: EvaluationTemplate
     produce: Produce = Field(default_factory=Produce)
@@ -151,10 +225,8 @@ class SchedulePatch(Strict):
     name: Annotated[str, Field(min_length=1, max_length=200), Printable] | SkipJsonSchema[None] = (
         _optional()
     )
-    cron: Annotated[str, Field(min_length=1, max_length=200)] | SkipJsonSchema[None] = _optional()
-    timezone: Annotated[str, Field(min_length=1, max_length=64)] | SkipJsonSchema[None] = (
-        _optional()
-    )
+    cron: Cron | SkipJsonSchema[None] = _optional()
+    timezone: TimeZone | SkipJsonSchema[None] = _optional()
     selection: Selection | SkipJsonSchema[None] = _optional()
     template: EvaluationTemplate | SkipJsonSchema[None] = _optional()
     produce: Produce | SkipJsonSchema[None] = _optional()

@@ -22,7 +22,7 @@ from pydantic_core import core_schema
 from exporters import ARTIFACT_ALIASES, ARTIFACTS, artifact_name
 from exporters.errors import ExportOptionsError
 from loceval.options import AUTO, OPTIONS, OptionKind, OptionSpec, option
-from service.schema_base import Id, Printable, Strict
+from service.schema_base import Declared, Id, Printable, Strict, strict_schema
 
 __all__ = [
     "ArtifactPublic",
@@ -127,8 +127,6 @@ def _field(key: str) -> Any:  # noqa: ANN401  (pydantic's FieldInfo, typed Any b
         extra["max_length"] = spec.max_length
     if spec.kind is OptionKind.NAMES:
         extra["min_length"] = spec.min_length
-    if spec.pattern is not None:
-        extra["pattern"] = spec.pattern
     if spec.example is not None:
         extra["examples"] = [spec.example]
     default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
@@ -215,6 +213,10 @@ def _base_type(spec: OptionSpec) -> Any:  # noqa: ANN401  (a type expression)
     if spec.kind is OptionKind.NAMES:
         item = Literal.__getitem__(spec.choices) if spec.choices else _Name
         return list[item]  # type: ignore[valid-type]
+    if spec.kind is OptionKind.TEXT and spec.pattern is not None:
+        # Declared, not checked here: the service checks it after the option's parser
+        # (loceval.options.check_pattern), so a bad value gets the parser's message.
+        return Annotated[str, Declared(pattern=spec.pattern)]
     return _KIND_TYPES[spec.kind]
 
 
@@ -260,13 +262,45 @@ else:
     _EvaluationFields = create_model("_EvaluationFields", __base__=Strict, **_fields("evaluation"))
 
 
+def _given(key: str) -> dict[str, Any]:
+    """Return the JSON schema of an object in which option ``key`` is given (not null, not "")."""
+    value = {"type": "string", "minLength": 1} if option(key).kind is OptionKind.TEXT else {}
+    return {"required": [key], "properties": {key: {**value, "not": {"type": "null"}}}}
+
+
+def _both(first: str, second: str) -> dict[str, Any]:
+    """Return the JSON schema of an object in which both options are given."""
+    a, b = _given(first), _given(second)
+    return {"required": [first, second], "properties": {**a["properties"], **b["properties"]}}
+
+
+def _options_schema(schema: dict[str, Any], cls: type[BaseModel] | None = None) -> None:
+    """Declare the NUL-free texts and the pairs of options that exclude each other."""
+    strict_schema(schema, cls)
+    schema["not"] = {"anyOf": [_both("offset", "device"), _both("site", "site_matrix")]}
+
+
+def _ranging_schema(schema: dict[str, Any], cls: type[BaseModel] | None = None) -> None:
+    """Declare, on top of the evaluation's rules, what a ranging evaluation does not take."""
+    strict_schema(schema, cls)
+    schema["not"] = {
+        "anyOf": [_both("site", "site_matrix"), _given("offset"), _given("device"), _given("map")]
+    }
+
+
 class EvaluationOptions(_EvaluationFields):
     """The evaluation options, as ``POST /evaluations`` takes them.
 
     Its fields are made from :data:`loceval.options.OPTIONS` (the CLI's flags are made from
     the same table): each option's key, JSON type (from its kind), default, bounds, choices,
     example and help. An option added to the table is here with no other edit.
+
+    The schema also says which options exclude each other (``not``): a device offset given
+    both as ``offset`` and as ``device``, a site given both as ``site`` and ``site_matrix``.
+    The service checks these with the options' messages (422).
     """
+
+    model_config = ConfigDict(json_schema_extra=_options_schema)
 
     @property
     def map_ref(self) -> MapRef | None:
@@ -321,8 +355,11 @@ class RangingOptions(_RangingFields):
     """The options of ``POST /ranging``: the evaluation's, then the ranging ones (from the table).
 
     The alignment defaults to ``none``: the anchors are in building coordinates already.
-    A device offset (``offset``, ``device``) is refused: the tag offset says where the tag is.
+    A device offset (``offset``, ``device``) is refused: the tag offset says where the tag is;
+    so is a map (measured in trajectory evaluations). The schema says so (``not``).
     """
+
+    model_config = ConfigDict(json_schema_extra=_ranging_schema)
 
     align: Annotated[str, _Choices("align")] = Field(
         default="none", description=option("align").help

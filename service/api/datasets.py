@@ -8,7 +8,7 @@ import anyio.to_thread
 from fastapi import APIRouter, Query, Request, Response, status
 
 from service import datasets
-from service.api.deps import ProjectDep, RuntimeDep
+from service.api.deps import PathText, ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Dataset, get_owned
 from service.links import api_url
@@ -131,7 +131,9 @@ def read_datasets(
 
 
 @router.get("/{dataset_id}", response_model=DatasetPublic, responses=problems(404))
-def read_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> DatasetPublic:
+def read_dataset(
+    dataset_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
+) -> DatasetPublic:
     """Show one dataset with its inspection."""
     return dataset_public(get_owned(runtime.sessions, Dataset, dataset_id, project_id))
 
@@ -141,7 +143,7 @@ def read_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep) -
     status_code=status.HTTP_204_NO_CONTENT,
     responses=problems(404, 409, 507),
 )
-def delete_dataset(dataset_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
+def delete_dataset(dataset_id: PathText, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Delete a dataset and its file (refused while a queued or running evaluation uses it).
 
     Finished evaluations keep their results and artifacts.

@@ -4,14 +4,22 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import Depends, Request, Security
+from fastapi import Depends, Path, Request, Security
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
 from service.auth import authenticate
 from service.errors import AuthenticationError
 from service.runtime import Runtime
+from service.schema_base import NO_NUL
 
-__all__ = ["ProjectDep", "RuntimeDep", "get_runtime"]
+__all__ = ["PathText", "ProjectDep", "RuntimeDep", "get_runtime"]
+
+PathText = Annotated[str, Path(json_schema_extra={"pattern": NO_NUL})]
+"""A path parameter (an id, an artifact's name): declared NUL-free, as the server holds it.
+
+:class:`~service.api.middleware.ApiKeyMiddleware` refuses a NUL (``%00``) in any path with
+a 422 before a route runs; the pattern says so in the schema, and no route checks it again.
+"""
 
 _bearer = HTTPBearer(
     auto_error=False,

@@ -10,12 +10,13 @@ from fastapi.responses import FileResponse
 
 from exporters import ARTIFACTS
 from service import evaluations, retention
-from service.api.deps import ProjectDep, RuntimeDep
+from service.api.deps import PathText, ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Evaluation, get_owned
 from service.links import api_url, public_base
 from service.metrics import count_upload
 from service.runtime import Runtime
+from service.schema_base import NO_NUL
 from service.schemas import (
     EvaluationCreate,
     EvaluationPublic,
@@ -117,7 +118,7 @@ def read_evaluations(
     "/evaluations/{evaluation_id}", response_model=EvaluationPublic, responses=problems(404)
 )
 def read_evaluation(
-    evaluation_id: str, runtime: RuntimeDep, project_id: ProjectDep
+    evaluation_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> EvaluationPublic:
     """Status and progress; the result document once succeeded, the problem once failed."""
     evaluation = get_owned(runtime.sessions, Evaluation, evaluation_id, project_id)
@@ -131,7 +132,9 @@ def read_evaluation(
     status_code=status.HTTP_204_NO_CONTENT,
     responses=problems(404, 409, 507),
 )
-def delete_evaluation(evaluation_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
+def delete_evaluation(
+    evaluation_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
+) -> Response:
     """Delete a finished evaluation and its artifacts (409 while it is queued or running).
 
     A schedule run that made it keeps its summary report and figures; its row for the
@@ -153,7 +156,7 @@ def delete_evaluation(evaluation_id: str, runtime: RuntimeDep, project_id: Proje
     },
 )
 def read_artifact(
-    evaluation_id: str, name: str, runtime: RuntimeDep, project_id: ProjectDep
+    evaluation_id: PathText, name: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> Response:
     """Download an artifact: report.html, report.pdf, errors.csv, result.json, paths.*."""
     key = evaluations.artifact_path(runtime, project_id, evaluation_id, name)
@@ -180,10 +183,20 @@ _ONE_SHOT_BODY = {
                         "items": {"type": "string", "format": "binary"},
                         "description": "omit when the reference file holds the estimates too",
                     },
-                    "reference_selector": {"type": "string"},
-                    "estimate_selector": {"type": "array", "items": {"type": "string"}},
-                    "estimate_name": {"type": "array", "items": {"type": "string"}},
-                    "options": {"type": "string", "description": "JSON of the options object"},
+                    "reference_selector": {"type": "string", "pattern": NO_NUL},
+                    "estimate_selector": {
+                        "type": "array",
+                        "items": {"type": "string", "pattern": NO_NUL},
+                    },
+                    "estimate_name": {
+                        "type": "array",
+                        "items": {"type": "string", "pattern": NO_NUL},
+                    },
+                    "options": {
+                        "type": "string",
+                        "pattern": NO_NUL,
+                        "description": "JSON of the options object",
+                    },
                 },
             }
         }

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
 
 from service import schedules
-from service.api.deps import ProjectDep, RuntimeDep
+from service.api.deps import PathText, ProjectDep, RuntimeDep
 from service.api.responses import problems
 from service.db import Schedule, get_owned
 from service.links import api_url, public_base
@@ -37,7 +37,7 @@ router = APIRouter(prefix="/schedules", tags=["schedules"])
     "",
     status_code=status.HTTP_201_CREATED,
     response_model=ScheduleWithSecret,
-    responses=problems(507),
+    responses=problems(404, 507),
 )
 def create_schedule(
     body: ScheduleCreate, response: Response, runtime: RuntimeDep, project_id: ProjectDep
@@ -61,14 +61,16 @@ def read_schedules(runtime: RuntimeDep, project_id: ProjectDep) -> SchedulesPubl
 
 
 @router.get("/{schedule_id}", response_model=SchedulePublic, responses=problems(404))
-def read_schedule(schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> SchedulePublic:
+def read_schedule(
+    schedule_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
+) -> SchedulePublic:
     """Show a schedule and when it fires next."""
     return schedule_public(get_owned(runtime.sessions, Schedule, schedule_id, project_id))
 
 
 @router.patch("/{schedule_id}", response_model=SchedulePublic, responses=problems(404, 507))
 def update_schedule(
-    schedule_id: str, body: SchedulePatch, runtime: RuntimeDep, project_id: ProjectDep
+    schedule_id: PathText, body: SchedulePatch, runtime: RuntimeDep, project_id: ProjectDep
 ) -> SchedulePublic:
     """Pause or resume, change the cron, the selection, the template or the webhook.
 
@@ -82,7 +84,7 @@ def update_schedule(
     "/{schedule_id}/secret", response_model=ScheduleWithSecret, responses=problems(404, 507)
 )
 def rotate_secret(
-    schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep
+    schedule_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> ScheduleWithSecret:
     """Replace the webhook signing secret and show the new one (once); the old one stops."""
     return schedule_with_secret(schedules.rotate_secret(runtime, project_id, schedule_id))
@@ -91,7 +93,7 @@ def rotate_secret(
 @router.delete(
     "/{schedule_id}", status_code=status.HTTP_204_NO_CONTENT, responses=problems(404, 507)
 )
-def delete_schedule(schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
+def delete_schedule(schedule_id: PathText, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Delete a schedule with its runs and their reports (the evaluations stay)."""
     schedules.delete_schedule(runtime, project_id, schedule_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
@@ -104,7 +106,7 @@ def delete_schedule(schedule_id: str, runtime: RuntimeDep, project_id: ProjectDe
     responses=problems(404, 507),
 )
 def run_schedule_now(
-    schedule_id: str, runtime: RuntimeDep, project_id: ProjectDep
+    schedule_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> ScheduleRunPublic:
     """Start a run now (paused schedules too); poll ``GET .../runs/{run_id}``."""
     schedule = get_owned(runtime.sessions, Schedule, schedule_id, project_id)
@@ -115,7 +117,7 @@ def run_schedule_now(
 
 @router.get("/{schedule_id}/runs", response_model=ScheduleRunsPublic, responses=problems(404))
 def read_runs(
-    schedule_id: str,
+    schedule_id: PathText,
     runtime: RuntimeDep,
     project_id: ProjectDep,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
@@ -130,7 +132,7 @@ def read_runs(
     "/{schedule_id}/runs/{run_id}", response_model=ScheduleRunPublic, responses=problems(404)
 )
 def read_run(
-    schedule_id: str, run_id: str, runtime: RuntimeDep, project_id: ProjectDep
+    schedule_id: PathText, run_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> ScheduleRunPublic:
     """Show one run."""
     run = schedules.get_run(runtime, project_id, schedule_id, run_id)
@@ -149,7 +151,11 @@ def read_run(
     },
 )
 def read_run_artifact(
-    schedule_id: str, run_id: str, name: str, runtime: RuntimeDep, project_id: ProjectDep
+    schedule_id: PathText,
+    run_id: PathText,
+    name: PathText,
+    runtime: RuntimeDep,
+    project_id: ProjectDep,
 ) -> Response:
     """Download the summary report: summary.html or summary.pdf."""
     key = schedules.run_artifact_path(runtime, project_id, schedule_id, run_id, name)

@@ -411,7 +411,9 @@ def test_bag_sources_by_selector(api: Api, rng: np.random.Generator, tmp_path: P
 OPTION_ERRORS = [
     ({"tolerance": "abc"}, r"tolerance takes METRES@PERCENT like 0\.10@95.*'abc'"),
     ({"tolerance": "0.1@200"}, r"share must be in \(0, 100\] percent"),
-    ({"align_first": "ten"}, r"options\.align_first: String should match pattern"),
+    ({"align_first": "ten"}, r"options\.align_first: .*takes a number of poses or seconds"),
+    ({"align_first": "1e1s"}, r"options\.align_first: .*must read N\|Ns"),
+    ({"tolerance": "1e-1@95"}, r"options\.tolerance: .*must read M@PCT like '0\.10@95'"),
     ({"align_first": "0"}, r"options\.align_first: .*needs at least one pose"),
     (
         {"site": "1 2 3 4", "site_matrix": np.eye(4).tolist()},

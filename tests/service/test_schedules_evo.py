@@ -108,7 +108,7 @@ def test_a_zip_in_degrees_is_shown_without_a_figure_in_metres(api: Api) -> None:
 
 
 def test_naming_what_is_no_evo_result_is_refused(api: Api, tmp_path: Path, rng) -> None:
-    """A missing id, another project's zip or a recording in evo_results is a 422 naming it."""
+    """A missing id or another project's zip is a 404, a recording in evo_results a 422."""
     bag = api.dataset("level2-run0.bag", _bag(tmp_path, rng, "level2-run0"))
     other = api.client.post(
         "/api/v1/datasets",
@@ -116,14 +116,14 @@ def test_naming_what_is_no_evo_result_is_refused(api: Api, tmp_path: Path, rng) 
         files={"file": ("theirs.zip", (EVO / "nav2_amcl_odom_ape_se3.zip").read_bytes())},
     ).json()
     cases = {
-        "no-such-id": "no dataset 'no-such-id' in this project",
-        other["id"]: f"no dataset {other['id']!r} in this project",
-        bag["id"]: "'level2-run0.bag' is a bag upload, not an evo result zip",
+        "no-such-id": (404, "no dataset 'no-such-id' in this project"),
+        other["id"]: (404, f"no dataset {other['id']!r} in this project"),
+        bag["id"]: (422, "'level2-run0.bag' is a bag upload, not an evo result zip"),
     }
-    for dataset_id, expected in cases.items():
+    for dataset_id, (status, expected) in cases.items():
         body = schedule_body(selection={"evo_results": [{"dataset_id": dataset_id}]})
         answer = api.client.post("/api/v1/schedules", headers=api.headers, json=body)
-        assert answer.status_code == 422, answer.text
+        assert answer.status_code == status, answer.text
         detail = answer.json()["detail"]
         assert "selection.evo_results[0].dataset_id" in detail
         assert expected in detail
