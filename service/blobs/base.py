@@ -133,10 +133,11 @@ class Blobs(abc.ABC):
         """Delete a dataset's file (its id's folder, or its key)."""
 
     def publishing(self, dataset_id: str) -> contextlib.AbstractContextManager[None]:
-        """Mark a dataset as being published while inside (a local folder's sweep reads it).
+        """Mark a dataset as being published while inside (a sweep reads the mark).
 
-        A bucket's objects are addressed by content: one left by a crash is the same bytes
-        an upload of them would store, and is taken again, so nothing needs marking.
+        A local folder marks the dataset's folder; a bucket keeps the upload's pending
+        marker until the block ends without an error (the row is recorded), so a sweep
+        deletes an object whose process died before recording it.
         """
         del dataset_id
         return contextlib.nullcontext()
