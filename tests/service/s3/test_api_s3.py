@@ -23,6 +23,11 @@ def api(bucket: str, s3_env: dict[str, str], tmp_path: Path) -> Iterator[Api]:
         yield api
 
 
+def _blobs(server: SeaweedFS, bucket: str) -> list[str]:
+    """Return the bucket's objects but the live API's lease (``site/instances/``)."""
+    return [k for k in object_keys(server, bucket) if not k.startswith("site/instances/")]
+
+
 def _files(folder: Path) -> list[str]:
     return sorted(
         str(p.relative_to(folder))
@@ -30,6 +35,7 @@ def _files(folder: Path) -> list[str]:
         if p.is_file()
         and not p.name.startswith(("loceval.db", "queue.db"))  # SQLite (and -wal, -shm)
         and "cache" not in p.parts
+        and "instances" not in p.parts  # this process's slot (service.blobs.lease)
     )
 
 
@@ -42,12 +48,17 @@ def test_upload_evaluate_download_and_delete_through_the_bucket(
     slam = api.dataset("slam.txt", estimate)
     project = api.app.state.runtime.store
     assert reference["inspection"]["sources"][0]["pose_count"] == 200
-    stored = object_keys(seaweedfs, bucket, "site/datasets/")
+    stored = object_keys(seaweedfs, bucket, "site/uploads/")
     assert len(stored) == 2
-    assert f"/{hashlib.sha256(truth).hexdigest()}" in stored[0] + stored[1]
+    assert object_keys(seaweedfs, bucket, "site/pending/") == []  # both recorded
+    by_sha = {
+        hashlib.sha256(project.read_bytes(k.removeprefix("site/"))).hexdigest() for k in stored
+    }
+    assert hashlib.sha256(truth).hexdigest() in by_sha
     again = api.upload("copy.txt", truth)
     assert again.status_code == 200  # the same bytes: found, not stored twice
-    assert len(object_keys(seaweedfs, bucket, "site/datasets/")) == 2
+    assert object_keys(seaweedfs, bucket, "site/uploads/") == stored
+    assert open_multipart_uploads(seaweedfs, bucket) == []
     answer = api.evaluate(
         {
             "reference": {"dataset_id": reference["id"]},
@@ -81,7 +92,7 @@ def test_upload_evaluate_download_and_delete_through_the_bucket(
     for dataset in (reference, slam):
         gone = api.client.delete(f"/api/v1/datasets/{dataset['id']}", headers=api.headers)
         assert gone.status_code == 204
-    assert object_keys(seaweedfs, bucket) == []
+    assert _blobs(seaweedfs, bucket) == []
     assert open_multipart_uploads(seaweedfs, bucket) == []
     assert project.kind == "s3"
 
@@ -91,7 +102,7 @@ def test_a_refused_upload_leaves_no_object(api: Api, seaweedfs: SeaweedFS, bucke
     answer = api.upload("noise.bag", b"#ROSBAG V2.0\n" + bytes(range(256)) * 100)
     assert 400 <= answer.status_code < 500, answer.text
     assert answer.headers["content-type"] == "application/problem+json"
-    assert object_keys(seaweedfs, bucket) == []
+    assert _blobs(seaweedfs, bucket) == []
 
 
 def test_metrics_cover_the_store(api: Api) -> None:
