@@ -145,6 +145,12 @@ class Blobs(abc.ABC):
     def close(self) -> None:  # noqa: B027  (most stores hold nothing to let go)
         """Let go of what this process holds (a local folder: its owner's lock)."""
 
+    def leave(self) -> None:  # noqa: B027  (a folder's uploads need no lease)
+        """Stop vouching for this process's uploads (the app's shutdown; a bucket's lease goes).
+
+        Receiving again later vouches again.
+        """
+
     def free_bytes(self) -> int | None:
         """Return the free bytes where uploads are written (None: no local disk, a bucket)."""
         return None

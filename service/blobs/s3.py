@@ -526,6 +526,10 @@ class S3Blobs(Blobs):
 
     def close(self) -> None:
         """See :meth:`Blobs.close`: the lease is deleted and the slot let go."""
+        self.leave()
+
+    def leave(self) -> None:
+        """See :meth:`Blobs.leave`: the lease is deleted and the slot let go."""
         with self._instance_lock:
             if self._lease is not None:
                 self._lease.stop()
@@ -533,6 +537,7 @@ class S3Blobs(Blobs):
             if self._slot is not None:
                 self._slot.close()
                 self._slot = None
+            self.instance = None
 
     def cached_bytes(self) -> int:
         """See :meth:`Blobs.cached_bytes`."""
