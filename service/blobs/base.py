@@ -19,11 +19,14 @@ import contextlib
 import re
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 from starlette.responses import Response
 
 from service.storage import Swept
+
+if TYPE_CHECKING:
+    from loceval.readers.rosbag import RemoteFile
 
 __all__ = [
     "HEAD_BYTES",
@@ -164,6 +167,15 @@ class Blobs(abc.ABC):
     @abc.abstractmethod
     def local_path(self, storage_path: str, *, filename: str, sha256: str) -> Path:
         """Return a local file with a dataset's bytes (held while :meth:`pinned` is open)."""
+
+    def remote_file(self, storage_path: str, *, filename: str) -> RemoteFile | None:
+        """Return a dataset's file to read by position where it lies, or None (read a copy).
+
+        A bucket serves MCAP files and ROS 1 bags so (their readers seek to an index and
+        read parts); a local folder's files are local already.
+        """
+        del storage_path, filename
+        return None
 
     def pinned(self) -> contextlib.AbstractContextManager[None]:
         """Keep the local copies :meth:`local_path` hands out in this block from eviction."""

@@ -37,7 +37,7 @@ import threading
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import IO, TYPE_CHECKING, Any, Final
 
 import boto3
@@ -55,6 +55,8 @@ from service.storage import Swept
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
     from mypy_boto3_s3.type_defs import ObjectIdentifierTypeDef
+
+    from service.blobs.ranged import ObjectFile
 
 __all__ = ["PART_BYTES", "S3Blobs", "S3Incoming", "make_client", "store_errors"]
 
@@ -376,6 +378,14 @@ class S3Blobs(Blobs):
                 self.client.download_file(self.bucket, key, str(target), Config=_TRANSFER)
 
         return self.cache.fetch(sha256, filename, size, download)
+
+    def remote_file(self, storage_path: str, *, filename: str) -> ObjectFile | None:
+        """See :meth:`Blobs.remote_file`: an ``.mcap`` or ``.bag`` file, read by ranges."""
+        from service.blobs.ranged import ObjectFile  # noqa: PLC0415  (imports this module)
+
+        if PurePosixPath(filename).suffix.lower() not in {".mcap", ".bag"}:
+            return None
+        return ObjectFile(self.client, self.bucket, self.prefix + storage_path, name=filename)
 
     def pinned(self) -> contextlib.AbstractContextManager[None]:
         """See :meth:`Blobs.pinned`."""

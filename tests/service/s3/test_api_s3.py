@@ -110,3 +110,37 @@ def test_metrics_cover_the_store(api: Api) -> None:
     text = api.client.get("/metrics").text
     assert 'loceval_blob_store_info{kind="s3"} 1.0' in text
     assert "loceval_blob_cache_bytes" in text
+
+
+def test_an_mcap_upload_is_inspected_by_ranged_reads_never_downloaded(
+    api: Api, rng: np.random.Generator, tmp_path: Path
+) -> None:
+    """A 40 MB camera bag: the API fetches under a tenth of it from the bucket to inspect it,
+    keeps no copy, and stores the same inspection a local file gets."""
+    import tests.bagfactory as bf
+    from service.recordings import inspect_upload
+
+    poses = bf.random_poses(rng, 200, dt_ns=50_000_000)
+    records = bf.tf_records(bf.link_transforms("map", "base_link", poses))
+    records += bf.pose_records("/gt", bf.POSE, poses)
+    records += [
+        bf.image_record("/camera/image", int(poses.stamps_ns[i]), size=256) for i in range(200)
+    ]
+    bag = bf.write_bag(tmp_path / "cam", records, fmt="mcap")
+    mcap = next(bag.glob("*.mcap"))
+    content = mcap.read_bytes()
+    assert len(content) > 30 << 20
+    fetched: list[int] = []
+    store = api.app.state.runtime.store
+    store.client.meta.events.register(
+        "after-call.s3.GetObject", lambda parsed, **_: fetched.append(parsed["ContentLength"])
+    )
+    dataset = api.dataset("cam.mcap", content)
+    assert 0 < sum(fetched) < len(content) / 10  # the summary, the index, tf and /gt's ends
+    assert not (api.data_dir / "cache").exists() or not any(
+        p.is_file() and p.name != ".lock" for p in (api.data_dir / "cache").rglob("*")
+    )
+    local = inspect_upload(mcap, "cam.mcap")
+    assert dataset["inspection"] == local  # the same description as from a local file
+    assert dataset["kind"] == "rosbag2-mcap"
+    assert {s["selector"] for s in dataset["inspection"]["sources"]} >= {"/gt", "tf:map:base_link"}
