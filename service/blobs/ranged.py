@@ -20,7 +20,7 @@ from collections import OrderedDict
 from pathlib import PurePosixPath
 from typing import TYPE_CHECKING, BinaryIO, Final
 
-from service.blobs.s3 import store_errors
+from service.blobs.s3client import store_errors
 
 if TYPE_CHECKING:
     from _typeshed import WriteableBuffer

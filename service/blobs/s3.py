@@ -40,23 +40,22 @@ from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path, PurePosixPath
 from typing import IO, TYPE_CHECKING, Any, Final
 
-import boto3
 from boto3.s3.transfer import TransferConfig
-from botocore.config import Config
 from botocore.exceptions import BotoCoreError, ClientError
 from starlette.responses import RedirectResponse, Response, StreamingResponse
 
 from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming, parse_blob_url
 from service.blobs.cache import InputCache
 from service.blobs.lease import LEASE_S, Lease, claim_slot
-from service.errors import ServiceUnavailableError, StartupError, register_private_root
+from service.blobs.ranged import ObjectFile
+from service.blobs.s3client import is_missing, make_client, store_errors
+from service.errors import StartupError, register_private_root
 from service.storage import Swept
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
     from mypy_boto3_s3.type_defs import ObjectIdentifierTypeDef
 
-    from service.blobs.ranged import ObjectFile
 
 __all__ = ["PART_BYTES", "S3Blobs", "S3Incoming", "make_client", "store_errors"]
 
@@ -67,44 +66,6 @@ _DOWNLOAD_CHUNK: Final = 1 << 20
 _TRANSFER: Final = TransferConfig(
     multipart_threshold=64 << 20, multipart_chunksize=8 << 20, max_concurrency=4
 )
-
-
-@contextlib.contextmanager
-def store_errors() -> Iterator[None]:
-    """Raise ServiceUnavailableError when the object store fails (unreachable, refusing)."""
-    try:
-        yield
-    except (BotoCoreError, ClientError) as err:
-        code = err.response.get("Error", {}).get("Code", "") if isinstance(err, ClientError) else ""
-        msg = (
-            f"The object store cannot be used ({type(err).__name__}{' ' + code if code else ''}); "
-            "try again in a minute (GET /readyz shows when it is back)."
-        )
-        raise ServiceUnavailableError(msg) from err
-
-
-def _missing(err: ClientError) -> bool:
-    return err.response.get("Error", {}).get("Code") in {"404", "NoSuchKey", "NotFound"}
-
-
-def make_client(*, pool: int = 32) -> S3Client:
-    """Return an S3 client configured from the conventional ``AWS_*`` variables."""
-    endpoint = os.environ.get("AWS_ENDPOINT_URL") or None
-    config = Config(
-        max_pool_connections=pool,
-        retries={"max_attempts": 5, "mode": "standard"},
-        s3={"addressing_style": "path" if endpoint else "auto"},
-        # S3-compatible stores do not all know the newer default checksums
-        request_checksum_calculation="when_required",
-        response_checksum_validation="when_required",
-        connect_timeout=10,
-        read_timeout=120,
-    )
-    region = os.environ.get("AWS_REGION") or os.environ.get("AWS_DEFAULT_REGION") or "us-east-1"
-    client: S3Client = boto3.session.Session().client(
-        "s3", endpoint_url=endpoint, region_name=region, config=config
-    )
-    return client
 
 
 class S3Incoming(Incoming):
@@ -381,8 +342,6 @@ class S3Blobs(Blobs):
 
     def remote_file(self, storage_path: str, *, filename: str) -> ObjectFile | None:
         """See :meth:`Blobs.remote_file`: an ``.mcap`` or ``.bag`` file, read by ranges."""
-        from service.blobs.ranged import ObjectFile  # noqa: PLC0415  (imports this module)
-
         if PurePosixPath(filename).suffix.lower() not in {".mcap", ".bag"}:
             return None
         return ObjectFile(self.client, self.bucket, self.prefix + storage_path, name=filename)
@@ -436,7 +395,7 @@ class S3Blobs(Blobs):
         try:
             head = self.client.head_object(Bucket=self.bucket, Key=self.prefix + key)
         except ClientError as err:
-            if _missing(err):
+            if is_missing(err):
                 return None
             with store_errors():
                 raise
