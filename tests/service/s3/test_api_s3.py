@@ -144,3 +144,16 @@ def test_an_mcap_upload_is_inspected_by_ranged_reads_never_downloaded(
     assert dataset["inspection"] == local  # the same description as from a local file
     assert dataset["kind"] == "rosbag2-mcap"
     assert {s["selector"] for s in dataset["inspection"]["sources"]} >= {"/gt", "tf:map:base_link"}
+
+
+def test_a_damaged_mcap_read_in_place_is_refused_and_leaves_no_object(
+    api: Api, seaweedfs: SeaweedFS, bucket: str, rng: np.random.Generator
+) -> None:
+    """An MCAP's magic and then noise: 4xx naming the file (no server path), nothing kept."""
+    answer = api.upload("broken.mcap", b"\x89MCAP0\r\n" + rng.bytes(300_000))
+    assert 400 <= answer.status_code < 500, answer.text
+    assert answer.headers["content-type"] == "application/problem+json"
+    assert "broken.mcap" in answer.json()["detail"]
+    assert str(api.data_dir) not in answer.text
+    assert _blobs(seaweedfs, bucket) == []
+    assert open_multipart_uploads(seaweedfs, bucket) == []
