@@ -484,7 +484,9 @@ class S3Blobs(Blobs):
         for item in markers:
             marker = item["Key"][len(self.prefix) :]
             upload = "uploads/" + marker.removeprefix("pending/")
-            dataset_id = self.read_bytes(marker).decode(errors="replace")
+            dataset_id = self._marker(marker)
+            if dataset_id is None:  # settled, or another sweep took it, meanwhile
+                continue
             if dataset_id not in set(recorded([dataset_id])):
                 with store_errors():
                     self.client.delete_object(Bucket=self.bucket, Key=self.prefix + upload)
@@ -540,6 +542,20 @@ class S3Blobs(Blobs):
                     raise
                 self.instance, self._slot = instance, slot
             return self.instance
+
+    def _marker(self, key: str) -> str | None:
+        """Return the dataset id a pending marker holds, or None when it is gone."""
+        try:
+            body = self.client.get_object(Bucket=self.bucket, Key=self.prefix + key)["Body"]
+            return body.read().decode(errors="replace")
+        except ClientError as err:
+            if is_missing(err):
+                return None
+            with store_errors():
+                raise
+        except BotoCoreError:
+            with store_errors():
+                raise
 
     def _leases(self) -> tuple[dict[str, dt.datetime], dt.datetime]:
         """Return when each instance's lease was last renewed, and the store's time now."""
