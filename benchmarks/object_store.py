@@ -4,6 +4,7 @@ Run by hand (not a test; needs PostgreSQL on 127.0.0.1:5432 as postgres, Redis o
 127.0.0.1:6379, and SeaweedFS's ``weed`` from the dev extra):
 
     .venv/bin/python -m benchmarks.object_store [--size-mb 2000] [--backends local,s3]
+        [--repeats 3] [--upload-only] [--code after=. --code before=/tmp/loceval-main]
 
 For each backend it starts ``loceval serve --no-consumer`` and one ``loceval worker`` on a
 fresh PostgreSQL database and an empty Redis database number (both removed afterwards):
@@ -19,6 +20,11 @@ and prints per backend: upload time and throughput, the job's time (queue to suc
 including the worker's fetch into its cache), and the peak RSS growth of the API's and the
 worker's process trees (the job's own process included) over their idle baseline.
 
+With ``--code LABEL=DIR`` (repeatable) the service runs from each source tree in turn
+(``PYTHONPATH=DIR``, the same virtual environment): a before/after comparison in one run.
+The runs are interleaved (every code and backend once per round, ``--repeats`` rounds), since
+the machine's load changes over minutes, and the medians are printed.
+
 Targets (issue 26): the bucket's upload throughput at least half the folder's; memory flat in
 the file's size (the API's growth well under the file's size).
 """
@@ -31,6 +37,7 @@ import os
 import secrets
 import shutil
 import signal
+import statistics
 import subprocess
 import sys
 import time
@@ -210,8 +217,37 @@ def _peak(sampler: RssSampler, start: float, end: float) -> float:
     return max((s.rss_mib for s in window), default=0.0)
 
 
-def run_backend(backend: str, bag: Path, work: Path) -> Figures:
-    """Upload and evaluate ``bag`` with one backend; return the figures."""
+def _evaluate(http: httpx.Client, dataset: str) -> tuple[float, str]:
+    """Evaluate the bag's two tf chains (result.json only); return when it ended and how."""
+    body: dict[str, Any] = {
+        "reference": {"dataset_id": dataset, "selector": "tf:map:base_link"},
+        "estimates": [{"dataset_id": dataset, "selector": "tf:odom:base_link"}],
+        "options": {"formats": ["result.json"], "max_dt_s": 0.001},
+    }
+    created = http.post("/api/v1/evaluations", json=body)
+    if created.status_code != 202:
+        msg = f"evaluation: {created.status_code} {created.text[:500]}"
+        raise RuntimeError(msg)
+    evaluation_id = created.json()["id"]
+    status = "queued"
+    while status not in {"succeeded", "failed"}:
+        time.sleep(0.5)
+        status = http.get(f"/api/v1/evaluations/{evaluation_id}").json()["status"]
+    return time.perf_counter(), status
+
+
+def run_backend(
+    backend: str, bag: Path, work: Path, *, code: Path | None = None, evaluate: bool = True
+) -> Figures:
+    """Upload and evaluate ``bag`` with one backend; return the figures.
+
+    Args:
+        backend: ``local`` or ``s3``.
+        bag: the recording.
+        work: a folder for the data folders, logs and SeaweedFS.
+        code: run the service from this source tree (None: the installed one).
+        evaluate: also evaluate it (else only the upload is timed).
+    """
     folder = work / backend
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir(parents=True)
@@ -227,6 +263,8 @@ def run_backend(backend: str, bag: Path, work: Path) -> Figures:
             LOCEVAL_JOB_TIMEOUT_S="3600",
             LOCEVAL_JOB_MEMORY_MB="0",
         )
+        if code is not None:
+            env["PYTHONPATH"] = str(code.resolve())
         api_dir, worker_dir = folder / "api", folder / "api"
         if backend == "s3":
             aws = stack.enter_context(_seaweedfs(folder / "seaweedfs"))
@@ -278,21 +316,7 @@ def run_backend(backend: str, bag: Path, work: Path) -> Figures:
                 msg = f"upload: {answer.status_code} {answer.text[:500]}"
                 raise RuntimeError(msg)
             dataset = answer.json()["id"]
-            body: dict[str, Any] = {
-                "reference": {"dataset_id": dataset, "selector": "tf:map:base_link"},
-                "estimates": [{"dataset_id": dataset, "selector": "tf:odom:base_link"}],
-                "options": {"formats": ["result.json"], "max_dt_s": 0.001},
-            }
-            created = http.post("/api/v1/evaluations", json=body)
-            if created.status_code != 202:
-                msg = f"evaluation: {created.status_code} {created.text[:500]}"
-                raise RuntimeError(msg)
-            evaluation_id = created.json()["id"]
-            status = "queued"
-            while status not in {"succeeded", "failed"}:
-                time.sleep(0.5)
-                status = http.get(f"/api/v1/evaluations/{evaluation_id}").json()["status"]
-            finished = time.perf_counter()
+            finished, status = _evaluate(http, dataset) if evaluate else (uploaded, "uploaded")
         return Figures(
             backend,
             bag.stat().st_size,
@@ -311,28 +335,62 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--size-mb", type=float, default=2000.0)
     parser.add_argument("--backends", default="local,s3")
     parser.add_argument("--workdir", type=Path, default=Path("benchmarks/_work/object_store"))
-    args = parser.parse_args(argv)
-    [recording] = prepare_recordings(args.workdir / "bags", args.size_mb, 1)
-    results = [
-        run_backend(b, recording.path, args.workdir / "runs") for b in args.backends.split(",")
-    ]
-    print(f"\nbag: {recording.size_bytes / _MB:,.0f} MB ({recording.path.name})")
-    print(
-        f"{'backend':8} {'upload s':>9} {'MB/s':>7} {'job s':>7} "
-        f"{'API idle→peak MiB':>19} {'worker idle→peak MiB':>22}  status"
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--upload-only", action="store_true", help="time the upload only")
+    parser.add_argument(
+        "--code", action="append", default=[], metavar="LABEL=DIR", help="a source tree to run"
     )
-    for f in results:
+    args = parser.parse_args(argv)
+    codes: list[tuple[str, Path | None]] = [
+        (label, Path(folder)) for label, _, folder in (c.partition("=") for c in args.code)
+    ] or [("", None)]
+    [recording] = prepare_recordings(args.workdir / "bags", args.size_mb, 1)
+    results: dict[tuple[str, str], list[Figures]] = {}
+    for round_ in range(args.repeats):
+        for label, code in codes:
+            for backend in args.backends.split(","):
+                figures = run_backend(
+                    backend,
+                    recording.path,
+                    args.workdir / "runs",
+                    code=code,
+                    evaluate=not args.upload_only,
+                )
+                results.setdefault((label, backend), []).append(figures)
+                print(
+                    f"round {round_ + 1} {label or '-'} {backend}: upload {figures.upload_s:.1f} s "
+                    f"({figures.size_bytes / _MB / figures.upload_s:.1f} MB/s), "
+                    f"API peak {figures.api_peak_mib:.0f} MiB, {figures.status}",
+                    flush=True,
+                )
+    size_mb = recording.size_bytes / _MB
+    print(f"\nbag: {size_mb:,.0f} MB ({recording.path.name}); medians of {args.repeats}")
+    print(
+        f"{'code':8} {'backend':8} {'upload s':>9} {'MB/s':>7} {'job s':>7} "
+        f"{'API idle→peak MiB':>19} {'worker idle→peak MiB':>22}"
+    )
+    medians: dict[tuple[str, str], float] = {}
+    for (label, backend), runs in results.items():
+        upload_s = statistics.median(f.upload_s for f in runs)
+        medians[label, backend] = upload_s
+        size = runs[0].size_bytes
         print(
-            f"{f.backend:8} {f.upload_s:9.1f} {f.size_bytes / _MB / f.upload_s:7.1f} "
-            f"{f.job_s:7.1f} "
-            f"{f.api_idle_mib:8.0f} → {f.api_peak_mib:6.0f}   {f.worker_idle_mib:9.0f} → "
-            f"{f.worker_peak_mib:7.0f}    {f.status}"
+            f"{label or '-':8} {backend:8} {upload_s:9.1f} {size / _MB / upload_s:7.1f} "
+            f"{statistics.median(f.job_s for f in runs):7.1f} "
+            f"{statistics.median(f.api_idle_mib for f in runs):8.0f} → "
+            f"{statistics.median(f.api_peak_mib for f in runs):6.0f}   "
+            f"{statistics.median(f.worker_idle_mib for f in runs):9.0f} → "
+            f"{statistics.median(f.worker_peak_mib for f in runs):7.0f}"
         )
-    if len(results) == 2:
-        ratio = (results[0].upload_s) / results[1].upload_s
-        print(f"bucket upload throughput / folder's: {ratio:.2f} (target >= 0.5)")
+    for label, _ in codes:
+        if (label, "local") in medians and (label, "s3") in medians:
+            ratio = medians[label, "local"] / medians[label, "s3"]
+            print(
+                f"{label or '-'}: bucket upload throughput / folder's: {ratio:.2f} (target >= 0.5)"
+            )
     shutil.rmtree(args.workdir / "runs", ignore_errors=True)
-    return 0 if all(f.status == "succeeded" for f in results) else 1
+    ok = {"succeeded", "uploaded"}
+    return 0 if all(f.status in ok for runs in results.values() for f in runs) else 1
 
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ from sqlalchemy.exc import IntegrityError
 
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, get_owned, new_id
 from service.errors import ConflictError, InvalidFieldsError, UploadError
-from service.recordings import inspect_upload
+from service.recordings import inspect_remote_upload, inspect_upload
 from service.runtime import Runtime
 from service.schemas import MAX_TAGS, DatasetFields, UploadPublic
 from service.storage import sanitize_filename
@@ -201,9 +201,15 @@ def _publish(
         sha256=received.sha256,
     )
     try:  # its errors name the stored path: problem_for() scrubs the server's folders
-        with runtime.store.pinned():
-            local = runtime.store.local_path(relative, filename=filename, sha256=received.sha256)
-            inspection = inspect_upload(local, filename)
+        remote = runtime.store.remote_file(relative, filename=filename)
+        if remote is not None:  # a bag in a bucket: read by ranges where it lies, never copied
+            inspection = inspect_remote_upload(remote, filename)
+        else:
+            with runtime.store.pinned():
+                local = runtime.store.local_path(
+                    relative, filename=filename, sha256=received.sha256
+                )
+                inspection = inspect_upload(local, filename)
     except BaseException:
         runtime.store.remove_upload(dataset_id, relative)
         raise

@@ -87,6 +87,7 @@ def create_app(
         finally:
             if running is not None:
                 runtime.stop_consumer(running)
+            runtime.store.leave()  # a bucket's lease goes: uvicorn re-raises SIGTERM after this
 
     app = FastAPI(
         title="loceval",

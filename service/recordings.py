@@ -9,13 +9,16 @@ corrupt file is refused at upload with the reader's message, not at evaluation.
 from __future__ import annotations
 
 from pathlib import Path, PurePosixPath
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from exporters.cad.site import BUILDING_SUFFIXES
 from loceval.errors import LocevalError, ReaderError
 from loceval.inspection import URDF_SUFFIXES, inspect
 
-__all__ = ["inspect_upload"]
+if TYPE_CHECKING:
+    from loceval.readers.rosbag import RemoteFile
+
+__all__ = ["inspect_remote_upload", "inspect_upload"]
 
 
 def inspect_upload(path: Path, filename: str) -> dict[str, Any]:
@@ -57,6 +60,26 @@ def inspect_upload(path: Path, filename: str) -> dict[str, Any]:
     warnings = inspection.get("warnings")
     if isinstance(warnings, list):
         inspection["warnings"] = [str(w).replace(server_path, filename) for w in warnings]
+    return inspection
+
+
+def inspect_remote_upload(file: RemoteFile, filename: str) -> dict[str, Any]:
+    """Inspect an MCAP file or ROS 1 bag in the object store by ranged reads (no copy).
+
+    The same description :func:`inspect_upload` gives for the file; only its index, tf
+    messages and pose topics' first and last messages are fetched where its MCAP index
+    allows.
+
+    Raises:
+        ReaderError: the file is empty or not a bag loceval can read.
+    """
+    from loceval.inspection.bag import inspect_bag_file  # noqa: PLC0415
+
+    if file.size == 0:
+        msg = f"{filename!r} is empty; upload the recording itself."
+        raise ReaderError(msg)
+    inspection = inspect_bag_file(file).to_dict()
+    inspection.pop("path", None)
     return inspection
 
 

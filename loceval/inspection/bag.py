@@ -17,6 +17,8 @@ then between two fixed frames (``map -> odom``), then links inside the robot
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from loceval.errors import ReaderError
@@ -28,10 +30,10 @@ from loceval.inspection.model import (
     TopicInspection,
 )
 from loceval.readers import SourceSpec
-from loceval.readers.rosbag import PoseKind, TopicOverview, read_bag_overview
+from loceval.readers.rosbag import PoseKind, RemoteFile, TopicOverview, read_bag_overview
 from loceval.readers.tftree import TfBuffer, compose_chain, describe_chain, find_chain
 
-__all__ = ["inspect_bag"]
+__all__ = ["inspect_bag", "inspect_bag_file"]
 
 _WORLD_FRAMES = ("earth", "world", "map", "odom")
 _BODY_FRAMES = ("base_link", "base_footprint")
@@ -50,7 +52,16 @@ def inspect_bag(spec: SourceSpec) -> Inspection:
     Raises:
         ReaderError: the bag cannot be read.
     """
-    overview = read_bag_overview(spec.path)
+    return inspect_bag_file(spec.path)
+
+
+def inspect_bag_file(path: Path | RemoteFile) -> Inspection:
+    """Describe a bag file (see :func:`inspect_bag`), also one read by position from a store.
+
+    Raises:
+        ReaderError: the bag cannot be read.
+    """
+    overview = read_bag_overview(path)
     warnings: list[str] = []
     topics = tuple(
         TopicInspection(t.name, t.msgtype, t.message_count, pose_source=_is_pose_topic(t))
@@ -66,7 +77,7 @@ def inspect_bag(spec: SourceSpec) -> Inspection:
         sorted(tf_sources, key=lambda x: _usefulness(overview.tf, depths, str(x.selector)))
     )
     return Inspection(
-        path=str(spec.path),
+        path=str(path),
         kind=str(overview.storage_format),
         format="bag",
         sources=tuple(sources),

@@ -20,8 +20,9 @@ import os
 import struct
 from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Protocol
 
-__all__ = ["read_indexed_messages"]
+__all__ = ["RandomAccess", "read_indexed_messages"]
 
 _MAGIC = b"\x89MCAP0\r\n"
 _OP_FOOTER, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK_INDEX, _OP_MESSAGE_INDEX = 0x02, 4, 5, 8, 7
@@ -44,13 +45,39 @@ class _NotServableError(Exception):
     """The file cannot be served from its index; read it the ordinary way."""
 
 
+class RandomAccess(Protocol):
+    """Bytes read by position: a local file, or an object read with ranged requests."""
+
+    @property
+    def size(self) -> int:
+        """The size in bytes."""
+        ...
+
+    def pread(self, size: int, offset: int) -> bytes:
+        """Return up to ``size`` bytes at ``offset``."""
+        ...
+
+
+class _LocalFile:
+    """A file descriptor as :class:`RandomAccess`."""
+
+    def __init__(self, fd: int) -> None:
+        self.fd = fd
+        self.size = os.fstat(fd).st_size
+
+    def pread(self, size: int, offset: int) -> bytes:
+        return os.pread(self.fd, size, offset)
+
+
 def read_indexed_messages(
-    path: Path, wanted: Sequence[tuple[str, str]]
+    path: Path | RandomAccess, wanted: Sequence[tuple[str, str]]
 ) -> list[tuple[int, int, bytes]] | None:
     """Return every message of the wanted channels, or None when the index cannot serve them.
 
     Args:
-        path: an ``.mcap`` file.
+        path: an ``.mcap`` file, or its bytes read by position (an object in a bucket read
+            with ranged requests: only the summary, the message indexes and the wanted
+            messages are read).
         wanted: ``(topic, msgtype)`` pairs to read.
 
     Returns:
@@ -58,20 +85,26 @@ def read_indexed_messages(
         None: the file has no usable summary or chunk index, a chunk that holds a wanted
         message is compressed, or a record disagrees with the index.
     """
+    keys = {key: i for i, key in enumerate(wanted)}
+    if not isinstance(path, str | os.PathLike):
+        try:
+            return _read(path, keys)
+        except (_NotServableError, struct.error, UnicodeDecodeError, OSError):
+            return None
     try:
         fd = os.open(path, os.O_RDONLY)
     except OSError:
         return None
     try:
-        return _read(fd, {key: i for i, key in enumerate(wanted)})
+        return _read(_LocalFile(fd), keys)
     except (_NotServableError, struct.error, UnicodeDecodeError, OSError):
         return None
     finally:
         os.close(fd)
 
 
-def _read(fd: int, wanted: dict[tuple[str, str], int]) -> list[tuple[int, int, bytes]]:
-    schemas, channels, chunk_indexes = _read_summary(fd)
+def _read(src: RandomAccess, wanted: dict[tuple[str, str], int]) -> list[tuple[int, int, bytes]]:
+    schemas, channels, chunk_indexes = _read_summary(src)
     wanted_channels: dict[int, int] = {}
     for channel_id, (topic, schema_id, encoding) in channels.items():
         key = (topic, schemas.get(schema_id, ""))
@@ -90,16 +123,16 @@ def _read(fd: int, wanted: dict[tuple[str, str], int]) -> list[tuple[int, int, b
         for channel_id, index_offset in offsets:
             entries.extend(
                 (records_start + offset, log_time, channel_id)
-                for log_time, offset in _read_message_index(fd, index_offset, channel_id)
+                for log_time, offset in _read_message_index(src, index_offset, channel_id)
             )
     entries.sort()
     messages: list[tuple[int, int, bytes]] = []
     for run in _runs(entries):
         start = run[0][0]
-        block = os.pread(fd, run[-1][0] + _FIRST_READ - start, start)
+        block = src.pread(run[-1][0] + _FIRST_READ - start, start)
         for position, log_time, channel_id in run:
             data = _message_data(
-                fd,
+                src,
                 block,
                 at=position - start,
                 position=position,
@@ -126,19 +159,19 @@ def _runs(entries: list[tuple[int, int, int]]) -> Iterator[list[tuple[int, int, 
 
 
 def _read_summary(
-    fd: int,
+    src: RandomAccess,
 ) -> tuple[dict[int, str], dict[int, tuple[str, int, str]], list[tuple[int, dict[int, int], str]]]:
-    size = os.fstat(fd).st_size
-    if size < 2 * len(_MAGIC) + _FOOTER_SIZE or os.pread(fd, 8, 0) != _MAGIC:
+    size = src.size
+    if size < 2 * len(_MAGIC) + _FOOTER_SIZE or src.pread(8, 0) != _MAGIC:
         raise _NotServableError
-    footer = os.pread(fd, _FOOTER_SIZE, size - _FOOTER_SIZE)
+    footer = src.pread(_FOOTER_SIZE, size - _FOOTER_SIZE)
     if footer[-8:] != _MAGIC or footer[0] != _OP_FOOTER:
         raise _NotServableError
     summary_start, summary_offset_start = struct.unpack_from("<QQ", footer, 9)
     summary_end = summary_offset_start or size - _FOOTER_SIZE
     if not 0 < summary_start < summary_end <= size - _FOOTER_SIZE:
         raise _NotServableError
-    summary = os.pread(fd, summary_end - summary_start, summary_start)
+    summary = src.pread(summary_end - summary_start, summary_start)
     schemas, channels, chunk_indexes = _parse_summary(summary)
     if not chunk_indexes:
         raise _NotServableError
@@ -146,19 +179,19 @@ def _read_summary(
 
 
 def _message_data(
-    fd: int, block: bytes, *, at: int, position: int, channel_id: int, log_time: int
+    src: RandomAccess, block: bytes, *, at: int, position: int, channel_id: int, log_time: int
 ) -> bytes:
     """Return a message record's data from ``block`` (read more when it runs past it)."""
     opcode, length, record_channel, _, record_time, _ = _MESSAGE_HEAD.unpack_from(block, at)
     if opcode != _OP_MESSAGE or record_channel != channel_id or record_time != log_time:
         raise _NotServableError
     data_size = length - 22
-    if not 0 <= data_size <= os.fstat(fd).st_size:  # a garbage length: no read of exabytes
+    if not 0 <= data_size <= src.size:  # a garbage length: no read of exabytes
         raise _NotServableError
     start = at + _MESSAGE_HEAD.size
     if start + data_size <= len(block):
         return block[start : start + data_size]
-    data = os.pread(fd, data_size, position + _MESSAGE_HEAD.size)
+    data = src.pread(data_size, position + _MESSAGE_HEAD.size)
     if len(data) != data_size:
         raise _NotServableError
     return data
@@ -198,14 +231,14 @@ def _parse_summary(
     return schemas, channels, chunk_indexes
 
 
-def _read_message_index(fd: int, offset: int, channel_id: int) -> list[tuple[int, int]]:
-    head = os.pread(fd, 1 + 8 + 2 + 4, offset)
+def _read_message_index(src: RandomAccess, offset: int, channel_id: int) -> list[tuple[int, int]]:
+    head = src.pread(1 + 8 + 2 + 4, offset)
     opcode, _ = _RECORD_HEAD.unpack_from(head)
     (record_channel,) = _U16.unpack_from(head, 9)
     (size,) = _U32.unpack_from(head, 11)
     if opcode != _OP_MESSAGE_INDEX or record_channel != channel_id or size % 16:
         raise _NotServableError
-    body = os.pread(fd, size, offset + len(head))
+    body = src.pread(size, offset + len(head))
     if len(body) != size:
         raise _NotServableError
     return list(struct.iter_unpack("<QQ", body))

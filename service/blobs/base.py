@@ -19,11 +19,14 @@ import contextlib
 import re
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 from starlette.responses import Response
 
 from service.storage import Swept
+
+if TYPE_CHECKING:
+    from loceval.readers.rosbag import RemoteFile
 
 __all__ = [
     "HEAD_BYTES",
@@ -133,16 +136,23 @@ class Blobs(abc.ABC):
         """Delete a dataset's file (its id's folder, or its key)."""
 
     def publishing(self, dataset_id: str) -> contextlib.AbstractContextManager[None]:
-        """Mark a dataset as being published while inside (a local folder's sweep reads it).
+        """Mark a dataset as being published while inside (a sweep reads the mark).
 
-        A bucket's objects are addressed by content: one left by a crash is the same bytes
-        an upload of them would store, and is taken again, so nothing needs marking.
+        A local folder marks the dataset's folder; a bucket keeps the upload's pending
+        marker until the block ends without an error (the row is recorded), so a sweep
+        deletes an object whose process died before recording it.
         """
         del dataset_id
         return contextlib.nullcontext()
 
     def close(self) -> None:  # noqa: B027  (most stores hold nothing to let go)
         """Let go of what this process holds (a local folder: its owner's lock)."""
+
+    def leave(self) -> None:  # noqa: B027  (a folder's uploads need no lease)
+        """Stop vouching for this process's uploads (the app's shutdown; a bucket's lease goes).
+
+        Receiving again later vouches again.
+        """
 
     def free_bytes(self) -> int | None:
         """Return the free bytes where uploads are written (None: no local disk, a bucket)."""
@@ -157,6 +167,15 @@ class Blobs(abc.ABC):
     @abc.abstractmethod
     def local_path(self, storage_path: str, *, filename: str, sha256: str) -> Path:
         """Return a local file with a dataset's bytes (held while :meth:`pinned` is open)."""
+
+    def remote_file(self, storage_path: str, *, filename: str) -> RemoteFile | None:
+        """Return a dataset's file to read by position where it lies, or None (read a copy).
+
+        A bucket serves MCAP files and ROS 1 bags so (their readers seek to an index and
+        read parts); a local folder's files are local already.
+        """
+        del storage_path, filename
+        return None
 
     def pinned(self) -> contextlib.AbstractContextManager[None]:
         """Keep the local copies :meth:`local_path` hands out in this block from eviction."""

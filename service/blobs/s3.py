@@ -2,16 +2,24 @@
 
 Layout under the URL's prefix (keys relative to it are the database's storage paths)::
 
-    incoming/<host>/<uuid>                an upload being received (a multipart upload)
-    datasets/<project id>/<sha256>        a stored upload, addressed by its content
+    uploads/<instance>/<uuid>             an upload: a multipart upload while it is received,
+                                          then, completed in place, the dataset's object
+    pending/<instance>/<uuid>             an upload completed but not yet recorded (holds the
+                                          dataset id; gone once the row is committed)
+    instances/<instance>                  the lease of a live process that receives uploads
+    datasets/<project id>/<sha256>        a dataset moved in by ``loceval storage migrate``
     evaluations/<id>/artifacts/<name>     an evaluation's artifacts
     runs/<run id>/artifacts/<name>        a schedule run's summary report
 
 An upload streams into a multipart upload part by part (a few parts in flight, never the
-whole file in memory or on disk); it becomes an object only when complete, is then copied to
-its content-addressed key (where identical bytes of the project already are, nothing is
-copied) and deleted. A failed or interrupted upload is aborted; the API's start (for its own
-host's uploads) and the hourly sweep (for any older than an hour) abort what a crash left.
+whole file in memory or on disk), hashed on the way. It is never copied: once received, the
+database is asked whether the project has these bytes already (then the multipart upload is
+aborted, and no object ever existed), else it is completed where it was received, and the
+whole object appears at once. A failed or interrupted upload is aborted. What a crash leaves
+is found by its *instance* (:mod:`service.blobs.lease`): the start of a process on the same
+data folder takes the gone process's identity and sweeps its leftovers at once; any sweep
+(every minute in the workers) takes those of processes whose lease in the bucket lapsed. A
+live process's uploads are never touched, whatever its host name.
 
 The endpoint and credentials come from the environment as every S3 client takes them
 (``AWS_ENDPOINT_URL``, ``AWS_ACCESS_KEY_ID``, ``AWS_SECRET_ACCESS_KEY``, ``AWS_REGION``);
@@ -22,83 +30,52 @@ from __future__ import annotations
 
 import contextlib
 import datetime as dt
+import email.utils
 import os
-import re
 import shutil
-import socket
+import threading
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
-from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final
+from pathlib import Path, PurePosixPath
+from typing import IO, TYPE_CHECKING, Any, Final
 
-import boto3
 from boto3.s3.transfer import TransferConfig
-from botocore.config import Config
 from botocore.exceptions import BotoCoreError, ClientError
 from starlette.responses import RedirectResponse, Response, StreamingResponse
 
 from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming, parse_blob_url
 from service.blobs.cache import InputCache
-from service.errors import ServiceUnavailableError, StartupError, register_private_root
+from service.blobs.lease import LEASE_S, Lease, claim_slot
+from service.blobs.ranged import ObjectFile
+from service.blobs.s3client import is_missing, make_client, store_errors
+from service.errors import StartupError, register_private_root
 from service.storage import Swept
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
-    from mypy_boto3_s3.type_defs import CopySourceTypeDef, ObjectIdentifierTypeDef
+    from mypy_boto3_s3.type_defs import ObjectIdentifierTypeDef
+
 
 __all__ = ["PART_BYTES", "S3Blobs", "S3Incoming", "make_client", "store_errors"]
 
 PART_BYTES: Final = 8 << 20
 """The size of an upload's parts (S3 wants at least 5 MiB but for the last)."""
 _IN_FLIGHT: Final = 4  # parts sent at once: the upload holds at most this many in memory
-_COPY_LIMIT: Final = 5 << 30  # CopyObject's limit; above it the managed copy goes by parts
 _DOWNLOAD_CHUNK: Final = 1 << 20
 _TRANSFER: Final = TransferConfig(
     multipart_threshold=64 << 20, multipart_chunksize=8 << 20, max_concurrency=4
 )
 
 
-@contextlib.contextmanager
-def store_errors() -> Iterator[None]:
-    """Raise ServiceUnavailableError when the object store fails (unreachable, refusing)."""
-    try:
-        yield
-    except (BotoCoreError, ClientError) as err:
-        code = err.response.get("Error", {}).get("Code", "") if isinstance(err, ClientError) else ""
-        msg = (
-            f"The object store cannot be used ({type(err).__name__}{' ' + code if code else ''}); "
-            "try again in a minute (GET /readyz shows when it is back)."
-        )
-        raise ServiceUnavailableError(msg) from err
-
-
-def _missing(err: ClientError) -> bool:
-    return err.response.get("Error", {}).get("Code") in {"404", "NoSuchKey", "NotFound"}
-
-
-def make_client(*, pool: int = 32) -> S3Client:
-    """Return an S3 client configured from the conventional ``AWS_*`` variables."""
-    endpoint = os.environ.get("AWS_ENDPOINT_URL") or None
-    config = Config(
-        max_pool_connections=pool,
-        retries={"max_attempts": 5, "mode": "standard"},
-        s3={"addressing_style": "path" if endpoint else "auto"},
-        # S3-compatible stores do not all know the newer default checksums
-        request_checksum_calculation="when_required",
-        response_checksum_validation="when_required",
-        connect_timeout=10,
-        read_timeout=120,
-    )
-    region = os.environ.get("AWS_REGION") or os.environ.get("AWS_DEFAULT_REGION") or "us-east-1"
-    client: S3Client = boto3.session.Session().client(
-        "s3", endpoint_url=endpoint, region_name=region, config=config
-    )
-    return client
-
-
 class S3Incoming(Incoming):
-    """An upload streamed into a multipart upload, at most a few parts in memory."""
+    """An upload streamed into a multipart upload, at most a few parts in memory.
+
+    Its key is final (``uploads/<instance>/<uuid>``): :meth:`commit` sends the last part but
+    does not complete the upload, so nothing is visible yet; :meth:`publish` writes the
+    pending marker and completes it, making the whole object appear at once. An upload of
+    bytes that are stored already is aborted without ever becoming an object.
+    """
 
     def __init__(self, store: S3Blobs, key: str) -> None:
         """Receive into ``key`` (relative to the prefix); nothing is sent before a part is full."""
@@ -110,6 +87,7 @@ class S3Incoming(Incoming):
         self._parts: list[tuple[int, Future[str]]] = []
         self._pool: ThreadPoolExecutor | None = None
         self.committed = False
+        self.published = False
         self.done = False
 
     @property
@@ -154,29 +132,47 @@ class S3Incoming(Incoming):
         return answer["ETag"]
 
     def commit(self) -> None:
-        """See :meth:`Incoming.commit`."""
+        """See :meth:`Incoming.commit`: every part is in the store (the object is not, yet).
+
+        An upload smaller than a part stays in memory (under 8 MiB) until :meth:`publish`.
+        """
         if self.committed:
             return
+        if self._upload_id is not None:
+            if self._buffer:
+                self._send(bytes(self._buffer))
+                self._buffer = bytearray()
+            for _, future in self._parts:
+                future.result()
+            self._close_pool()
+        self.committed = True
+
+    def publish(self, dataset_id: str) -> None:
+        """Mark the upload pending for ``dataset_id``, then make it an object, whole."""
+        if not self.committed or self.done:
+            msg = "only a committed, not aborted upload to the bucket can be published"
+            raise TypeError(msg)
         client = self.store.client
-        if self._upload_id is None:  # smaller than one part: one request
-            with store_errors():
+        with store_errors():
+            client.put_object(
+                Bucket=self.store.bucket,
+                Key=self.store.prefix + pending_key(self.key),
+                Body=dataset_id.encode(),
+            )
+            if self._upload_id is None:  # smaller than one part: one request
                 client.put_object(
                     Bucket=self.store.bucket, Key=self._full_key, Body=bytes(self._buffer)
                 )
-        else:
-            if self._buffer:
-                self._send(bytes(self._buffer))
-            parts = [{"PartNumber": n, "ETag": f.result()} for n, f in self._parts]
-            with store_errors():
+            else:
+                parts = [{"PartNumber": n, "ETag": f.result()} for n, f in self._parts]
                 client.complete_multipart_upload(
                     Bucket=self.store.bucket,
                     Key=self._full_key,
                     UploadId=self._upload_id,
                     MultipartUpload={"Parts": parts},  # type: ignore[typeddict-item]
                 )
-            self._close_pool()
         self._buffer = bytearray()
-        self.committed = True
+        self.published = True
 
     def _close_pool(self) -> None:
         if self._pool is not None:
@@ -184,20 +180,24 @@ class S3Incoming(Incoming):
             self._pool = None
 
     def abort(self) -> None:
-        """See :meth:`Incoming.abort`."""
+        """See :meth:`Incoming.abort` (after publishing: deletes the object and its marker)."""
         if self.done:
             return
         self.done = True
         self._buffer = bytearray()
         self._close_pool()
-        client = self.store.client
         with contextlib.suppress(BotoCoreError, ClientError):  # the sweep takes what stays
-            if self.committed:
-                client.delete_object(Bucket=self.store.bucket, Key=self._full_key)
+            if self.published:
+                self.store.remove_upload("", self.key)
             elif self._upload_id is not None:
-                client.abort_multipart_upload(
+                self.store.client.abort_multipart_upload(
                     Bucket=self.store.bucket, Key=self._full_key, UploadId=self._upload_id
                 )
+
+
+def pending_key(upload_key: str) -> str:
+    """Return the marker key of an upload's key (``uploads/I/U`` -> ``pending/I/U``)."""
+    return "pending/" + upload_key.removeprefix("uploads/")
 
 
 class S3Blobs(Blobs):
@@ -210,6 +210,7 @@ class S3Blobs(Blobs):
         min_free_bytes: the local disk's reserve (the cache keeps it).
         redirect_s: downloads answer 307 to a presigned URL valid this long; 0 streams.
         client: the S3 client (default: from the ``AWS_*`` environment variables).
+        lease_s: an uploading process whose lease is older than this is gone.
     """
 
     kind = "s3"
@@ -223,13 +224,20 @@ class S3Blobs(Blobs):
         min_free_bytes: int,
         redirect_s: int = 0,
         client: S3Client | None = None,
+        lease_s: float = LEASE_S,
     ) -> None:
         """Connect to the bucket (checked by :meth:`check_bucket`)."""
         self.bucket, self.prefix = parse_blob_url(url)
         self.root = root.resolve()
         self.client = client or make_client()
         self.redirect_s = redirect_s
-        self.host = _host_label()
+        self.lease_s = lease_s
+        self.instance: str | None = None
+        """This process's instance id once it receives uploads (:mod:`service.blobs.lease`)."""
+        self._slot: IO[bytes] | None = None
+        self._lease: Lease | None = None
+        self._instance_lock = threading.Lock()
+        self._publishing: dict[str, S3Incoming] = {}
         self.cache = InputCache(
             self.root / "cache", max_bytes=cache_bytes, min_free_bytes=min_free_bytes
         )
@@ -268,37 +276,50 @@ class S3Blobs(Blobs):
 
     def open_incoming(self) -> S3Incoming:
         """See :meth:`Blobs.open_incoming`."""
-        return S3Incoming(self, f"incoming/{self.host}/{uuid.uuid4().hex}")
+        return S3Incoming(self, f"uploads/{self._claim()}/{uuid.uuid4().hex}")
 
     def publish_upload(
         self, incoming: Incoming, *, project_id: str, dataset_id: str, filename: str, sha256: str
     ) -> str:
-        """See :meth:`Blobs.publish_upload`."""
-        del dataset_id, filename  # addressed by content: the row keeps the name
-        if not isinstance(incoming, S3Incoming) or not incoming.committed:
-            msg = "only a committed upload to the bucket can be published in it"
+        """See :meth:`Blobs.publish_upload`: the upload's own key, completed in place.
+
+        No copy: the object appears whole under the key it was received into. Until the
+        :meth:`publishing` block ends, a marker (``pending/<instance>/<uuid>``, holding the
+        dataset id) tells a sweep to delete the object if the dataset was never recorded.
+        """
+        del project_id, filename, sha256  # the row keeps them; deduplication asks the database
+        if not isinstance(incoming, S3Incoming):
+            msg = "only an upload to the bucket can be published in it"
             raise TypeError(msg)
-        key = f"datasets/{project_id}/{sha256}"
-        if not self.exists(key):
-            source: CopySourceTypeDef = {"Bucket": self.bucket, "Key": self.prefix + incoming.key}
-            with store_errors():
-                size = self.client.head_object(Bucket=self.bucket, Key=source["Key"])[
-                    "ContentLength"
-                ]
-                if size < _COPY_LIMIT:
-                    self.client.copy_object(
-                        CopySource=source, Bucket=self.bucket, Key=self.prefix + key
-                    )
-                else:
-                    self.client.copy(source, self.bucket, self.prefix + key, Config=_TRANSFER)
-        incoming.abort()  # the received copy goes
-        return key
+        incoming.publish(dataset_id)
+        self._publishing[dataset_id] = incoming
+        return incoming.key
+
+    @contextlib.contextmanager
+    def publishing(self, dataset_id: str) -> Iterator[None]:
+        """See :meth:`Blobs.publishing`: the pending marker goes once the block succeeded."""
+        try:
+            yield
+        except BaseException:
+            self._publishing.pop(dataset_id, None)  # the marker stays when the object might
+            raise
+        incoming = self._publishing.pop(dataset_id, None)
+        if incoming is not None:
+            incoming.done = True  # recorded (or removed): discarding the form keeps it
+            with contextlib.suppress(BotoCoreError, ClientError):  # the sweep takes a leftover
+                self.client.delete_object(
+                    Bucket=self.bucket, Key=self.prefix + pending_key(incoming.key)
+                )
 
     def remove_upload(self, dataset_id: str, storage_path: str) -> None:
-        """See :meth:`Blobs.remove_upload`."""
+        """See :meth:`Blobs.remove_upload` (and the upload's pending marker)."""
         del dataset_id
         with store_errors():
             self.client.delete_object(Bucket=self.bucket, Key=self.prefix + storage_path)
+            if storage_path.startswith("uploads/"):
+                self.client.delete_object(
+                    Bucket=self.bucket, Key=self.prefix + pending_key(storage_path)
+                )
 
     def check_free_space(self, min_free_bytes: int, *, incoming_bytes: int = 0) -> bool:
         """See :meth:`Blobs.check_free_space`."""
@@ -318,6 +339,12 @@ class S3Blobs(Blobs):
                 self.client.download_file(self.bucket, key, str(target), Config=_TRANSFER)
 
         return self.cache.fetch(sha256, filename, size, download)
+
+    def remote_file(self, storage_path: str, *, filename: str) -> ObjectFile | None:
+        """See :meth:`Blobs.remote_file`: an ``.mcap`` or ``.bag`` file, read by ranges."""
+        if PurePosixPath(filename).suffix.lower() not in {".mcap", ".bag"}:
+            return None
+        return ObjectFile(self.client, self.bucket, self.prefix + storage_path, name=filename)
 
     def pinned(self) -> contextlib.AbstractContextManager[None]:
         """See :meth:`Blobs.pinned`."""
@@ -368,7 +395,7 @@ class S3Blobs(Blobs):
         try:
             head = self.client.head_object(Bucket=self.bucket, Key=self.prefix + key)
         except ClientError as err:
-            if _missing(err):
+            if is_missing(err):
                 return None
             with store_errors():
                 raise
@@ -418,28 +445,70 @@ class S3Blobs(Blobs):
         older_than_s: float = STALE_UPLOAD_S,
         startup: bool = False,
     ) -> Swept:
-        """See :meth:`Blobs.sweep` (a bucket's datasets are addressed by content: kept)."""
-        del recorded
-        cutoff = dt.datetime.now(dt.UTC) - dt.timedelta(seconds=older_than_s)
-        own = f"{self.prefix}incoming/{self.host}/"
-        removed = 0
+        """See :meth:`Blobs.sweep`: what processes that are gone left (:mod:`.lease`).
+
+        Aborts the open multipart uploads of instances that are gone, and deletes the
+        uploads that were completed but never recorded (their pending markers) of
+        instances that are gone or older than ``older_than_s``. A live process's uploads
+        are kept whatever their age (a slow client's upload may take hours). At
+        ``startup`` this process's identity is taken first: a gone process's slot in this
+        data folder, whose leftovers are then all abandoned.
+        """
+        if startup:
+            self._claim()
+        leases, now = self._leases()
+
+        def gone(instance: str) -> bool:
+            if instance == self.instance:
+                return startup
+            renewed = leases.get(instance)
+            return renewed is None or (now - renewed).total_seconds() > self.lease_s
+
+        partial = unrecorded = 0
         with store_errors():
             paginator = self.client.get_paginator("list_multipart_uploads")
-            for page in paginator.paginate(Bucket=self.bucket, Prefix=f"{self.prefix}incoming/"):
+            for page in paginator.paginate(Bucket=self.bucket, Prefix=f"{self.prefix}uploads/"):
                 for upload in page.get("Uploads", []):
-                    key = upload["Key"]
-                    if upload["Initiated"] < cutoff or (startup and key.startswith(own)):
+                    if gone(_instance_of(upload["Key"], self.prefix + "uploads/")):
                         with contextlib.suppress(ClientError):  # finished meanwhile
                             self.client.abort_multipart_upload(
-                                Bucket=self.bucket, Key=key, UploadId=upload["UploadId"]
+                                Bucket=self.bucket, Key=upload["Key"], UploadId=upload["UploadId"]
                             )
-                        removed += 1
-            for item in self._list("incoming/"):
-                key = item["Key"]
-                if item["LastModified"] < cutoff or (startup and key.startswith(own)):
-                    self.client.delete_object(Bucket=self.bucket, Key=key)
-                    removed += 1
-        return Swept(partial_uploads=removed)
+                        partial += 1
+        markers = [
+            item
+            for item in self._list("pending/")
+            if gone(_instance_of(item["Key"], self.prefix + "pending/"))
+            or (now - item["LastModified"]).total_seconds() > older_than_s
+        ]
+        for item in markers:
+            marker = item["Key"][len(self.prefix) :]
+            upload = "uploads/" + marker.removeprefix("pending/")
+            dataset_id = self._marker(marker)
+            if dataset_id is None:  # settled, or another sweep took it, meanwhile
+                continue
+            if dataset_id not in set(recorded([dataset_id])):
+                with store_errors():
+                    self.client.delete_object(Bucket=self.bucket, Key=self.prefix + upload)
+                unrecorded += 1
+            with store_errors():
+                self.client.delete_object(Bucket=self.bucket, Key=item["Key"])
+        return Swept(partial_uploads=partial, datasets=unrecorded)
+
+    def close(self) -> None:
+        """See :meth:`Blobs.close`: the lease is deleted and the slot let go."""
+        self.leave()
+
+    def leave(self) -> None:
+        """See :meth:`Blobs.leave`: the lease is deleted and the slot let go."""
+        with self._instance_lock:
+            if self._lease is not None:
+                self._lease.stop()
+                self._lease = None
+            if self._slot is not None:
+                self._slot.close()
+                self._slot = None
+            self.instance = None
 
     def cached_bytes(self) -> int:
         """See :meth:`Blobs.cached_bytes`."""
@@ -451,6 +520,58 @@ class S3Blobs(Blobs):
             self.client.head_bucket(Bucket=self.bucket)
 
     # -- helpers ---------------------------------------------------------------------------
+
+    def _claim(self) -> str:
+        """Return this process's instance id, taking a slot and starting its lease first."""
+        with self._instance_lock:
+            if self.instance is None:
+                instance, slot = claim_slot(self.root / "instances")
+                key = f"{self.prefix}instances/{instance}"
+
+                def renew() -> None:
+                    self.client.put_object(Bucket=self.bucket, Key=key, Body=b"")
+
+                def release() -> None:
+                    self.client.delete_object(Bucket=self.bucket, Key=key)
+
+                try:
+                    with store_errors():
+                        self._lease = Lease(renew, release, interval_s=self.lease_s / 4)
+                except BaseException:
+                    slot.close()
+                    raise
+                self.instance, self._slot = instance, slot
+            return self.instance
+
+    def _marker(self, key: str) -> str | None:
+        """Return the dataset id a pending marker holds, or None when it is gone."""
+        try:
+            body = self.client.get_object(Bucket=self.bucket, Key=self.prefix + key)["Body"]
+            return body.read().decode(errors="replace")
+        except ClientError as err:
+            if is_missing(err):
+                return None
+            with store_errors():
+                raise
+        except BotoCoreError:
+            with store_errors():
+                raise
+
+    def _leases(self) -> tuple[dict[str, dt.datetime], dt.datetime]:
+        """Return when each instance's lease was last renewed, and the store's time now."""
+        leases: dict[str, dt.datetime] = {}
+        now: dt.datetime | None = None
+        with store_errors():
+            paginator = self.client.get_paginator("list_objects_v2")
+            for page in paginator.paginate(Bucket=self.bucket, Prefix=f"{self.prefix}instances/"):
+                date = page.get("ResponseMetadata", {}).get("HTTPHeaders", {}).get("date")
+                if date and now is None:
+                    with contextlib.suppress(TypeError, ValueError):
+                        now = email.utils.parsedate_to_datetime(date)
+                for item in page.get("Contents", []):
+                    instance = _instance_of(item["Key"], f"{self.prefix}instances/")
+                    leases[instance] = item["LastModified"]
+        return leases, now or dt.datetime.now(dt.UTC)
 
     def _list(self, relative: str) -> Iterator[Any]:
         with store_errors():
@@ -468,6 +589,6 @@ class S3Blobs(Blobs):
                 )
 
 
-def _host_label() -> str:
-    """Return this machine's name as a key segment (its uploads' folder in ``incoming/``)."""
-    return re.sub(r"[^A-Za-z0-9.\-]", "_", socket.gethostname())[:63] or "host"
+def _instance_of(key: str, folder: str) -> str:
+    """Return the instance segment of ``<folder><instance>/<uuid>``."""
+    return key.removeprefix(folder).split("/", 1)[0]

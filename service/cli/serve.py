@@ -43,7 +43,10 @@ def run_serve(args: argparse.Namespace) -> int:
         f"links start with {settings.public_url.rstrip('/')}/, set by LOCEVAL_PUBLIC_URL)",
         flush=True,
     )
-    run(app, host=host, port=port)
+    try:
+        run(app, host=host, port=port)
+    finally:
+        runtime.close()  # a bucket's upload lease is deleted, the data folder's lock let go
     return 0
 
 

@@ -32,6 +32,7 @@ from rosbags.interfaces import Connection
 from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError, ReaderError
 from loceval.readers.rosbag.bagfile import (
+    RemoteFile,
     is_tf,
     normalize_msgtype,
     open_bag,
@@ -59,6 +60,7 @@ __all__ = [
     "BagFormat",
     "BagOverview",
     "PoseKind",
+    "RemoteFile",
     "StampSource",
     "TopicOverview",
     "is_bag_path",
@@ -178,7 +180,7 @@ def read_bag_tf_buffer(
         return read_tf(bag, stamp=stamp)
 
 
-def read_bag_overview(path: Path | Sequence[Path]) -> BagOverview:
+def read_bag_overview(path: Path | Sequence[Path] | RemoteFile) -> BagOverview:
     """Summarize a bag: format, time range, topics, tf links and pose-topic time ranges.
 
     Reads the bag's index and metadata, the tf messages, and only the first and last
@@ -186,7 +188,9 @@ def read_bag_overview(path: Path | Sequence[Path]) -> BagOverview:
     point clouds) are never read.
 
     Args:
-        path: a bag, or the files of a split ROS 1 recording.
+        path: a bag, or the files of a split ROS 1 recording, or an MCAP file or ROS 1 bag
+            read by position from a store (:class:`RemoteFile`: only what is listed above
+            is fetched where the MCAP index allows).
 
     Raises:
         ReaderError: the bag cannot be read.

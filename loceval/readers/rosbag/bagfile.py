@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO, Final
+from typing import BinaryIO, Final, Protocol, cast, runtime_checkable
 
 import apsw  # rosbags' SQLite driver: a damaged .db3 raises its errors, not sqlite3's
 from rosbags.highlevel import AnyReader, AnyReaderError
@@ -35,7 +35,7 @@ else:  # rosbags depends on backports.zstd before Python 3.14
 
 from loceval.errors import ReaderError
 from loceval.readers._archive import extracted_bag
-from loceval.readers._mcap import read_indexed_messages
+from loceval.readers._mcap import RandomAccess, read_indexed_messages
 from loceval.readers.rosbag.messages import TF_MSGTYPE, BagFormat
 
 __all__ = [
@@ -137,6 +137,39 @@ if storage_mcap.read_exact.__name__ != "read_within_file":  # once, even if reim
 # --- Opening bags.
 
 
+@runtime_checkable
+class RemoteFile(RandomAccess, Protocol):
+    """A bag file read by position from elsewhere (an object store), not from a local path.
+
+    It is a path for rosbags' readers (``open()`` gives a seekable binary file, the way
+    rosbags' ``RPath`` protocol asks) and :class:`~loceval.readers._mcap.RandomAccess` for
+    the MCAP index reader, so an MCAP file or a ROS 1 bag is read piece by piece: its index,
+    then only the chunks or messages wanted.
+    """
+
+    @property
+    def name(self) -> str:
+        """The file name."""
+        ...
+
+    @property
+    def suffix(self) -> str:
+        """The file name's suffix (``.mcap`` or ``.bag``)."""
+        ...
+
+    def exists(self) -> bool:
+        """Whether the file exists."""
+        ...
+
+    def is_dir(self) -> bool:
+        """False: a remote file is no folder."""
+        ...
+
+    def open(self, mode: str = "rb") -> BinaryIO:
+        """Open it for reading."""
+        ...
+
+
 @dataclass(frozen=True, slots=True, eq=False)
 class Bag:
     """An open bag: the reader, its label and storage format, and the paths opened."""
@@ -149,8 +182,12 @@ class Bag:
 
 
 @contextmanager
-def open_bag(path: Path | Sequence[Path]) -> Iterator[Bag]:
-    """Open a bag (file, folder, split set or zip) and yield it; close it afterwards."""
+def open_bag(path: Path | Sequence[Path] | RemoteFile) -> Iterator[Bag]:
+    """Open a bag (file, folder, split set or zip, or a remote file) and yield it; close it."""
+    if isinstance(path, RemoteFile):
+        with _open_remote(path) as bag:
+            yield bag
+        return
     paths = _as_paths(path)
     label = ",".join(p.name for p in paths)
     for p in paths:
@@ -186,6 +223,23 @@ def open_bag(path: Path | Sequence[Path]) -> Iterator[Bag]:
         with converted(label):
             reader = _open_reader(list(paths), stack)
         yield Bag(reader, label, _storage_format(paths), archive, paths)
+
+
+@contextmanager
+def _open_remote(file: RemoteFile) -> Iterator[Bag]:
+    """Open an MCAP file or a ROS 1 bag that is read by position (its index, then parts)."""
+    formats = {".mcap": BagFormat.ROSBAG2_MCAP, ".bag": BagFormat.ROSBAG1}
+    storage_format = formats.get(file.suffix.lower())
+    if storage_format is None:
+        msg = (
+            f"Bag {file.name!r} is read from a remote store, which serves .mcap files and ROS 1 "
+            ".bag files; copy other bags (.db3, zipped folders) to a local file first."
+        )
+        raise ReaderError(msg)
+    with ExitStack() as stack:
+        with converted(file.name):
+            reader = _open_reader([cast("Path", file)], stack)  # rosbags takes any RPath
+        yield Bag(reader, file.name, storage_format, "", ())
 
 
 def _open_reader(paths: list[Path], stack: ExitStack) -> AnyReader:
@@ -325,10 +379,13 @@ def _indexed_mcap_messages(
     """Read MCAP messages through the file's index, or return None when it cannot serve."""
     if bag.storage_format is not BagFormat.ROSBAG2_MCAP:
         return None
-    files: list[Path] = []
+    files: list[Path | RemoteFile] = []
     for reader in bag.reader.readers:
         if not isinstance(reader, Rosbag2Reader) or reader.compression_mode:
             return None
+        if isinstance(reader.path, RemoteFile):  # read by position: its index, then messages
+            files.append(reader.path)
+            continue
         rpath = Path(str(reader.path))
         files.extend(sorted(rpath.glob("*.mcap")) if rpath.is_dir() else [rpath])
     keys = [(c.topic, c.msgtype) for c in connections]

@@ -23,6 +23,11 @@ def api(bucket: str, s3_env: dict[str, str], tmp_path: Path) -> Iterator[Api]:
         yield api
 
 
+def _blobs(server: SeaweedFS, bucket: str) -> list[str]:
+    """Return the bucket's objects but the live API's lease (``site/instances/``)."""
+    return [k for k in object_keys(server, bucket) if not k.startswith("site/instances/")]
+
+
 def _files(folder: Path) -> list[str]:
     return sorted(
         str(p.relative_to(folder))
@@ -30,6 +35,7 @@ def _files(folder: Path) -> list[str]:
         if p.is_file()
         and not p.name.startswith(("loceval.db", "queue.db"))  # SQLite (and -wal, -shm)
         and "cache" not in p.parts
+        and "instances" not in p.parts  # this process's slot (service.blobs.lease)
     )
 
 
@@ -42,12 +48,17 @@ def test_upload_evaluate_download_and_delete_through_the_bucket(
     slam = api.dataset("slam.txt", estimate)
     project = api.app.state.runtime.store
     assert reference["inspection"]["sources"][0]["pose_count"] == 200
-    stored = object_keys(seaweedfs, bucket, "site/datasets/")
+    stored = object_keys(seaweedfs, bucket, "site/uploads/")
     assert len(stored) == 2
-    assert f"/{hashlib.sha256(truth).hexdigest()}" in stored[0] + stored[1]
+    assert object_keys(seaweedfs, bucket, "site/pending/") == []  # both recorded
+    by_sha = {
+        hashlib.sha256(project.read_bytes(k.removeprefix("site/"))).hexdigest() for k in stored
+    }
+    assert hashlib.sha256(truth).hexdigest() in by_sha
     again = api.upload("copy.txt", truth)
     assert again.status_code == 200  # the same bytes: found, not stored twice
-    assert len(object_keys(seaweedfs, bucket, "site/datasets/")) == 2
+    assert object_keys(seaweedfs, bucket, "site/uploads/") == stored
+    assert open_multipart_uploads(seaweedfs, bucket) == []
     answer = api.evaluate(
         {
             "reference": {"dataset_id": reference["id"]},
@@ -81,7 +92,7 @@ def test_upload_evaluate_download_and_delete_through_the_bucket(
     for dataset in (reference, slam):
         gone = api.client.delete(f"/api/v1/datasets/{dataset['id']}", headers=api.headers)
         assert gone.status_code == 204
-    assert object_keys(seaweedfs, bucket) == []
+    assert _blobs(seaweedfs, bucket) == []
     assert open_multipart_uploads(seaweedfs, bucket) == []
     assert project.kind == "s3"
 
@@ -91,7 +102,7 @@ def test_a_refused_upload_leaves_no_object(api: Api, seaweedfs: SeaweedFS, bucke
     answer = api.upload("noise.bag", b"#ROSBAG V2.0\n" + bytes(range(256)) * 100)
     assert 400 <= answer.status_code < 500, answer.text
     assert answer.headers["content-type"] == "application/problem+json"
-    assert object_keys(seaweedfs, bucket) == []
+    assert _blobs(seaweedfs, bucket) == []
 
 
 def test_metrics_cover_the_store(api: Api) -> None:
@@ -99,3 +110,50 @@ def test_metrics_cover_the_store(api: Api) -> None:
     text = api.client.get("/metrics").text
     assert 'loceval_blob_store_info{kind="s3"} 1.0' in text
     assert "loceval_blob_cache_bytes" in text
+
+
+def test_an_mcap_upload_is_inspected_by_ranged_reads_never_downloaded(
+    api: Api, rng: np.random.Generator, tmp_path: Path
+) -> None:
+    """A 40 MB camera bag: the API fetches under a tenth of it from the bucket to inspect it,
+    keeps no copy, and stores the same inspection a local file gets."""
+    import tests.bagfactory as bf
+    from service.recordings import inspect_upload
+
+    poses = bf.random_poses(rng, 200, dt_ns=50_000_000)
+    records = bf.tf_records(bf.link_transforms("map", "base_link", poses))
+    records += bf.pose_records("/gt", bf.POSE, poses)
+    records += [
+        bf.image_record("/camera/image", int(poses.stamps_ns[i]), size=256) for i in range(200)
+    ]
+    bag = bf.write_bag(tmp_path / "cam", records, fmt="mcap")
+    mcap = next(bag.glob("*.mcap"))
+    content = mcap.read_bytes()
+    assert len(content) > 30 << 20
+    fetched: list[int] = []
+    store = api.app.state.runtime.store
+    store.client.meta.events.register(
+        "after-call.s3.GetObject", lambda parsed, **_: fetched.append(parsed["ContentLength"])
+    )
+    dataset = api.dataset("cam.mcap", content)
+    assert 0 < sum(fetched) < len(content) / 10  # the summary, the index, tf and /gt's ends
+    assert not (api.data_dir / "cache").exists() or not any(
+        p.is_file() and p.name != ".lock" for p in (api.data_dir / "cache").rglob("*")
+    )
+    local = inspect_upload(mcap, "cam.mcap")
+    assert dataset["inspection"] == local  # the same description as from a local file
+    assert dataset["kind"] == "rosbag2-mcap"
+    assert {s["selector"] for s in dataset["inspection"]["sources"]} >= {"/gt", "tf:map:base_link"}
+
+
+def test_a_damaged_mcap_read_in_place_is_refused_and_leaves_no_object(
+    api: Api, seaweedfs: SeaweedFS, bucket: str, rng: np.random.Generator
+) -> None:
+    """An MCAP's magic and then noise: 4xx naming the file (no server path), nothing kept."""
+    answer = api.upload("broken.mcap", b"\x89MCAP0\r\n" + rng.bytes(300_000))
+    assert 400 <= answer.status_code < 500, answer.text
+    assert answer.headers["content-type"] == "application/problem+json"
+    assert "broken.mcap" in answer.json()["detail"]
+    assert str(api.data_dir) not in answer.text
+    assert _blobs(seaweedfs, bucket) == []
+    assert open_multipart_uploads(seaweedfs, bucket) == []

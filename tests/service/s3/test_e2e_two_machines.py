@@ -252,7 +252,7 @@ def test_api_killed_mid_upload_leaves_no_object_and_no_open_upload(
         if sock is not None:
             sock.close()
     assert code == -signal.SIGKILL, first.output
-    assert object_keys(seaweedfs, bucket, "site-1/datasets/") == []
+    assert object_keys(seaweedfs, bucket, "site-1/uploads/") == []
     assert open_multipart_uploads(seaweedfs, bucket) != []  # the crash left it open ...
     second = start_server(machines["a"], api_key=first.api_key, env=env, args=("--no-consumer",))
     try:
@@ -263,6 +263,73 @@ def test_api_killed_mid_upload_leaves_no_object_and_no_open_upload(
     finally:
         second.stop()
     assert object_keys(seaweedfs, bucket) == []
+
+
+def _read_answer(sock: socket.socket) -> tuple[int, bytes]:
+    """Read one HTTP/1.1 answer with a Content-Length: its status and body."""
+    data = b""
+    while b"\r\n\r\n" not in data:
+        data += sock.recv(65536)
+    head, body = data.split(b"\r\n\r\n", 1)
+    lines = head.decode("latin-1").split("\r\n")
+    length = next(
+        int(v) for k, _, v in (x.partition(":") for x in lines[1:]) if k.lower() == "content-length"
+    )
+    while len(body) < length:
+        body += sock.recv(65536)
+    return int(lines[0].split()[1]), body
+
+
+def test_a_second_api_on_the_same_host_keeps_the_first_ones_upload(
+    machines: dict[str, Any], seaweedfs: SeaweedFS, tmp_path: Path, rng: np.random.Generator
+) -> None:
+    """API A is mid-upload when API B (same host name, its own folder) starts and sweeps:
+    A's multipart upload stays open, and A completes it into a dataset."""
+    import json
+
+    env, bucket = machines["env"], machines["bucket"]
+    content = write_tum(tmp_path / "long.txt", make_trajectory(rng, 150_000)).read_bytes()
+    assert len(content) > 10 << 20  # more than one 8 MiB part
+    boundary = "loceval-two-apis"
+    head = (
+        f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="long.txt"\r\n'
+        "Content-Type: text/plain\r\n\r\n"
+    ).encode()
+    body = head + content + f"\r\n--{boundary}--\r\n".encode()
+    first = start_server(machines["a"], env=env, args=("--no-consumer",))
+    second: LiveServer | None = None
+    try:
+        port = int(first.url.rsplit(":", 1)[1])
+        request = (
+            "POST /api/v1/datasets HTTP/1.1\r\n"
+            f"Host: 127.0.0.1:{port}\r\n"
+            f"Authorization: Bearer {first.api_key}\r\n"
+            f"Content-Type: multipart/form-data; boundary={boundary}\r\n"
+            f"Content-Length: {len(body)}\r\n\r\n"
+        ).encode()
+        with socket.create_connection(("127.0.0.1", port), timeout=120) as sock:
+            sock.sendall(request + body[: 10 << 20])
+            assert _wait_until(lambda: open_multipart_uploads(seaweedfs, bucket), 60), (
+                "the upload never reached the bucket"
+            )
+            second = start_server(
+                machines["b"], api_key=first.api_key, env=env, args=("--no-consumer",)
+            )
+            assert "0 partial uploads" not in second.output  # nothing was swept: no line
+            assert open_multipart_uploads(seaweedfs, bucket) != []  # A's upload is still open
+            sock.sendall(body[10 << 20 :])
+            status, answer = _read_answer(sock)
+        assert status == 201, answer
+        dataset = json.loads(answer)
+        assert dataset["inspection"]["sources"][0]["pose_count"] == 150_000
+        with second.client() as client:  # B sees the dataset A stored
+            assert client.get(f"/api/v1/datasets/{dataset['id']}").status_code == 200
+    finally:
+        if second is not None:
+            second.stop()
+        first.stop()
+    assert open_multipart_uploads(seaweedfs, bucket) == []
+    assert [k for k in object_keys(seaweedfs, bucket) if "/pending/" in k] == []
 
 
 @pytest.mark.pdf

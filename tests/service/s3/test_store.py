@@ -48,38 +48,50 @@ def _send(store: S3Blobs, data: bytes, chunk: int = 1 << 16) -> Any:
     return incoming
 
 
-def test_upload_streams_as_multipart_and_is_stored_by_content(
+def _uploads(server: SeaweedFS, bucket: str) -> list[str]:
+    """Return the bucket's objects but the processes' leases (``instances/``)."""
+    return [k for k in object_keys(server, bucket) if "/instances/" not in k]
+
+
+def test_upload_streams_as_multipart_and_is_completed_in_place(
     store: S3Blobs, seaweedfs: SeaweedFS, bucket: str
 ) -> None:
-    """2.5 parts in 64 KiB writes: one object under datasets/<project>/<sha256>, nothing else."""
+    """2.5 parts in 64 KiB writes: one object under uploads/<instance>/<uuid>, never copied."""
     data = _payload(PART_BYTES * 5 // 2)
     sha = hashlib.sha256(data).hexdigest()
     incoming = _send(store, data)
     assert len(incoming._parts) == 3  # two full parts and the rest: a real multipart upload
     assert incoming.head == data[:64]
-    key = store.publish_upload(
-        incoming, project_id="p1", dataset_id="d1", filename="run.bag", sha256=sha
-    )
-    assert key == f"datasets/p1/{sha}"
-    assert object_keys(seaweedfs, bucket) == [f"team/datasets/p1/{sha}"]
+    assert _uploads(seaweedfs, bucket) == []  # committed: every part sent, nothing visible
+    with store.publishing("d1"):
+        key = store.publish_upload(
+            incoming, project_id="p1", dataset_id="d1", filename="run.bag", sha256=sha
+        )
+        assert key == incoming.key == f"uploads/{store.instance}/{key.rsplit('/', 1)[1]}"
+        assert _uploads(seaweedfs, bucket) == [f"team/pending/{key[8:]}", f"team/{key}"]
+        assert store.read_bytes(f"pending/{key[8:]}") == b"d1"  # the sweep's note
+    assert _uploads(seaweedfs, bucket) == [f"team/{key}"]  # recorded: the marker went
     assert store.read_bytes(key) == data
     assert open_multipart_uploads(seaweedfs, bucket) == []
+    incoming.abort()  # discarding the request's form keeps a recorded upload
+    assert store.read_bytes(key) == data
 
 
 def test_same_bytes_twice_are_stored_once(
     store: S3Blobs, seaweedfs: SeaweedFS, bucket: str
 ) -> None:
-    """A second upload of identical bytes publishes to the same key and leaves no copy."""
-    data = _payload(3 << 20, seed=1)
+    """A second upload of identical bytes (found in the database) is aborted: never an object."""
+    data = _payload(PART_BYTES + (3 << 20), seed=1)
     sha = hashlib.sha256(data).hexdigest()
-    keys = [
-        store.publish_upload(
-            _send(store, data), project_id="p", dataset_id=f"d{k}", filename="a.txt", sha256=sha
+    with store.publishing("d0"):
+        key = store.publish_upload(
+            _send(store, data), project_id="p", dataset_id="d0", filename="a.txt", sha256=sha
         )
-        for k in range(2)
-    ]
-    assert keys[0] == keys[1]
-    assert object_keys(seaweedfs, bucket) == [f"team/{keys[0]}"]
+    second = _send(store, data)
+    assert open_multipart_uploads(seaweedfs, bucket) == [second._full_key]
+    second.abort()  # what datasets.store_upload does when the project has these bytes
+    assert _uploads(seaweedfs, bucket) == [f"team/{key}"]
+    assert open_multipart_uploads(seaweedfs, bucket) == []
 
 
 def test_aborted_upload_leaves_no_object_and_no_multipart_upload(
@@ -93,7 +105,7 @@ def test_aborted_upload_leaves_no_object_and_no_multipart_upload(
     incoming.abort()
     incoming.abort()  # twice is harmless
     assert open_multipart_uploads(seaweedfs, bucket) == []
-    assert object_keys(seaweedfs, bucket) == []
+    assert _uploads(seaweedfs, bucket) == []
 
 
 def _request(chunks: list[bytes], *, disconnect: bool) -> Request:
@@ -143,7 +155,7 @@ def test_client_gone_mid_upload_leaves_nothing(
     with pytest.raises(UploadError, match="interrupted"):
         anyio.run(run)
     assert open_multipart_uploads(seaweedfs, bucket) == []
-    assert object_keys(seaweedfs, bucket) == []
+    assert _uploads(seaweedfs, bucket) == []
 
 
 def test_received_form_hashes_while_streaming(store: S3Blobs) -> None:
@@ -221,9 +233,10 @@ def test_download_streams_or_redirects(bucket: str, s3_env: dict[str, str], tmp_
 
 def _dataset(store: S3Blobs, data: bytes, project: str = "p") -> tuple[str, str]:
     sha = hashlib.sha256(data).hexdigest()
-    key = store.publish_upload(
-        _send(store, data), project_id=project, dataset_id="d", filename="x.txt", sha256=sha
-    )
+    with store.publishing("d"):
+        key = store.publish_upload(
+            _send(store, data), project_id=project, dataset_id="d", filename="x.txt", sha256=sha
+        )
     return key, sha
 
 

@@ -1,0 +1,233 @@
+"""A seekable, read-only file over an object in a bucket: each read is a ranged GetObject.
+
+Readers that seek (an MCAP file's summary at its end, a zip's central directory, a ROS 1
+bag's index) read a few small pieces of a large file. :class:`RangedFile` fetches what is
+read and a little more, reading ahead like a kernel does: a read that starts where the last
+fetch ended doubles the next fetch (up to ``max_ahead`` bytes), any other read fetches only
+``min_ahead`` more than it asks. The fetched pieces are kept up to ``max_cached`` bytes (the
+least recently used go), and a read larger than ``max_ahead`` is fetched in one request and
+not kept, so the memory is bounded whatever the object's size. Readers that need a real file
+(SQLite bags, rosbags' readers) keep using the local input cache
+(:class:`service.blobs.cache.InputCache`).
+
+``fetched_bytes`` and ``requests`` count what was asked of the store.
+"""
+
+from __future__ import annotations
+
+import io
+from collections import OrderedDict
+from pathlib import PurePosixPath
+from typing import TYPE_CHECKING, BinaryIO, Final
+
+from service.blobs.s3client import store_errors
+
+if TYPE_CHECKING:
+    from _typeshed import WriteableBuffer
+    from mypy_boto3_s3 import S3Client
+
+__all__ = ["MAX_AHEAD", "MIN_AHEAD", "ObjectFile", "RangedFile"]
+
+MIN_AHEAD: Final = 4 << 10
+"""Bytes fetched beyond a read that does not continue the last one (a seek)."""
+MAX_AHEAD: Final = 4 << 20
+"""The most bytes one sequential read-ahead fetches."""
+
+
+class RangedFile(io.RawIOBase):
+    """Read an object of a bucket as a seekable binary file, fetching what is read.
+
+    Args:
+        client: the S3 client.
+        bucket: the bucket.
+        key: the object's full key.
+        size: its size in bytes (None: asked with a HeadObject).
+        min_ahead: bytes fetched beyond a read that follows a seek.
+        max_ahead: the largest read-ahead (sequential reads double it up to this).
+        max_cached: the fetched bytes kept for later reads (the memory bound).
+    """
+
+    def __init__(
+        self,
+        client: S3Client,
+        bucket: str,
+        key: str,
+        *,
+        size: int | None = None,
+        min_ahead: int = MIN_AHEAD,
+        max_ahead: int = MAX_AHEAD,
+        max_cached: int = 2 * MAX_AHEAD,
+    ) -> None:
+        """Open the object (a HeadObject when its size is not given)."""
+        super().__init__()
+        self._client = client
+        self._bucket = bucket
+        self._key = key
+        if size is None:
+            with store_errors():
+                size = int(client.head_object(Bucket=bucket, Key=key)["ContentLength"])
+        self.size = size
+        self._min_ahead = min_ahead
+        self._max_ahead = max_ahead
+        self._max_cached = max(max_cached, max_ahead)
+        self._ahead = min_ahead
+        self._last_end = -1
+        self._pieces: OrderedDict[int, bytes] = OrderedDict()  # start -> bytes
+        self._position = 0
+        self.fetched_bytes = 0
+        """Bytes received from the store so far."""
+        self.requests = 0
+        """Ranged GetObject requests made so far."""
+
+    @property
+    def cached_bytes(self) -> int:
+        """Return the bytes kept now (at most ``max_cached``)."""
+        return sum(len(p) for p in self._pieces.values())
+
+    # -- io.RawIOBase ----------------------------------------------------------------------
+
+    def readable(self) -> bool:
+        """Return True: the file is read-only."""
+        return True
+
+    def seekable(self) -> bool:
+        """Return True: any position can be read."""
+        return True
+
+    def tell(self) -> int:
+        """Return the current position."""
+        return self._position
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        """Move to ``offset`` from the start, the current position or the end."""
+        base = {io.SEEK_SET: 0, io.SEEK_CUR: self._position, io.SEEK_END: self.size}.get(whence)
+        if base is None:
+            msg = f"invalid whence ({whence})"
+            raise ValueError(msg)
+        if base + offset < 0:
+            msg = f"negative seek position {base + offset}"
+            raise OSError(msg)
+        self._position = base + offset
+        return self._position
+
+    def readinto(self, buffer: WriteableBuffer) -> int:
+        """Read up to ``len(buffer)`` bytes at the position into ``buffer``."""
+        view = memoryview(buffer).cast("B")
+        data = self.pread(len(view), self._position)
+        view[: len(data)] = data
+        self._position += len(data)
+        return len(data)
+
+    # -- positional reads ------------------------------------------------------------------
+
+    def pread(self, size: int, offset: int) -> bytes:
+        """Return up to ``size`` bytes at ``offset`` (fewer at the end), not moving."""
+        end = min(offset + size, self.size)
+        if offset >= end:
+            return b""
+        for start, piece in self._pieces.items():
+            if start <= offset and end <= start + len(piece):
+                self._pieces.move_to_end(start)
+                return piece[offset - start : end - start]
+        if end - offset > self._max_ahead:  # a large read: one request, nothing kept
+            self._last_end = -1
+            return self._fetch(offset, end)
+        sequential = offset == self._last_end
+        self._ahead = min(2 * self._ahead, self._max_ahead) if sequential else self._min_ahead
+        stop = min(max(end, offset + self._ahead), self.size)
+        piece = self._fetch(offset, stop)
+        self._last_end = stop
+        self._pieces[offset] = piece
+        while self.cached_bytes > self._max_cached:
+            self._pieces.popitem(last=False)
+        return piece[: end - offset]
+
+    def _fetch(self, start: int, end: int) -> bytes:
+        """Return the bytes ``[start, end)`` of the object (one ranged GetObject)."""
+        with store_errors():
+            answer = self._client.get_object(
+                Bucket=self._bucket, Key=self._key, Range=f"bytes={start}-{end - 1}"
+            )
+            data = answer["Body"].read()
+        self.requests += 1
+        self.fetched_bytes += len(data)
+        if len(data) != end - start:
+            msg = (
+                f"the store answered {len(data)} bytes for a range of {end - start}; the object "
+                "changed or the store does not serve ranges"
+            )
+            raise OSError(msg)
+        return data
+
+
+class ObjectFile:
+    """An object in a bucket as a read-only file path for the bag readers (rosbags' ``RPath``).
+
+    ``open()`` gives a buffered :class:`RangedFile` over it, ``pread``/``size`` read it by
+    position (:class:`loceval.readers.RandomAccess`: the MCAP index reader), so a bag is read
+    from the store piece by piece, never copied whole. Every reader opened shares the
+    counters ``fetched_bytes`` and ``requests``.
+
+    Args:
+        client: the S3 client.
+        bucket: the bucket.
+        key: the object's full key.
+        name: the file name (its suffix tells the readers the format).
+    """
+
+    def __init__(self, client: S3Client, bucket: str, key: str, *, name: str) -> None:
+        """Ask the object's size (one HeadObject)."""
+        self._file = RangedFile(client, bucket, key)
+        self._opened: list[RangedFile] = [self._file]
+        self._client, self._bucket, self._key = client, bucket, key
+        self.name = name
+        self.size = self._file.size
+
+    def __str__(self) -> str:
+        """Return the file name (what messages show)."""
+        return self.name
+
+    @property
+    def suffix(self) -> str:
+        """Return the file name's suffix (``.mcap``)."""
+        return PurePosixPath(self.name).suffix
+
+    @property
+    def stem(self) -> str:
+        """Return the file name without its suffix."""
+        return PurePosixPath(self.name).stem
+
+    def exists(self) -> bool:
+        """Return True: the object was found."""
+        return True
+
+    def is_file(self) -> bool:
+        """Return True: an object is a file."""
+        return True
+
+    def is_dir(self) -> bool:
+        """Return False: an object is no folder."""
+        return False
+
+    def open(self, mode: str = "rb", *_args: object, **_kwargs: object) -> BinaryIO:
+        """Return a new buffered reader over the object (``mode`` must be ``rb``)."""
+        if mode != "rb":
+            msg = f"an object in the bucket is read-only; cannot open it with mode {mode!r}"
+            raise OSError(msg)
+        raw = RangedFile(self._client, self._bucket, self._key, size=self.size)
+        self._opened.append(raw)
+        return io.BufferedReader(raw, buffer_size=64 << 10)
+
+    def pread(self, size: int, offset: int) -> bytes:
+        """Return up to ``size`` bytes at ``offset``."""
+        return self._file.pread(size, offset)
+
+    @property
+    def fetched_bytes(self) -> int:
+        """Return the bytes fetched from the store by every reader of this object."""
+        return sum(f.fetched_bytes for f in self._opened)
+
+    @property
+    def requests(self) -> int:
+        """Return the ranged requests made by every reader of this object."""
+        return sum(f.requests for f in self._opened)
