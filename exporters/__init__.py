@@ -22,6 +22,7 @@ from loceval.evaluation import EvaluationResult, ProgressCallback
 
 if TYPE_CHECKING:
     from exporters.cad.placement import Placement
+    from exporters.report import ReportPlots
 
 __all__ = [
     "ARTIFACTS",
@@ -279,15 +280,54 @@ def _render_into(
         from exporters.cad.placement import place_evaluation  # noqa: PLC0415
 
         placement = place_evaluation(result, options)
+    reports = _ReportFigures(result, options, wanted)
     for k, name in enumerate(wanted):
         progress(f"writing {name}", k / len(wanted))
         if placement is not None and name == "result.json":
             data = export_result_json(result, options, cad=placement.metadata())
         elif placement is not None and name in CAD_ARTIFACTS:
             data = ARTIFACTS[name].load()(result, options, placement=placement)
+        elif name in _REPORTS:
+            data = reports.render(name)
         else:
             data = render_artifact(name, result, options)
         (staging / name).write_bytes(data)
+
+
+_REPORTS: Final = frozenset({"report.html", "report.pdf"})
+"""The artifacts that embed the report's figures (SVG in the HTML, PNG in the PDF)."""
+
+
+class _ReportFigures:
+    """Renders ``report.html`` and ``report.pdf`` of one run, drawing each figure once.
+
+    When a run writes both reports, every figure is drawn once and encoded as SVG and as
+    PNG; a run writing one of them draws only its format.
+    """
+
+    def __init__(self, result: EvaluationResult, options: ExportOptions, wanted: list[str]):
+        self._result = result
+        self._options = options
+        self._both = _REPORTS.issubset(wanted)
+        self._plots: ReportPlots | None = None
+
+    def render(self, name: str) -> bytes:
+        """Render the report ``name`` (``report.html`` or ``report.pdf``)."""
+        spec = ARTIFACTS[name]
+        spec.load()  # the libraries' message (ExportUnavailableError) when one is missing
+        from exporters.report import (  # noqa: PLC0415  (matplotlib, Jinja2)
+            render_report_html,
+            render_report_plots,
+            render_report_pdf,
+        )
+
+        if self._both and self._plots is None:
+            self._plots = render_report_plots(
+                self._result, self._options, formats=("svg", "png")
+            )
+        if name == "report.html":
+            return render_report_html(self._result, self._options, plots=self._plots)
+        return render_report_pdf(self._result, self._options, plots=self._plots)
 
 
 __all__ += ["ExportError", "ExportOptionsError", "ExportUnavailableError"]

@@ -13,11 +13,11 @@ from pathlib import Path
 from typing import Final
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval.core.geometry import SimilarityTransform
+from loceval.core.rotation import Rotation
 from loceval.errors import InputError
 from loceval.trajectory import MAX_COORDINATE_M
 

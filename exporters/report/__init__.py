@@ -27,12 +27,19 @@ from exporters.report.render import (
     render_template,
     render_view_html,
 )
-from exporters.report.view import BEST_MARK, ReportView, build_report_view
+from exporters.report.view import (
+    BEST_MARK,
+    ReportPlots,
+    ReportView,
+    build_report_view,
+    render_report_plots,
+)
 
 __all__ = [
     "BEST_MARK",
     "DEFAULT_TEMPLATES_DIR",
     "TEMPLATE_NAME",
+    "ReportPlots",
     "ReportView",
     "build_report_view",
     "check_pdf",
@@ -42,6 +49,7 @@ __all__ = [
     "render_report",
     "render_report_html",
     "render_report_pdf",
+    "render_report_plots",
     "render_template",
     "render_view_html",
 ]

@@ -9,9 +9,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from loceval.evaluation import EvaluationResult
-from loceval.maps import WallFigures
+
+if TYPE_CHECKING:
+    # Only named here: importing loceval.maps loads scipy.spatial, which a report of a
+    # run without a map never needs.
+    from loceval.maps import WallFigures
 
 __all__ = ["MapView", "build_map_view"]
 

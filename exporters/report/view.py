@@ -23,6 +23,7 @@ from exporters.plots import (
     estimate_colour,
     render_plots,
 )
+from exporters.plots.clock import plot_clock_correlation
 from exporters.plots.figure import FigureView, number_figures
 from exporters.plots.underlay import floor_plan_segments
 from exporters.report.clocks import ClockSection, build_clock_section
@@ -41,7 +42,7 @@ from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.options import option
 
-__all__ = ["BEST_MARK", "ReportView", "build_report_view"]
+__all__ = ["BEST_MARK", "ReportPlots", "ReportView", "build_report_view", "render_report_plots"]
 
 BEST_MARK: Final = "★"
 """Marks the lowest value of a statistics row (with bold, so it survives grey print)."""
@@ -142,6 +143,52 @@ class WorstTable:
     name: str
     rows: tuple[WorstRow, ...]
     error_unit: str = "m"
+
+
+@dataclass(frozen=True, slots=True)
+class ReportPlots:
+    """Every figure of the report, drawn once and encoded in each format a report embeds.
+
+    The HTML report embeds the SVG and the PDF the PNG of the same figures, so a run that
+    writes both draws each figure once (:func:`render_report_plots`).
+
+    Attributes:
+        figures: the numbered figures, in report order (:func:`exporters.plots.render_plots`).
+        clock: the figure of the "Clocks and device offset" section, or None (no clock
+            offset estimated).
+    """
+
+    figures: tuple[Plot, ...]
+    clock: Plot | None
+
+
+def render_report_plots(
+    result: EvaluationResult,
+    options: ExportOptions,
+    *,
+    formats: Sequence[ImageFormat] = ("svg",),
+    max_points: int = DEFAULT_MAX_POINTS,
+) -> ReportPlots:
+    """Draw every figure of the report once and encode it in ``formats``.
+
+    Args:
+        result: the evaluation.
+        options: the export options (the building's floor plan under the plan views).
+        formats: the encodings to produce: ``svg`` (HTML), ``png`` (PDF) or both.
+        max_points: most vertices drawn per plotted line (drawing only).
+
+    Returns:
+        The figures and the clock section's figure.
+    """
+    return ReportPlots(
+        figures=render_plots(
+            result,
+            max_points=max_points,
+            formats=formats,
+            floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
+        ),
+        clock=plot_clock_correlation(result, max_points=max_points, formats=formats),
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -462,7 +509,7 @@ def build_report_view(
     result: EvaluationResult,
     options: ExportOptions,
     *,
-    plots: Sequence[Plot] | None = None,
+    plots: ReportPlots | Sequence[Plot] | None = None,
     image_format: ImageFormat = "svg",
     max_points: int = DEFAULT_MAX_POINTS,
 ) -> ReportView:
@@ -471,7 +518,9 @@ def build_report_view(
     Args:
         result: the evaluation.
         options: the title and evaluation id.
-        plots: already rendered plots, holding ``image_format`` (default: render them here).
+        plots: already rendered plots holding ``image_format``: every figure and the clock
+            section's (:func:`render_report_plots`), or the numbered figures alone (the
+            clock section's is then drawn here); default: draw them all here.
         image_format: how the figures are embedded: ``svg`` for the HTML, ``png`` for the
             PDF.
         max_points: most vertices drawn per plotted line (drawing only).
@@ -479,16 +528,15 @@ def build_report_view(
     Returns:
         The view model the templates render.
     """
-    rendered = (
-        tuple(plots)
-        if plots is not None
-        else render_plots(
-            result,
-            max_points=max_points,
-            formats=(image_format,),
-            floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
+    if plots is None:
+        plots = render_report_plots(
+            result, options, formats=(image_format,), max_points=max_points
         )
-    )
+    if isinstance(plots, ReportPlots):
+        rendered, clock = plots.figures, plots.clock
+    else:
+        rendered = tuple(plots)
+        clock = plot_clock_correlation(result, max_points=max_points, formats=(image_format,))
     tolerance_example, tolerance_where = _tolerance_hint(options.front_door)
     figures = number_figures(rendered, image_format)
     figure_of = {f.key: f.number for f in figures}
@@ -549,7 +597,7 @@ def build_report_view(
             {(t.number, "translation"): t.length.format for t in tables if t.length is not None},
         ),
         clocks=build_clock_section(
-            result, number=len(figures) + 1, image_format=image_format, max_points=max_points
+            result, number=len(figures) + 1, plot=clock, image_format=image_format
         ),
         ranging=build_ranging_view(result),
         tolerance_example=tolerance_example,

@@ -12,13 +12,15 @@ are handled in numpy blocks, never one by one.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
-from scipy.spatial import KDTree
 
 from loceval.core.arrays import FloatArray, IntArray
 from loceval.errors import InputError
+
+if TYPE_CHECKING:
+    from scipy.spatial import KDTree
 
 __all__ = [
     "RESAMPLE_SPACING_M",
@@ -171,6 +173,10 @@ class PolylineIndex:
             where=length[segment] > 0.0,
         )
         samples = vertices[segment] + np.clip(fraction, 0.0, 1.0)[:, None] * ab[segment]
+        # Imported here: scipy.spatial costs a tenth of a second to import, which the CAD
+        # files (simplify_rdp) and the reports do not need.
+        from scipy.spatial import KDTree  # noqa: PLC0415
+
         tree = KDTree(samples, compact_nodes=False)  # faster queries far from the path
         return cls(vertices, samples, segment.astype(np.intp), spacing_m, tree)
 
