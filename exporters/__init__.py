@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib
 import shutil
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final, Protocol, cast
@@ -28,6 +28,7 @@ __all__ = [
     "ARTIFACTS",
     "ARTIFACT_ALIASES",
     "CAD_ARTIFACTS",
+    "ArtifactCallback",
     "ArtifactSpec",
     "ExportOptions",
     "Units",
@@ -36,6 +37,10 @@ __all__ = [
     "render_artifact",
     "write_artifacts",
 ]
+
+
+ArtifactCallback = Callable[[str, Path], None]
+"""Called with an artifact's name and the path of its finished file, as soon as it is written."""
 
 
 class Exporter(Protocol):
@@ -200,11 +205,15 @@ def write_artifacts(
     *,
     names: Iterable[str] | None = None,
     progress: ProgressCallback | None = None,
+    on_written: ArtifactCallback | None = None,
 ) -> list[Path]:
     """Write artifacts into ``out_dir``, all or nothing.
 
     Everything is rendered into a staging folder beside ``out_dir`` first and moved into
     place only when every artifact succeeded, so a failure leaves no half-written files.
+    ``on_written`` sees each file the moment it is complete in the staging folder (the
+    service shows an evaluation's figures before its reports are laid out); the file
+    stays there until every artifact is written, then moves to ``out_dir``.
 
     Args:
         result: the evaluation.
@@ -212,6 +221,8 @@ def write_artifacts(
         options: placement and report options.
         names: the artifacts to write (default: all of :data:`ARTIFACTS`).
         progress: called with (stage, fraction done) before each artifact.
+        on_written: called with the name and the staged path of each finished artifact,
+            in the order they are written (``result.json`` first when it is wanted).
 
     Returns:
         The paths written.
@@ -226,7 +237,9 @@ def write_artifacts(
     out_dir = out_dir.resolve()
     staging = _staging_folder(out_dir)
     try:
-        _render_into(staging, result, options, wanted, progress or _no_progress)
+        _render_into(
+            staging, result, options, wanted, progress or _no_progress, on_written=on_written
+        )
         out_dir.mkdir(exist_ok=True)
         written = []
         for name in wanted:
@@ -272,6 +285,8 @@ def _render_into(
     options: ExportOptions,
     wanted: list[str],
     progress: ProgressCallback,
+    *,
+    on_written: ArtifactCallback | None = None,
 ) -> None:
     """Render every wanted artifact into ``staging``, placing the CAD paths only once."""
     placement = None
@@ -292,6 +307,8 @@ def _render_into(
         else:
             data = render_artifact(name, result, options)
         (staging / name).write_bytes(data)
+        if on_written is not None:
+            on_written(name, staging / name)
 
 
 _REPORTS: Final = frozenset({"report.html", "report.pdf"})
@@ -305,7 +322,7 @@ class _ReportFigures:
     PNG; a run writing one of them draws only its format.
     """
 
-    def __init__(self, result: EvaluationResult, options: ExportOptions, wanted: list[str]):
+    def __init__(self, result: EvaluationResult, options: ExportOptions, wanted: list[str]) -> None:
         self._result = result
         self._options = options
         self._both = _REPORTS.issubset(wanted)
@@ -317,14 +334,12 @@ class _ReportFigures:
         spec.load()  # the libraries' message (ExportUnavailableError) when one is missing
         from exporters.report import (  # noqa: PLC0415  (matplotlib, Jinja2)
             render_report_html,
-            render_report_plots,
             render_report_pdf,
+            render_report_plots,
         )
 
         if self._both and self._plots is None:
-            self._plots = render_report_plots(
-                self._result, self._options, formats=("svg", "png")
-            )
+            self._plots = render_report_plots(self._result, self._options, formats=("svg", "png"))
         if name == "report.html":
             return render_report_html(self._result, self._options, plots=self._plots)
         return render_report_pdf(self._result, self._options, plots=self._plots)

@@ -77,7 +77,7 @@ def parse_site(text: str) -> SimilarityTransform:
             f"{yaw_deg:g}; give the yaw as an angle of one turn at most, in degrees."
         )
         raise ExportOptionsError(msg, option="site")
-    rotation = Rotation.from_euler("z", yaw_deg, degrees=True).as_matrix()
+    rotation = Rotation.from_euler("z", np.array(yaw_deg), degrees=True).as_matrix()
     return SimilarityTransform(rotation, np.array(values[:3]), 1.0)
 
 

@@ -529,9 +529,7 @@ def build_report_view(
         The view model the templates render.
     """
     if plots is None:
-        plots = render_report_plots(
-            result, options, formats=(image_format,), max_points=max_points
-        )
+        plots = render_report_plots(result, options, formats=(image_format,), max_points=max_points)
     if isinstance(plots, ReportPlots):
         rendered, clock = plots.figures, plots.clock
     else:
