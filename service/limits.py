@@ -178,9 +178,9 @@ def run_limited(
 
     The target must be importable by name (a module-level function) and its arguments
     picklable; its return value is dropped (a job's output is its files). Progress the
-    target reports is passed on to ``progress`` in this process. With ``artifacts``, the
-    target is also given ``on_artifact=``, a callback whose calls (an artifact's name and
-    file, as it is written) reach ``artifacts`` in this process, in order.
+    target reports is passed on to ``progress`` in this process. With ``artifacts``, a
+    target that takes ``on_artifact=`` is given a callback whose calls (an artifact's name
+    and file, as it is written) reach ``artifacts`` in this process, in order.
 
     Args:
         limits: the wall time and memory it may use.
@@ -313,7 +313,7 @@ def _child(
     report = _Reporter(sender)
     outcome: tuple[object, ...]
     try:
-        if with_artifacts:
+        if with_artifacts and _takes(target, "on_artifact"):
             target(*args, progress=report, on_artifact=report.artifact)
         else:
             target(*args, progress=report)
@@ -327,6 +327,14 @@ def _child(
     # The failed work's frames (and their arrays) are gone here, so sending needs no memory.
     sender(outcome)
     results.close()
+
+
+def _takes(target: Callable[..., object], name: str) -> bool:
+    """Return whether ``target`` takes the keyword argument ``name``."""
+    import inspect  # noqa: PLC0415
+
+    parameters = inspect.signature(target).parameters
+    return name in parameters or any(p.kind is p.VAR_KEYWORD for p in parameters.values())
 
 
 class _Sender:
