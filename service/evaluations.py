@@ -443,8 +443,7 @@ def evaluation_public(
     """Return the HTTP view of an evaluation."""
     request = evaluation.request
     succeeded = evaluation.status == JobStatus.SUCCEEDED
-    # A running evaluation shows what it has made so far: its result document and summary
-    # once result.json is written, and each artifact as soon as it is ready.
+    # A running evaluation shows what it has made so far (result.json first, then each file).
     shown = succeeded or evaluation.status == JobStatus.RUNNING
     artifacts = None
     if shown and evaluation.artifacts is not None:
@@ -517,11 +516,9 @@ def artifact_path(runtime: Runtime, project_id: str, evaluation_id: str, name: s
             if evaluation.status in ACTIVE_STATUSES
             else "; see its error."
         )
-        if evaluation.status == JobStatus.RUNNING and evaluation.artifacts:
-            msg = (
-                f"Evaluation {evaluation_id!r} is running and has not written {name!r} yet; "
-                "poll GET /evaluations/{id} until its artifacts list it."
-            )
+        if evaluation.status == JobStatus.RUNNING and evaluation.artifacts:  # some are ready
+            msg = f"Evaluation {evaluation_id!r} is running and has not written {name!r} yet; "
+            msg += "poll GET /evaluations/{id} until its artifacts list it."
         raise NotReadyError(msg)
     key = artifact_key(EVALUATIONS, evaluation.id, name)
     if not runtime.store.exists(key):

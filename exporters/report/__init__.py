@@ -14,6 +14,7 @@ it (and holds the Jinja2 render and the PDF layout the summary report shares).
 
 from __future__ import annotations
 
+from exporters.report.figures import ReportPlots, render_report_plots
 from exporters.report.render import (
     DEFAULT_TEMPLATES_DIR,
     TEMPLATE_NAME,
@@ -27,13 +28,7 @@ from exporters.report.render import (
     render_template,
     render_view_html,
 )
-from exporters.report.view import (
-    BEST_MARK,
-    ReportPlots,
-    ReportView,
-    build_report_view,
-    render_report_plots,
-)
+from exporters.report.view import BEST_MARK, ReportView, build_report_view
 
 __all__ = [
     "BEST_MARK",

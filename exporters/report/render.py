@@ -15,12 +15,8 @@ from typing import Final
 from exporters.errors import ExportError, ExportUnavailableError
 from exporters.options import ExportOptions
 from exporters.plots import DEFAULT_MAX_POINTS
-from exporters.report.view import (
-    ReportPlots,
-    ReportView,
-    build_report_view,
-    render_report_plots,
-)
+from exporters.report.figures import ReportPlots, render_report_plots
+from exporters.report.view import ReportView, build_report_view
 from exporters.viewer import ViewerFragment, viewer_fragment
 from loceval.core.display import shown_text
 from loceval.evaluation import EvaluationResult

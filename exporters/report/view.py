@@ -21,13 +21,12 @@ from exporters.plots import (
     Plot,
     describe_rpe_step,
     estimate_colour,
-    render_plots,
 )
 from exporters.plots.clock import plot_clock_correlation
 from exporters.plots.figure import FigureView, number_figures
-from exporters.plots.underlay import floor_plan_segments
 from exporters.report.clocks import ClockSection, build_clock_section
 from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
+from exporters.report.figures import ReportPlots, render_report_plots
 from exporters.report.mapsection import MapView, build_map_view
 from exporters.report.provenance import (
     alignment_rows,
@@ -42,7 +41,7 @@ from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.options import option
 
-__all__ = ["BEST_MARK", "ReportPlots", "ReportView", "build_report_view", "render_report_plots"]
+__all__ = ["BEST_MARK", "ReportView", "build_report_view"]
 
 BEST_MARK: Final = "★"
 """Marks the lowest value of a statistics row (with bold, so it survives grey print)."""
@@ -143,52 +142,6 @@ class WorstTable:
     name: str
     rows: tuple[WorstRow, ...]
     error_unit: str = "m"
-
-
-@dataclass(frozen=True, slots=True)
-class ReportPlots:
-    """Every figure of the report, drawn once and encoded in each format a report embeds.
-
-    The HTML report embeds the SVG and the PDF the PNG of the same figures, so a run that
-    writes both draws each figure once (:func:`render_report_plots`).
-
-    Attributes:
-        figures: the numbered figures, in report order (:func:`exporters.plots.render_plots`).
-        clock: the figure of the "Clocks and device offset" section, or None (no clock
-            offset estimated).
-    """
-
-    figures: tuple[Plot, ...]
-    clock: Plot | None
-
-
-def render_report_plots(
-    result: EvaluationResult,
-    options: ExportOptions,
-    *,
-    formats: Sequence[ImageFormat] = ("svg",),
-    max_points: int = DEFAULT_MAX_POINTS,
-) -> ReportPlots:
-    """Draw every figure of the report once and encode it in ``formats``.
-
-    Args:
-        result: the evaluation.
-        options: the export options (the building's floor plan under the plan views).
-        formats: the encodings to produce: ``svg`` (HTML), ``png`` (PDF) or both.
-        max_points: most vertices drawn per plotted line (drawing only).
-
-    Returns:
-        The figures and the clock section's figure.
-    """
-    return ReportPlots(
-        figures=render_plots(
-            result,
-            max_points=max_points,
-            formats=formats,
-            floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
-        ),
-        clock=plot_clock_correlation(result, max_points=max_points, formats=formats),
-    )
 
 
 @dataclass(frozen=True, slots=True)
