@@ -36,16 +36,18 @@ def _pixels(match: re.Match[bytes]) -> bytes:
     return b"pixels:" + digest.encode()
 
 
+def _numbered_ids(svg: bytes) -> bytes:
+    """The SVG with its element ids numbered in order of first appearance."""
+    names: dict[bytes, bytes] = {}
+    return _SVG_ID.sub(lambda m: names.setdefault(m.group(0), b"id%d" % len(names)), svg)
+
+
 def _figures(html: bytes) -> list[bytes]:
     """The report's SVG figures, matplotlib's random ids numbered, bitmaps as pixel digests."""
-    figures = []
-    for uri in re.findall(rb"data:image/svg\+xml;base64,([A-Za-z0-9+/=]+)", html):
-        svg = _SVG_PNG.sub(_pixels, base64.b64decode(uri))
-        names: dict[bytes, bytes] = {}
-        figures.append(
-            _SVG_ID.sub(lambda m: names.setdefault(m.group(0), b"id%d" % len(names)), svg)
-        )
-    return figures
+    return [
+        _numbered_ids(_SVG_PNG.sub(_pixels, base64.b64decode(uri)))
+        for uri in re.findall(rb"data:image/svg\+xml;base64,([A-Za-z0-9+/=]+)", html)
+    ]
 
 
 @pytest.mark.pdf
