@@ -57,22 +57,28 @@ TARGETS = {
 """The issue's targets, seconds on a quiet machine."""
 
 
-def timed(argv: Sequence[str], env: dict[str, str] | None = None) -> tuple[float, float]:
+def timed(
+    argv: Sequence[str], env: dict[str, str] | None = None, cwd: Path | None = None
+) -> tuple[float, float]:
     """Run one process; return its wall time and CPU time (with its children's)."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     start = time.perf_counter()
-    subprocess.run(argv, capture_output=True, check=True, env=env)
+    subprocess.run(argv, capture_output=True, check=True, env=env, cwd=cwd)
     wall = time.perf_counter() - start
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
-def cli(tree: Path | None) -> tuple[list[str], dict[str, str]]:
-    """Return the command prefix and environment of ``loceval`` from ``tree`` (None: here)."""
+def cli(tree: Path | None) -> tuple[list[str], dict[str, str], Path]:
+    """Return the command prefix, environment and folder to run ``loceval`` from ``tree``.
+
+    ``python -m`` puts the working folder first on the import path, before
+    ``PYTHONPATH``: each tree's command runs in that tree (None: this checkout).
+    """
     env = dict(os.environ)
-    if tree is not None:
-        env["PYTHONPATH"] = str(tree)
-    return [sys.executable, "-m", "service.cli"], env
+    folder = Path(__file__).resolve().parents[1] if tree is None else tree
+    env["PYTHONPATH"] = str(folder)
+    return [sys.executable, "-m", "service.cli"], env, folder
 
 
 def row(
@@ -105,12 +111,12 @@ def evaluate_runs(
     """Return one ``loceval evaluate ARGS`` run per tree (``--out`` into a scratch folder)."""
     runs: dict[str, Callable[[], tuple[float, float]]] = {}
     for name, tree in trees.items():
-        prefix, env = cli(tree)
+        prefix, env, folder = cli(tree)
         argv = [*prefix, "evaluate", *args]
         if "--json" not in args:
             argv += ["--out", str(out / name)]
-        runs[name] = functools.partial(timed, argv, env)
-        print(f"  {name}: {' '.join(argv)}" + (f"  (PYTHONPATH={tree})" if tree else ""))
+        runs[name] = functools.partial(timed, argv, env, folder)
+        print(f"  {name}: (cd {folder} && PYTHONPATH={folder} {' '.join(argv)})")
     return runs
 
 
@@ -219,6 +225,7 @@ def main() -> int:
     trees: dict[str, Path | None] = {"new": None}
     if opts.baseline is not None:
         trees = {"old": opts.baseline.resolve(), "new": None}
+    opts.data, opts.workdir = opts.data.resolve(), opts.workdir.resolve()
     ref, est = (opts.data / name for name in FR2)
     opts.workdir.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as scratch_name:

@@ -95,14 +95,19 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
             ready = ReadyArtifacts(runtime, evaluation_id, staging)
             ready.forget()  # an earlier attempt's files are gone with clear_job
             # In a child process: stopped at the wall-time limit, capped at the memory limit.
-            run_limited(
-                Limits.from_settings(runtime.settings),
-                run_job,
-                work,
-                staging,
-                progress=job.progress,
-                artifacts=ready,
-            )
+            try:
+                run_limited(
+                    Limits.from_settings(runtime.settings),
+                    run_job,
+                    work,
+                    staging,
+                    progress=job.progress,
+                    artifacts=ready,
+                )
+            except BaseException:
+                if ready.ready:  # a failed evaluation keeps none of the files it published
+                    runtime.store.clear_job(job.kind.folder, evaluation_id)
+                raise
         final = job.publish(staging)
         document = json.loads((final / "result.json").read_text())
         job.succeed(

@@ -25,6 +25,7 @@ __all__ = [
     "SLEEPER",
     "crash",
     "exit_quietly",
+    "fail_after_result",
     "grow",
     "header_stamps_zero",
     "hold_after_result",
@@ -91,6 +92,23 @@ def hold_after_result(
             time.sleep(0.02)
 
     run_job(job, out_dir, progress, on_artifact=hold)
+
+
+def fail_after_result(
+    job: Job,
+    out_dir: Path,
+    progress: ProgressCallback,
+    *,
+    on_artifact: ArtifactCallback,
+) -> None:
+    """Evaluate, then fail as a report can once result.json was published."""
+
+    def fail(name: str, path: Path) -> None:
+        on_artifact(name, path)
+        msg = "The floor plan is unreadable; upload it again."
+        raise InputError(msg)
+
+    run_job(job, out_dir, progress, on_artifact=fail)
 
 
 def sleep_forever(*, progress: ProgressCallback) -> None:

@@ -108,3 +108,26 @@ def test_a_file_not_yet_written_is_409_naming_it(
         409,
         detail=r"is running and has not written 'errors.csv' yet; poll GET /evaluations/\{id\}",
     )
+
+
+def test_a_failed_evaluation_keeps_nothing_it_published(
+    api: Api, rng: np.random.Generator, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A failure after result.json was published leaves no result, file or listing behind."""
+    monkeypatch.setattr(jobs, "run_job", hooks.fail_after_result)
+    reference, estimate = tum_pair(rng, tmp_path)
+    body = {
+        "reference": {"dataset_id": api.dataset("truth.txt", reference)["id"]},
+        "estimates": [{"dataset_id": api.dataset("slam.txt", estimate)["id"]}],
+        "options": {"formats": ["result.json", "errors.csv"]},
+    }
+    evaluation_id = api.evaluate(body).json()["id"]
+    failed = api.client.get(f"/api/v1/evaluations/{evaluation_id}", headers=api.headers).json()
+    assert failed["status"] == "failed"
+    assert failed["error"]["detail"] == "The floor plan is unreadable; upload it again."
+    assert (failed["result"], failed["summary"], failed["artifacts"]) == (None, None, None)
+    assert not (api.data_dir / "evaluations" / evaluation_id / "artifacts").exists()
+    url = f"/api/v1/evaluations/{evaluation_id}/artifacts/result.json"
+    assert_problem(
+        api.client.get(url, headers=api.headers), 409, detail=r"is failed, so it has no artifacts"
+    )
