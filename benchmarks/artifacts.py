@@ -138,6 +138,8 @@ def evo_run(
     def run() -> tuple[float, float]:
         wall = cpu = 0.0
         for argv in argvs:
+            if plots is not None:  # evo asks before it overwrites a plot
+                Path(argv[-1]).unlink(missing_ok=True)
             one = timed(argv)
             wall, cpu = wall + one[0], cpu + one[1]
         return wall, cpu
