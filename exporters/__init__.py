@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib
 import shutil
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final, Protocol, cast
@@ -22,11 +22,13 @@ from loceval.evaluation import EvaluationResult, ProgressCallback
 
 if TYPE_CHECKING:
     from exporters.cad.placement import Placement
+    from exporters.report import ReportPlots
 
 __all__ = [
     "ARTIFACTS",
     "ARTIFACT_ALIASES",
     "CAD_ARTIFACTS",
+    "ArtifactCallback",
     "ArtifactSpec",
     "ExportOptions",
     "Units",
@@ -35,6 +37,10 @@ __all__ = [
     "render_artifact",
     "write_artifacts",
 ]
+
+
+ArtifactCallback = Callable[[str, Path], None]
+"""Called with an artifact's name and the path of its finished file, as soon as it is written."""
 
 
 class Exporter(Protocol):
@@ -199,11 +205,15 @@ def write_artifacts(
     *,
     names: Iterable[str] | None = None,
     progress: ProgressCallback | None = None,
+    on_written: ArtifactCallback | None = None,
 ) -> list[Path]:
     """Write artifacts into ``out_dir``, all or nothing.
 
     Everything is rendered into a staging folder beside ``out_dir`` first and moved into
     place only when every artifact succeeded, so a failure leaves no half-written files.
+    ``on_written`` sees each file the moment it is complete in the staging folder (the
+    service shows an evaluation's figures before its reports are laid out); the file
+    stays there until every artifact is written, then moves to ``out_dir``.
 
     Args:
         result: the evaluation.
@@ -211,6 +221,8 @@ def write_artifacts(
         options: placement and report options.
         names: the artifacts to write (default: all of :data:`ARTIFACTS`).
         progress: called with (stage, fraction done) before each artifact.
+        on_written: called with the name and the staged path of each finished artifact,
+            in the order they are written (``result.json`` first when it is wanted).
 
     Returns:
         The paths written.
@@ -225,7 +237,9 @@ def write_artifacts(
     out_dir = out_dir.resolve()
     staging = _staging_folder(out_dir)
     try:
-        _render_into(staging, result, options, wanted, progress or _no_progress)
+        _render_into(
+            staging, result, options, wanted, progress or _no_progress, on_written=on_written
+        )
         out_dir.mkdir(exist_ok=True)
         written = []
         for name in wanted:
@@ -271,6 +285,8 @@ def _render_into(
     options: ExportOptions,
     wanted: list[str],
     progress: ProgressCallback,
+    *,
+    on_written: ArtifactCallback | None = None,
 ) -> None:
     """Render every wanted artifact into ``staging``, placing the CAD paths only once."""
     placement = None
@@ -279,15 +295,54 @@ def _render_into(
         from exporters.cad.placement import place_evaluation  # noqa: PLC0415
 
         placement = place_evaluation(result, options)
+    reports = _ReportFigures(result, options, wanted)
     for k, name in enumerate(wanted):
         progress(f"writing {name}", k / len(wanted))
         if placement is not None and name == "result.json":
             data = export_result_json(result, options, cad=placement.metadata())
         elif placement is not None and name in CAD_ARTIFACTS:
             data = ARTIFACTS[name].load()(result, options, placement=placement)
+        elif name in _REPORTS:
+            data = reports.render(name)
         else:
             data = render_artifact(name, result, options)
         (staging / name).write_bytes(data)
+        if on_written is not None:
+            on_written(name, staging / name)
+
+
+_REPORTS: Final = frozenset({"report.html", "report.pdf"})
+"""The artifacts that embed the report's figures (SVG in the HTML, PNG in the PDF)."""
+
+
+class _ReportFigures:
+    """Renders ``report.html`` and ``report.pdf`` of one run, drawing each figure once.
+
+    When a run writes both reports, every figure is drawn once and encoded as SVG and as
+    PNG; a run writing one of them draws only its format.
+    """
+
+    def __init__(self, result: EvaluationResult, options: ExportOptions, wanted: list[str]) -> None:
+        self._result = result
+        self._options = options
+        self._both = _REPORTS.issubset(wanted)
+        self._plots: ReportPlots | None = None
+
+    def render(self, name: str) -> bytes:
+        """Render the report ``name`` (``report.html`` or ``report.pdf``)."""
+        spec = ARTIFACTS[name]
+        spec.load()  # the libraries' message (ExportUnavailableError) when one is missing
+        from exporters.report import (  # noqa: PLC0415  (matplotlib, Jinja2)
+            render_report_html,
+            render_report_pdf,
+            render_report_plots,
+        )
+
+        if self._both and self._plots is None:
+            self._plots = render_report_plots(self._result, self._options, formats=("svg", "png"))
+        if name == "report.html":
+            return render_report_html(self._result, self._options, plots=self._plots)
+        return render_report_pdf(self._result, self._options, plots=self._plots)
 
 
 __all__ += ["ExportError", "ExportOptionsError", "ExportUnavailableError"]

@@ -443,8 +443,10 @@ def evaluation_public(
     """Return the HTTP view of an evaluation."""
     request = evaluation.request
     succeeded = evaluation.status == JobStatus.SUCCEEDED
+    # A running evaluation shows what it has made so far (result.json first, then each file).
+    shown = succeeded or evaluation.status == JobStatus.RUNNING
     artifacts = None
-    if succeeded and evaluation.artifacts is not None:
+    if shown and evaluation.artifacts is not None:
         artifacts = [
             ArtifactPublic(
                 **a, url=f"{base_url}api/v1/evaluations/{evaluation.id}/artifacts/{a['name']}"
@@ -463,10 +465,10 @@ def evaluation_public(
             "reference": request["reference"],
             "estimates": request["estimates"],
             "options": request.get("options", {}),
-            "summary": evaluation.summary if succeeded else None,
+            "summary": evaluation.summary if shown else None,
             "error": evaluation.error,
             "artifacts": artifacts,
-            "result": evaluation.result if (succeeded and with_result) else None,
+            "result": evaluation.result if (shown and with_result) else None,
         }
     )
 
@@ -499,18 +501,24 @@ def artifact_path(runtime: Runtime, project_id: str, evaluation_id: str, name: s
 
     Raises:
         NotFoundError: no such evaluation, artifact name, or file (its formats left it out).
-        NotReadyError: the evaluation has not succeeded.
+        NotReadyError: the evaluation has not succeeded and has not written this one yet.
     """
     evaluation = get_owned(runtime.sessions, Evaluation, evaluation_id, project_id)
     if name not in ARTIFACTS:
         msg = f"No artifact {name!r}; the artifacts are {', '.join(ARTIFACTS)}."
         raise NotFoundError(msg)
-    if evaluation.status != JobStatus.SUCCEEDED:
+    ready = evaluation.status == JobStatus.RUNNING and any(
+        a.get("name") == name for a in evaluation.artifacts or ()
+    )
+    if evaluation.status != JobStatus.SUCCEEDED and not ready:
         msg = f"Evaluation {evaluation_id!r} is {evaluation.status}, so it has no artifacts" + (
             " yet; poll GET /evaluations/{id} until it succeeds."
             if evaluation.status in ACTIVE_STATUSES
             else "; see its error."
         )
+        if evaluation.status == JobStatus.RUNNING and evaluation.artifacts:  # some are ready
+            msg = f"Evaluation {evaluation_id!r} is running and has not written {name!r} yet; "
+            msg += "poll GET /evaluations/{id} until its artifacts list it."
         raise NotReadyError(msg)
     key = artifact_key(EVALUATIONS, evaluation.id, name)
     if not runtime.store.exists(key):

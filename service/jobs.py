@@ -14,6 +14,7 @@ worker.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import socket
 import uuid
@@ -23,15 +24,18 @@ from typing import Any, Final
 
 from huey import crontab
 from huey.exceptions import RetryTask
+from sqlalchemy import update
 from sqlalchemy.orm import Session
 
 from exporters import ARTIFACTS
-from loceval.errors import InputError
+from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec, TrajectoryFormat
+from service.adapters import DATABASE_ERRORS
 from service.blobs import open_blobs
 from service.db import (
     Dataset,
     Evaluation,
+    JobStatus,
     ScheduleRun,
     create_db_engine,
     make_session_factory,
@@ -68,7 +72,9 @@ from service.watchdog import start_watchdog
 
 __all__ = [
     "JOB_KINDS",
+    "ReadyArtifacts",
     "Runtime",
+    "artifact_entry",
     "create_runtime",
     "evaluation_summary",
     "execute_evaluation",
@@ -76,6 +82,8 @@ __all__ = [
     "release",
     "stored_request",
 ]
+
+logger = logging.getLogger(__name__)
 
 _DEFERRED_DELAY_S: Final = 2.0
 """When a job put off by a database outage is tried again (its thread waited 30 s already)."""
@@ -93,29 +101,97 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
                 work = _job_for(session, runtime, evaluation)
             runtime.store.clear_job(job.kind.folder, evaluation_id)
             staging = job.staging_dir()
+            ready = ReadyArtifacts(runtime, evaluation_id, staging)
+            ready.forget()  # an earlier attempt's files are gone with clear_job
             # In a child process: stopped at the wall-time limit, capped at the memory limit.
-            run_limited(
-                Limits.from_settings(runtime.settings),
-                run_job,
-                work,
-                staging,
-                progress=job.progress,
-            )
+            try:
+                run_limited(
+                    Limits.from_settings(runtime.settings),
+                    run_job,
+                    work,
+                    staging,
+                    progress=job.progress,
+                    artifacts=ready,
+                )
+            except BaseException:
+                if ready.ready:  # a failed evaluation keeps none of the files it published
+                    runtime.store.clear_job(job.kind.folder, evaluation_id)
+                raise
         final = job.publish(staging)
         document = json.loads((final / "result.json").read_text())
         job.succeed(
             result=document,
             summary=evaluation_summary(document),
             artifacts=[
-                {
-                    "name": name,
-                    "media_type": spec.media_type,
-                    "size_bytes": (final / name).stat().st_size,
-                }
-                for name, spec in ARTIFACTS.items()
-                if (final / name).is_file()
+                artifact_entry(name, final / name) for name in ARTIFACTS if (final / name).is_file()
             ],
         )
+
+
+def artifact_entry(name: str, path: Path) -> dict[str, Any]:
+    """Return an artifact's row in an evaluation's ``artifacts``: name, media type, size."""
+    return {
+        "name": name,
+        "media_type": ARTIFACTS[name].media_type,
+        "size_bytes": path.stat().st_size,
+    }
+
+
+class ReadyArtifacts:
+    """Publishes each artifact of a running evaluation the moment its process writes it.
+
+    Called (in the worker, through :func:`service.limits.run_limited`) with an artifact's
+    name and its file in the job's staging folder: the file is published to the store
+    and the evaluation's row lists it, so ``GET /evaluations/{id}`` shows it and it can
+    be downloaded while the others are still being made. ``result.json`` comes first;
+    with it the row gets the result document and the summary, and the page shows the
+    figures. The finished set replaces all of it when the job succeeds. A store or
+    database that fails here costs only the early view: the job goes on.
+    """
+
+    def __init__(self, runtime: Runtime, evaluation_id: str, staging: Path) -> None:
+        """Publish for ``evaluation_id``, whose artifacts are written into ``staging``."""
+        self.runtime = runtime
+        self.evaluation_id = evaluation_id
+        self.staging = staging
+        self.ready: list[dict[str, Any]] = []
+
+    def forget(self) -> None:
+        """Clear the row's artifacts, result and summary (a new attempt starts)."""
+        self._store_row(artifacts=None, result=None, summary=None)
+
+    def __call__(self, name: str, path: str) -> None:
+        """Publish the artifact ``name`` written at ``path``."""
+        # The child moves the whole set into the staging folder once the last file is
+        # written, possibly before this message is read: the file is then there.
+        found = next((p for p in (Path(path), self.staging / name) if p.is_file()), None)
+        if found is None or name not in ARTIFACTS:
+            return
+        try:
+            self.runtime.store.publish_job_artifact(EVALUATIONS, self.evaluation_id, name, found)
+            entry = artifact_entry(name, found)
+            document = json.loads(found.read_bytes()) if name == "result.json" else None
+        except (OSError, ValueError, LocevalError) as err:
+            logger.warning("%s of %s not published early (%s)", name, self.evaluation_id, err)
+            return
+        self.ready.append(entry)
+        values: dict[str, Any] = {"artifacts": list(self.ready)}
+        if document is not None:
+            values.update(result=document, summary=evaluation_summary(document))
+        self._store_row(**values)
+
+    def _store_row(self, **values: Any) -> None:  # noqa: ANN401
+        try:
+            with self.runtime.sessions() as session:
+                session.execute(
+                    update(Evaluation)
+                    .where(Evaluation.id == self.evaluation_id)
+                    .where(Evaluation.status == JobStatus.RUNNING)
+                    .values(**values)
+                )
+                session.commit()
+        except DATABASE_ERRORS as err:  # shown early, not kept: the finished job stores all
+            logger.warning("Artifacts of %s not listed early (%s)", self.evaluation_id, err)
 
 
 def _outcome(verdict: dict[str, Any]) -> str:

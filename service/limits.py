@@ -49,6 +49,8 @@ from loceval.errors import LocevalError
 from service.errors import JobMemoryError, JobTimeoutError
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from service.settings import Settings
 
 __all__ = [
@@ -75,6 +77,8 @@ _ADVICE: Final = (
 )
 
 Progress = Callable[[str, float], None]
+Artifacts = Callable[[str, str], None]
+"""Called in the parent with an artifact's name and the path of its finished file."""
 
 
 def _mapping_proxy(items: dict[Any, Any]) -> MappingProxyType[Any, Any]:
@@ -168,18 +172,22 @@ def run_limited(
     target: Callable[..., object],
     *args: object,
     progress: Progress | None = None,
+    artifacts: Artifacts | None = None,
 ) -> None:
     """Run ``target(*args, progress=...)`` in a child process within ``limits``.
 
     The target must be importable by name (a module-level function) and its arguments
     picklable; its return value is dropped (a job's output is its files). Progress the
-    target reports is passed on to ``progress`` in this process.
+    target reports is passed on to ``progress`` in this process. With ``artifacts``, a
+    target that takes ``on_artifact=`` is given a callback whose calls (an artifact's name
+    and file, as it is written) reach ``artifacts`` in this process, in order.
 
     Args:
         limits: the wall time and memory it may use.
         target: the work, called with the arguments and ``progress=`` a callback.
         *args: the arguments.
         progress: called here with (stage, fraction) as the child reports them.
+        artifacts: called here with (name, path) of each artifact the child reports.
 
     Raises:
         LocevalError: the target raised it (the same class, message, option and suggestion).
@@ -194,6 +202,7 @@ def run_limited(
     process = context.Process(
         target=_child,
         args=(child_results, child_lifeline, memory_bytes, target, args),
+        kwargs={"with_artifacts": artifacts is not None},
         name=f"loceval-{limits.what}",
         daemon=True,
     )
@@ -202,7 +211,7 @@ def run_limited(
     child_lifeline.close()
     outcome: tuple[Any, ...] | None = ("timeout",)
     try:
-        outcome = _wait(results, limits.timeout_s, progress)
+        outcome = _wait(results, limits.timeout_s, progress, artifacts)
     finally:
         if outcome is not None and outcome[0] != "timeout":
             process.join(_EXIT_GRACE_S)  # it has sent its outcome and is exiting
@@ -220,8 +229,9 @@ def _wait(
     results: Connection,
     timeout_s: float,
     progress: Progress | None,
+    artifacts: Artifacts | None = None,
 ) -> tuple[Any, ...] | None:
-    """Pass on the child's progress until its outcome; None: it died without one."""
+    """Pass on the child's progress and artifacts until its outcome; None: it died first."""
     deadline = time.monotonic() + timeout_s
     while True:
         remaining = deadline - time.monotonic()
@@ -235,6 +245,10 @@ def _wait(
             return None
         if message[0] == "log":
             _log_from_child(message[1])
+            continue
+        if message[0] == "artifact":
+            if artifacts is not None:
+                artifacts(message[1], message[2])
             continue
         if message[0] != "progress":
             return message
@@ -282,6 +296,8 @@ def _child(
     memory_bytes: int,
     target: Callable[..., object],
     args: tuple[object, ...],
+    *,
+    with_artifacts: bool = False,
 ) -> None:
     """Run the target in the child process and send its outcome (or its progress)."""
     # Ctrl-C in a terminal reaches the whole process group: the parent decides what stops.
@@ -297,7 +313,10 @@ def _child(
     report = _Reporter(sender)
     outcome: tuple[object, ...]
     try:
-        target(*args, progress=report)
+        if with_artifacts and _takes(target, "on_artifact"):
+            target(*args, progress=report, on_artifact=report.artifact)
+        else:
+            target(*args, progress=report)
         outcome = ("done",)
     except MemoryError:
         outcome = ("memory",)
@@ -308,6 +327,14 @@ def _child(
     # The failed work's frames (and their arrays) are gone here, so sending needs no memory.
     sender(outcome)
     results.close()
+
+
+def _takes(target: Callable[..., object], name: str) -> bool:
+    """Return whether ``target`` takes the keyword argument ``name``."""
+    import inspect  # noqa: PLC0415
+
+    parameters = inspect.signature(target).parameters
+    return name in parameters or any(p.kind is p.VAR_KEYWORD for p in parameters.values())
 
 
 class _Sender:
@@ -385,6 +412,10 @@ class _Reporter:
             return
         self.stage, self.at = stage, now
         self.send(("progress", stage, float(fraction)))
+
+    def artifact(self, name: str, path: Path) -> None:
+        """Send an artifact's name and file the moment it is written (never dropped)."""
+        self.send(("artifact", name, str(path)))
 
 
 def _portable(err: LocevalError) -> LocevalError:

@@ -25,6 +25,7 @@ from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory, sniff
 from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
+    from exporters import ArtifactCallback
     from exporters.options import ExportOptions
     from loceval.checkpoint_evaluation import CheckpointEvaluation
     from loceval.controlpoints import ControlPoints, Visits
@@ -274,7 +275,11 @@ def run_job(
 
 
 def run_job(
-    job: Job, out_dir: Path | None, progress: ProgressCallback | None = None
+    job: Job,
+    out_dir: Path | None,
+    progress: ProgressCallback | None = None,
+    *,
+    on_artifact: ArtifactCallback | None = None,
 ) -> EvaluationResult | CheckpointEvaluation:
     """Read, evaluate and (with ``out_dir`` and ``job.export``) write the artifacts.
 
@@ -282,6 +287,9 @@ def run_job(
         job: the job; its kind says how it is evaluated.
         out_dir: the artifact folder, written all or nothing; None writes nothing.
         progress: called with (stage, overall fraction done).
+        on_artifact: called with the name and staged path of each artifact of a trajectory
+            evaluation as soon as it is written (:func:`exporters.write_artifacts`), before
+            the whole set moves into ``out_dir``.
 
     Returns:
         The evaluation result (a control-point job's: its scores at the points).
@@ -310,6 +318,7 @@ def run_job(
             replace(job.export, title=title),
             names=job.artifact_names(),
             progress=writing,
+            on_written=on_artifact,
         )
     report("done", 1.0)
     return result

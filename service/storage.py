@@ -234,6 +234,21 @@ class BlobStore:
         """Rename a job's finished staging folder into place, replacing an earlier attempt's."""
         return _publish(staging, self.job_artifacts_dir(folder, job_id))
 
+    def publish_job_artifact(self, folder: str, job_id: str, name: str, path: Path) -> None:
+        """Put one finished artifact of a running job into its artifacts folder at once.
+
+        The file is hard-linked (copied across file systems) under a temporary name and
+        renamed into place, so a download never sees half of it.
+        """
+        final = self.job_artifacts_dir(folder, job_id)
+        final.mkdir(parents=True, exist_ok=True)
+        partial = final / f".{name}.{uuid.uuid4().hex}"
+        try:
+            os.link(path, partial)
+        except OSError:
+            shutil.copyfile(path, partial)
+        partial.replace(final / name)
+
     def clear_job(self, folder: str, job_id: str) -> None:
         """Remove a job's staging leftovers and artifacts (before a new attempt)."""
         parent = self.job_folder(folder, job_id)

@@ -72,13 +72,20 @@ class BulkPolylines:
             ValueError: a collected polyline is not in ``text`` (a bug).
         """
         cuts: list[tuple[int, str]] = []
+        after = 0
         for item in self._pending:  # one iteration per polyline
-            start = text.find(f"\n  0\nPOLYLINE\n  5\n{item.handle}\n")
-            seqend = text.find("\n  0\nSEQEND\n", start)
+            key = f"\n  0\nPOLYLINE\n  5\n{item.handle}\n"
+            # ezdxf writes the polylines in the order they were added: searching on from the
+            # previous one keeps this linear (from the top, 25,000 polylines took 13 s)
+            start = text.find(key, after)
+            if start < 0:
+                start = text.find(key)  # written in another order after all
+            seqend = text.find("\n  0\nSEQEND\n", start) if start >= 0 else -1
             if start < 0 or seqend < 0:
                 msg = f"POLYLINE {item.handle} not found in the written drawing"
                 raise ValueError(msg)
             cuts.append((seqend + 1, _vertex_records(item)))
+            after = seqend
         cuts.sort()
         parts, last = [], 0
         for position, records in cuts:

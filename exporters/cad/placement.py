@@ -51,7 +51,7 @@ from loceval import __version__
 from loceval.core.arrays import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.core.gaps import path_breaks
 from loceval.core.geometry import SimilarityTransform
-from loceval.core.polyline import simplify_rdp
+from loceval.core.polyline import simplify_rdp, simplify_rdp_runs
 from loceval.evaluation import EstimateResult, EvaluationResult
 
 __all__ = [
@@ -290,23 +290,21 @@ class Placement:
         # a run continues to the next run's first vertex unless a break lies between
         ends = np.where((ends < len(which)) & ~np.append(jump, True)[ends - 1], ends + 1, ends)
         tolerance = self.simplify_m * self.units.per_metre
+        drawn = ends - starts >= 2
+        starts, ends = starts[drawn], ends[drawn]
+        # every run simplified in one work list (thousands of short runs on a noisy path)
+        keep, _ = simplify_rdp_runs(model, starts, ends, tolerance)
         base = self.base_point
-        runs = []
-        for start, stop in zip(starts.tolist(), ends.tolist(), strict=True):  # per run
-            if stop - start < 2:
-                continue
-            chunk = model[start:stop]
-            kept, _ = simplify_rdp(chunk, tolerance)
-            runs.append(
-                ATERun(
-                    path=path.name,
-                    piece=int(piece[start]),
-                    bin_index=int(which[start]),
-                    vertices=chunk[kept],
-                    local_vertices=chunk[kept] - base,
-                )
+        return [
+            ATERun(
+                path=path.name,
+                piece=int(piece[start]),
+                bin_index=int(which[start]),
+                vertices=model[start:stop][keep[start:stop]],
+                local_vertices=model[start:stop][keep[start:stop]] - base,
             )
-        return runs
+            for start, stop in zip(starts.tolist(), ends.tolist(), strict=True)
+        ]
 
     def markers(self) -> list[Marker]:
         """Return one marker per tracking loss and the greatest-error markers.

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import json
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Final
 
@@ -159,13 +159,14 @@ def export_3dm_json(
         for path in placement.paths:
             entry = path.metadata()
             entry["layer"] = layer_path(placement, path)
-            entry["curves"] = [_curve(path, v).Encode() for v in _piece_vertices(path)]
+            strings = _user_strings(path)  # once per path: its statistics cover every pose
+            entry["curves"] = [_curve(v, strings).Encode() for v in _piece_vertices(path)]
             entry["ate_layer"] = f"{entry['layer']}::ATE"
             entry["ate"] = [
                 {
                     "bin": run.bin_index,
                     "color": list(bins[run.bin_index].color_rgb),
-                    "curve": _curve(path, run.vertices).Encode(),
+                    "curve": _curve(run.vertices, strings).Encode(),
                 }
                 for run in placement.ate_runs(path)
             ]
@@ -224,10 +225,11 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
         attributes.Name = path.name
         attributes.LayerIndex = layer
         attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromLayer
-        for key, value in _user_strings(path).items():
+        strings = _user_strings(path)  # once per path: its statistics cover every pose
+        for key, value in strings.items():
             attributes.SetUserString(key, value)
         for vertices in _piece_vertices(path):  # one curve per continuous piece
-            model.Objects.AddCurve(_curve(path, vertices), attributes)
+            model.Objects.AddCurve(_curve(vertices, strings), attributes)
         if path.estimate is None:
             continue
         ate_layer = _add_layer(model, "ATE", path.color_rgb, layer)
@@ -238,7 +240,7 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
             run_attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromObject
             run_attributes.ObjectColor = (*bins[run.bin_index].color_rgb, 255)
             run_attributes.SetUserString("loceval.ate_bin", bins[run.bin_index].label)
-            model.Objects.AddCurve(_curve(path, run.vertices), run_attributes)
+            model.Objects.AddCurve(_curve(run.vertices, strings), run_attributes)
         worst = [m for m in markers if m.kind == "worst" and m.path == path.name]
         if worst:
             _add_dots(model, worst, _add_layer(model, "markers", path.color_rgb, layer))
@@ -340,12 +342,13 @@ def _add_layer(
     return index
 
 
-def _curve(path: PlacedPath, vertices: FloatArray) -> Any:  # noqa: ANN401
+def _curve(vertices: FloatArray, user_strings: Mapping[str, str]) -> Any:  # noqa: ANN401
+    """A polyline curve through ``vertices`` carrying its path's user strings."""
     points = rhino3dm.Point3dList(len(vertices))
     for x, y, z in vertices.tolist():  # rhino3dm takes points one by one
         points.Add(x, y, z)
     curve = rhino3dm.PolylineCurve(points)
-    for key, value in _user_strings(path).items():
+    for key, value in user_strings.items():
         curve.SetUserString(key, value)
     return curve
 

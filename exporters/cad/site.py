@@ -13,11 +13,11 @@ from pathlib import Path
 from typing import Final
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from exporters.errors import ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval.core.geometry import SimilarityTransform
+from loceval.core.rotation import Rotation
 from loceval.errors import InputError
 from loceval.trajectory import MAX_COORDINATE_M
 
@@ -77,7 +77,7 @@ def parse_site(text: str) -> SimilarityTransform:
             f"{yaw_deg:g}; give the yaw as an angle of one turn at most, in degrees."
         )
         raise ExportOptionsError(msg, option="site")
-    rotation = Rotation.from_euler("z", yaw_deg, degrees=True).as_matrix()
+    rotation = Rotation.from_euler("z", np.array(yaw_deg), degrees=True).as_matrix()
     return SimilarityTransform(rotation, np.array(values[:3]), 1.0)
 
 

@@ -254,10 +254,36 @@ def _svg(fig: Figure) -> bytes:
     return _SVG_PATH_DATA.sub(lambda m: _SVG_NUMBER.sub(rb"\1", m.group(0)), buf.getvalue())
 
 
+PNG_COMPRESS_LEVEL = 1
+"""zlib level of the PNG plots: the PDF engine decodes and recompresses every image anyway,
+so the fastest level costs nothing in the PDF (level 6, PIL's default, took twice as long)."""
+
+
 def _png(fig: Figure) -> bytes:
+    """Encode the figure as an opaque RGB PNG at :data:`PNG_DPI`.
+
+    The figure is drawn into an RGBA buffer and saved without its alpha channel: every
+    figure has an opaque white background, so the picture is the same, and WeasyPrint
+    would otherwise split the alpha off into a soft mask, decoding and encoding each image
+    once more.
+    """
+    from PIL import Image, PngImagePlugin  # noqa: PLC0415  (comes with matplotlib)
+
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=PNG_DPI, metadata={"Software": "loceval"})
-    return buf.getvalue()
+    fig.savefig(buf, format="rgba", dpi=PNG_DPI)
+    width = int(fig.get_figwidth() * PNG_DPI)  # matplotlib's canvas size: truncated
+    rgba = np.frombuffer(buf.getbuffer(), dtype=np.uint8).reshape(-1, width, 4)
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Software", "loceval")
+    out = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(rgba[:, :, :3])).save(
+        out,
+        format="png",
+        compress_level=PNG_COMPRESS_LEVEL,
+        pnginfo=info,
+        dpi=(PNG_DPI, PNG_DPI),
+    )
+    return out.getvalue()
 
 
 def encode_plot(

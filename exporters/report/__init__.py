@@ -14,6 +14,7 @@ it (and holds the Jinja2 render and the PDF layout the summary report shares).
 
 from __future__ import annotations
 
+from exporters.report.figures import ReportPlots, render_report_plots
 from exporters.report.render import (
     DEFAULT_TEMPLATES_DIR,
     TEMPLATE_NAME,
@@ -33,6 +34,7 @@ __all__ = [
     "BEST_MARK",
     "DEFAULT_TEMPLATES_DIR",
     "TEMPLATE_NAME",
+    "ReportPlots",
     "ReportView",
     "build_report_view",
     "check_pdf",
@@ -42,6 +44,7 @@ __all__ = [
     "render_report",
     "render_report_html",
     "render_report_pdf",
+    "render_report_plots",
     "render_template",
     "render_view_html",
 ]

@@ -5,8 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from exporters.plots.clock import plot_clock_correlation
-from exporters.plots.figure import DEFAULT_MAX_POINTS, FigureView, ImageFormat
+from exporters.plots.figure import FigureView, ImageFormat, Plot
 from loceval.calibration.offsets import OffsetCheck
 from loceval.evaluation import EstimateResult, EvaluationConfig, EvaluationResult
 
@@ -133,22 +132,22 @@ def build_clock_section(
     result: EvaluationResult,
     *,
     number: int,
+    plot: Plot | None,
     image_format: ImageFormat = "svg",
-    max_points: int = DEFAULT_MAX_POINTS,
 ) -> ClockSection:
-    """Format the section and render its plot as the figure ``number``.
+    """Format the section, with its plot as the figure ``number``.
 
     Args:
         result: the evaluation.
         number: the plot's figure number.
+        plot: the section's plot (:func:`exporters.plots.clock.plot_clock_correlation`),
+            holding ``image_format``; None when there is none.
         image_format: ``svg`` for the HTML, ``png`` for the PDF.
-        max_points: most vertices per curve.
 
     Returns:
         The section's view.
     """
     columns = [_column(result, e) for e in result.estimates]
     rows = tuple((label, tuple(column[i] for column in columns)) for i, label in enumerate(_LABELS))
-    plot = plot_clock_correlation(result, max_points=max_points, formats=(image_format,))
     figure = None if plot is None else plot.as_figure(number, image_format)
     return ClockSection(rows=rows, figure=figure)

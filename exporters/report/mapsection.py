@@ -9,10 +9,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from loceval.evaluation import EvaluationResult
-from loceval.maps import MapSnapshot, WallFigures
-from loceval.maps.axis_scale import AxisScales
+
+if TYPE_CHECKING:
+    # Only named here: importing loceval.maps loads scipy.spatial, which a report of a
+    # run without a map never needs.
+    from loceval.maps import MapSnapshot, WallFigures
+    from loceval.maps.axis_scale import AxisScales
 
 __all__ = ["MapView", "build_map_view"]
 

@@ -10,7 +10,6 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from exporters.plots import (
     REFERENCE_COLOUR,
@@ -18,6 +17,7 @@ from exporters.plots import (
     estimate_colour,
 )
 from exporters.report.clocks import time_offset_text
+from loceval.core.arrays import FloatArray
 from loceval.core.gaps import GAP_RATE_FACTOR
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.registration.alignment import AlignWindow
@@ -30,7 +30,32 @@ __all__ = [
     "input_rows",
     "option_rows",
     "trajectory_rows",
+    "yaw_pitch_roll_deg",
 ]
+
+
+_GIMBAL_LOCK: float = 1.0 - 1e-12
+"""``|sin(pitch)|`` beyond which yaw and roll turn about the same axis (pitch ±90°)."""
+
+
+def yaw_pitch_roll_deg(rotation: FloatArray) -> tuple[float, float, float]:
+    """Return the intrinsic z-y'-x'' angles of a rotation matrix, degrees.
+
+    ``R = Rz(yaw) Ry(pitch) Rx(roll)`` (the order of scipy's ``as_euler("ZYX")``):
+    yaw and roll in (-180°, 180°], pitch in [-90°, 90°]. At pitch ±90° (gimbal lock)
+    only yaw ∓ roll is defined; roll is then 0 and yaw carries the whole turn.
+
+    Args:
+        rotation: (3, 3) rotation matrix.
+    """
+    r = np.asarray(rotation, dtype=np.float64)
+    sin_pitch = float(np.clip(-r[2, 0], -1.0, 1.0))
+    pitch = math.atan2(sin_pitch, math.hypot(r[0, 0], r[1, 0]))  # exact near ±90°
+    if abs(sin_pitch) >= _GIMBAL_LOCK:
+        yaw, roll = math.atan2(-r[0, 1], r[1, 1]), 0.0
+    else:
+        yaw, roll = math.atan2(r[1, 0], r[0, 0]), math.atan2(r[2, 1], r[2, 2])
+    return math.degrees(yaw), math.degrees(pitch), math.degrees(roll)
 
 
 def estimate_name(e: EstimateResult, k: int) -> str:
@@ -177,7 +202,7 @@ def alignment_rows(result: EvaluationResult) -> tuple[tuple[str, tuple[str, ...]
     for e in result.estimates:
         a = e.alignment
         tf = a.transform
-        yaw, pitch, roll = Rotation.from_matrix(tf.rotation).as_euler("ZYX", degrees=True)
+        yaw, pitch, roll = yaw_pitch_roll_deg(tf.rotation)
         matrix = np.hstack([tf.scale * tf.rotation, tf.translation[:, None]])
         columns.append(
             (

@@ -14,8 +14,8 @@ from typing import Final
 
 from exporters.errors import ExportError, ExportUnavailableError
 from exporters.options import ExportOptions
-from exporters.plots import DEFAULT_MAX_POINTS, render_plots
-from exporters.plots.underlay import floor_plan_segments
+from exporters.plots import DEFAULT_MAX_POINTS
+from exporters.report.figures import ReportPlots, render_report_plots
 from exporters.report.view import ReportView, build_report_view
 from exporters.viewer import ViewerFragment, viewer_fragment
 from loceval.core.display import shown_text
@@ -246,7 +246,7 @@ def render_report(
     templates_dir: Path | None = None,
     max_points: int = DEFAULT_MAX_POINTS,
 ) -> tuple[bytes, bytes]:
-    """Render the report as HTML and PDF, building the plots once for both.
+    """Render the report as HTML and PDF, drawing each figure once for both.
 
     The HTML embeds the plots as SVG; the PDF is the same templates laid out by WeasyPrint
     with the plots as 200 dpi PNG (WeasyPrint draws matplotlib's SVG slowly: seconds per
@@ -267,48 +267,64 @@ def render_report(
         ExportError: the templates are missing or the layout failed.
     """
     options = options or ExportOptions()
-    folder = _templates_dir(options, templates_dir)
-    plots = render_plots(
-        result,
-        max_points=max_points,
-        formats=("svg", "png"),
-        floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
-    )
-    html = render_view_html(
-        build_report_view(result, options, plots=plots, image_format="svg"),
-        templates_dir=folder,
-        viewer=viewer_fragment(result, options, templates_dir=folder),
-    )
-    printable = render_view_html(
-        build_report_view(result, options, plots=plots, image_format="png"), templates_dir=folder
-    )
-    return html, html_to_pdf(printable)
+    plots = render_report_plots(result, options, formats=("svg", "png"), max_points=max_points)
+    html = render_report_html(result, options, plots=plots, templates_dir=templates_dir)
+    return html, render_report_pdf(result, options, plots=plots, templates_dir=templates_dir)
 
 
-def render_report_html(result: EvaluationResult, options: ExportOptions) -> bytes:
+def render_report_html(
+    result: EvaluationResult,
+    options: ExportOptions,
+    *,
+    plots: ReportPlots | None = None,
+    templates_dir: Path | None = None,
+) -> bytes:
     """Render ``report.html``: one self-contained file (the ARTIFACTS exporter).
+
+    Args:
+        result: the evaluation.
+        options: title, evaluation id, templates folder.
+        plots: the figures already drawn, with their SVG (:func:`render_report_plots`);
+            default: draw them here.
+        templates_dir: the template folder; default ``options.templates_dir``, else the
+            repository's ``templates/``.
 
     Raises:
         ExportUnavailableError: Jinja2 or matplotlib is missing.
         ExportError: the templates are missing or broken.
     """
-    folder = _templates_dir(options, None)
+    folder = _templates_dir(options, templates_dir)
     return render_view_html(
-        build_report_view(result, options),
+        build_report_view(result, options, plots=plots, image_format="svg"),
         templates_dir=folder,
         viewer=viewer_fragment(result, options, templates_dir=folder),
     )
 
 
-def render_report_pdf(result: EvaluationResult, options: ExportOptions) -> bytes:
+def render_report_pdf(
+    result: EvaluationResult,
+    options: ExportOptions,
+    *,
+    plots: ReportPlots | None = None,
+    templates_dir: Path | None = None,
+) -> bytes:
     """Render ``report.pdf``: the same report on A4 pages (the ARTIFACTS exporter).
 
     Plots are embedded as PNG (see :func:`render_report`).
+
+    Args:
+        result: the evaluation.
+        options: title, evaluation id, templates folder.
+        plots: the figures already drawn, with their PNG (:func:`render_report_plots`);
+            default: draw them here.
+        templates_dir: the template folder; default ``options.templates_dir``, else the
+            repository's ``templates/``.
 
     Raises:
         ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
         ExportError: the templates are missing or the layout failed.
     """
-    folder = _templates_dir(options, None)
-    view = build_report_view(result, options, image_format="png")
+    folder = _templates_dir(options, templates_dir)
+    check_pdf()  # before drawing anything: without WeasyPrint there is no PDF to draw for
+    view = build_report_view(result, options, plots=plots, image_format="png")
     return html_to_pdf(render_view_html(view, templates_dir=folder))

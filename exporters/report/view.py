@@ -21,12 +21,12 @@ from exporters.plots import (
     Plot,
     describe_rpe_step,
     estimate_colour,
-    render_plots,
 )
+from exporters.plots.clock import plot_clock_correlation
 from exporters.plots.figure import FigureView, number_figures
-from exporters.plots.underlay import floor_plan_segments
 from exporters.report.clocks import ClockSection, build_clock_section
 from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
+from exporters.report.figures import ReportPlots, render_report_plots
 from exporters.report.mapsection import MapView, build_map_view
 from exporters.report.provenance import (
     alignment_rows,
@@ -462,7 +462,7 @@ def build_report_view(
     result: EvaluationResult,
     options: ExportOptions,
     *,
-    plots: Sequence[Plot] | None = None,
+    plots: ReportPlots | Sequence[Plot] | None = None,
     image_format: ImageFormat = "svg",
     max_points: int = DEFAULT_MAX_POINTS,
 ) -> ReportView:
@@ -471,7 +471,9 @@ def build_report_view(
     Args:
         result: the evaluation.
         options: the title and evaluation id.
-        plots: already rendered plots, holding ``image_format`` (default: render them here).
+        plots: already rendered plots holding ``image_format``: every figure and the clock
+            section's (:func:`render_report_plots`), or the numbered figures alone (the
+            clock section's is then drawn here); default: draw them all here.
         image_format: how the figures are embedded: ``svg`` for the HTML, ``png`` for the
             PDF.
         max_points: most vertices drawn per plotted line (drawing only).
@@ -479,16 +481,13 @@ def build_report_view(
     Returns:
         The view model the templates render.
     """
-    rendered = (
-        tuple(plots)
-        if plots is not None
-        else render_plots(
-            result,
-            max_points=max_points,
-            formats=(image_format,),
-            floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
-        )
-    )
+    if plots is None:
+        plots = render_report_plots(result, options, formats=(image_format,), max_points=max_points)
+    if isinstance(plots, ReportPlots):
+        rendered, clock = plots.figures, plots.clock
+    else:
+        rendered = tuple(plots)
+        clock = plot_clock_correlation(result, max_points=max_points, formats=(image_format,))
     tolerance_example, tolerance_where = _tolerance_hint(options.front_door)
     figures = number_figures(rendered, image_format)
     figure_of = {f.key: f.number for f in figures}
@@ -549,7 +548,7 @@ def build_report_view(
             {(t.number, "translation"): t.length.format for t in tables if t.length is not None},
         ),
         clocks=build_clock_section(
-            result, number=len(figures) + 1, image_format=image_format, max_points=max_points
+            result, number=len(figures) + 1, plot=clock, image_format=image_format
         ),
         ranging=build_ranging_view(result),
         tolerance_example=tolerance_example,

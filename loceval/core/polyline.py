@@ -12,13 +12,15 @@ are handled in numpy blocks, never one by one.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
-from scipy.spatial import KDTree
 
-from loceval.core.arrays import FloatArray, IntArray
+from loceval.core.arrays import BoolArray, FloatArray, IntArray
 from loceval.errors import InputError
+
+if TYPE_CHECKING:
+    from scipy.spatial import KDTree
 
 __all__ = [
     "RESAMPLE_SPACING_M",
@@ -27,6 +29,7 @@ __all__ = [
     "polyline_distances",
     "segment_distances",
     "simplify_rdp",
+    "simplify_rdp_runs",
 ]
 
 RESAMPLE_SPACING_M: Final = 0.001
@@ -171,6 +174,10 @@ class PolylineIndex:
             where=length[segment] > 0.0,
         )
         samples = vertices[segment] + np.clip(fraction, 0.0, 1.0)[:, None] * ab[segment]
+        # Imported here: scipy.spatial costs a tenth of a second to import, which the CAD
+        # files (simplify_rdp) and the reports do not need.
+        from scipy.spatial import KDTree  # noqa: PLC0415
+
         tree = KDTree(samples, compact_nodes=False)  # faster queries far from the path
         return cls(vertices, samples, segment.astype(np.intp), spacing_m, tree)
 
@@ -241,10 +248,43 @@ def simplify_rdp(points_xyz: FloatArray, tolerance: float) -> tuple[IntArray, fl
     n = points.shape[0]
     if n <= 2 or tolerance <= 0.0:
         return np.arange(n, dtype=np.intp), 0.0
+    keep, deviation = simplify_rdp_runs(
+        points, np.array([0], dtype=np.intp), np.array([n], dtype=np.intp), tolerance
+    )
+    return np.flatnonzero(keep), deviation
+
+
+def simplify_rdp_runs(
+    points_xyz: FloatArray, starts: IntArray, stops: IntArray, tolerance: float
+) -> tuple[BoolArray, float]:
+    """Simplify many polylines, each a run of consecutive points, in one work list.
+
+    The same simplification as :func:`simplify_rdp` applied to every ``points[start:stop]``
+    on its own, with the runs of all polylines refined together level by level (a CAD
+    file's paths are thousands of short runs, one per colour band: one numpy pass per
+    level instead of one Python call per run). Runs may share an end point (one run ends
+    where the next begins); run ends are always kept.
+
+    Args:
+        points_xyz: (N, 3) vertices.
+        starts: (R,) first index of each run.
+        stops: (R,) one past the last index of each run (``stop - start >= 1``).
+        tolerance: largest allowed deviation, in the points' units; 0 keeps every vertex.
+
+    Returns:
+        The (N,) mask of kept vertices (every run's ``points[start:stop][mask[start:stop]]``
+        is its simplified polyline), and the largest deviation introduced over all runs.
+    """
+    points = np.asarray(points_xyz, dtype=np.float64)
+    n = points.shape[0]
+    starts = np.asarray(starts, dtype=np.intp)
+    ends = np.asarray(stops, dtype=np.intp) - 1
     keep = np.zeros(n, dtype=bool)
-    keep[[0, n - 1]] = True
-    starts = np.array([0], dtype=np.intp)
-    ends = np.array([n - 1], dtype=np.intp)
+    keep[starts] = True
+    keep[ends] = True
+    if tolerance <= 0.0:
+        keep[:] = True
+        return keep, 0.0
     deviation = 0.0
     while starts.size:
         counts = ends - starts - 1
@@ -270,4 +310,4 @@ def simplify_rdp(points_xyz: FloatArray, tolerance: float) -> tuple[IntArray, fl
         keep[cut] = True
         starts = np.concatenate([starts[split], cut])
         ends = np.concatenate([cut, ends[split]])
-    return np.flatnonzero(keep), deviation
+    return keep, deviation

@@ -196,6 +196,14 @@ class Blobs(abc.ABC):
         """
 
     @abc.abstractmethod
+    def publish_job_artifact(self, folder: str, job_id: str, name: str, path: Path) -> None:
+        """Publish one finished artifact of a running job ahead of the whole folder.
+
+        Downloads see it at once; :meth:`publish_job_artifacts` later replaces it with the
+        same file of the finished set.
+        """
+
+    @abc.abstractmethod
     def clear_job(self, folder: str, job_id: str) -> None:
         """Remove a job's staging leftovers and artifacts (before a new attempt)."""
 

@@ -44,7 +44,7 @@ from boto3.s3.transfer import TransferConfig
 from botocore.exceptions import BotoCoreError, ClientError
 from starlette.responses import RedirectResponse, Response, StreamingResponse
 
-from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming, parse_blob_url
+from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming, artifact_key, parse_blob_url
 from service.blobs.cache import InputCache
 from service.blobs.lease import LEASE_S, Lease, claim_slot
 from service.blobs.ranged import ObjectFile
@@ -366,6 +366,12 @@ class S3Blobs(Blobs):
             with store_errors():
                 self.client.upload_file(str(path), self.bucket, key, Config=_TRANSFER)
         return staging
+
+    def publish_job_artifact(self, folder: str, job_id: str, name: str, path: Path) -> None:
+        """See :meth:`Blobs.publish_job_artifact`."""
+        key = f"{self.prefix}{artifact_key(folder, job_id, name)}"
+        with store_errors():
+            self.client.upload_file(str(path), self.bucket, key, Config=_TRANSFER)
 
     def clear_job(self, folder: str, job_id: str) -> None:
         """See :meth:`Blobs.clear_job`."""

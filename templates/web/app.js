@@ -1351,7 +1351,9 @@
       setHidden($("current-error"), true);
     }
 
-    if (status === "succeeded") {
+    // The figures show the moment result.json exists (a running evaluation's result); the
+    // files follow as each is written, the list growing with every poll.
+    if (status === "succeeded" || (status === "running" && evaluation.result)) {
       renderSummary(evaluation);
       renderRanging(evaluation);
       renderArtifacts(evaluation);
@@ -1432,7 +1434,8 @@
       const rank = (x) => (OPENED_IN_TAB.has(x.name) ? 0 : 1) * 100 + (ALL_ARTIFACTS.indexOf(x.name) + 1 || 99);
       return rank(a) - rank(b) || a.name.localeCompare(b.name);
     });
-    if (!artifacts.length) {
+    const running = evaluation.status === "running";
+    if (!artifacts.length && !running) {
       list.append(el("li", { className: "muted", text: "This evaluation produced no files." }));
       return;
     }
@@ -1458,6 +1461,9 @@
           onclick: () => fetchArtifact(evaluation, artifact, false, null, message),
         }) : null,
         message));
+    }
+    if (running) {
+      list.append(el("li", { className: "muted artifacts-pending", text: "More files follow as each is written…" }));
     }
   }
 

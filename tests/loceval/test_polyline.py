@@ -19,6 +19,7 @@ from loceval.core.polyline import (
     polyline_distances,
     segment_distances,
     simplify_rdp,
+    simplify_rdp_runs,
 )
 from loceval.errors import InputError
 
@@ -192,3 +193,23 @@ class TestSimplify:
         np.testing.assert_allclose(polyline_distances(points, vertices), expected, rtol=1e-12)
         single = polyline_distances(points, vertices[:1])
         np.testing.assert_allclose(single, np.linalg.norm(points - vertices[0], axis=1))
+
+
+@pytest.mark.parametrize("tolerance", [0.0, 0.005, 0.02, 0.2])
+def test_runs_simplify_as_each_run_alone(rng: np.random.Generator, tolerance: float) -> None:
+    """Many runs in one work list keep the vertices and deviation of one call per run."""
+    points = np.cumsum(rng.normal(size=(3000, 3)) * 0.01, axis=0)
+    points[1000:1200] = np.round(points[1000:1200], 2)  # ties: the split nearest the middle
+    cuts = np.sort(rng.choice(np.arange(1, 3000), 500, replace=False))
+    starts = np.concatenate(([0], cuts))
+    stops = np.concatenate((cuts + 1, [3000]))  # each run shares its last point with the next
+    long_enough = stops - starts >= 2
+    starts, stops = starts[long_enough], stops[long_enough]
+
+    keep, deviation = simplify_rdp_runs(points, starts, stops, tolerance)
+
+    alone = [simplify_rdp(points[a:b], tolerance) for a, b in zip(starts, stops, strict=True)]
+    for (a, b), (kept, _) in zip(zip(starts, stops, strict=True), alone, strict=True):
+        np.testing.assert_array_equal(np.flatnonzero(keep[a:b]), kept)
+    assert deviation == max(d for _, d in alone)
+    assert deviation <= tolerance

@@ -13,18 +13,22 @@ from pathlib import Path
 
 import numpy as np
 
+from exporters import ArtifactCallback
 from loceval.errors import AssociationError, InputError
 from loceval.evaluation import ProgressCallback
 from service.runner import Job, run_job
 
 __all__ = [
     "CHUNK_MIB",
+    "HOLD_FILE",
     "MAX_CHUNKS",
     "SLEEPER",
     "crash",
     "exit_quietly",
+    "fail_after_result",
     "grow",
     "header_stamps_zero",
+    "hold_after_result",
     "killed",
     "no_overlap",
     "report_then_fail",
@@ -64,6 +68,47 @@ def sleep_if_sleeper(job: Job, out_dir: Path, progress: ProgressCallback) -> Non
         progress("searching pairs", 0.3)
         time.sleep(3600)
     run_job(job, out_dir, progress)
+
+
+HOLD_FILE = "go-on"
+"""Created in the evaluation's folder, it lets :func:`hold_after_result` go on."""
+HOLD_LIMIT_S = 60.0
+
+
+def hold_after_result(
+    job: Job,
+    out_dir: Path,
+    progress: ProgressCallback,
+    *,
+    on_artifact: ArtifactCallback,
+) -> None:
+    """Evaluate, stopping after result.json until the test creates :data:`HOLD_FILE`."""
+    go_on = out_dir.parent / HOLD_FILE  # .../evaluations/ID/.staging-...
+
+    def hold(name: str, path: Path) -> None:
+        on_artifact(name, path)
+        deadline = time.monotonic() + HOLD_LIMIT_S  # a broken test fails, it does not hang
+        while name == "result.json" and not go_on.exists() and time.monotonic() < deadline:
+            time.sleep(0.02)
+
+    run_job(job, out_dir, progress, on_artifact=hold)
+
+
+def fail_after_result(
+    job: Job,
+    out_dir: Path,
+    progress: ProgressCallback,
+    *,
+    on_artifact: ArtifactCallback,
+) -> None:
+    """Evaluate, then fail as a report can once result.json was published."""
+
+    def fail(name: str, path: Path) -> None:
+        on_artifact(name, path)
+        msg = "The floor plan is unreadable; upload it again."
+        raise InputError(msg)
+
+    run_job(job, out_dir, progress, on_artifact=fail)
 
 
 def sleep_forever(*, progress: ProgressCallback) -> None:
