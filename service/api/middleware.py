@@ -12,7 +12,10 @@ does not answer to, still needs the key.
 
 Once the key is known, a path or query holding a NUL character (``%00``) is refused with
 422 here, for every route at once: no id, tag or filter is ever NUL-bearing, and PostgreSQL
-cannot even compare text with one (it would fail the request with a 500).
+cannot even compare text with one (it would fail the request with a 500). A query parameter
+given twice (``?tag=a&tag=b``) is refused with 422 too: every one the API takes holds one
+value, and FastAPI would silently keep the last, so the schema (one value) and the server
+would not agree.
 
 When the database cannot be reached, the key cannot be looked up: the answer is the 503
 problem with ``Retry-After`` that every route gives in an outage (never a 500, and the
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import json
 import logging
+from collections import Counter
 from typing import Any, Final
 from urllib.parse import parse_qsl
 
@@ -91,6 +95,9 @@ class ApiKeyMiddleware:
         if nul := _nul_locations(scope):
             await _send_problem(send, _nul_problem(nul))
             return
+        if repeated := _repeated_names(scope):
+            await _send_problem(send, _repeated_problem(repeated))
+            return
         scope.setdefault("state", {})[PROJECT_STATE_KEY] = project_id
         with log_context(project=project_id):
             await self.app(scope, receive, send)
@@ -127,6 +134,21 @@ def _nul_locations(scope: Scope) -> list[list[str]]:
         pairs = parse_qsl(query, keep_blank_values=True)
         found += [["query", name] for name, value in pairs if "\x00" in name + value]
     return found
+
+
+def _repeated_names(scope: Scope) -> list[str]:
+    """Return the query parameters given more than once (every one the API takes is single)."""
+    query = bytes(scope.get("query_string", b"")).decode("latin-1")
+    counts = Counter(name for name, _ in parse_qsl(query, keep_blank_values=True))
+    return sorted(name for name, count in counts.items() if count > 1)
+
+
+def _repeated_problem(names: list[str]) -> dict[str, Any]:
+    msg = "is given more than once; give it once"
+    errors = [{"loc": ["query", name], "msg": msg, "type": "repeated_parameter"} for name in names]
+    where = "; ".join(f"query.{name}: {msg}" for name in names)
+    detail = f"The request is not valid: {where}."
+    return problem(422, "request.invalid", "RequestValidationError", detail, errors=errors)
 
 
 def _nul_problem(locations: list[list[str]]) -> dict[str, Any]:

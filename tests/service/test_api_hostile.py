@@ -545,3 +545,23 @@ def test_bad_public_url_is_refused_at_start(tmp_path: Path, public_url: str) -> 
     """A public address that cannot start a link is a settings error naming the variable."""
     with pytest.raises(ValidationError, match=r"LOCEVAL_PUBLIC_URL must be"):
         Settings(data_dir=tmp_path, public_url=public_url)
+
+
+def test_a_query_parameter_given_twice_is_refused(api: Api) -> None:
+    """``?tag=a&tag=b`` is a 422 naming the parameter: the schema says one value, and
+    FastAPI alone would keep the last one silently (schemathesis checks the same)."""
+    answers = {
+        "tag": api.client.get("/api/v1/datasets?tag=a&tag=b", headers=api.headers),
+        "limit": api.client.get("/api/v1/evaluations?limit=5&limit=6", headers=api.headers),
+    }
+    for name, answer in answers.items():
+        assert_problem(answer, 422, type_="request.invalid")
+        assert answer.json()["errors"] == [
+            {
+                "loc": ["query", name],
+                "msg": "is given more than once; give it once",
+                "type": "repeated_parameter",
+            }
+        ]
+    once = api.client.get("/api/v1/datasets?tag=a&limit=5", headers=api.headers)
+    assert once.status_code == 200
