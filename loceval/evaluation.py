@@ -126,6 +126,9 @@ class EvaluationConfig:
             InputError: a value out of bounds; the error carries the option's key.
         """
         check_option("max_dt_s", self.max_dt_s, unit="seconds")
+        if self.max_gap_s < 1e-9:  # the table's minimum, in the unit a user thinks in
+            msg = f"The maximum gap must be at least 1 ns, got {self.max_gap_s!r} s."
+            raise InputError(msg, option="max_gap_s")
         check_option("max_gap_s", self.max_gap_s, unit="seconds")
         check_option("time_offset_s", self.time_offset_s, unit="seconds")
         if self.calibrate_at_s is not None:
@@ -140,9 +143,6 @@ class EvaluationConfig:
         if self.auto_device and self.reference_offset is not None:
             msg = "Give the device offset or have it estimated from the motion, not both."
             raise InputError(msg, option="device")
-        if self.max_gap_s < 1e-9:
-            msg = f"The maximum gap must be at least 1 ns, got {self.max_gap_s!r} s."
-            raise InputError(msg, option="max_gap_s")
 
     def to_dict(self) -> dict[str, object]:
         """Return the options as JSON (for the report's provenance)."""
