@@ -48,7 +48,7 @@ from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming, artifact_key, pa
 from service.blobs.cache import InputCache
 from service.blobs.lease import LEASE_S, Lease, claim_slot
 from service.blobs.ranged import ObjectFile
-from service.blobs.s3client import is_missing, make_client, store_errors
+from service.blobs.s3client import make_client, store_errors, unless_missing
 from service.errors import StartupError, register_private_root
 from service.storage import Swept
 
@@ -398,17 +398,10 @@ class S3Blobs(Blobs):
 
     def size(self, key: str) -> int | None:
         """Return a blob's size in bytes, or None when there is no such blob."""
-        try:
-            head = self.client.head_object(Bucket=self.bucket, Key=self.prefix + key)
-        except ClientError as err:
-            if is_missing(err):
-                return None
-            with store_errors():
-                raise
-        except BotoCoreError:
-            with store_errors():
-                raise
-        return int(head["ContentLength"])
+        head = unless_missing(
+            lambda: self.client.head_object(Bucket=self.bucket, Key=self.prefix + key)
+        )
+        return None if head is None else int(head["ContentLength"])
 
     def read_bytes(self, key: str) -> bytes:
         """See :meth:`Blobs.read_bytes`."""
@@ -551,17 +544,12 @@ class S3Blobs(Blobs):
 
     def _marker(self, key: str) -> str | None:
         """Return the dataset id a pending marker holds, or None when it is gone."""
-        try:
-            body = self.client.get_object(Bucket=self.bucket, Key=self.prefix + key)["Body"]
-            return body.read().decode(errors="replace")
-        except ClientError as err:
-            if is_missing(err):
-                return None
-            with store_errors():
-                raise
-        except BotoCoreError:
-            with store_errors():
-                raise
+
+        def read() -> bytes:  # the body's read fails like the request: both are guarded
+            return self.client.get_object(Bucket=self.bucket, Key=self.prefix + key)["Body"].read()
+
+        data = unless_missing(read)
+        return None if data is None else data.decode(errors="replace")
 
     def _leases(self) -> tuple[dict[str, dt.datetime], dt.datetime]:
         """Return when each instance's lease was last renewed, and the store's time now."""

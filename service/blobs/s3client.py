@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Iterator
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Iterator
+from typing import TYPE_CHECKING, TypeVar
 
 import boto3
 from botocore.config import Config
@@ -20,7 +20,9 @@ from service.errors import ServiceUnavailableError
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
 
-__all__ = ["is_missing", "make_client", "store_errors"]
+__all__ = ["is_missing", "make_client", "store_errors", "unless_missing"]
+
+T = TypeVar("T")
 
 
 @contextlib.contextmanager
@@ -40,6 +42,21 @@ def store_errors() -> Iterator[None]:
 def is_missing(err: ClientError) -> bool:
     """Return whether the store answered that the object or bucket does not exist."""
     return err.response.get("Error", {}).get("Code") in {"404", "NoSuchKey", "NotFound"}
+
+
+def unless_missing(call: Callable[[], T]) -> T | None:
+    """Return ``call()``, or None when the store answers that there is no such object.
+
+    Raises:
+        ServiceUnavailableError: the store failed otherwise (see :func:`store_errors`).
+    """
+    with store_errors():
+        try:
+            return call()
+        except ClientError as err:
+            if is_missing(err):
+                return None
+            raise
 
 
 def make_client(*, pool: int = 32) -> S3Client:
