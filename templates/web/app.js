@@ -15,6 +15,7 @@
   // server from its list of artifacts, never copied here by hand.
   const ALL_ARTIFACTS = JSON.parse(document.body.dataset.artifacts || "[]");
   const OPENED_IN_TAB = new Set(["report.html", "report.pdf"]);
+  const NONE = "— none —"; // the empty choice of an optional dataset field (device, building)
   // The server renders whether it can write PDFs (WeasyPrint and pango): without, the page
   // asks for no report.pdf and its schedules for summary.html only.
   const PDF_REPORTS = document.body.dataset.pdfReports !== "no";
@@ -861,7 +862,7 @@
       case "names":
         return el("input", { type: "text", placeholder, spellcheck: "false", pattern: doc.pattern || null });
       case "file":
-        return el("select", { className: "dataset-choice" }, el("option", { value: "", text: "— none —" }));
+        return el("select", { className: "dataset-choice" }, el("option", { value: "", text: NONE }));
       default:
         return null; // a matrix or a device file: the page's own fields hold these
     }
@@ -869,11 +870,9 @@
 
   /** Offer the uploaded datasets in the made fields that name one (kind file). */
   function renderOtherDatasetChoices() {
+    const choices = state.datasets.map((d) => ({ value: d.id, text: datasetLabel(d) }));
     for (const select of document.querySelectorAll("#other-options-grid select.dataset-choice")) {
-      const previous = select.value;
-      select.replaceChildren(el("option", { value: "", text: "— none —" }),
-        ...state.datasets.map((d) => el("option", { value: d.id, text: datasetLabel(d) })));
-      select.value = Array.from(select.options).some((o) => o.value === previous) ? previous : "";
+      fillChoice(select, choices, NONE, NONE);
     }
   }
 
@@ -990,18 +989,16 @@
 
   /** Fill the device file choice with the uploaded URDFs and bags. */
   function renderDeviceSelect() {
-    const select = $("opt-device-dataset");
-    const previous = select.value;
-    select.replaceChildren(el("option", { value: "", text: "— none —" }));
+    const choices = [];
     for (const dataset of state.datasets) {
       const format = dataset.inspection && dataset.inspection.format;
       if (format !== "urdf" && format !== "bag") continue;
-      select.append(el("option", {
+      choices.push({
         value: dataset.id,
         text: `${dataset.name || dataset.filename || dataset.id} (${format === "urdf" ? "URDF" : "bag"})`,
-      }));
+      });
     }
-    select.value = Array.from(select.options).some((o) => o.value === previous) ? previous : "";
+    fillChoice($("opt-device-dataset"), choices, NONE, NONE);
     renderDeviceLinks();
   }
 
@@ -1016,15 +1013,13 @@
 
   /** Fill the building model choice with the uploaded building models (options.building). */
   function renderBuildingSelect() {
-    const select = $("opt-building");
-    const previous = select.value;
-    select.replaceChildren(el("option", { value: "", text: "— none —" }));
+    const choices = [];
     for (const dataset of state.datasets) {
       const inspection = dataset.inspection || {};
       if (inspection.kind !== "building") continue;
-      select.append(el("option", { value: dataset.id, text: `${datasetLabel(dataset)} (${buildingSummary(inspection)})` }));
+      choices.push({ value: dataset.id, text: `${datasetLabel(dataset)} (${buildingSummary(inspection)})` });
     }
-    select.value = Array.from(select.options).some((o) => o.value === previous) ? previous : "";
+    fillChoice($("opt-building"), choices, NONE, NONE);
   }
 
   /** Offer the chosen device file's links (URDF) or tf frames (bag) for the two link fields. */
@@ -1114,6 +1109,7 @@
     return { anchors, ranges };
   }
 
+  /** Offer ``choices`` ({value, text}) after an empty one, keeping the choice made if offered. */
   function fillChoice(select, choices, empty, placeholder) {
     const previous = select.value;
     select.replaceChildren(el("option", { value: "", text: choices.length ? placeholder : empty }),
