@@ -19,8 +19,11 @@ running jobs whose heartbeat is older than the lease. How the numbers were chose
   without persistence that restarts comes back empty: the check reads Redis's ``run_id``
   (a new one at every start) and, when it changed or Redis or the database failed since
   the last look, compares the ``queued`` rows with what the queue holds and enqueues the
-  missing ones (the claim makes a duplicate harmless). Listing the queue is the expensive
-  part, so otherwise it is done every 30 s, for rows queued for longer than that.
+  missing ones (the claim makes a duplicate harmless). Rows queued in the last 2 s are left
+  to their message on its way, so after a fault the check looks once more 2 s later: a job
+  queued just before the restart is found then, not at the next 30 s look. Listing the
+  queue is the expensive part, so otherwise it is done every 30 s, for rows queued for
+  longer than that.
 """
 
 from __future__ import annotations
@@ -63,6 +66,8 @@ class Watchdog:
         self._last_lost_check = now
         self._run_id: str | None = None
         self._fault = False
+        self._settle_at: float | None = None
+        """After a fault: look for lost messages until a look at or after this (monotonic)."""
         self._failing = False
 
     def start(self) -> None:
@@ -84,9 +89,10 @@ class Watchdog:
         if now - self._last_check > _STALLED * self.interval:
             self._trusted_since = now  # held up: beats of this machine may have been too
         self._last_check = now
-        restarted = self._queue_restarted()
-        look = restarted or self._fault or now - self._last_lost_check >= LOST_CHECK_S
-        lost_after = LOST_CHECK_S if not (restarted or self._fault) else _FRESH_S
+        fault = self._queue_restarted() or self._fault
+        settling = fault or self._settle_at is not None
+        look = settling or now - self._last_lost_check >= LOST_CHECK_S
+        lost_after = _FRESH_S if settling else LOST_CHECK_S
         try:
             requeued = recover(
                 self.runtime,
@@ -102,6 +108,12 @@ class Watchdog:
             return []
         if look:
             self._last_lost_check, self._fault = now, False
+            # A row queued less than _FRESH_S before the fault was left alone by this look;
+            # the next look after _FRESH_S covers it (its message was lost as well).
+            if fault:
+                self._settle_at = now + _FRESH_S
+            elif self._settle_at is not None and now >= self._settle_at:
+                self._settle_at = None
         if self._failing:
             logger.warning("Watchdog: the database and the queue answer again")
             self._failing = False

@@ -11,6 +11,8 @@ import pytest
 from alembic.autogenerate import compare_metadata
 from alembic.migration import MigrationContext
 from sqlalchemy import inspect, select
+from sqlalchemy.exc import OperationalError
+from sqlalchemy.orm import Session
 
 from service import jobs
 from service.db import Base, Evaluation, Project, ScheduleRun, utcnow
@@ -201,6 +203,46 @@ def test_recover_requeues_a_job_the_queue_lost(runtime: Runtime, evaluation_id: 
     assert recover(runtime) == [evaluation_id]
     assert recover(runtime) == []  # now it is in the queue
     assert runtime.huey.pending_count() == 1
+
+
+def test_watchdog_finds_a_job_queued_just_before_a_queue_outage(
+    runtime: Runtime, evaluation_id: str, monkeypatch
+):
+    """A job queued just before an outage whose message was lost is queued again ~2 s later.
+
+    The first look after the fault leaves rows younger than 2 s to their message on its way;
+    the follow-up look covers them. (Before: the next look was 30 s away, which is what CI's
+    Redis-restart fault test measured: the last job finished 30.6 s after the restart.)
+    """
+    from service import tracking, watchdog
+
+    clock = {"mono": 1000.0, "wall": utcnow()}
+    with runtime.sessions() as session:  # queued now; its message is not in the queue
+        session.get_one(Evaluation, evaluation_id).created_at = clock["wall"]
+        session.commit()
+    monkeypatch.setattr(watchdog.time, "monotonic", lambda: clock["mono"])
+    monkeypatch.setattr(tracking, "utcnow", lambda: clock["wall"])
+    dog = watchdog.Watchdog(runtime)
+    sessions = runtime.sessions
+
+    def unreachable() -> Session:
+        statement = "SELECT 1"
+        raise OperationalError(statement, {}, ConnectionError("the database is away"))
+
+    monkeypatch.setattr(runtime, "sessions", unreachable)
+    assert dog.check() == []  # the outage: logged, nothing done
+    monkeypatch.setattr(runtime, "sessions", sessions)
+
+    def tick(seconds: float) -> list[str]:
+        clock["mono"] += seconds
+        clock["wall"] += dt.timedelta(seconds=seconds)
+        return dog.check()
+
+    assert tick(1.0) == []  # back 1 s later; the row is 1 s old, so fresh: left alone
+    assert tick(dog.interval) == [evaluation_id]  # 2 s on: found lost, queued again
+    assert runtime.huey.pending_count() == 1
+    assert tick(dog.interval) == []  # settled: back to the 30 s looks, nothing queued twice
+    assert dog._settle_at is None
 
 
 def test_release_requeues_the_jobs_of_a_stopping_worker(runtime: Runtime, evaluation_id: str):
