@@ -8,6 +8,11 @@ asked to compress), the MCAP summary says where every message of a channel is: t
 indexes point to message index records, which hold each message's offset inside its chunk.
 :func:`read_indexed_messages` follows them and reads only those records.
 
+The reads are known before any is made (the summary gives each message index's place and
+length), so they are asked for in batches: a source that can serve several reads at once (an
+object in a bucket, :meth:`RandomAccess.pread_many`) overlaps their round trips; a local file
+reads them one after another.
+
 Anything unexpected (no summary, no chunk index, compressed chunks, a record that does not
 match its index) makes it return None, and the caller reads the file through rosbags, which
 then reports a damaged file properly. Record layouts follow the MCAP specification
@@ -16,11 +21,12 @@ then reports a damaged file properly. Record layouts follow the MCAP specificati
 
 from __future__ import annotations
 
+import bisect
 import os
 import struct
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 __all__ = ["RandomAccess", "read_indexed_messages"]
 
@@ -34,17 +40,26 @@ _MAX_RUN_GAP = 64 * 1024
 """Messages closer than this are read with one call (skipping the bytes between)."""
 _MAX_RUN = 1024**2
 """Longest stretch read with one call."""
+_BATCH = 64
+"""Reads asked for at once (what is held in memory is at most this many reads' bytes)."""
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
 _RECORD_HEAD = struct.Struct("<BQ")
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")
 _CHUNK_INDEX_HEAD = struct.Struct("<QQQQ")
+
+
+_ChunkIndex = tuple[int, dict[int, int], int, str]
+"""A chunk index: the chunk's start, its message index offsets by channel, where its message
+index records end, and its compression."""
 
 
 class _NotServableError(Exception):
     """The file cannot be served from its index; read it the ordinary way."""
 
 
+@runtime_checkable
 class RandomAccess(Protocol):
     """Bytes read by position: a local file, or an object read with ranged requests."""
 
@@ -56,6 +71,23 @@ class RandomAccess(Protocol):
     def pread(self, size: int, offset: int) -> bytes:
         """Return up to ``size`` bytes at ``offset``."""
         ...
+
+
+@runtime_checkable
+class ManyAtOnce(RandomAccess, Protocol):
+    """Bytes read by position, several reads at once (their waits overlap)."""
+
+    def pread_many(self, reads: Sequence[tuple[int, int]]) -> list[bytes]:
+        """Return the bytes of each ``(size, offset)`` read, in order."""
+        ...
+
+
+def _pread_many(src: RandomAccess, reads: Sequence[tuple[int, int]]) -> Iterator[bytes]:
+    """Yield each ``(size, offset)`` read's bytes in order, ``_BATCH`` reads asked at once."""
+    many = src.pread_many if isinstance(src, ManyAtOnce) else None
+    for first in range(0, len(reads), _BATCH):
+        batch = reads[first : first + _BATCH]
+        yield from many(batch) if many is not None else (src.pread(n, at) for n, at in batch)
 
 
 class _LocalFile:
@@ -112,24 +144,34 @@ def _read(src: RandomAccess, wanted: dict[tuple[str, str], int]) -> list[tuple[i
             if encoding != "cdr":
                 raise _NotServableError
             wanted_channels[channel_id] = wanted[key]
-    entries: list[tuple[int, int, int]] = []
-    for chunk_start, index_offsets, compression in chunk_indexes:
+    # (offset, length, channel, chunk's records start) of each wanted message index record
+    indexes: list[tuple[int, int, int, int]] = []
+    for chunk_start, index_offsets, index_end, compression in chunk_indexes:
         offsets = [(cid, off) for cid, off in index_offsets.items() if cid in wanted_channels]
-        if offsets and compression:
+        if (offsets and compression) or index_end > src.size:
             raise _NotServableError
         # Chunk record: opcode, length, start, end, uncompressed size, crc, compression
         # string (empty here), records length; the records follow.
         records_start = chunk_start + 1 + 8 + 8 + 8 + 8 + 4 + 4 + 8
-        for channel_id, index_offset in offsets:
-            entries.extend(
-                (records_start + offset, log_time, channel_id)
-                for log_time, offset in _read_message_index(src, index_offset, channel_id)
-            )
+        # A channel's message index record ends where the chunk's next one starts.
+        ends = sorted([*index_offsets.values(), index_end])
+        indexes.extend(
+            (offset, ends[bisect.bisect_right(ends, offset)] - offset, cid, records_start)
+            for cid, offset in offsets
+        )
+    entries: list[tuple[int, int, int]] = []
+    records = _pread_many(src, [(length, offset) for offset, length, _, _ in indexes])
+    for (_, _, channel_id, records_start), record in zip(indexes, records, strict=True):
+        entries.extend(
+            (records_start + offset, log_time, channel_id)
+            for log_time, offset in _message_index(record, channel_id)
+        )
     entries.sort()
     messages: list[tuple[int, int, bytes]] = []
-    for run in _runs(entries):
+    runs = list(_runs(entries))
+    blocks = _pread_many(src, [(run[-1][0] + _FIRST_READ - run[0][0], run[0][0]) for run in runs])
+    for run, block in zip(runs, blocks, strict=True):
         start = run[0][0]
-        block = src.pread(run[-1][0] + _FIRST_READ - start, start)
         for position, log_time, channel_id in run:
             data = _message_data(
                 src,
@@ -160,7 +202,7 @@ def _runs(entries: list[tuple[int, int, int]]) -> Iterator[list[tuple[int, int, 
 
 def _read_summary(
     src: RandomAccess,
-) -> tuple[dict[int, str], dict[int, tuple[str, int, str]], list[tuple[int, dict[int, int], str]]]:
+) -> tuple[dict[int, str], dict[int, tuple[str, int, str]], list[_ChunkIndex]]:
     size = src.size
     if size < 2 * len(_MAGIC) + _FOOTER_SIZE or src.pread(8, 0) != _MAGIC:
         raise _NotServableError
@@ -199,10 +241,10 @@ def _message_data(
 
 def _parse_summary(
     summary: bytes,
-) -> tuple[dict[int, str], dict[int, tuple[str, int, str]], list[tuple[int, dict[int, int], str]]]:
+) -> tuple[dict[int, str], dict[int, tuple[str, int, str]], list[_ChunkIndex]]:
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, int, str]] = {}
-    chunk_indexes: list[tuple[int, dict[int, int], str]] = []
+    chunk_indexes: list[_ChunkIndex] = []
     pos = 0
     while pos < len(summary):
         opcode, length = _RECORD_HEAD.unpack_from(summary, pos)
@@ -220,28 +262,33 @@ def _parse_summary(
             encoding, _ = _string(summary, at)
             channels[channel_id] = (topic, schema_id, encoding)
         elif opcode == _OP_CHUNK_INDEX:
-            _, _, chunk_start, _ = _CHUNK_INDEX_HEAD.unpack_from(summary, body)
+            _, _, chunk_start, chunk_length = _CHUNK_INDEX_HEAD.unpack_from(summary, body)
             at = body + _CHUNK_INDEX_HEAD.size
             (map_size,) = _U32.unpack_from(summary, at)
             at += 4
             index_offsets = dict(struct.iter_unpack("<HQ", summary[at : at + map_size]))
-            at += map_size + 8
-            compression, _ = _string(summary, at)
-            chunk_indexes.append((chunk_start, index_offsets, compression))
+            at += map_size
+            (index_length,) = _U64.unpack_from(summary, at)
+            compression, _ = _string(summary, at + 8)
+            index_end = chunk_start + chunk_length + index_length
+            if any(not chunk_start < o < index_end for o in index_offsets.values()):
+                raise _NotServableError
+            chunk_indexes.append((chunk_start, index_offsets, index_end, compression))
     return schemas, channels, chunk_indexes
 
 
-def _read_message_index(src: RandomAccess, offset: int, channel_id: int) -> list[tuple[int, int]]:
-    head = src.pread(1 + 8 + 2 + 4, offset)
-    opcode, _ = _RECORD_HEAD.unpack_from(head)
-    (record_channel,) = _U16.unpack_from(head, 9)
-    (size,) = _U32.unpack_from(head, 11)
+def _message_index(record: bytes, channel_id: int) -> list[tuple[int, int]]:
+    """Return the ``(log time, offset in the chunk's records)`` pairs of a message index record."""
+    if len(record) < 15:
+        raise _NotServableError
+    opcode, _ = _RECORD_HEAD.unpack_from(record)
+    (record_channel,) = _U16.unpack_from(record, 9)
+    (size,) = _U32.unpack_from(record, 11)
     if opcode != _OP_MESSAGE_INDEX or record_channel != channel_id or size % 16:
         raise _NotServableError
-    body = src.pread(size, offset + len(head))
-    if len(body) != size:
+    if 15 + size > len(record):
         raise _NotServableError
-    return list(struct.iter_unpack("<QQ", body))
+    return list(struct.iter_unpack("<QQ", record[15 : 15 + size]))
 
 
 def _string(buffer: bytes, pos: int) -> tuple[str, int]:

@@ -10,28 +10,55 @@ not kept, so the memory is bounded whatever the object's size. Readers that need
 (SQLite bags, rosbags' readers) keep using the local input cache
 (:class:`service.blobs.cache.InputCache`).
 
+Readers that know their reads beforehand (the MCAP index reader:
+:func:`loceval.readers._mcap.read_indexed_messages`) ask for many at once with
+:meth:`RangedFile.pread_many`, which sends up to ``MANY_AT_ONCE`` requests together: a ranged
+read from a store costs a round trip of a few milliseconds, mostly waiting, and a camera
+bag's tf is thousands of small reads (a 2 GB bag's remote inspection took 20 s one by one).
+
+Each ranged read is a plain GET of a presigned URL of the object (made once, renewed before
+it expires) with a ``Range`` header, sent through the client's own HTTP session (its TLS
+settings, proxies and connection pool): boto3's request machinery (events, signing, parsing)
+cost 2.5 ms of CPU per request against 0.9 ms for the GET, and the store's answers are the
+same bytes. A client without that session falls back to ``GetObject``.
+
 ``fetched_bytes`` and ``requests`` count what was asked of the store.
 """
 
 from __future__ import annotations
 
+import bisect
 import io
+import threading
+import time
 from collections import OrderedDict
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import PurePosixPath
 from typing import TYPE_CHECKING, BinaryIO, Final
 
+from botocore.awsrequest import AWSRequest
+from botocore.exceptions import BotoCoreError
+
 from service.blobs.s3client import store_errors
+from service.errors import ServiceUnavailableError
 
 if TYPE_CHECKING:
     from _typeshed import WriteableBuffer
     from mypy_boto3_s3 import S3Client
 
-__all__ = ["MAX_AHEAD", "MIN_AHEAD", "ObjectFile", "RangedFile"]
+__all__ = ["MANY_AT_ONCE", "MAX_AHEAD", "MIN_AHEAD", "ObjectFile", "RangedFile"]
 
 MIN_AHEAD: Final = 4 << 10
 """Bytes fetched beyond a read that does not continue the last one (a seek)."""
 MAX_AHEAD: Final = 4 << 20
 """The most bytes one sequential read-ahead fetches."""
+MANY_AT_ONCE: Final = 16
+"""Requests in flight for :meth:`RangedFile.pread_many` (below the client's pool of 32)."""
+_URL_LIFE_S: Final = 3600
+"""How long a presigned URL is valid; it is renewed after half of it."""
+_ATTEMPTS: Final = 3
+"""Tries of a ranged GET that failed on the way or with a 5xx (as the client's retries)."""
 
 
 class RangedFile(io.RawIOBase):
@@ -72,7 +99,12 @@ class RangedFile(io.RawIOBase):
         self._max_cached = max(max_cached, max_ahead)
         self._ahead = min_ahead
         self._last_end = -1
-        self._pieces: OrderedDict[int, bytes] = OrderedDict()  # start -> bytes
+        self._pieces: OrderedDict[int, bytes] = OrderedDict()  # start -> bytes, LRU order
+        self._starts: list[int] = []  # the pieces' starts, sorted
+        self._cached = 0  # their bytes
+        self._counting = threading.Lock()  # pread_many's threads count their requests
+        self._http = getattr(getattr(client, "_endpoint", None), "http_session", None)
+        self._url: tuple[str, float] | None = None  # a presigned GET and when it was made
         self._position = 0
         self.fetched_bytes = 0
         """Bytes received from the store so far."""
@@ -82,7 +114,7 @@ class RangedFile(io.RawIOBase):
     @property
     def cached_bytes(self) -> int:
         """Return the bytes kept now (at most ``max_cached``)."""
-        return sum(len(p) for p in self._pieces.values())
+        return self._cached
 
     # -- io.RawIOBase ----------------------------------------------------------------------
 
@@ -125,8 +157,11 @@ class RangedFile(io.RawIOBase):
         end = min(offset + size, self.size)
         if offset >= end:
             return b""
-        for start, piece in self._pieces.items():
-            if start <= offset and end <= start + len(piece):
+        held = bisect.bisect_right(self._starts, offset) - 1  # the piece starting before
+        if held >= 0:
+            start = self._starts[held]
+            piece = self._pieces[start]
+            if end <= start + len(piece):
                 self._pieces.move_to_end(start)
                 return piece[offset - start : end - start]
         if end - offset > self._max_ahead:  # a large read: one request, nothing kept
@@ -137,20 +172,46 @@ class RangedFile(io.RawIOBase):
         stop = min(max(end, offset + self._ahead), self.size)
         piece = self._fetch(offset, stop)
         self._last_end = stop
-        self._pieces[offset] = piece
-        while self.cached_bytes > self._max_cached:
-            self._pieces.popitem(last=False)
+        self._keep(offset, piece)
         return piece[: end - offset]
 
+    def pread_many(self, reads: Sequence[tuple[int, int]]) -> list[bytes]:
+        """Return the bytes of each ``(size, offset)`` read (fewer at the end), in order.
+
+        The reads are fetched directly, ``MANY_AT_ONCE`` requests at a time, and not kept:
+        what is held is the answer. Use it for reads known beforehand; the position does
+        not move.
+        """
+        ranges = [(offset, min(offset + size, self.size)) for size, offset in reads]
+        if len(ranges) <= 1:
+            return [self.pread(end - start, start) for start, end in ranges]
+
+        def fetch(span: tuple[int, int]) -> bytes:
+            return self._fetch(*span) if span[0] < span[1] else b""
+
+        with ThreadPoolExecutor(min(MANY_AT_ONCE, len(ranges))) as pool:
+            return list(pool.map(fetch, ranges))
+
+    def _keep(self, start: int, piece: bytes) -> None:
+        """Keep a fetched piece, dropping the least recently used beyond ``max_cached``."""
+        old = self._pieces.pop(start, None)
+        if old is None:
+            bisect.insort(self._starts, start)
+        else:
+            self._cached -= len(old)
+        self._pieces[start] = piece
+        self._cached += len(piece)
+        while self._cached > self._max_cached:
+            dropped, gone = self._pieces.popitem(last=False)
+            self._starts.remove(dropped)
+            self._cached -= len(gone)
+
     def _fetch(self, start: int, end: int) -> bytes:
-        """Return the bytes ``[start, end)`` of the object (one ranged GetObject)."""
-        with store_errors():
-            answer = self._client.get_object(
-                Bucket=self._bucket, Key=self._key, Range=f"bytes={start}-{end - 1}"
-            )
-            data = answer["Body"].read()
-        self.requests += 1
-        self.fetched_bytes += len(data)
+        """Return the bytes ``[start, end)`` of the object (one ranged GET)."""
+        data = self._get(start, end) if self._http is not None else self._get_object(start, end)
+        with self._counting:
+            self.requests += 1
+            self.fetched_bytes += len(data)
         if len(data) != end - start:
             msg = (
                 f"the store answered {len(data)} bytes for a range of {end - start}; the object "
@@ -158,6 +219,55 @@ class RangedFile(io.RawIOBase):
             )
             raise OSError(msg)
         return data
+
+    def _get_object(self, start: int, end: int) -> bytes:
+        with store_errors():
+            answer = self._client.get_object(
+                Bucket=self._bucket, Key=self._key, Range=f"bytes={start}-{end - 1}"
+            )
+            data: bytes = answer["Body"].read()
+        return data
+
+    def _presigned(self, *, renew: bool = False) -> str:
+        made = self._url
+        if made is None or renew or time.monotonic() - made[1] > _URL_LIFE_S / 2:
+            with store_errors():
+                url = self._client.generate_presigned_url(
+                    "get_object",
+                    Params={"Bucket": self._bucket, "Key": self._key},
+                    ExpiresIn=_URL_LIFE_S,
+                )
+            made = self._url = (url, time.monotonic())
+        return made[0]
+
+    def _get(self, start: int, end: int) -> bytes:
+        """A GET of the presigned URL with a Range; retried like the client's own calls."""
+        assert self._http is not None  # noqa: S101  (the caller checked)
+        failure = ""
+        for attempt in range(_ATTEMPTS):
+            if attempt:
+                time.sleep(0.1 * 2**attempt)
+            request = AWSRequest(
+                method="GET",
+                url=self._presigned(renew=failure == "403"),
+                headers={"Range": f"bytes={start}-{end - 1}"},
+            ).prepare()
+            try:
+                answer = self._http.send(request)
+                status, data = int(answer.status_code), bytes(answer.content)
+            except BotoCoreError as err:  # refused, reset, timed out
+                failure = type(err).__name__
+                continue
+            if status in {200, 206}:
+                return data
+            failure = str(status)
+            if status < 500 and status not in {403, 408, 429}:
+                break  # 404 and the like: no retry helps
+        msg = (
+            f"The object store cannot be used (ranged GET: {failure}); "
+            "try again in a minute (GET /readyz shows when it is back)."
+        )
+        raise ServiceUnavailableError(msg)
 
 
 class ObjectFile:
@@ -221,6 +331,10 @@ class ObjectFile:
     def pread(self, size: int, offset: int) -> bytes:
         """Return up to ``size`` bytes at ``offset``."""
         return self._file.pread(size, offset)
+
+    def pread_many(self, reads: Sequence[tuple[int, int]]) -> list[bytes]:
+        """Return the bytes of each ``(size, offset)`` read, several requests at once."""
+        return self._file.pread_many(reads)
 
     @property
     def fetched_bytes(self) -> int:

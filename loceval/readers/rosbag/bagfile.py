@@ -120,14 +120,33 @@ def _read_within_file(read_exact: Callable[[BinaryIO, int], bytes]) -> Callable[
 
     def read_within_file(bio: BinaryIO, size: int) -> bytes:
         pos = bio.tell()
-        end = bio.seek(0, os.SEEK_END)
-        bio.seek(pos)
+        end = _file_size(bio)
         if size > end - pos:
             msg = f"Truncated record at offset {pos}: expected {size} bytes, got {end - pos}."
             raise Rosbag2ReaderError(msg)
         return read_exact(bio, size)
 
     return read_within_file
+
+
+def _file_size(bio: BinaryIO) -> int:
+    """Return the size of an open file without moving in it.
+
+    Seeking to the end and back would do, but a buffered reader drops its buffer at every
+    seek: over an object in a bucket (:class:`service.blobs.ranged.RangedFile`, which knows
+    its size) each record of an MCAP summary then cost a new ranged request.
+    """
+    try:
+        return os.fstat(bio.fileno()).st_size
+    except (OSError, AttributeError):  # io.UnsupportedOperation is an OSError
+        pass
+    size = getattr(getattr(bio, "raw", bio), "size", None)
+    if isinstance(size, int):
+        return size
+    pos = bio.tell()
+    end = bio.seek(0, os.SEEK_END)
+    bio.seek(pos)
+    return end
 
 
 if storage_mcap.read_exact.__name__ != "read_within_file":  # once, even if reimported

@@ -186,3 +186,28 @@ def object_keys(server: SeaweedFS, bucket: str, prefix: str = "") -> list[str]:
 def _patient_start(monkeypatch: pytest.MonkeyPatch) -> None:
     """Give ``serve``/``worker`` 120 s to start: boto3 adds seconds to a loaded machine's start."""
     monkeypatch.setattr("tests.service.conftest.READY_TIMEOUT_S", 120.0)
+
+
+class GetCounter:
+    """Counts the GETs an S3 client sends and the bytes the store answered them with.
+
+    It wraps the client's HTTP session, through which both boto3's own calls and the ranged
+    reads' presigned GETs go (:mod:`service.blobs.ranged`), and reads each answer's
+    ``Content-Length`` as the store sent it: an independent count, not the reader's own.
+    """
+
+    def __init__(self, client: Any) -> None:
+        """Start counting the GETs of ``client``."""
+        session = client._endpoint.http_session
+        send = session.send
+        self.calls = 0
+        self.bytes = 0
+
+        def counted(request: Any) -> Any:
+            answer = send(request)
+            if request.method == "GET" and answer.status_code in {200, 206}:
+                self.calls += 1
+                self.bytes += int(answer.headers.get("content-length", 0))
+            return answer
+
+        session.send = counted

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from tests.service._api_fixtures import Api, open_api, tum_pair
-from tests.service.s3.conftest import SeaweedFS, object_keys, open_multipart_uploads
+from tests.service.s3.conftest import GetCounter, SeaweedFS, object_keys, open_multipart_uploads
 
 OPTIONS = {"formats": ["result.json", "errors.csv"]}
 
@@ -130,13 +130,9 @@ def test_an_mcap_upload_is_inspected_by_ranged_reads_never_downloaded(
     mcap = next(bag.glob("*.mcap"))
     content = mcap.read_bytes()
     assert len(content) > 30 << 20
-    fetched: list[int] = []
-    store = api.app.state.runtime.store
-    store.client.meta.events.register(
-        "after-call.s3.GetObject", lambda parsed, **_: fetched.append(parsed["ContentLength"])
-    )
+    fetched = GetCounter(api.app.state.runtime.store.client)
     dataset = api.dataset("cam.mcap", content)
-    assert 0 < sum(fetched) < len(content) / 10  # the summary, the index, tf and /gt's ends
+    assert 0 < fetched.bytes < len(content) / 10  # the summary, the index, tf and /gt's ends
     assert not (api.data_dir / "cache").exists() or not any(
         p.is_file() and p.name != ".lock" for p in (api.data_dir / "cache").rglob("*")
     )
