@@ -41,7 +41,11 @@ _MAX_RUN_GAP = 64 * 1024
 _MAX_RUN = 1024**2
 """Longest stretch read with one call."""
 _BATCH = 64
-"""Reads asked for at once (what is held in memory is at most this many reads' bytes)."""
+"""Reads asked for at once."""
+_GROUP = 256
+"""Chunks read together: their index reads are held until their messages are read."""
+_SPILL = 16 * 1024
+"""Bytes read past a chunk's message index records: the next chunk's first messages."""
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
@@ -144,33 +148,69 @@ def _read(src: RandomAccess, wanted: dict[tuple[str, str], int]) -> list[tuple[i
             if encoding != "cdr":
                 raise _NotServableError
             wanted_channels[channel_id] = wanted[key]
-    # (offset, length, channel, chunk's records start) of each wanted message index record
-    indexes: list[tuple[int, int, int, int]] = []
+    messages: list[tuple[int, int, bytes]] = []
+    for first in range(0, len(chunk_indexes), _GROUP):
+        group = chunk_indexes[first : first + _GROUP]
+        messages.extend(_read_chunks(src, group, wanted_channels))
+    messages.sort(key=lambda m: m[0])
+    return messages
+
+
+def _read_chunks(
+    src: RandomAccess, chunk_indexes: Sequence[_ChunkIndex], wanted_channels: dict[int, int]
+) -> list[tuple[int, int, bytes]]:
+    """Return the wanted messages of these chunks (unsorted), in two rounds of reads.
+
+    First one read per chunk: its wanted message index records and ``_SPILL`` bytes past
+    them, the start of the next chunk, where a writer that closes a chunk after a large
+    message (an image) has put the next small ones (tf). Then one read per run of messages
+    that the first round did not already bring.
+    """
+    reads: list[tuple[int, int]] = []  # (offset, size), one per chunk with wanted messages
+    records: list[tuple[int, int, int, int, int]] = []  # (read, offset, size, channel, base)
     for chunk_start, index_offsets, index_end, compression in chunk_indexes:
         offsets = [(cid, off) for cid, off in index_offsets.items() if cid in wanted_channels]
         if (offsets and compression) or index_end > src.size:
             raise _NotServableError
+        if not offsets:
+            continue
         # Chunk record: opcode, length, start, end, uncompressed size, crc, compression
         # string (empty here), records length; the records follow.
         records_start = chunk_start + 1 + 8 + 8 + 8 + 8 + 4 + 4 + 8
         # A channel's message index record ends where the chunk's next one starts.
         ends = sorted([*index_offsets.values(), index_end])
-        indexes.extend(
-            (offset, ends[bisect.bisect_right(ends, offset)] - offset, cid, records_start)
-            for cid, offset in offsets
-        )
+        spans = [(off, ends[bisect.bisect_right(ends, off)] - off, cid) for cid, off in offsets]
+        low = min(off for off, _, _ in spans)
+        high = max(off + size for off, size, _ in spans)
+        reads.append((low, min(high + _SPILL, src.size) - low))
+        records.extend((len(reads) - 1, off, size, cid, records_start) for off, size, cid in spans)
+    blocks = list(_pread_many(src, [(size, offset) for offset, size in reads]))
     entries: list[tuple[int, int, int]] = []
-    records = _pread_many(src, [(length, offset) for offset, length, _, _ in indexes])
-    for (_, _, channel_id, records_start), record in zip(indexes, records, strict=True):
+    for k, offset, size, channel_id, records_start in records:
+        at = offset - reads[k][0]
         entries.extend(
-            (records_start + offset, log_time, channel_id)
-            for log_time, offset in _message_index(record, channel_id)
+            (records_start + position, log_time, channel_id)
+            for log_time, position in _message_index(blocks[k][at : at + size], channel_id)
         )
     entries.sort()
-    messages: list[tuple[int, int, bytes]] = []
+    held = sorted(range(len(reads)), key=lambda k: reads[k][0])
+    held_starts = [reads[k][0] for k in held]
     runs = list(_runs(entries))
-    blocks = _pread_many(src, [(run[-1][0] + _FIRST_READ - run[0][0], run[0][0]) for run in runs])
-    for run, block in zip(runs, blocks, strict=True):
+    run_blocks: list[bytes | None] = []
+    missing: list[tuple[int, int]] = []  # (size, offset) of the runs not brought yet
+    for run in runs:
+        low, high = run[0][0], min(run[-1][0] + _FIRST_READ, src.size)
+        i = bisect.bisect_right(held_starts, low) - 1
+        k = held[i] if i >= 0 else -1
+        if k >= 0 and high <= reads[k][0] + len(blocks[k]):
+            run_blocks.append(blocks[k][low - reads[k][0] : high - reads[k][0]])
+        else:
+            run_blocks.append(None)
+            missing.append((high - low, low))
+    fetched = _pread_many(src, missing)
+    messages: list[tuple[int, int, bytes]] = []
+    for run, found in zip(runs, run_blocks, strict=True):
+        block = found if found is not None else next(fetched)
         start = run[0][0]
         for position, log_time, channel_id in run:
             data = _message_data(
@@ -182,7 +222,6 @@ def _read(src: RandomAccess, wanted: dict[tuple[str, str], int]) -> list[tuple[i
                 log_time=log_time,
             )
             messages.append((log_time, wanted_channels[channel_id], data))
-    messages.sort(key=lambda m: m[0])
     return messages
 
 

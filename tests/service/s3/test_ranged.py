@@ -8,6 +8,7 @@ HTTP session reads each GET's ``Content-Length`` as the store answered it:
 from __future__ import annotations
 
 import io
+import os
 import zipfile
 from pathlib import Path
 
@@ -16,6 +17,7 @@ import pytest
 from rosbags.highlevel import AnyReader
 
 import tests.bagfactory as bf
+from loceval.readers import _mcap
 from loceval.readers._mcap import read_indexed_messages
 from service.blobs.ranged import RangedFile
 from tests.service.s3.conftest import GetCounter, SeaweedFS
@@ -104,6 +106,15 @@ def test_an_mcap_index_reads_only_the_wanted_messages(
     size = mcap.stat().st_size
     assert size > 30 << 20  # 200 images of 256x256 rgb8
     assert counted.bytes == ranged.fetched_bytes < size / 10
+    # Each chunk's tf index is one GET, and each run of tf between two images another (the
+    # summary takes 3): 237 GETs here, one after another, before batched reads. The index
+    # GET also brings the next chunk's first tf messages, so those runs cost nothing (204).
+    fd = os.open(mcap, os.O_RDONLY)
+    try:
+        chunks = len(_mcap._read_summary(_mcap._LocalFile(fd))[2])
+    finally:
+        os.close(fd)
+    assert counted.calls < 3 + chunks + 200, (counted.calls, chunks)
 
 
 def test_many_reads_at_once_give_the_bytes_of_each(
