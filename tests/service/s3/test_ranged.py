@@ -83,18 +83,22 @@ def test_a_zip_central_directory_is_read_without_the_members(
     assert 0 < counted.bytes < archive.stat().st_size / 10
 
 
-def test_an_mcap_index_reads_only_the_wanted_messages(
-    counted: _Counted, bucket: str, rng: np.random.Generator, tmp_path: Path
-) -> None:
-    """tf of a camera bag read through its MCAP index over ranged requests: the same messages
-    as rosbags reads from the local file, for a small part of the file's bytes."""
+def _camera_bag(rng: np.random.Generator, tmp_path: Path) -> Path:
+    """An MCAP file of 200 tf messages at 20 Hz and a 256x256 RGB image at each (40 MB)."""
     poses = bf.random_poses(rng, 200, dt_ns=50_000_000)
     records = bf.tf_records(bf.link_transforms("map", "base_link", poses))
     records += [
         bf.image_record("/camera/image", int(poses.stamps_ns[i]), size=256) for i in range(200)
     ]
-    bag = bf.write_bag(tmp_path / "cam", records, fmt="mcap")
-    mcap = next(bag.glob("*.mcap"))
+    return next(bf.write_bag(tmp_path / "cam", records, fmt="mcap").glob("*.mcap"))
+
+
+def test_an_mcap_index_reads_only_the_wanted_messages(
+    counted: _Counted, bucket: str, rng: np.random.Generator, tmp_path: Path
+) -> None:
+    """tf of a camera bag read through its MCAP index over ranged requests: the same messages
+    as rosbags reads from the local file, for a small part of the file's bytes."""
+    mcap = _camera_bag(rng, tmp_path)
     counted.client.upload_file(str(mcap), bucket, "cam.mcap")
     ranged = RangedFile(counted.client, bucket, "cam.mcap")
     indexed = read_indexed_messages(ranged, [("/tf", bf.TF)])
@@ -157,12 +161,7 @@ def test_an_mcap_summary_is_read_in_a_few_requests(
     from loceval.readers.rosbag.bagfile import open_bag
     from service.blobs.ranged import ObjectFile
 
-    poses = bf.random_poses(rng, 200, dt_ns=50_000_000)
-    records = bf.tf_records(bf.link_transforms("map", "base_link", poses))
-    records += [
-        bf.image_record("/camera/image", int(poses.stamps_ns[i]), size=256) for i in range(200)
-    ]
-    mcap = next(bf.write_bag(tmp_path / "cam", records, fmt="mcap").glob("*.mcap"))
+    mcap = _camera_bag(rng, tmp_path)
     counted.client.upload_file(str(mcap), bucket, "cam.mcap")
     with open_bag(ObjectFile(counted.client, bucket, "cam.mcap", name="cam.mcap")) as bag:
         assert {c.topic for c in bag.reader.connections} == {"/tf", "/camera/image"}
