@@ -41,7 +41,8 @@ _MAX_RUN_GAP = 64 * 1024
 _MAX_RUN = 1024**2
 """Longest stretch read with one call."""
 _BATCH = 64
-"""Reads asked for at once."""
+"""Reads asked for at once: the message runs of a group are held at most this many at a time
+(a run is up to ``_MAX_RUN`` bytes)."""
 _GROUP = 256
 """Chunks read together: their index reads are held until their messages are read."""
 _SPILL = 16 * 1024
@@ -63,7 +64,6 @@ class _NotServableError(Exception):
     """The file cannot be served from its index; read it the ordinary way."""
 
 
-@runtime_checkable
 class RandomAccess(Protocol):
     """Bytes read by position: a local file, or an object read with ranged requests."""
 

@@ -17,6 +17,23 @@ from tests.service._api_fixtures import Api, assert_problem, tum_pair
 WAIT_S = 60.0
 
 
+def _pair_body(api: Api, rng: np.random.Generator, tmp_path: Path) -> dict[str, Any]:
+    """An evaluation of an uploaded TUM pair writing result.json and errors.csv."""
+    reference, estimate = tum_pair(rng, tmp_path)
+    return {
+        "reference": {"dataset_id": api.dataset("truth.txt", reference)["id"]},
+        "estimates": [{"dataset_id": api.dataset("slam.txt", estimate)["id"]}],
+        "options": {"formats": ["result.json", "errors.csv"]},
+    }
+
+
+def _release(api: Api, request: threading.Thread) -> None:
+    """Let every held job go on (:func:`hooks.hold_after_result`) and wait for the request."""
+    for folder in (api.data_dir / "evaluations").iterdir():
+        (folder / hooks.HOLD_FILE).touch()
+    request.join(WAIT_S)
+
+
 def _running_with_result(api: Api) -> dict[str, Any]:
     """Poll the list, then the evaluation, until it runs and has its result document."""
     deadline = time.monotonic() + WAIT_S
@@ -36,22 +53,14 @@ def test_result_is_served_while_the_files_are_written(
 ) -> None:
     """result.json is listed, shown and downloadable while the other files are still to come."""
     monkeypatch.setattr(jobs, "run_job", hooks.hold_after_result)
-    reference, estimate = tum_pair(rng, tmp_path)
-    body = {
-        "reference": {"dataset_id": api.dataset("truth.txt", reference)["id"]},
-        "estimates": [{"dataset_id": api.dataset("slam.txt", estimate)["id"]}],
-        "options": {"formats": ["result.json", "errors.csv"]},
-    }
+    body = _pair_body(api, rng, tmp_path)
     posted: list[Any] = []
     request = threading.Thread(target=lambda: posted.append(api.evaluate(body)))
     request.start()  # the immediate queue runs the job inside this request
     try:
         running = _running_with_result(api)
     finally:
-        evaluation_dir = api.data_dir / "evaluations"
-        for folder in evaluation_dir.iterdir():
-            (folder / hooks.HOLD_FILE).touch()
-        request.join(WAIT_S)
+        _release(api, request)
 
     assert running["status"] == "running"
     assert [a["name"] for a in running["artifacts"]] == ["result.json"]
@@ -87,12 +96,7 @@ def test_a_file_not_yet_written_is_409_naming_it(
 ) -> None:
     """While an evaluation runs, a file it has not written yet is a 409 that names it."""
     monkeypatch.setattr(jobs, "run_job", hooks.hold_after_result)
-    reference, estimate = tum_pair(rng, tmp_path)
-    body = {
-        "reference": {"dataset_id": api.dataset("truth.txt", reference)["id"]},
-        "estimates": [{"dataset_id": api.dataset("slam.txt", estimate)["id"]}],
-        "options": {"formats": ["result.json", "errors.csv"]},
-    }
+    body = _pair_body(api, rng, tmp_path)
     request = threading.Thread(target=api.evaluate, args=(body,))
     request.start()
     try:
@@ -100,9 +104,7 @@ def test_a_file_not_yet_written_is_409_naming_it(
         url = f"/api/v1/evaluations/{running['id']}/artifacts/errors.csv"
         response = api.client.get(url, headers=api.headers)
     finally:
-        for folder in (api.data_dir / "evaluations").iterdir():
-            (folder / hooks.HOLD_FILE).touch()
-        request.join(WAIT_S)
+        _release(api, request)
     assert_problem(
         response,
         409,
@@ -115,12 +117,7 @@ def test_a_failed_evaluation_keeps_nothing_it_published(
 ) -> None:
     """A failure after result.json was published leaves no result, file or listing behind."""
     monkeypatch.setattr(jobs, "run_job", hooks.fail_after_result)
-    reference, estimate = tum_pair(rng, tmp_path)
-    body = {
-        "reference": {"dataset_id": api.dataset("truth.txt", reference)["id"]},
-        "estimates": [{"dataset_id": api.dataset("slam.txt", estimate)["id"]}],
-        "options": {"formats": ["result.json", "errors.csv"]},
-    }
+    body = _pair_body(api, rng, tmp_path)
     evaluation_id = api.evaluate(body).json()["id"]
     failed = api.client.get(f"/api/v1/evaluations/{evaluation_id}", headers=api.headers).json()
     assert failed["status"] == "failed"

@@ -198,7 +198,8 @@ class GetCounter:
 
     def __init__(self, client: Any) -> None:
         """Start counting the GETs of ``client``."""
-        session = client._endpoint.http_session
+        self.client = client
+        session = client._endpoint.http_session  # what boto3 and the ranged reads send through
         send = session.send
         self.calls = 0
         self.bytes = 0

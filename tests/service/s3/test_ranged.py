@@ -25,29 +25,14 @@ from tests.service.s3.conftest import GetCounter, SeaweedFS
 MIB = 1 << 20
 
 
-class _Counted:
-    """A real S3 client whose GETs are counted as the store answered them."""
-
-    def __init__(self, server: SeaweedFS) -> None:
-        self.client = server.client()
-        self._gets = GetCounter(self.client)
-
-    @property
-    def bytes(self) -> int:
-        return self._gets.bytes
-
-    @property
-    def calls(self) -> int:
-        return self._gets.calls
-
-
 @pytest.fixture
-def counted(seaweedfs: SeaweedFS) -> _Counted:
-    return _Counted(seaweedfs)
+def counted(seaweedfs: SeaweedFS) -> GetCounter:
+    """A real S3 client whose GETs are counted as the store answered them."""
+    return GetCounter(seaweedfs.client())
 
 
 def test_seeks_and_reads_like_a_local_file_in_bounded_memory(
-    counted: _Counted, bucket: str, rng: np.random.Generator
+    counted: GetCounter, bucket: str, rng: np.random.Generator
 ) -> None:
     """Random seeks and reads give the object's bytes; at most max_cached bytes are kept."""
     data = rng.bytes(12 * MIB + 12345)
@@ -69,7 +54,7 @@ def test_seeks_and_reads_like_a_local_file_in_bounded_memory(
 
 
 def test_a_zip_central_directory_is_read_without_the_members(
-    counted: _Counted, bucket: str, rng: np.random.Generator, tmp_path: Path
+    counted: GetCounter, bucket: str, rng: np.random.Generator, tmp_path: Path
 ) -> None:
     """A 24 MB zip: listing it and reading its small member fetch well under a tenth of it."""
     archive = tmp_path / "bag.zip"
@@ -94,7 +79,7 @@ def _camera_bag(rng: np.random.Generator, tmp_path: Path) -> Path:
 
 
 def test_an_mcap_index_reads_only_the_wanted_messages(
-    counted: _Counted, bucket: str, rng: np.random.Generator, tmp_path: Path
+    counted: GetCounter, bucket: str, rng: np.random.Generator, tmp_path: Path
 ) -> None:
     """tf of a camera bag read through its MCAP index over ranged requests: the same messages
     as rosbags reads from the local file, for a small part of the file's bytes."""
@@ -122,7 +107,7 @@ def test_an_mcap_index_reads_only_the_wanted_messages(
 
 
 def test_many_reads_at_once_give_the_bytes_of_each(
-    counted: _Counted, bucket: str, rng: np.random.Generator
+    counted: GetCounter, bucket: str, rng: np.random.Generator
 ) -> None:
     """pread_many: each read's bytes in order (short at the end), one GET each, none kept."""
     data = rng.bytes(3 * MIB + 77)
@@ -138,7 +123,7 @@ def test_many_reads_at_once_give_the_bytes_of_each(
     assert ranged.cached_bytes == 0
 
 
-def test_a_read_of_an_object_gone_meanwhile_is_a_503(counted: _Counted, bucket: str) -> None:
+def test_a_read_of_an_object_gone_meanwhile_is_a_503(counted: GetCounter, bucket: str) -> None:
     """The object deleted after opening: the read fails as the store's outage does (503)."""
     from service.errors import ServiceUnavailableError
 
@@ -150,7 +135,7 @@ def test_a_read_of_an_object_gone_meanwhile_is_a_503(counted: _Counted, bucket: 
 
 
 def test_an_mcap_summary_is_read_in_a_few_requests(
-    counted: _Counted, bucket: str, rng: np.random.Generator, tmp_path: Path
+    counted: GetCounter, bucket: str, rng: np.random.Generator, tmp_path: Path
 ) -> None:
     """Opening a camera bag in a bucket reads its summary in a few GETs, not one per record.
 
