@@ -241,7 +241,12 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     options = request.options
     project_id = evaluation.project_id
     reference = _source(session, runtime, project_id, request.reference, "reference")
-    estimates = [_source(session, runtime, project_id, e, "estimate") for e in request.estimates]
+    # A control-point job reads arrivals from its estimates' files too: those stay local.
+    ranged = reference.spec.format is not TrajectoryFormat.POINTS
+    estimates = [
+        _source(session, runtime, project_id, e, "estimate", ranged=ranged)
+        for e in request.estimates
+    ]
     device_transform = None
     if isinstance(options.device, DeviceOffset):
         dataset = _dataset(session, project_id, options.device.dataset_id)
@@ -345,18 +350,42 @@ def _dataset(session: Session, project_id: str, dataset_id: str) -> Dataset:
 
 
 def _source(
-    session: Session, runtime: Runtime, project_id: str, ref: SourceRef, role: str
+    session: Session,
+    runtime: Runtime,
+    project_id: str,
+    ref: SourceRef,
+    role: str,
+    *,
+    ranged: bool = True,
 ) -> JobSource:
+    """Return a dataset as a job's trajectory source.
+
+    A large MCAP file in a bucket is read where it lies (``ranged``, see
+    :meth:`service.blobs.Blobs.job_input`); any other file from a local copy.
+    """
     dataset = _dataset(session, project_id, ref.dataset_id)
     fmt = dataset.inspection.get("format")
     if fmt not in {f.value for f in TrajectoryFormat}:
         msg = f"Dataset {dataset.name!r} is a {dataset.kind} file, not a trajectory recording."
         raise InputError(msg)
-    spec = SourceSpec(TrajectoryFormat(fmt), _file(runtime, dataset), ref.selector)
-    provenance = file_provenance(role, spec, sha256=dataset.sha256)
+    fmt = TrajectoryFormat(fmt)
+    remote = None
+    if ranged and fmt is TrajectoryFormat.BAG:
+        remote = runtime.store.job_input(
+            dataset.storage_path,
+            filename=dataset.filename,
+            sha256=dataset.sha256,
+            size=dataset.size_bytes,
+        )
+    if remote is None:
+        spec = SourceSpec(fmt, _file(runtime, dataset), ref.selector)
+        provenance = file_provenance(role, spec, sha256=dataset.sha256)
+    else:  # the path only names the file: it is read through ``remote``
+        spec = SourceSpec(fmt, Path(dataset.filename), ref.selector)
+        provenance = file_provenance(role, spec, sha256=dataset.sha256, size=dataset.size_bytes)
     provenance.update(path=dataset.filename, dataset_id=dataset.id)
     name = ref.name or ref.selector or Path(dataset.filename).stem
-    return JobSource(spec, str(name), provenance, display_path=dataset.filename)
+    return JobSource(spec, str(name), provenance, display_path=dataset.filename, remote=remote)
 
 
 JOB_KINDS: Final = (

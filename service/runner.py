@@ -21,7 +21,13 @@ from loceval.checkpoints.config import CheckpointConfig
 from loceval.errors import InputError, LocevalError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, ProgressCallback, evaluate
 from loceval.options import choice_default
-from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory, sniff_format
+from loceval.readers import (
+    SourceSpec,
+    TrajectoryFormat,
+    read_stored_bag,
+    read_trajectory,
+    sniff_format,
+)
 from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
@@ -31,6 +37,7 @@ if TYPE_CHECKING:
     from loceval.controlpoints import ControlPoints, Visits
     from loceval.radio_evaluation import RangingConfig
     from loceval.readers.radio import Ranges
+    from loceval.readers.rosbag import RemoteFile
     from service.mapjob import MapSource
 
 __all__ = [
@@ -61,16 +68,22 @@ class JobSource:
         provenance: the input record of the result (file, checksum, selector, dataset id).
         display_path: shown instead of the file's path in the result and the reports (the
             service shows the uploaded file name, not its folders on the server).
+        remote: a bag read by position where it is stored (an MCAP file in a bucket)
+            instead of ``spec.path``, which then only names it.
     """
 
     spec: SourceSpec
     name: str
     provenance: Mapping[str, object] = field(default_factory=dict)
     display_path: str | None = None
+    remote: RemoteFile | None = None
 
     def read(self, *, stamp: str) -> Trajectory:
         """Read the trajectory, naming the file by ``display_path`` when given."""
-        trajectory = read_trajectory(self.spec, name=self.name, stamp=stamp)
+        if self.remote is None:
+            trajectory = read_trajectory(self.spec, name=self.name, stamp=stamp)
+        else:
+            trajectory = read_stored_bag(self.spec, self.remote, name=self.name, stamp=stamp)
         if self.display_path is None:
             return trajectory
         path, shown = str(self.spec.path), self.display_path
@@ -483,8 +496,14 @@ def unique_names(names: Sequence[str]) -> list[str]:
     return out
 
 
-def file_provenance(role: str, spec: SourceSpec, *, sha256: str | None = None) -> dict[str, object]:
-    """Return the input record of a source: file, format, selector and SHA-256."""
+def file_provenance(
+    role: str, spec: SourceSpec, *, sha256: str | None = None, size: int | None = None
+) -> dict[str, object]:
+    """Return the input record of a source: file, format, selector, SHA-256 and size.
+
+    With both ``sha256`` and ``size`` given the file is not looked at (a bag read where it
+    is stored has no local file).
+    """
     path = spec.path
     info: dict[str, object] = {
         "role": role,
@@ -493,7 +512,9 @@ def file_provenance(role: str, spec: SourceSpec, *, sha256: str | None = None) -
         "format": spec.format.value if spec.format else None,
         "selector": spec.selector,
     }
-    if path.is_file():
+    if sha256 is not None and size is not None:
+        info.update(sha256=sha256, bytes=size)
+    elif path.is_file():
         if sha256 is None:
             digest = hashlib.sha256()
             with path.open("rb") as fh:

@@ -62,6 +62,10 @@ class Settings(BaseSettings):
             (keyed by content hash, least recently used copies evicted).
         blob_redirect_s: with a bucket, downloads answer 307 to a presigned URL valid this
             many seconds (the client fetches from the store); 0 streams them through the API.
+        blob_ranged_bytes: with a bucket, an evaluation reads an MCAP file of at least this
+            many bytes where it lies, by ranged reads of its index and the wanted topics'
+            messages, instead of copying it into the cache first (unless the cache holds it
+            already, or its chunks are compressed); 0 reads every such file so.
     """
 
     model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
@@ -85,6 +89,7 @@ class Settings(BaseSettings):
     blob_url: str = ""
     blob_cache_bytes: Annotated[int, Field(ge=1 << 20, le=1 << 50)] = 20 * _GIB
     blob_redirect_s: Annotated[int, Field(ge=0, le=7 * 86400)] = 0
+    blob_ranged_bytes: Annotated[int, Field(ge=0, le=1 << 50)] = 256 << 20
 
     @field_validator("blob_url")
     @classmethod

@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from loceval.readers.euroc import read_euroc
     from loceval.readers.kitti import read_kitti
     from loceval.readers.motive import read_motive
+    from loceval.readers.rosbag import RemoteFile
 
 __all__ = [
     "SourceSpec",
@@ -34,6 +35,7 @@ __all__ = [
     "read_euroc",
     "read_kitti",
     "read_motive",
+    "read_stored_bag",
     "read_trajectory",
     "read_tum",
     "sniff_format",
@@ -154,6 +156,31 @@ def read_trajectory(
     )
 
 
+def read_stored_bag(
+    spec: SourceSpec, file: RemoteFile, *, name: str = "", stamp: str = "header"
+) -> Trajectory:
+    """Read a bag source whose bytes are read by position from a store, not from its path.
+
+    Args:
+        spec: the source (format ``bag``); its path only names the file.
+        file: the bag's bytes (an MCAP file or ROS 1 bag in a bucket).
+        name: the trajectory's name; defaults to the selector.
+        stamp: ``"header"`` or ``"receive"`` (see :func:`read_trajectory`).
+
+    Raises:
+        InputError: ``stamp`` is neither ``"header"`` nor ``"receive"``.
+        ReaderError: as :func:`read_trajectory` for a bag.
+    """
+    if stamp not in _STAMP_SOURCES:
+        msg = f"Unknown stamp source {stamp!r}; use 'header' or 'receive'."
+        raise InputError(msg)
+    if spec.format is not TrajectoryFormat.BAG:
+        msg = f"only a bag is read from a store, not the {spec.format} source {spec.path}"
+        raise TypeError(msg)
+    _check_options(spec, spec.format, label=str(spec))
+    return _read_bag(spec, name=name, stamp=stamp, file=file)
+
+
 def _check_options(spec: SourceSpec, fmt: TrajectoryFormat, *, label: str) -> None:
     allowed = _OPTIONS[fmt]
     for key in spec.options:
@@ -172,7 +199,9 @@ def _times_path(times: str, poses: Path) -> Path:
     return given
 
 
-def _read_bag(spec: SourceSpec, *, name: str, stamp: str) -> Trajectory:
+def _read_bag(
+    spec: SourceSpec, *, name: str, stamp: str, file: RemoteFile | None = None
+) -> Trajectory:
     if not spec.selector:
         msg = (
             f"{str(spec.path)!r} is a bag; name a topic or tf chain, e.g. "
@@ -184,4 +213,6 @@ def _read_bag(spec: SourceSpec, *, name: str, stamp: str) -> Trajectory:
         read_bag_trajectory,
     )
 
-    return read_bag_trajectory(spec.path, spec.selector, stamp=StampSource(stamp), name=name)
+    return read_bag_trajectory(
+        spec.path if file is None else file, spec.selector, stamp=StampSource(stamp), name=name
+    )

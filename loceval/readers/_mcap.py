@@ -28,7 +28,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
-__all__ = ["RandomAccess", "read_indexed_messages"]
+__all__ = ["RandomAccess", "index_serves", "read_indexed_messages"]
 
 _MAGIC = b"\x89MCAP0\r\n"
 _OP_FOOTER, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK_INDEX, _OP_MESSAGE_INDEX = 0x02, 4, 5, 8, 7
@@ -137,6 +137,20 @@ def read_indexed_messages(
         return None
     finally:
         os.close(fd)
+
+
+def index_serves(src: RandomAccess) -> bool:
+    """Return whether :func:`read_indexed_messages` can serve any channel of this MCAP file.
+
+    True when it has a summary with chunk indexes and stores every chunk uncompressed: then
+    reading a few channels costs their message indexes and messages, not the file. Reads
+    the footer and the summary only.
+    """
+    try:
+        _, _, chunk_indexes = _read_summary(src)
+    except (_NotServableError, struct.error, UnicodeDecodeError, OSError):
+        return False
+    return bool(chunk_indexes) and not any(compression for *_, compression in chunk_indexes)
 
 
 def _read(src: RandomAccess, wanted: dict[tuple[str, str], int]) -> list[tuple[int, int, bytes]]:

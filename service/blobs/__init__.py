@@ -43,6 +43,7 @@ def open_blobs(settings: Settings) -> Blobs:
         cache_bytes=settings.blob_cache_bytes,
         min_free_bytes=settings.min_free_bytes,
         redirect_s=settings.blob_redirect_s,
+        ranged_bytes=settings.blob_ranged_bytes,
     )
     store.check_bucket()
     return store

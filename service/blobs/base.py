@@ -177,6 +177,19 @@ class Blobs(abc.ABC):
         del storage_path, filename
         return None
 
+    def job_input(
+        self, storage_path: str, *, filename: str, sha256: str, size: int
+    ) -> RemoteFile | None:
+        """Return a bag an evaluation reads where it lies, or None (read :meth:`local_path`).
+
+        A bucket hands out a large, indexed MCAP file that this machine holds no copy of:
+        an evaluation reads its index and the wanted topics' messages by ranged reads, for
+        a camera bag a small part of the file, instead of waiting for a download of all of
+        it. A local folder's files are local already.
+        """
+        del storage_path, filename, sha256, size
+        return None
+
     def pinned(self) -> contextlib.AbstractContextManager[None]:
         """Keep the local copies :meth:`local_path` hands out in this block from eviction."""
         return contextlib.nullcontext()

@@ -112,6 +112,10 @@ class InputCache:
             pins.append(lock)
         return target
 
+    def holds(self, sha256: str, filename: str, size: int) -> bool:
+        """Return whether a whole copy of the blob is here now (it may be evicted later)."""
+        return _whole(self.root / sha256 / filename, size)
+
     def size(self) -> int:
         """Return the bytes the copies take."""
         return sum(size for _, _, size in self._entries())

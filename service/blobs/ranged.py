@@ -6,8 +6,10 @@ read and a little more, reading ahead like a kernel does: a read that starts whe
 fetch ended doubles the next fetch (up to ``max_ahead`` bytes), any other read fetches only
 ``min_ahead`` more than it asks. The fetched pieces are kept up to ``max_cached`` bytes (the
 least recently used go), and a read larger than ``max_ahead`` is fetched in one request and
-not kept, so the memory is bounded whatever the object's size. Readers that need a real file
-(SQLite bags, rosbags' readers) keep using the local input cache
+not kept, so the memory is bounded whatever the object's size. The API inspects uploaded
+bags so, and an evaluation reads a large indexed MCAP input so in its job process
+(:meth:`service.blobs.s3.S3Blobs.job_input`); readers that need a real file (SQLite bags,
+zipped bag folders) and inputs read whole use the local input cache
 (:class:`service.blobs.cache.InputCache`).
 
 Readers that know their reads beforehand (the MCAP index reader:
@@ -28,11 +30,13 @@ same bytes. A client without that session falls back to ``GetObject``.
 from __future__ import annotations
 
 import bisect
+import functools
 import io
+import os
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import PurePosixPath
 from typing import TYPE_CHECKING, BinaryIO, Final
@@ -40,7 +44,7 @@ from typing import TYPE_CHECKING, BinaryIO, Final
 from botocore.awsrequest import AWSRequest
 from botocore.exceptions import BotoCoreError
 
-from service.blobs.s3client import store_errors
+from service.blobs.s3client import make_client, store_errors
 from service.errors import ServiceUnavailableError
 
 if TYPE_CHECKING:
@@ -283,15 +287,31 @@ class ObjectFile:
         bucket: the bucket.
         key: the object's full key.
         name: the file name (its suffix tells the readers the format).
+        size: its size in bytes (None: asked with a HeadObject).
+
+    It pickles as its bucket, key, name and size with this process's ``AWS_*`` variables:
+    unpickled in an evaluation's job process (a child of the forkserver, which may have
+    started before they were set) it reads through a client of that process made from the
+    same variables (:func:`service.blobs.s3client.make_client`). The pickle goes only to
+    the job processes this one starts, over a local pipe.
     """
 
-    def __init__(self, client: S3Client, bucket: str, key: str, *, name: str) -> None:
-        """Ask the object's size (one HeadObject)."""
-        self._file = RangedFile(client, bucket, key)
+    def __init__(
+        self, client: S3Client, bucket: str, key: str, *, name: str, size: int | None = None
+    ) -> None:
+        """Open the object (a HeadObject when its size is not given)."""
+        self._file = RangedFile(client, bucket, key, size=size)
         self._opened: list[RangedFile] = [self._file]
         self._client, self._bucket, self._key = client, bucket, key
         self.name = name
         self.size = self._file.size
+
+    def __reduce__(
+        self,
+    ) -> tuple[Callable[..., ObjectFile], tuple[str, str, str, int, dict[str, str]]]:
+        """Pickle the object's address and the client's variables (not its connections)."""
+        environ = {k: v for k, v in os.environ.items() if k.startswith("AWS_")}
+        return _reopen, (self._bucket, self._key, self.name, self.size, environ)
 
     def __str__(self) -> str:
         """Return the file name (what messages show)."""
@@ -345,3 +365,21 @@ class ObjectFile:
     def requests(self) -> int:
         """Return the ranged requests made by every reader of this object."""
         return sum(f.requests for f in self._opened)
+
+
+def _reopen(bucket: str, key: str, name: str, size: int, environ: dict[str, str]) -> ObjectFile:
+    """Open a pickled :class:`ObjectFile` again, with a client of this process."""
+    return ObjectFile(
+        _process_client(tuple(sorted(environ.items()))), bucket, key, name=name, size=size
+    )
+
+
+@functools.cache
+def _process_client(environ: tuple[tuple[str, str], ...]) -> S3Client:
+    """Return one S3 client per ``AWS_*`` variables for the objects unpickled here.
+
+    The variables are set in this process (a job's own, which makes no other client) so
+    that boto3 reads them as it reads its environment everywhere else.
+    """
+    os.environ.update(environ)
+    return make_client()

@@ -57,10 +57,19 @@ if TYPE_CHECKING:
     from mypy_boto3_s3.type_defs import ObjectIdentifierTypeDef
 
 
-__all__ = ["PART_BYTES", "S3Blobs", "S3Incoming", "make_client", "store_errors"]
+__all__ = [
+    "PART_BYTES",
+    "RANGED_INPUT_BYTES",
+    "S3Blobs",
+    "S3Incoming",
+    "make_client",
+    "store_errors",
+]
 
 PART_BYTES: Final = 8 << 20
 """The size of an upload's parts (S3 wants at least 5 MiB but for the last)."""
+RANGED_INPUT_BYTES: Final = 256 << 20
+"""The default size from which an evaluation reads a bag in the bucket by ranged reads."""
 _IN_FLIGHT: Final = 4  # parts sent at once: the upload holds at most this many in memory
 _DOWNLOAD_CHUNK: Final = 1 << 20
 _TRANSFER: Final = TransferConfig(
@@ -209,6 +218,8 @@ class S3Blobs(Blobs):
         cache_bytes: the input cache's size.
         min_free_bytes: the local disk's reserve (the cache keeps it).
         redirect_s: downloads answer 307 to a presigned URL valid this long; 0 streams.
+        ranged_bytes: evaluations read MCAP files and ROS 1 bags at least this large by
+            ranged reads where they lie, unless the cache holds a copy (:meth:`job_input`).
         client: the S3 client (default: from the ``AWS_*`` environment variables).
         lease_s: an uploading process whose lease is older than this is gone.
     """
@@ -223,6 +234,7 @@ class S3Blobs(Blobs):
         cache_bytes: int,
         min_free_bytes: int,
         redirect_s: int = 0,
+        ranged_bytes: int = RANGED_INPUT_BYTES,
         client: S3Client | None = None,
         lease_s: float = LEASE_S,
     ) -> None:
@@ -231,6 +243,7 @@ class S3Blobs(Blobs):
         self.root = root.resolve()
         self.client = client or make_client()
         self.redirect_s = redirect_s
+        self.ranged_bytes = ranged_bytes
         self.lease_s = lease_s
         self.instance: str | None = None
         """This process's instance id once it receives uploads (:mod:`service.blobs.lease`)."""
@@ -345,6 +358,26 @@ class S3Blobs(Blobs):
         if PurePosixPath(filename).suffix.lower() not in {".mcap", ".bag"}:
             return None
         return ObjectFile(self.client, self.bucket, self.prefix + storage_path, name=filename)
+
+    def job_input(
+        self, storage_path: str, *, filename: str, sha256: str, size: int
+    ) -> ObjectFile | None:
+        """See :meth:`Blobs.job_input`: an MCAP file of ``ranged_bytes`` or more.
+
+        Only an MCAP file whose index serves a few topics (a summary, chunk indexes,
+        uncompressed chunks: three small reads tell) is read so. Compressed chunks and ROS 1
+        bags, whose chunks mix every topic, would be read whole one request after another,
+        slower than the cache's parallel download.
+        """
+        from loceval.readers.rosbag import serves_by_index  # noqa: PLC0415  (rosbags: jobs only)
+
+        if size < self.ranged_bytes or PurePosixPath(filename).suffix.lower() != ".mcap":
+            return None
+        if self.cache.holds(sha256, filename, size):
+            return None
+        key = self.prefix + storage_path
+        file = ObjectFile(self.client, self.bucket, key, name=filename, size=size)
+        return file if serves_by_index(file) else None
 
     def pinned(self) -> contextlib.AbstractContextManager[None]:
         """See :meth:`Blobs.pinned`."""

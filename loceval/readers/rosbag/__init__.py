@@ -37,6 +37,7 @@ from loceval.readers.rosbag.bagfile import (
     normalize_msgtype,
     open_bag,
     raw_messages,
+    serves_by_index,
 )
 from loceval.readers.rosbag.messages import (
     SUPPORTED_MSGTYPES,
@@ -69,6 +70,7 @@ __all__ = [
     "read_bag_tf_buffer",
     "read_bag_trajectory",
     "read_range_topic",
+    "serves_by_index",
 ]
 
 
@@ -93,7 +95,7 @@ def is_bag_path(path: Path) -> bool:
 
 
 def read_bag_trajectory(
-    path: Path | Sequence[Path],
+    path: Path | Sequence[Path] | RemoteFile,
     selector: str,
     *,
     stamp: StampSource = StampSource.HEADER,
@@ -103,7 +105,8 @@ def read_bag_trajectory(
     """Read one trajectory from a bag.
 
     Args:
-        path: a bag (see :func:`is_bag_path`), or the files of a split ROS 1 recording.
+        path: a bag (see :func:`is_bag_path`), the files of a split ROS 1 recording, or
+            an MCAP file or ROS 1 bag read by position from a store (:class:`RemoteFile`).
         selector: a topic (``/amcl_pose``; a ROS 1 topic may be given with or without its
             leading slash when that is unambiguous) or a tf chain ``tf:PARENT:CHILD``.
         stamp: header stamps (default) or the bag's receive times.

@@ -35,7 +35,7 @@ else:  # rosbags depends on backports.zstd before Python 3.14
 
 from loceval.errors import ReaderError
 from loceval.readers._archive import extracted_bag
-from loceval.readers._mcap import RandomAccess, read_indexed_messages
+from loceval.readers._mcap import RandomAccess, index_serves, read_indexed_messages
 from loceval.readers.rosbag.messages import TF_MSGTYPE, BagFormat
 
 __all__ = [
@@ -48,6 +48,7 @@ __all__ = [
     "normalize_msgtype",
     "open_bag",
     "raw_messages",
+    "serves_by_index",
 ]
 
 _MAX_LISTED = 40
@@ -198,6 +199,16 @@ class Bag:
     storage_format: BagFormat
     archive: str
     paths: tuple[Path, ...]
+
+
+def serves_by_index(file: RemoteFile) -> bool:
+    """Return whether a remote bag is read for a few topics without reading most of it.
+
+    True for an MCAP file with a summary, chunk indexes and uncompressed chunks (its
+    messages are found through the index: :func:`raw_messages`); False for anything else,
+    which is read chunk after chunk (a ROS 1 bag's chunks mix every topic).
+    """
+    return file.suffix.lower() == ".mcap" and index_serves(file)
 
 
 @contextmanager

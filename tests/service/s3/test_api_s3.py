@@ -153,3 +153,52 @@ def test_a_damaged_mcap_read_in_place_is_refused_and_leaves_no_object(
     assert str(api.data_dir) not in answer.text
     assert _blobs(seaweedfs, bucket) == []
     assert open_multipart_uploads(seaweedfs, bucket) == []
+
+
+def test_an_evaluation_reads_a_camera_bag_in_the_bucket_by_ranges(
+    bucket: str, s3_env: dict[str, str], rng: np.random.Generator, tmp_path: Path
+) -> None:
+    """LOCEVAL_BLOB_RANGED_BYTES=0: a bag's pose topic against its tf chain, read in the job
+    process where the bag lies: nothing is copied into the cache, and the result is the one
+    the same evaluation gives from the local file."""
+    import tests.bagfactory as bf
+    from loceval.evaluation import evaluate
+    from loceval.readers import parse_source, read_trajectory
+
+    del s3_env
+    poses = bf.random_poses(rng, 200, dt_ns=50_000_000)
+    drifted = bf.Poses(
+        poses.stamps_ns, poses.positions + rng.normal(scale=0.02, size=(200, 3)), poses.quats
+    )
+    records = bf.tf_records(bf.link_transforms("map", "base_link", drifted))
+    records += bf.pose_records("/gt", bf.POSE, poses)
+    records += [bf.image_record("/camera/image", int(t), size=128) for t in poses.stamps_ns]
+    mcap = next(bf.write_bag(tmp_path / "cam", records, fmt="mcap").glob("*.mcap"))
+    with open_api(tmp_path, blob_url=f"s3://{bucket}/site", blob_ranged_bytes=0) as api:
+        dataset = api.dataset("cam.mcap", mcap.read_bytes())
+        answer = api.evaluate(
+            {
+                "reference": {"dataset_id": dataset["id"], "selector": "/gt"},
+                "estimates": [{"dataset_id": dataset["id"], "selector": "tf:map:base_link"}],
+                "options": {"formats": ["result.json"]},
+            }
+        )
+        assert answer.status_code == 202, answer.text
+        evaluation = answer.json()
+        assert evaluation["status"] == "succeeded", evaluation
+        cache = api.data_dir / "cache"
+        copies = [p for p in cache.rglob("*") if p.is_file() and p.name != ".lock"]
+        assert copies == []  # read by ranges in the job process, never downloaded
+        url = f"/api/v1/evaluations/{evaluation['id']}"
+        result = api.client.get(url, headers=api.headers).json()["result"]
+    [estimate] = result["estimates"]
+    local = evaluate(
+        read_trajectory(parse_source(f"bag:{mcap}@/gt")),
+        [read_trajectory(parse_source(f"bag:{mcap}@tf:map:base_link"))],
+    )
+    ate = local.estimates[0].ate_translation.stats
+    assert estimate["matched"] == 200
+    assert estimate["ate"]["translation_m"]["rmse"] == pytest.approx(ate.rmse, rel=1e-12)
+    assert estimate["ate"]["translation_m"]["max"] == pytest.approx(ate.max, rel=1e-12)
+    assert [i["sha256"] for i in result["inputs"]] == [dataset["sha256"]] * 2
+    assert [i["bytes"] for i in result["inputs"]] == [dataset["size_bytes"]] * 2

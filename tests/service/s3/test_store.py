@@ -325,3 +325,53 @@ def test_one_job_reads_the_same_input_twice(
         first = store.local_path(key, filename="both.bag", sha256=sha)
         second = store.local_path(key, filename="both.bag", sha256=sha)  # must not wait
     assert first == second
+
+
+def _mcap(folder: Path, compression: str | None = None) -> bytes:
+    """Return a small MCAP camera bag (tf and images), its chunks zstd-compressed if asked."""
+    import tests.bagfactory as bf
+
+    poses = bf.random_poses(np.random.default_rng(3), 40, dt_ns=50_000_000)
+    records = bf.tf_records(bf.link_transforms("map", "base_link", poses))
+    records += [bf.image_record("/camera", int(t), size=32) for t in poses.stamps_ns]
+    bag = bf.write_bag(folder, records, fmt="mcap", compression=compression)
+    return next(bag.glob("*.mcap")).read_bytes()
+
+
+def test_a_job_reads_a_large_indexed_mcap_where_it_lies_and_other_files_from_the_cache(
+    bucket: str, s3_env: dict[str, str], tmp_path: Path
+) -> None:
+    """job_input: an uncompressed MCAP file from the size on is read by ranges; a smaller
+    one, a compressed one, a ROS 1 bag, another file and one the cache holds are not."""
+    import pickle
+
+    from service.blobs.ranged import ObjectFile
+
+    del s3_env
+    plain, packed = _mcap(tmp_path / "plain"), _mcap(tmp_path / "packed", "storage")
+    store = _store(bucket, tmp_path / "w", ranged_bytes=min(len(plain), len(packed)))
+    (plain_key, plain_sha), (packed_key, packed_sha) = (
+        _dataset(store, plain),
+        _dataset(store, packed),
+    )
+    remote = store.job_input(plain_key, filename="cam.mcap", sha256=plain_sha, size=len(plain))
+    assert isinstance(remote, ObjectFile)
+    reopened = pickle.loads(pickle.dumps(remote))  # a job process's copy: its own client
+    assert reopened.size == len(plain)
+    assert reopened.pread(len(plain), 0) == plain
+    assert reopened._client is not store.client
+    store.ranged_bytes = len(plain) + 1
+    small = store.job_input(plain_key, filename="cam.mcap", sha256=plain_sha, size=len(plain))
+    assert small is None  # under the setting: copied
+    store.ranged_bytes = min(len(plain), len(packed))
+    for filename in ("cam.bag", "cam.db3", "cam.txt"):
+        assert store.job_input(plain_key, filename=filename, sha256=plain_sha, size=1 << 40) is None
+    assert packed_sha != plain_sha
+    compressed = store.job_input(
+        packed_key, filename="cam.mcap", sha256=packed_sha, size=len(packed)
+    )
+    assert compressed is None  # zstd chunks: the index cannot serve a few topics
+    with store.pinned():
+        store.local_path(plain_key, filename="cam.mcap", sha256=plain_sha)
+    cached = store.job_input(plain_key, filename="cam.mcap", sha256=plain_sha, size=len(plain))
+    assert cached is None  # this machine has a copy already
