@@ -57,6 +57,8 @@ MIN_AHEAD: Final = 4 << 10
 """Bytes fetched beyond a read that does not continue the last one (a seek)."""
 MAX_AHEAD: Final = 4 << 20
 """The most bytes one sequential read-ahead fetches."""
+MEMO_BYTES: Final = 64 << 20
+"""The most answers of :meth:`ObjectFile.pread_many` kept for asking again (a bag's tf)."""
 MANY_AT_ONCE: Final = 16
 """Requests in flight for :meth:`RangedFile.pread_many` (below the client's pool of 32)."""
 _URL_LIFE_S: Final = 3600
@@ -109,6 +111,7 @@ class RangedFile(io.RawIOBase):
         self._counting = threading.Lock()  # pread_many's threads count their requests
         self._http = getattr(getattr(client, "_endpoint", None), "http_session", None)
         self._url: tuple[str, float] | None = None  # a presigned GET and when it was made
+        self._pool: ThreadPoolExecutor | None = None  # pread_many's requests, made on first use
         self._position = 0
         self.fetched_bytes = 0
         """Bytes received from the store so far."""
@@ -193,8 +196,16 @@ class RangedFile(io.RawIOBase):
         def fetch(span: tuple[int, int]) -> bytes:
             return self._fetch(*span) if span[0] < span[1] else b""
 
-        with ThreadPoolExecutor(min(MANY_AT_ONCE, len(ranges))) as pool:
-            return list(pool.map(fetch, ranges))
+        if self._pool is None:  # kept for the next batch: a reader asks for many in a row
+            self._pool = ThreadPoolExecutor(MANY_AT_ONCE, thread_name_prefix="loceval-ranged")
+        return list(self._pool.map(fetch, ranges))
+
+    def close(self) -> None:
+        """Close the file and let its request threads go."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=False)
+            self._pool = None
+        super().close()
 
     def _keep(self, start: int, piece: bytes) -> None:
         """Keep a fetched piece, dropping the least recently used beyond ``max_cached``."""
@@ -305,6 +316,9 @@ class ObjectFile:
         self._client, self._bucket, self._key = client, bucket, key
         self.name = name
         self.size = self._file.size
+        self._memo: dict[tuple[int, int], bytes] = {}
+        self._memo_bytes = 0
+        self._spill: dict[tuple[int, int], bytes] = {}
 
     def __reduce__(
         self,
@@ -353,8 +367,21 @@ class ObjectFile:
         return self._file.pread(size, offset)
 
     def pread_many(self, reads: Sequence[tuple[int, int]]) -> list[bytes]:
-        """Return the bytes of each ``(size, offset)`` read, several requests at once."""
-        return self._file.pread_many(reads)
+        """Return the bytes of each ``(size, offset)`` read, several requests at once.
+
+        Answers are kept up to ``MEMO_BYTES``: a job that reads several tf chains or topics
+        of one bag asks for the same index records and messages once per source.
+        """
+        missing = [r for r in dict.fromkeys(reads) if r not in self._memo]
+        for read, data in zip(missing, self._file.pread_many(missing), strict=True):
+            if self._memo_bytes + len(data) <= MEMO_BYTES:
+                self._memo[read] = data
+                self._memo_bytes += len(data)
+            else:
+                self._spill[read] = data  # this batch's answer only
+        out = [self._memo[r] if r in self._memo else self._spill[r] for r in reads]
+        self._spill.clear()
+        return out
 
     @property
     def fetched_bytes(self) -> int:
@@ -368,10 +395,19 @@ class ObjectFile:
 
 
 def _reopen(bucket: str, key: str, name: str, size: int, environ: dict[str, str]) -> ObjectFile:
-    """Open a pickled :class:`ObjectFile` again, with a client of this process."""
-    return ObjectFile(
-        _process_client(tuple(sorted(environ.items()))), bucket, key, name=name, size=size
-    )
+    """Open a pickled :class:`ObjectFile` again, with a client of this process.
+
+    One object is one :class:`ObjectFile` here: the reference and the estimates of one bag
+    share its answers (``pread_many``'s memo).
+    """
+    return _opened(bucket, key, name, size, tuple(sorted(environ.items())))
+
+
+@functools.cache
+def _opened(
+    bucket: str, key: str, name: str, size: int, environ: tuple[tuple[str, str], ...]
+) -> ObjectFile:
+    return ObjectFile(_process_client(environ), bucket, key, name=name, size=size)
 
 
 @functools.cache
