@@ -36,7 +36,6 @@ import shutil
 import threading
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Mapping
-from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from pathlib import Path, PurePosixPath
 from typing import IO, TYPE_CHECKING, Any, Final
 
@@ -49,6 +48,7 @@ from service.blobs.cache import InputCache
 from service.blobs.lease import LEASE_S, Lease, claim_slot
 from service.blobs.ranged import ObjectFile
 from service.blobs.s3client import make_client, store_errors, unless_missing
+from service.blobs.s3upload import PART_BYTES, S3Incoming, pending_key
 from service.errors import StartupError, register_private_root
 from service.storage import Swept
 
@@ -66,147 +66,12 @@ __all__ = [
     "store_errors",
 ]
 
-PART_BYTES: Final = 8 << 20
-"""The size of an upload's parts (S3 wants at least 5 MiB but for the last)."""
 RANGED_INPUT_BYTES: Final = 256 << 20
 """The default size from which an evaluation reads a bag in the bucket by ranged reads."""
-_IN_FLIGHT: Final = 4  # parts sent at once: the upload holds at most this many in memory
 _DOWNLOAD_CHUNK: Final = 1 << 20
 _TRANSFER: Final = TransferConfig(
     multipart_threshold=64 << 20, multipart_chunksize=8 << 20, max_concurrency=4
 )
-
-
-class S3Incoming(Incoming):
-    """An upload streamed into a multipart upload, at most a few parts in memory.
-
-    Its key is final (``uploads/<instance>/<uuid>``): :meth:`commit` sends the last part but
-    does not complete the upload, so nothing is visible yet; :meth:`publish` writes the
-    pending marker and completes it, making the whole object appear at once. An upload of
-    bytes that are stored already is aborted without ever becoming an object.
-    """
-
-    def __init__(self, store: S3Blobs, key: str) -> None:
-        """Receive into ``key`` (relative to the prefix); nothing is sent before a part is full."""
-        super().__init__()
-        self.store = store
-        self.key = key  # relative to the prefix
-        self._buffer = bytearray()
-        self._upload_id: str | None = None
-        self._parts: list[tuple[int, Future[str]]] = []
-        self._pool: ThreadPoolExecutor | None = None
-        self.committed = False
-        self.published = False
-        self.done = False
-
-    @property
-    def _full_key(self) -> str:
-        return self.store.prefix + self.key
-
-    def _write(self, chunk: bytes) -> None:
-        self._buffer += chunk
-        while len(self._buffer) >= PART_BYTES:
-            self._send(bytes(self._buffer[:PART_BYTES]))
-            del self._buffer[:PART_BYTES]
-
-    def _send(self, data: bytes) -> None:
-        client = self.store.client
-        if self._upload_id is None:
-            with store_errors():
-                created = client.create_multipart_upload(
-                    Bucket=self.store.bucket, Key=self._full_key
-                )
-            self._upload_id = created["UploadId"]
-            self._pool = ThreadPoolExecutor(_IN_FLIGHT, thread_name_prefix="loceval-upload")
-        pending = [f for _, f in self._parts if not f.done()]
-        if len(pending) >= _IN_FLIGHT:
-            wait(pending, return_when=FIRST_COMPLETED)
-        for _, future in self._parts:
-            if future.done():
-                future.result()  # a failed part fails the upload now
-        number = len(self._parts) + 1
-        assert self._pool is not None  # noqa: S101  (created with the upload id)
-        self._parts.append((number, self._pool.submit(self._upload_part, number, data)))
-
-    def _upload_part(self, number: int, data: bytes) -> str:
-        assert self._upload_id is not None  # noqa: S101
-        with store_errors():
-            answer = self.store.client.upload_part(
-                Bucket=self.store.bucket,
-                Key=self._full_key,
-                UploadId=self._upload_id,
-                PartNumber=number,
-                Body=data,
-            )
-        return answer["ETag"]
-
-    def commit(self) -> None:
-        """See :meth:`Incoming.commit`: every part is in the store (the object is not, yet).
-
-        An upload smaller than a part stays in memory (under 8 MiB) until :meth:`publish`.
-        """
-        if self.committed:
-            return
-        if self._upload_id is not None:
-            if self._buffer:
-                self._send(bytes(self._buffer))
-                self._buffer = bytearray()
-            for _, future in self._parts:
-                future.result()
-            self._close_pool()
-        self.committed = True
-
-    def publish(self, dataset_id: str) -> None:
-        """Mark the upload pending for ``dataset_id``, then make it an object, whole."""
-        if not self.committed or self.done:
-            msg = "only a committed, not aborted upload to the bucket can be published"
-            raise TypeError(msg)
-        client = self.store.client
-        with store_errors():
-            client.put_object(
-                Bucket=self.store.bucket,
-                Key=self.store.prefix + pending_key(self.key),
-                Body=dataset_id.encode(),
-            )
-            if self._upload_id is None:  # smaller than one part: one request
-                client.put_object(
-                    Bucket=self.store.bucket, Key=self._full_key, Body=bytes(self._buffer)
-                )
-            else:
-                parts = [{"PartNumber": n, "ETag": f.result()} for n, f in self._parts]
-                client.complete_multipart_upload(
-                    Bucket=self.store.bucket,
-                    Key=self._full_key,
-                    UploadId=self._upload_id,
-                    MultipartUpload={"Parts": parts},  # type: ignore[typeddict-item]
-                )
-        self._buffer = bytearray()
-        self.published = True
-
-    def _close_pool(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
-
-    def abort(self) -> None:
-        """See :meth:`Incoming.abort` (after publishing: deletes the object and its marker)."""
-        if self.done:
-            return
-        self.done = True
-        self._buffer = bytearray()
-        self._close_pool()
-        with contextlib.suppress(BotoCoreError, ClientError):  # the sweep takes what stays
-            if self.published:
-                self.store.remove_upload("", self.key)
-            elif self._upload_id is not None:
-                self.store.client.abort_multipart_upload(
-                    Bucket=self.store.bucket, Key=self._full_key, UploadId=self._upload_id
-                )
-
-
-def pending_key(upload_key: str) -> str:
-    """Return the marker key of an upload's key (``uploads/I/U`` -> ``pending/I/U``)."""
-    return "pending/" + upload_key.removeprefix("uploads/")
 
 
 class S3Blobs(Blobs):
