@@ -251,13 +251,9 @@ def _add_ate_layer(
     name = f"{path.layer} ATE"
     _layer(doc, name, path.color_rgb, f"loceval: {path.name} coloured by ATE")
     bins = placement.ate_bins()
-    for run in placement.ate_runs(path):  # one iteration per run of one colour
-        rgb = bins[run.bin_index].color_rgb
-        bulk.add(
-            msp,
-            run.vertices,
-            {"layer": name, "color": _nearest_aci(rgb), "true_color": _int_rgb(rgb)},
-        )
+    colours = [(_nearest_aci(b.color_rgb), _int_rgb(b.color_rgb)) for b in bins]
+    runs = placement.ate_runs(path)
+    bulk.add_coloured(msp, name, [(r.vertices, *colours[r.bin_index]) for r in runs])
     x, y, z = corner
     y -= text_h
     msp.add_text(
