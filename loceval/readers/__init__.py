@@ -101,9 +101,7 @@ def read_trajectory(
         ReaderError: the file is missing or unreadable, the format cannot be told, a
             selector or option does not fit the format, or the reader rejects the content.
     """
-    if stamp not in _STAMP_SOURCES:
-        msg = f"Unknown stamp source {stamp!r}; use 'header' or 'receive'."
-        raise InputError(msg)
+    _check_stamp(stamp)
     spec = (
         parse_source(source, default_format=default_format) if isinstance(source, str) else source
     )
@@ -171,14 +169,18 @@ def read_stored_bag(
         InputError: ``stamp`` is neither ``"header"`` nor ``"receive"``.
         ReaderError: as :func:`read_trajectory` for a bag.
     """
-    if stamp not in _STAMP_SOURCES:
-        msg = f"Unknown stamp source {stamp!r}; use 'header' or 'receive'."
-        raise InputError(msg)
+    _check_stamp(stamp)
     if spec.format is not TrajectoryFormat.BAG:
         msg = f"only a bag is read from a store, not the {spec.format} source {spec.path}"
         raise TypeError(msg)
     _check_options(spec, spec.format, label=str(spec))
     return _read_bag(spec, name=name, stamp=stamp, file=file)
+
+
+def _check_stamp(stamp: str) -> None:
+    if stamp not in _STAMP_SOURCES:
+        msg = f"Unknown stamp source {stamp!r}; use 'header' or 'receive'."
+        raise InputError(msg)
 
 
 def _check_options(spec: SourceSpec, fmt: TrajectoryFormat, *, label: str) -> None:

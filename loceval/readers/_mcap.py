@@ -64,6 +64,10 @@ class _NotServableError(Exception):
     """The file cannot be served from its index; read it the ordinary way."""
 
 
+_NOT_SERVABLE = (_NotServableError, struct.error, UnicodeDecodeError, OSError)
+"""What reading the index raises when it cannot serve: unusable, cut short or garbled."""
+
+
 class RandomAccess(Protocol):
     """Bytes read by position: a local file, or an object read with ranged requests."""
 
@@ -125,7 +129,7 @@ def read_indexed_messages(
     if not isinstance(path, str | os.PathLike):
         try:
             return _read(path, keys)
-        except (_NotServableError, struct.error, UnicodeDecodeError, OSError):
+        except _NOT_SERVABLE:
             return None
     try:
         fd = os.open(path, os.O_RDONLY)
@@ -133,7 +137,7 @@ def read_indexed_messages(
         return None
     try:
         return _read(_LocalFile(fd), keys)
-    except (_NotServableError, struct.error, UnicodeDecodeError, OSError):
+    except _NOT_SERVABLE:
         return None
     finally:
         os.close(fd)
@@ -148,7 +152,7 @@ def index_serves(src: RandomAccess) -> bool:
     """
     try:
         _, _, chunk_indexes = _read_summary(src)
-    except (_NotServableError, struct.error, UnicodeDecodeError, OSError):
+    except _NOT_SERVABLE:
         return False
     return bool(chunk_indexes) and not any(compression for *_, compression in chunk_indexes)
 

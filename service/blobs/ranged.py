@@ -318,7 +318,6 @@ class ObjectFile:
         self.size = self._file.size
         self._memo: dict[tuple[int, int], bytes] = {}
         self._memo_bytes = 0
-        self._spill: dict[tuple[int, int], bytes] = {}
 
     def __reduce__(
         self,
@@ -373,15 +372,12 @@ class ObjectFile:
         of one bag asks for the same index records and messages once per source.
         """
         missing = [r for r in dict.fromkeys(reads) if r not in self._memo]
-        for read, data in zip(missing, self._file.pread_many(missing), strict=True):
+        fetched = dict(zip(missing, self._file.pread_many(missing), strict=True))
+        for read, data in fetched.items():
             if self._memo_bytes + len(data) <= MEMO_BYTES:
                 self._memo[read] = data
                 self._memo_bytes += len(data)
-            else:
-                self._spill[read] = data  # this batch's answer only
-        out = [self._memo[r] if r in self._memo else self._spill[r] for r in reads]
-        self._spill.clear()
-        return out
+        return [self._memo[r] if r in self._memo else fetched[r] for r in reads]
 
     @property
     def fetched_bytes(self) -> int:
