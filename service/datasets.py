@@ -22,6 +22,7 @@ from sqlalchemy import ColumnElement, cast, column, exists, func, literal, selec
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.exc import IntegrityError
 
+from loceval.readers.rosbag import HeldFile
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, get_owned, new_id
 from service.errors import ConflictError, InvalidFieldsError, UploadError
 from service.recordings import inspect_remote_upload, inspect_upload
@@ -203,6 +204,8 @@ def _publish(
     try:  # its errors name the stored path: problem_for() scrubs the server's folders
         remote = runtime.store.remote_file(relative, filename=filename)
         if remote is not None:  # a bag in a bucket: read by ranges where it lies, never copied
+            if received.held is not None:  # its tf and poses, kept as it streamed in
+                remote = HeldFile(remote, received.held)
             inspection = inspect_remote_upload(remote, filename)
         else:
             with runtime.store.pinned():

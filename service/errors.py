@@ -48,6 +48,7 @@ __all__ = [
     "NotReadyError",
     "ServiceUnavailableError",
     "StartupError",
+    "StoreUnavailableError",
     "UploadError",
     "UploadTooLargeError",
     "WebhookRefusedError",
@@ -166,6 +167,15 @@ class JobMemoryError(InputError):
 
 class ServiceUnavailableError(LocevalError):
     """The database or the queue cannot be reached."""
+
+    code: ClassVar[str] = "service.unavailable"
+
+
+class StoreUnavailableError(ServiceUnavailableError):
+    """The object store cannot be reached or refuses to serve (an outage, not the input's fault).
+
+    A job that meets it is put back in the queue, not failed (:mod:`service.tracking`).
+    """
 
     code: ClassVar[str] = "service.unavailable"
 

@@ -11,7 +11,9 @@ The database may be away for a moment (a restart, a failover). Nothing is lost t
 a progress write, a heartbeat or the final write that fails with an outage error is retried with
 backoff (:func:`persist`); a job that still cannot claim, or whose own reads fail, is put back
 (``queued``, the attempt not counted) and :class:`JobDeferred` tells the queue task to queue
-it again later. An outage is never recorded as the job's failure, nor logged as a bug.
+it again later. A job that cannot read its inputs from the object store, or write its
+artifacts there, once the client's own retries are spent is put back the same way. An
+outage is never recorded as the job's failure, nor logged as a bug.
 
 :func:`tracked_job` is the one sequence every executor runs inside; each transition (queued,
 started, succeeded, failed, requeued) is one log line with the kind, job id, project,
@@ -37,7 +39,7 @@ from sqlalchemy import or_, select, update
 from loceval.errors import LocevalError
 from service.adapters import BACKOFF_MAX_S, DATABASE_ERRORS, persist
 from service.db import JobStatus, utcnow
-from service.errors import internal_problem, problem, problem_for
+from service.errors import StoreUnavailableError, internal_problem, problem, problem_for
 from service.logs import log_context, log_transition
 from service.runtime import JobKind, JobModel, Runtime
 
@@ -77,8 +79,17 @@ class JobDeferred(Exception):  # noqa: N818  (not an error of the job: it is put
     """
 
 
-_OUTAGES: Final[tuple[type[Exception], ...]] = (*DATABASE_ERRORS, JobDeferred)
+_OUTAGES: Final[tuple[type[Exception], ...]] = (
+    *DATABASE_ERRORS,
+    JobDeferred,
+    StoreUnavailableError,
+)
 """What ends a job's run without ending the job: it is put back and queued again."""
+
+
+def _unreachable(err: Exception) -> str:
+    """Name what an outage made unreachable: the object store or the database."""
+    return "the object store" if isinstance(err, StoreUnavailableError) else "the database"
 
 
 def beat_interval(lease_s: float) -> float:
@@ -178,13 +189,13 @@ def tracked_job(
             try:
                 yield job
                 values = job.values
+            except _OUTAGES as err:  # an outage, not the job's failure (a store's outage is
+                job.discard_staging()  # a LocevalError too: this clause comes first)
+                _defer(runtime, spec, job_id, attempt, err)
+                msg = f"{kind} {job_id} was put back: {_unreachable(err)} cannot be reached"
+                raise JobDeferred(msg) from err
             except LocevalError as err:
                 status, values = JobStatus.FAILED, {"error": problem_for(err)}
-            except _OUTAGES as err:  # an outage, not the job's failure
-                job.discard_staging()
-                _defer(runtime, spec, job_id, attempt, err)
-                msg = f"{kind} {job_id} was put back: the database cannot be reached"
-                raise JobDeferred(msg) from err
             except Exception:  # a bug in the job: it must not kill the consumer thread
                 error_id = uuid.uuid4().hex[:12]
                 logger.exception("%s %s failed with a bug (error_id=%s)", kind, job_id, error_id)
@@ -246,7 +257,7 @@ def _defer(runtime: Runtime, kind: JobKind, job_id: str, attempt: int, err: Exce
                     attempts=model.attempts - 1,
                     worker=None,
                     heartbeat_at=None,
-                    stage="queued again: the database could not be reached",
+                    stage=f"queued again: {_unreachable(err)} could not be reached",
                     fraction=0.0,
                 )
             )

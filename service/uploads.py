@@ -30,6 +30,7 @@ from python_multipart.exceptions import FormParserError
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
+from loceval.readers.rosbag import HeldMessages, McapScan
 from service.blobs import Blobs, Incoming
 from service.blobs.local import STORAGE_FULL, LocalBlobs, LocalIncoming
 from service.errors import InsufficientStorageError, UploadError, UploadTooLargeError
@@ -60,6 +61,9 @@ class ReceivedFile:
         incoming: the received bytes (publish them with the store, or abort them).
         size: bytes.
         sha256: hex digest.
+        held: an MCAP file's small messages (tf, poses), kept as they streamed past for
+            the inspection of a file read where it lies (:mod:`loceval.readers.rosbag.held`);
+            None for other files and stores.
     """
 
     field: str
@@ -67,6 +71,7 @@ class ReceivedFile:
     incoming: Incoming
     size: int
     sha256: str
+    held: HeldMessages | None = None
 
     @property
     def path(self) -> Path:
@@ -137,6 +142,7 @@ class _Receiver:
         self._filename: str | None = None
         self._text: bytearray | None = None
         self._fh: Incoming | None = None
+        self._scan: McapScan | None = None
         self._digest = hashlib.sha256()
         self._size = 0
         self._total = 0
@@ -213,6 +219,7 @@ class _Receiver:
                 msg = f"Too many files in one request (at most {self.max_files}); send fewer."
                 raise UploadError(msg)
             self._fh = self.store.open_incoming()
+            self._scan = McapScan() if self.store.reads_in_place else None
             self._digest = hashlib.sha256()
             self._size = 0
         else:
@@ -232,6 +239,8 @@ class _Receiver:
                 self._make_room(len(chunk))
             self._fh.write(chunk)  # a local file's full disk is refused there (507)
             self._digest.update(chunk)
+            if self._scan is not None:
+                self._scan.feed(chunk)
         elif self._text is not None:
             self._text += chunk
             if len(self._text) > _MAX_FIELD_BYTES:
@@ -265,9 +274,15 @@ class _Receiver:
         if self._fh is not None:
             self._fh.commit()
             received = ReceivedFile(
-                self._name, self._filename or "", self._fh, self._size, self._digest.hexdigest()
+                self._name,
+                self._filename or "",
+                self._fh,
+                self._size,
+                self._digest.hexdigest(),
+                None if self._scan is None else self._scan.finish(),
             )
             self._fh = None
+            self._scan = None
             if received.size == 0 and not received.filename:
                 received.incoming.abort()  # a browser's empty file input
             else:
@@ -285,6 +300,7 @@ class _Receiver:
         if self._fh is not None:
             self._fh.abort()
             self._fh = None
+        self._scan = None
         self.form.discard()
 
 

@@ -28,7 +28,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
-__all__ = ["RandomAccess", "index_serves", "read_indexed_messages"]
+__all__ = ["HoldsMessages", "RandomAccess", "index_serves", "read_indexed_messages"]
 
 _MAGIC = b"\x89MCAP0\r\n"
 _OP_FOOTER, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK_INDEX, _OP_MESSAGE_INDEX = 0x02, 4, 5, 8, 7
@@ -90,6 +90,20 @@ class ManyAtOnce(RandomAccess, Protocol):
         ...
 
 
+@runtime_checkable
+class HoldsMessages(Protocol):
+    """A file whose small messages are held in memory already (read as it was uploaded)."""
+
+    def held_messages(
+        self, wanted: Sequence[tuple[str, str]]
+    ) -> list[tuple[int, int, bytes]] | None:
+        """Return the wanted channels' messages as :func:`read_indexed_messages` does.
+
+        None when they were not all held: the file is then read through its index.
+        """
+        ...
+
+
 def _pread_many(src: RandomAccess, reads: Sequence[tuple[int, int]]) -> Iterator[bytes]:
     """Yield each ``(size, offset)`` read's bytes in order, ``_BATCH`` reads asked at once."""
     many = src.pread_many if isinstance(src, ManyAtOnce) else None
@@ -125,6 +139,10 @@ def read_indexed_messages(
         None: the file has no usable summary or chunk index, a chunk that holds a wanted
         message is compressed, or a record disagrees with the index.
     """
+    if isinstance(path, HoldsMessages):
+        held = path.held_messages(wanted)
+        if held is not None:
+            return held
     keys = {key: i for i, key in enumerate(wanted)}
     if not isinstance(path, str | os.PathLike):
         try:

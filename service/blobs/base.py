@@ -109,6 +109,8 @@ class Blobs(abc.ABC):
 
     root: Path
     kind: str
+    reads_in_place: bool = False
+    """Whether bags are read where they lie (:meth:`remote_file`), not from a local copy."""
 
     @property
     @abc.abstractmethod
@@ -268,4 +270,4 @@ class Blobs(abc.ABC):
 
     @abc.abstractmethod
     def ping(self) -> None:
-        """Raise :class:`~service.errors.ServiceUnavailableError` when the store does not answer."""
+        """Raise :class:`~service.errors.StoreUnavailableError` when the store does not answer."""

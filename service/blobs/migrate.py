@@ -74,7 +74,7 @@ def migrate_folder(
     Raises:
         ValueError: the runtime's store is not a bucket, or a file's SHA-256 is not the one
             recorded when it was uploaded (the file changed on disk: nothing of it is copied).
-        ServiceUnavailableError: the bucket cannot be reached.
+        StoreUnavailableError: the bucket cannot be reached.
     """
     store = runtime.store
     if not isinstance(store, S3Blobs):

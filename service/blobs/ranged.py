@@ -45,7 +45,7 @@ from botocore.awsrequest import AWSRequest
 from botocore.exceptions import BotoCoreError
 
 from service.blobs.s3client import make_client, store_errors
-from service.errors import ServiceUnavailableError
+from service.errors import StoreUnavailableError
 
 if TYPE_CHECKING:
     from _typeshed import WriteableBuffer
@@ -282,7 +282,7 @@ class RangedFile(io.RawIOBase):
             f"The object store cannot be used (ranged GET: {failure}); "
             "try again in a minute (GET /readyz shows when it is back)."
         )
-        raise ServiceUnavailableError(msg)
+        raise StoreUnavailableError(msg)
 
 
 class ObjectFile:

@@ -90,6 +90,7 @@ class S3Blobs(Blobs):
     """
 
     kind = "s3"
+    reads_in_place = True
 
     def __init__(
         self,

@@ -15,7 +15,7 @@ import boto3
 from botocore.config import Config
 from botocore.exceptions import BotoCoreError, ClientError
 
-from service.errors import ServiceUnavailableError
+from service.errors import StoreUnavailableError
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
@@ -27,7 +27,7 @@ T = TypeVar("T")
 
 @contextlib.contextmanager
 def store_errors() -> Iterator[None]:
-    """Raise ServiceUnavailableError when the object store fails (unreachable, refusing)."""
+    """Raise StoreUnavailableError when the object store fails (unreachable, refusing)."""
     try:
         yield
     except (BotoCoreError, ClientError) as err:
@@ -36,7 +36,7 @@ def store_errors() -> Iterator[None]:
             f"The object store cannot be used ({type(err).__name__}{' ' + code if code else ''}); "
             "try again in a minute (GET /readyz shows when it is back)."
         )
-        raise ServiceUnavailableError(msg) from err
+        raise StoreUnavailableError(msg) from err
 
 
 def is_missing(err: ClientError) -> bool:
@@ -48,7 +48,7 @@ def unless_missing(call: Callable[[], T]) -> T | None:
     """Return ``call()``, or None when the store answers that there is no such object.
 
     Raises:
-        ServiceUnavailableError: the store failed otherwise (see :func:`store_errors`).
+        StoreUnavailableError: the store failed otherwise (see :func:`store_errors`).
     """
     with store_errors():
         try:

@@ -16,7 +16,9 @@ chain ``tf:PARENT:CHILD`` (composed by :mod:`loceval.readers.tftree`). Only the 
 are read and deserialized; image payloads are never decoded. Two shortcuts keep large
 camera bags cheap: standard ``tf2_msgs/msg/TFMessage`` payloads in CDR are decoded by a
 small struct-based parser instead of generic deserialization, and indexed, uncompressed
-MCAP files are read through their message index (see :mod:`loceval.readers._mcap`).
+MCAP files are read through their message index (see :mod:`loceval.readers._mcap`), and
+an MCAP file uploaded into object storage keeps its small messages from the upload's stream
+(:mod:`.held`), so inspecting it reads none of them back.
 
 Every rosbags error, and missing files, become :class:`~loceval.errors.ReaderError` here.
 """
@@ -39,6 +41,7 @@ from loceval.readers.rosbag.bagfile import (
     raw_messages,
     serves_by_index,
 )
+from loceval.readers.rosbag.held import HeldFile, HeldMessages, McapScan
 from loceval.readers.rosbag.messages import (
     SUPPORTED_MSGTYPES,
     TF_MSGTYPE,
@@ -60,6 +63,9 @@ __all__ = [
     "TF_MSGTYPE",
     "BagFormat",
     "BagOverview",
+    "HeldFile",
+    "HeldMessages",
+    "McapScan",
     "PoseKind",
     "RemoteFile",
     "StampSource",

@@ -4,7 +4,8 @@ Machine A runs ``loceval serve --no-consumer`` on its own data folder, machine B
 worker`` on another; neither sees the other's folder. Uploads go through A into the bucket, B
 reads them from the bucket (its input cache) and writes the artifacts there, A streams them
 back. Killing A mid-upload leaves no object and, after A's next start, no open multipart
-upload; killing B mid-job loses nothing (the job runs again, and succeeds once).
+upload; killing B mid-job loses nothing (the job runs again, and succeeds once); cutting B's
+way to the bucket mid-job puts the job back in the queue, and it succeeds once the way is open.
 
 Needs PostgreSQL (127.0.0.1:5432, user postgres, trust auth, a database ``test``: a fresh
 database is created and dropped), Redis (127.0.0.1:6379: an empty database number is used and
@@ -13,6 +14,7 @@ only this test's keys are deleted) and SeaweedFS; each is skipped without (faile
 
 from __future__ import annotations
 
+import json
 import secrets
 import signal
 import socket
@@ -40,7 +42,7 @@ from tests.service.conftest import (
     upload,
     wait_for_evaluation,
 )
-from tests.service.s3.conftest import SeaweedFS, object_keys, open_multipart_uploads
+from tests.service.s3.conftest import Gate, SeaweedFS, object_keys, open_multipart_uploads
 
 pytestmark = [pytest.mark.slow]
 
@@ -369,3 +371,47 @@ def test_worker_killed_mid_job_loses_nothing(
         server.stop()
     assert _local_blobs(machines["b"]) == []
     assert not any((machines["b"] / "staging").rglob("*.json"))
+
+
+def test_a_store_outage_puts_the_job_back_and_it_succeeds_once_the_store_returns(
+    machines: dict[str, Any], seaweedfs: SeaweedFS, tmp_path: Path, rng: np.random.Generator
+) -> None:
+    """The worker's way to the bucket is cut while it fetches a job's inputs: the job goes
+    back to the queue (not failed, the attempt not counted) and succeeds once it is back."""
+    gate = Gate(seaweedfs)
+    truth = make_trajectory(rng, 500)
+    reference = write_tum(tmp_path / "truth.txt", truth)
+    estimate = write_tum(tmp_path / "slam.txt", perturb(truth, rng))
+    server = start_server(machines["a"], env=machines["env"], args=("--no-consumer",))
+    worker: ServiceProcess | None = None
+    try:
+        worker = start_worker(machines["b"], {**machines["env"], "AWS_ENDPOINT_URL": gate.endpoint})
+        with server.client() as client:
+            ref = upload(client, reference)
+            est = upload(client, estimate)
+            gate.shut()
+            created = submit(client, {"dataset_id": ref["id"]}, [{"dataset_id": est["id"]}])
+            url = f"/api/v1/evaluations/{created['id']}"
+
+            def put_back() -> bool:
+                seen = client.get(url).json()
+                assert seen["status"] in {"queued", "running"}, seen  # never failed
+                return "object store could not be reached" in seen["progress"]["stage"]
+
+            assert _wait_until(put_back, timeout=120), client.get(url).json()
+            waiting = client.get(url).json()
+            assert waiting["attempts"] == 0  # the outage's run is not counted
+            gate.open()
+            done = succeeded(wait_for_evaluation(client, created["id"], timeout=240))
+            assert done["attempts"] == 1
+            assert done["result"]["estimates"][0]["matched"] == 500
+    finally:
+        gate.shut()
+        if worker is not None:
+            worker.stop()
+        server.stop()
+    events = [json.loads(line) for line in worker.lines if line.startswith("{")]
+    deferred = [e for e in events if e.get("event") == "deferred"]
+    assert deferred, "the worker logged no deferral"
+    assert {e["error"] for e in deferred} == {"StoreUnavailableError"}
+    assert not [e for e in events if e["level"] == "error" or "Traceback" in e["message"]]

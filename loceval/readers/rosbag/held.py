@@ -1,0 +1,333 @@
+"""Keep an MCAP file's small messages while its bytes stream past, once, in order.
+
+An upload into a bucket passes through the API once. Inspecting it afterwards reads its tf
+and pose messages back out of the bucket through the index (:mod:`loceval.readers._mcap`):
+in a camera bag, a ranged request per run of tf messages between two images, thousands of
+round trips for a bag of a few GB. :class:`McapScan` is fed the upload's bytes as they
+arrive and keeps every message of at most :data:`HELD_MESSAGE_BYTES`, up to
+:data:`HELD_BYTES` in all (when more arrive, the channel that holds the most is let go: a
+camera or a point cloud, whose payloads nobody reads from here); images and other large
+payloads are counted past, never copied. :class:`HeldFile` then serves the messages of the
+channels it kept from memory and reads anything else where the file lies.
+
+It holds messages only for the files the index reader would serve (a complete MCAP file
+with chunk indexes, uncompressed chunks and no messages outside them), so what it returns
+is what :func:`~loceval.readers._mcap.read_indexed_messages` would have read: every
+message of the wanted channels, by log time, ties in file order. Anything else (another
+format, compressed chunks, a record that does not fit its parent, a file cut short) makes
+the scan give up and hold nothing; the file is then read the ordinary way. Record layouts
+follow the MCAP specification (https://mcap.dev/spec).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Generator, Sequence
+from typing import BinaryIO
+
+from loceval.readers._mcap import ManyAtOnce
+from loceval.readers.rosbag.bagfile import RemoteFile
+
+__all__ = ["HELD_BYTES", "HELD_MESSAGE_BYTES", "HeldFile", "HeldMessages", "McapScan"]
+
+HELD_BYTES = 32 * 1024**2
+"""The most message bytes (with a per-message allowance) one scan holds."""
+HELD_MESSAGE_BYTES = 1024**2
+"""A channel with a message larger than this is not held (an image, a point cloud)."""
+_PER_MESSAGE = 64
+"""Bytes counted per held message on top of its data: the list entry and its tuple."""
+_MAX_DEFINITION = 4 * 1024**2
+"""The largest schema or channel record read (a message definition is a few KB)."""
+_MAX_COMPRESSION_NAME = 64
+
+_MAGIC = b"\x89MCAP0\r\n"
+_OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x02, 0x03, 0x04, 0x05, 0x06
+_OP_CHUNK_INDEX = 0x08
+_RECORD_HEAD = struct.Struct("<BQ")
+_MESSAGE_HEAD = struct.Struct("<HIQQ")
+_CHUNK_HEAD = struct.Struct("<QQQII")  # start and end time, uncompressed size, crc, name length
+_U16_U16 = struct.Struct("<HH")
+_U16 = struct.Struct("<H")
+_U32 = struct.Struct("<I")
+_U64 = struct.Struct("<Q")
+
+_Request = Generator[int, bytes, None]
+"""The parser: it yields ``n >= 0`` to take the next ``n`` bytes (sent back), ``-n`` to skip."""
+
+
+class _UnusableError(Exception):
+    """The bytes are no MCAP file the index reader would serve; hold nothing."""
+
+
+class HeldMessages:
+    """The messages a scan held, by channel, with the file's schemas and channels.
+
+    Attributes:
+        schemas: schema id -> name (the message type, ``tf2_msgs/msg/TFMessage``).
+        channels: channel id -> ``(topic, schema id, message encoding)``.
+    """
+
+    def __init__(
+        self,
+        schemas: dict[int, str],
+        channels: dict[int, tuple[str, int, str]],
+        held: dict[int, list[tuple[int, int, bytes]]],
+        dropped: set[int],
+    ) -> None:
+        """Wrap what a finished scan found (see :meth:`McapScan.finish`)."""
+        self.schemas = schemas
+        self.channels = channels
+        self._held = held
+        self._dropped = dropped
+
+    def messages(self, wanted: Sequence[tuple[str, str]]) -> list[tuple[int, int, bytes]] | None:
+        """Return every message of the wanted channels, or None when one was not held.
+
+        Args:
+            wanted: ``(topic, msgtype)`` pairs.
+
+        Returns:
+            ``(log_time_ns, index into wanted, data)`` per message, sorted by log time
+            (ties in file order), as :func:`~loceval.readers._mcap.read_indexed_messages`
+            returns them; None when a wanted channel was let go or is not CDR-encoded.
+        """
+        keys = {key: i for i, key in enumerate(wanted)}
+        found: list[tuple[int, int, int, bytes]] = []
+        for channel_id, (topic, schema_id, encoding) in self.channels.items():
+            index = keys.get((topic, self.schemas.get(schema_id, "")))
+            if index is None:
+                continue
+            if encoding != "cdr" or channel_id in self._dropped:
+                return None
+            found.extend((t, seq, index, data) for t, seq, data in self._held.get(channel_id, ()))
+        found.sort(key=lambda m: (m[0], m[1]))
+        return [(t, index, data) for t, _, index, data in found]
+
+
+class McapScan:
+    """Fed an MCAP file's bytes in order, keeps its small messages (see the module doc)."""
+
+    def __init__(self, *, held_bytes: int = HELD_BYTES) -> None:
+        """Start before the file's first byte, holding at most ``held_bytes``."""
+        self._limit = held_bytes
+        self._schemas: dict[int, str] = {}
+        self._channels: dict[int, tuple[str, int, str]] = {}
+        self._held: dict[int, list[tuple[int, int, bytes]]] = {}
+        self._held_size: dict[int, int] = {}
+        self._dropped: set[int] = set()
+        self._total = 0
+        self._seq = 0
+        self._indexed = False
+        self._complete = False
+        self._usable = True
+        self._parser: _Request | None = self._file()
+        self._want = next(self._parser)
+        self._buffer = bytearray()
+
+    def feed(self, data: bytes | memoryview) -> None:
+        """Take the file's next bytes."""
+        if self._parser is None:
+            if data and self._usable:  # bytes past the closing magic: not an MCAP file
+                self._give_up()
+            return
+        view = memoryview(data)
+        pos, end = 0, len(view)
+        going = True
+        while going:
+            want = self._want
+            if want < 0:  # skip: count the bytes past without keeping them
+                step = min(-want, end - pos)
+                pos += step
+                self._want += step
+                if self._want < 0:
+                    return
+                going = self._send(b"")
+            elif self._buffer or end - pos < want:  # the piece ends inside the request
+                step = min(want - len(self._buffer), end - pos)
+                self._buffer += view[pos : pos + step]
+                pos += step
+                if len(self._buffer) < want:
+                    return
+                taken = bytes(self._buffer)
+                self._buffer.clear()
+                going = self._send(taken)
+            else:
+                pos += want
+                going = self._send(bytes(view[pos - want : pos]))
+        if pos < end and self._usable:
+            self._give_up()
+
+    def finish(self) -> HeldMessages | None:
+        """Return what was held, or None: not a complete MCAP file the index would serve."""
+        if not (self._usable and self._complete and self._indexed):
+            return None
+        return HeldMessages(self._schemas, self._channels, self._held, self._dropped)
+
+    # -- the parser ------------------------------------------------------------------------
+
+    def _send(self, taken: bytes) -> bool:
+        """Hand the parser the bytes it asked for; return whether it asks for more."""
+        if self._parser is None:
+            return False
+        try:
+            self._want = self._parser.send(taken)
+        except StopIteration:
+            self._parser = None
+        except (_UnusableError, struct.error, UnicodeDecodeError):
+            self._give_up()
+        return self._parser is not None
+
+    def _give_up(self) -> None:
+        self._usable = False
+        self._parser = None
+        self._held.clear()
+        self._buffer.clear()
+
+    def _file(self) -> _Request:
+        if (yield len(_MAGIC)) != _MAGIC:
+            raise _UnusableError
+        while True:
+            opcode, length = _RECORD_HEAD.unpack((yield _RECORD_HEAD.size))
+            if opcode == _OP_CHUNK:
+                yield from self._chunk(length)
+            elif opcode in {_OP_SCHEMA, _OP_CHANNEL}:
+                if length > _MAX_DEFINITION:
+                    raise _UnusableError
+                self._definition(opcode, (yield length))
+            elif opcode == _OP_MESSAGE:  # a message outside any chunk: no index serves it
+                raise _UnusableError
+            elif opcode == _OP_FOOTER:
+                yield -length
+                if (yield len(_MAGIC)) != _MAGIC:
+                    raise _UnusableError
+                self._complete = True
+                return
+            else:
+                self._indexed |= opcode == _OP_CHUNK_INDEX
+                yield -length
+
+    def _chunk(self, length: int) -> _Request:
+        head = yield _CHUNK_HEAD.size
+        name_length = _CHUNK_HEAD.unpack(head)[4]
+        if name_length > _MAX_COMPRESSION_NAME:
+            raise _UnusableError
+        if (yield name_length):  # compressed records: the index reader cannot serve them
+            raise _UnusableError
+        (rest,) = _U64.unpack((yield _U64.size))
+        if rest != length - _CHUNK_HEAD.size - name_length - _U64.size:
+            raise _UnusableError
+        while rest > 0:
+            opcode, size = _RECORD_HEAD.unpack((yield _RECORD_HEAD.size))
+            rest -= _RECORD_HEAD.size + size
+            if rest < 0:
+                raise _UnusableError
+            if opcode == _OP_MESSAGE:
+                if size < _MESSAGE_HEAD.size:
+                    raise _UnusableError
+                channel_id, _, log_time, _ = _MESSAGE_HEAD.unpack((yield _MESSAGE_HEAD.size))
+                size -= _MESSAGE_HEAD.size
+                if self._holds(channel_id, size):
+                    self._hold(channel_id, log_time, (yield size))
+                else:
+                    yield -size
+            elif opcode in {_OP_SCHEMA, _OP_CHANNEL} and size <= _MAX_DEFINITION:
+                self._definition(opcode, (yield size))
+            else:
+                yield -size
+
+    def _definition(self, opcode: int, body: bytes) -> None:
+        if opcode == _OP_SCHEMA:
+            (schema_id,) = _U16.unpack_from(body)
+            self._schemas[schema_id] = _string(body, _U16.size)[0]
+        else:
+            channel_id, schema_id = _U16_U16.unpack_from(body)
+            topic, at = _string(body, _U16_U16.size)
+            encoding, _ = _string(body, at)
+            self._channels[channel_id] = (topic, schema_id, encoding)
+
+    def _holds(self, channel_id: int, size: int) -> bool:
+        if channel_id in self._dropped:
+            return False
+        if size > HELD_MESSAGE_BYTES:
+            self._drop(channel_id)
+            return False
+        return True
+
+    def _hold(self, channel_id: int, log_time: int, data: bytes) -> None:
+        self._held.setdefault(channel_id, []).append((log_time, self._seq, data))
+        self._seq += 1
+        cost = len(data) + _PER_MESSAGE
+        self._held_size[channel_id] = self._held_size.get(channel_id, 0) + cost
+        self._total += cost
+        while self._total > self._limit:
+            self._drop(max(self._held_size, key=self._held_size.__getitem__))
+
+    def _drop(self, channel_id: int) -> None:
+        self._dropped.add(channel_id)
+        self._held.pop(channel_id, None)
+        self._total -= self._held_size.pop(channel_id, 0)
+
+
+def _string(buffer: bytes, pos: int) -> tuple[str, int]:
+    (length,) = _U32.unpack_from(buffer, pos)
+    end = pos + _U32.size + length
+    if end > len(buffer):
+        raise _UnusableError
+    return buffer[pos + _U32.size : end].decode(), end
+
+
+class HeldFile:
+    """A bag file read where it lies, whose small messages were held while it streamed in.
+
+    A :class:`~loceval.readers.rosbag.RemoteFile` (the file's bytes are read from it) with
+    :meth:`held_messages`: the index reader takes the wanted channels' messages from memory
+    when the scan held them all, and reads the file itself otherwise.
+    """
+
+    def __init__(self, file: RemoteFile, held: HeldMessages) -> None:
+        """Serve ``file``'s bytes, and ``held``'s messages without reading them again."""
+        self._file = file
+        self._messages = held
+
+    def held_messages(
+        self, wanted: Sequence[tuple[str, str]]
+    ) -> list[tuple[int, int, bytes]] | None:
+        """See :meth:`HeldMessages.messages`."""
+        return self._messages.messages(wanted)
+
+    @property
+    def size(self) -> int:
+        """The file's size in bytes."""
+        return self._file.size
+
+    @property
+    def name(self) -> str:
+        """The file name."""
+        return self._file.name
+
+    @property
+    def suffix(self) -> str:
+        """The file name's suffix."""
+        return self._file.suffix
+
+    def exists(self) -> bool:
+        """Whether the file exists."""
+        return self._file.exists()
+
+    def is_dir(self) -> bool:
+        """False: a file."""
+        return self._file.is_dir()
+
+    def open(self, mode: str = "rb") -> BinaryIO:
+        """Open the file itself for reading (rosbags' readers seek in it)."""
+        return self._file.open(mode)
+
+    def pread(self, size: int, offset: int) -> bytes:
+        """Read ``size`` bytes at ``offset`` of the file."""
+        return self._file.pread(size, offset)
+
+    def pread_many(self, reads: Sequence[tuple[int, int]]) -> list[bytes]:
+        """Read each ``(size, offset)`` of the file (at once, where it can)."""
+        if isinstance(self._file, ManyAtOnce):
+            return self._file.pread_many(reads)
+        return [self._file.pread(size, offset) for size, offset in reads]
