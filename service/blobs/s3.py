@@ -50,6 +50,7 @@ from service.blobs.ranged import ObjectFile
 from service.blobs.s3client import make_client, store_errors, unless_missing
 from service.blobs.s3upload import PART_BYTES, S3Incoming, pending_key
 from service.errors import StartupError, register_private_root
+from service.settings import Settings
 from service.storage import Swept
 
 if TYPE_CHECKING:
@@ -66,8 +67,9 @@ __all__ = [
     "store_errors",
 ]
 
-RANGED_INPUT_BYTES: Final = 256 << 20
-"""The default size from which an evaluation reads a bag in the bucket by ranged reads."""
+RANGED_INPUT_BYTES: Final[int] = Settings.model_fields["blob_ranged_bytes"].default
+"""The default size from which an evaluation reads a bag in the bucket by ranged reads
+(``LOCEVAL_BLOB_RANGED_BYTES``'s default: one figure, in the settings)."""
 _DOWNLOAD_CHUNK: Final = 1 << 20
 _TRANSFER: Final = TransferConfig(
     multipart_threshold=64 << 20, multipart_chunksize=8 << 20, max_concurrency=4
