@@ -17,8 +17,14 @@ It uploads one generated ROS 2 MCAP bag (``benchmarks.bags.generate_bag``: tf at
 640x480 images at 15 Hz; cached in ``benchmarks/_work/object_store``), streaming it from disk,
 then evaluates ``tf:odom:base_link`` against ``tf:map:base_link`` of it (result.json only),
 and prints per backend: upload time and throughput, the job's time (queue to succeeded,
-including the worker's fetch into its cache), and the peak RSS growth of the API's and the
-worker's process trees (the job's own process included) over their idle baseline.
+including the worker's fetch into its cache), the peak RSS growth of the API's and the
+worker's process trees (the job's own process included) over their idle baseline, and the
+CPU seconds the API's process tree and SeaweedFS spent during the upload.
+
+SeaweedFS runs on the same machine: it takes about 19-21 CPU seconds per 2 GB (a bare boto3
+upload of the bag, no loceval involved, takes 11 s on two vCPUs), so on a small machine the
+bucket's throughput is bound by the store's CPU, which the API's upload competes with; in a
+deployment the store runs elsewhere.
 
 With ``--code LABEL=DIR`` (repeatable) the service runs from each source tree in turn
 (``PYTHONPATH=DIR``, the same virtual environment): a before/after comparison in one run.
@@ -53,7 +59,7 @@ import redis
 from botocore.config import Config
 from psycopg import sql
 
-from benchmarks.upload_load import RssSampler, _free_port, prepare_recordings
+from benchmarks.upload_load import RssSampler, _descendants, _free_port, prepare_recordings
 
 POSTGRES = "host=127.0.0.1 port=5432 user=postgres dbname=postgres connect_timeout=5"
 REDIS = "redis://127.0.0.1:6379"
@@ -73,6 +79,8 @@ class Figures:
     worker_idle_mib: float
     worker_peak_mib: float
     status: str
+    api_cpu_s: float = 0.0
+    store_cpu_s: float = 0.0
 
 
 def _loceval() -> str:
@@ -113,8 +121,8 @@ def _redis() -> Iterator[str]:
 
 
 @contextlib.contextmanager
-def _seaweedfs(folder: Path) -> Iterator[dict[str, str]]:
-    """Run ``weed server -s3`` on loopback ports; yield the AWS_* variables for it."""
+def _seaweedfs(folder: Path) -> Iterator[tuple[dict[str, str], int]]:
+    """Run ``weed server -s3`` on loopback ports; yield the AWS_* variables for it, its pid."""
     weed = Path(sys.executable).with_name("weed")
     folder.mkdir(parents=True, exist_ok=True)
     ports = []
@@ -147,7 +155,7 @@ def _seaweedfs(folder: Path) -> Iterator[dict[str, str]]:
     )
     env = {"AWS_ENDPOINT_URL": f"http://127.0.0.1:{s3}", "AWS_REGION": "us-east-1", **_CREDENTIALS}
     try:
-        yield env
+        yield env, process.pid
     finally:
         process.terminate()
         try:
@@ -212,6 +220,20 @@ def _wait_ready(url: str, process: subprocess.Popen[bytes], log: Path) -> None:
     raise RuntimeError(msg)
 
 
+def _cpu_s(root: int | None) -> float:
+    """Return the CPU seconds (user + system) a process tree has used so far (0: no tree)."""
+    if root is None:
+        return 0.0
+    ticks = 0
+    for pid in _descendants(root):
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        ticks += int(fields[11]) + int(fields[12])  # utime, stime
+    return ticks / os.sysconf("SC_CLK_TCK")
+
+
 def _peak(sampler: RssSampler, start: float, end: float) -> float:
     window = sampler.window(start, end)
     return max((s.rss_mib for s in window), default=0.0)
@@ -266,8 +288,9 @@ def run_backend(
         if code is not None:
             env["PYTHONPATH"] = str(code.resolve())
         api_dir, worker_dir = folder / "api", folder / "api"
+        store_pid: int | None = None
         if backend == "s3":
-            aws = stack.enter_context(_seaweedfs(folder / "seaweedfs"))
+            aws, store_pid = stack.enter_context(_seaweedfs(folder / "seaweedfs"))
             env.update(aws, LOCEVAL_BLOB_URL=f"s3://{_bucket(aws)}/bench")
             worker_dir = folder / "worker"
         port = _free_port()
@@ -306,12 +329,14 @@ def run_backend(
         headers = {"Authorization": f"Bearer {key}"}
         with httpx.Client(base_url=url, headers=headers, timeout=timeout) as http:
             with bag.open("rb") as fh:
+                cpu = _cpu_s(api.pid), _cpu_s(store_pid)
                 start = time.perf_counter()
                 answer = http.post(
                     "/api/v1/datasets",
                     files={"file": (bag.name, fh, "application/octet-stream")},
                 )
                 uploaded = time.perf_counter()
+                api_cpu, store_cpu = _cpu_s(api.pid) - cpu[0], _cpu_s(store_pid) - cpu[1]
             if answer.status_code != 201:
                 msg = f"upload: {answer.status_code} {answer.text[:500]}"
                 raise RuntimeError(msg)
@@ -327,6 +352,8 @@ def run_backend(
             _peak(worker_rss, idle_end - BASELINE_S, idle_end),
             _peak(worker_rss, uploaded, finished),
             status,
+            api_cpu,
+            store_cpu,
         )
 
 
@@ -360,14 +387,16 @@ def main(argv: list[str] | None = None) -> int:
                 print(
                     f"round {round_ + 1} {label or '-'} {backend}: upload {figures.upload_s:.1f} s "
                     f"({figures.size_bytes / _MB / figures.upload_s:.1f} MB/s), "
-                    f"API peak {figures.api_peak_mib:.0f} MiB, {figures.status}",
+                    f"API peak {figures.api_peak_mib:.0f} MiB, CPU s: API "
+                    f"{figures.api_cpu_s:.1f}, store {figures.store_cpu_s:.1f}; {figures.status}",
                     flush=True,
                 )
     size_mb = recording.size_bytes / _MB
     print(f"\nbag: {size_mb:,.0f} MB ({recording.path.name}); medians of {args.repeats}")
     print(
         f"{'code':8} {'backend':8} {'upload s':>9} {'MB/s':>7} {'job s':>7} "
-        f"{'API idle→peak MiB':>19} {'worker idle→peak MiB':>22}"
+        f"{'API idle→peak MiB':>19} {'worker idle→peak MiB':>22} {'API CPU s':>10} "
+        f"{'store CPU s':>12}"
     )
     medians: dict[tuple[str, str], float] = {}
     for (label, backend), runs in results.items():
@@ -380,7 +409,9 @@ def main(argv: list[str] | None = None) -> int:
             f"{statistics.median(f.api_idle_mib for f in runs):8.0f} → "
             f"{statistics.median(f.api_peak_mib for f in runs):6.0f}   "
             f"{statistics.median(f.worker_idle_mib for f in runs):9.0f} → "
-            f"{statistics.median(f.worker_peak_mib for f in runs):7.0f}"
+            f"{statistics.median(f.worker_peak_mib for f in runs):7.0f} "
+            f"{statistics.median(f.api_cpu_s for f in runs):10.1f} "
+            f"{statistics.median(f.store_cpu_s for f in runs):12.1f}"
         )
     for label, _ in codes:
         if (label, "local") in medians and (label, "s3") in medians:

@@ -66,8 +66,10 @@ class S3Incoming(Incoming):
     def _write(self, chunk: bytes) -> None:
         self._buffer += chunk
         while len(self._buffer) >= PART_BYTES:
-            self._send(bytes(self._buffer[:PART_BYTES]))
+            with memoryview(self._buffer) as view:  # one copy into the part, not two
+                part = bytes(view[:PART_BYTES])
             del self._buffer[:PART_BYTES]
+            self._send(part)
 
     def _send(self, data: bytes) -> None:
         client = self.store.client

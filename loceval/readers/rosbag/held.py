@@ -4,10 +4,10 @@ An upload into a bucket passes through the API once. Inspecting it afterwards re
 and pose messages back out of the bucket through the index (:mod:`loceval.readers._mcap`):
 in a camera bag, a ranged request per run of tf messages between two images, thousands of
 round trips for a bag of a few GB. :class:`McapScan` is fed the upload's bytes as they
-arrive and keeps every message of at most :data:`HELD_MESSAGE_BYTES`, up to
-:data:`HELD_BYTES` in all (when more arrive, the channel that holds the most is let go: a
-camera or a point cloud, whose payloads nobody reads from here); images and other large
-payloads are counted past, never copied. :class:`HeldFile` then serves the messages of the
+arrive and keeps the messages an inspection reads (tf and the pose types), each of at most
+:data:`HELD_MESSAGE_BYTES`, up to :data:`HELD_BYTES` in all (when more arrive, the channel
+that holds the most is let go and read from the file later); images and other payloads are
+counted past, never copied. :class:`HeldFile` then serves the messages of the
 channels it kept from memory and reads anything else where the file lies.
 
 It holds messages only for the files the index reader would serve (a complete MCAP file
@@ -22,13 +22,21 @@ follow the MCAP specification (https://mcap.dev/spec).
 from __future__ import annotations
 
 import struct
-from collections.abc import Generator, Sequence
+from collections.abc import Callable, Generator, Sequence
 from typing import BinaryIO
 
 from loceval.readers._mcap import ManyAtOnce
-from loceval.readers.rosbag.bagfile import RemoteFile
+from loceval.readers.rosbag.bagfile import RemoteFile, normalize_msgtype
+from loceval.readers.rosbag.messages import SUPPORTED_MSGTYPES
 
-__all__ = ["HELD_BYTES", "HELD_MESSAGE_BYTES", "HeldFile", "HeldMessages", "McapScan"]
+__all__ = [
+    "HELD_BYTES",
+    "HELD_MESSAGE_BYTES",
+    "HeldFile",
+    "HeldMessages",
+    "McapScan",
+    "inspection_reads",
+]
 
 HELD_BYTES = 32 * 1024**2
 """The most message bytes (with a per-message allowance) one scan holds."""
@@ -57,6 +65,11 @@ _Request = Generator[int, bytes, None]
 
 class _UnusableError(Exception):
     """The bytes are no MCAP file the index reader would serve; hold nothing."""
+
+
+def inspection_reads(msgtype: str) -> bool:
+    """Whether an inspection reads the messages of this type: tf, and the pose types."""
+    return normalize_msgtype(msgtype) in SUPPORTED_MSGTYPES
 
 
 class HeldMessages:
@@ -107,8 +120,21 @@ class HeldMessages:
 class McapScan:
     """Fed an MCAP file's bytes in order, keeps its small messages (see the module doc)."""
 
-    def __init__(self, *, held_bytes: int = HELD_BYTES) -> None:
-        """Start before the file's first byte, holding at most ``held_bytes``."""
+    def __init__(
+        self,
+        *,
+        keeps: Callable[[str], bool] = inspection_reads,
+        held_bytes: int = HELD_BYTES,
+    ) -> None:
+        """Start before the file's first byte.
+
+        Args:
+            keeps: whether to hold the messages of a channel of this schema (message type);
+                by default those an inspection reads (:func:`inspection_reads`). A message
+                whose channel is not defined yet is held.
+            held_bytes: the most held at once (see :data:`HELD_BYTES`).
+        """
+        self._keeps = keeps
         self._limit = held_bytes
         self._schemas: dict[int, str] = {}
         self._channels: dict[int, tuple[str, int, str]] = {}
@@ -248,7 +274,9 @@ class McapScan:
     def _holds(self, channel_id: int, size: int) -> bool:
         if channel_id in self._dropped:
             return False
-        if size > HELD_MESSAGE_BYTES:
+        channel = self._channels.get(channel_id)
+        schema = None if channel is None else self._schemas.get(channel[1])
+        if size > HELD_MESSAGE_BYTES or (schema is not None and not self._keeps(schema)):
             self._drop(channel_id)
             return False
         return True

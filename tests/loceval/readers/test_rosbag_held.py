@@ -10,7 +10,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 import pytest
@@ -80,7 +80,7 @@ def pieces(data: bytes, seed: int, largest: int) -> Iterator[bytes]:
         start = end
 
 
-def scanned(data: bytes, *, largest: int = 1 << 16, seed: int = 7, **kwargs: int) -> McapScan:
+def scanned(data: bytes, *, largest: int = 1 << 16, seed: int = 7, **kwargs: Any) -> McapScan:
     scan = McapScan(**kwargs)
     for piece in pieces(data, seed, largest):
         scan.feed(piece)
@@ -101,8 +101,14 @@ def test_a_scan_holds_what_the_index_reads_however_the_bytes_are_cut(tmp_path, r
     assert held.messages(WANTED) == expected
     for key in WANTED:  # one channel at a time, as the readers ask
         assert held.messages([key]) == read_indexed_messages(mcap, [key])
-    assert held.messages([("/camera", bf.IMAGE)]) is not None  # 30 kB images: held too
+    assert held.messages([("/camera", bf.IMAGE)]) is None  # no inspection reads images
     assert held.messages([("/nothing", bf.TF)]) == []
+    everything = scanned(mcap.read_bytes(), keeps=lambda _: True).finish()
+    assert everything is not None
+    cameras = read_indexed_messages(mcap, [("/camera", bf.IMAGE)])
+    assert everything.messages([("/camera", bf.IMAGE)]) == cameras
+    assert cameras is not None
+    assert len(cameras) == 60
 
 
 def test_inspecting_a_held_file_reads_no_message_again(tmp_path, rng):
@@ -125,7 +131,7 @@ def test_inspecting_a_held_file_reads_no_message_again(tmp_path, rng):
 def test_a_channel_past_the_limit_is_let_go_and_read_from_the_file(tmp_path, rng):
     """The channel holding most goes when the limit is passed; asking for it gives None."""
     mcap = camera_bag(tmp_path, rng)
-    held = scanned(mcap.read_bytes(), held_bytes=200_000).finish()  # images: 60 x 30 kB
+    held = scanned(mcap.read_bytes(), keeps=lambda _: True, held_bytes=200_000).finish()
     assert held is not None
     assert held.messages([("/camera", bf.IMAGE)]) is None
     assert held.messages(WANTED) == read_indexed_messages(mcap, WANTED)
@@ -148,7 +154,7 @@ def test_a_message_over_the_per_message_limit_lets_its_channel_go(tmp_path, rng)
     ]
     directory = bf.write_bag(bf.bag_path(tmp_path, "mcap"), records, fmt="mcap")
     mcap = next(directory.glob("*.mcap"))
-    held = scanned(mcap.read_bytes()).finish()
+    held = scanned(mcap.read_bytes(), keeps=lambda _: True).finish()
     assert held is not None
     assert held.messages([("/camera", bf.IMAGE)]) is None
     assert held.messages([("/tf", bf.TF)]) == read_indexed_messages(mcap, [("/tf", bf.TF)])
