@@ -20,10 +20,10 @@ doubles and get absolute model coordinates, so they drop onto the building model
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Hashable, Sequence
+from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Final
+from typing import Final, TypeVar, cast
 
 import numpy as np
 
@@ -53,6 +53,8 @@ from loceval.core.gaps import path_breaks
 from loceval.core.geometry import SimilarityTransform
 from loceval.core.polyline import simplify_rdp, simplify_rdp_runs
 from loceval.evaluation import EstimateResult, EvaluationResult
+
+_T = TypeVar("_T")
 
 __all__ = [
     "BUILDING_SUFFIXES",
@@ -223,6 +225,18 @@ class Placement:
     title: str
     paths: tuple[PlacedPath, ...]
     crs: str | None = None
+    _memo: dict[Hashable, object] = field(default_factory=dict, init=False, repr=False)
+
+    def shared(self, key: Hashable, make: Callable[[], _T]) -> _T:
+        """Return ``make()``, made once per placement and key.
+
+        The CAD files of one run share the work this way: the ATE runs every format draws,
+        the curves the .3dm and its JSON both carry. What it returns is shared: callers do
+        not change it.
+        """
+        if key not in self._memo:
+            self._memo[key] = make()
+        return cast("_T", self._memo[key])
 
     @property
     def base_point(self) -> FloatArray:
@@ -273,8 +287,13 @@ class Placement:
         """Return an estimate's path cut where its ATE changes bin, each run simplified.
 
         Runs never cross a break of the path (tracking loss); within one piece they join.
-        The reference (no ATE) has none.
+        The reference (no ATE) has none. Cut once per path of this placement.
         """
+        if not any(p is path for p in self.paths):  # not one of ours: nothing to share
+            return self._ate_runs(path)
+        return list(self.shared(("ate_runs", id(path)), lambda: self._ate_runs(path)))
+
+    def _ate_runs(self, path: PlacedPath) -> list[ATERun]:
         est = path.estimate
         if est is None or len(est.aligned) == 0:
             return []

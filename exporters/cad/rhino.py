@@ -159,16 +159,16 @@ def export_3dm_json(
         for path in placement.paths:
             entry = path.metadata()
             entry["layer"] = layer_path(placement, path)
-            strings = _user_strings(path)  # once per path: its statistics cover every pose
-            entry["curves"] = [_curve(v, strings).Encode() for v in _piece_vertices(path)]
+            pieces, runs = _curves(placement, path)
+            entry["curves"] = [curve.Encode() for curve in pieces]
             entry["ate_layer"] = f"{entry['layer']}::ATE"
             entry["ate"] = [
                 {
                     "bin": run.bin_index,
                     "color": list(bins[run.bin_index].color_rgb),
-                    "curve": _curve(run.vertices, strings).Encode(),
+                    "curve": curve.Encode(),
                 }
-                for run in placement.ate_runs(path)
+                for run, curve in zip(placement.ate_runs(path), runs, strict=True)
             ]
             paths.append(entry)
     except RuntimeError as err:
@@ -225,22 +225,22 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
         attributes.Name = path.name
         attributes.LayerIndex = layer
         attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromLayer
-        strings = _user_strings(path)  # once per path: its statistics cover every pose
-        for key, value in strings.items():
+        for key, value in _user_strings(path).items():
             attributes.SetUserString(key, value)
-        for vertices in _piece_vertices(path):  # one curve per continuous piece
-            model.Objects.AddCurve(_curve(vertices, strings), attributes)
+        pieces, runs = _curves(placement, path)
+        for curve in pieces:  # one curve per continuous piece (the model keeps a copy)
+            model.Objects.AddCurve(curve, attributes)
         if path.estimate is None:
             continue
         ate_layer = _add_layer(model, "ATE", path.color_rgb, layer)
-        for run in placement.ate_runs(path):  # one curve per run of one colour
+        for run, curve in zip(placement.ate_runs(path), runs, strict=True):  # one per colour run
             run_attributes = rhino3dm.ObjectAttributes()
             run_attributes.Name = f"{path.name} ATE {bins[run.bin_index].label}"
             run_attributes.LayerIndex = ate_layer
             run_attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromObject
             run_attributes.ObjectColor = (*bins[run.bin_index].color_rgb, 255)
             run_attributes.SetUserString("loceval.ate_bin", bins[run.bin_index].label)
-            model.Objects.AddCurve(_curve(run.vertices, strings), run_attributes)
+            model.Objects.AddCurve(curve, run_attributes)
         worst = [m for m in markers if m.kind == "worst" and m.path == path.name]
         if worst:
             _add_dots(model, worst, _add_layer(model, "markers", path.color_rgb, layer))
@@ -340,6 +340,22 @@ def _add_layer(
         layer.ParentLayerId = model.Layers[parent].Id
     index: int = model.Layers.Add(layer)
     return index
+
+
+def _curves(placement: Placement, path: PlacedPath) -> tuple[list[Any], list[Any]]:
+    """Return a path's curves: one per continuous piece, one per ATE run.
+
+    Built once per placement: a run writing both the .3dm and its JSON builds them for the
+    first and encodes the same curves for the second (a model keeps copies of its curves).
+    """
+
+    def build() -> tuple[list[Any], list[Any]]:
+        strings = _user_strings(path)  # once per path: its statistics cover every pose
+        pieces = [_curve(v, strings) for v in _piece_vertices(path)]
+        runs = [_curve(run.vertices, strings) for run in placement.ate_runs(path)]
+        return pieces, runs
+
+    return placement.shared(("rhino.curves", id(path)), build)
 
 
 def _curve(vertices: FloatArray, user_strings: Mapping[str, str]) -> Any:  # noqa: ANN401

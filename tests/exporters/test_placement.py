@@ -302,3 +302,17 @@ class TestATEEdges:
         assert top / 10 <= edges[0]
         assert edges[-3] < top
         assert list(edges) == sorted(edges)
+
+
+def test_ate_runs_are_cut_once_per_placement(two_estimates: EvaluationResult):
+    """Every CAD file of a run asks for the same runs: the second ask is the first's work."""
+    placement = place_evaluation(two_estimates, ExportOptions(units=Units.M))
+    path = next(p for p in placement.paths if p.estimate is not None)
+    first = placement.ate_runs(path)
+    again = placement.ate_runs(path)
+    assert again == first  # the same run objects (compared by identity)
+    assert again is not first  # a list of the caller's own
+    fresh = place_evaluation(two_estimates, ExportOptions(units=Units.M)).ate_runs(path)
+    assert [r.bin_index for r in fresh] == [r.bin_index for r in first]
+    for one, other in zip(fresh, first, strict=True):
+        np.testing.assert_array_equal(one.vertices, other.vertices)

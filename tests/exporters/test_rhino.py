@@ -185,3 +185,32 @@ def test_write_failure_becomes_export_error(
     monkeypatch.setattr(rhino, "_model", lambda _placement: Unwritable())
     with pytest.raises(ExportError, match=r"rhino3dm could not write the \.3dm model"):
         rhino.export_3dm(two_estimates, ExportOptions())
+
+
+def test_one_placement_shares_its_curves_between_the_3dm_and_its_json(
+    two_estimates: EvaluationResult, options: ExportOptions, monkeypatch: pytest.MonkeyPatch
+):
+    """Both files from one placement equal each written from its own; curves built once."""
+    alone_json = rhino.export_3dm_json(two_estimates, options)
+    alone_model = rhino3dm.File3dm.FromByteArray(rhino.export_3dm(two_estimates, options))
+    built = 0
+    curve = rhino._curve
+
+    def counted(*args: object) -> object:
+        nonlocal built
+        built += 1
+        return curve(*args)
+
+    monkeypatch.setattr(rhino, "_curve", counted)
+    placement = place_evaluation(two_estimates, options)
+    model = rhino3dm.File3dm.FromByteArray(
+        rhino.export_3dm(two_estimates, options, placement=placement)
+    )
+    after_model = built
+    shared_json = rhino.export_3dm_json(two_estimates, options, placement=placement)
+    assert built == after_model > 0  # the JSON encoded the model's curves, built none
+    assert shared_json == alone_json
+    assert len(model.Objects) == len(alone_model.Objects)
+    for one, other in zip(model.Objects, alone_model.Objects, strict=True):
+        assert one.Attributes.Name == other.Attributes.Name
+        assert one.Geometry.Encode()["data"] == other.Geometry.Encode()["data"]
