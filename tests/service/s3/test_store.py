@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import os
 import threading
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -22,11 +23,23 @@ from tests.service.s3.conftest import SeaweedFS, object_keys, open_multipart_upl
 BOUNDARY = "loceval-s3-boundary"
 
 
+_OPENED: list[S3Blobs] = []
+"""The stores a test opened; closed after it (their lease threads stop, leases go)."""
+
+
 def _store(bucket: str, root: Path, **kwargs: Any) -> S3Blobs:
     values: dict[str, Any] = {"cache_bytes": 1 << 30, "min_free_bytes": 0, **kwargs}
     store = S3Blobs(f"s3://{bucket}/team", root, **values)
+    _OPENED.append(store)
     store.check_bucket()
     return store
+
+
+@pytest.fixture(autouse=True)
+def _close_stores() -> Iterator[None]:
+    yield
+    while _OPENED:
+        _OPENED.pop().close()
 
 
 @pytest.fixture
