@@ -22,7 +22,6 @@ from sqlalchemy import ColumnElement, cast, column, exists, func, literal, selec
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.exc import IntegrityError
 
-from loceval.readers.rosbag import HeldFile
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, get_owned, new_id
 from service.errors import ConflictError, InvalidFieldsError, UploadError
 from service.recordings import inspect_remote_upload, inspect_upload
@@ -205,6 +204,8 @@ def _publish(
         remote = runtime.store.remote_file(relative, filename=filename)
         if remote is not None:  # a bag in a bucket: read by ranges where it lies, never copied
             if received.held is not None:  # its tf and poses, kept as it streamed in
+                from loceval.readers.rosbag import HeldFile  # noqa: PLC0415  (rosbags)
+
                 remote = HeldFile(remote, received.held)
             inspection = inspect_remote_upload(remote, filename)
         else:

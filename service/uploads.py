@@ -22,7 +22,7 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Final
+from typing import TYPE_CHECKING, Final
 from urllib.parse import unquote_to_bytes
 
 import anyio.to_thread
@@ -30,11 +30,13 @@ from python_multipart.exceptions import FormParserError
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
-from loceval.readers.rosbag import HeldMessages, McapScan
 from service.blobs import Blobs, Incoming
 from service.blobs.local import STORAGE_FULL, LocalBlobs, LocalIncoming
 from service.errors import InsufficientStorageError, UploadError, UploadTooLargeError
 from service.storage import BlobStore
+
+if TYPE_CHECKING:
+    from loceval.readers.rosbag import HeldMessages, McapScan
 
 __all__ = ["ReceivedFile", "ReceivedForm", "check_free_space", "receive_multipart"]
 
@@ -219,7 +221,7 @@ class _Receiver:
                 msg = f"Too many files in one request (at most {self.max_files}); send fewer."
                 raise UploadError(msg)
             self._fh = self.store.open_incoming()
-            self._scan = McapScan() if self.store.reads_in_place else None
+            self._scan = _scan() if self.store.reads_in_place else None
             self._digest = hashlib.sha256()
             self._size = 0
         else:
@@ -302,6 +304,16 @@ class _Receiver:
             self._fh = None
         self._scan = None
         self.form.discard()
+
+
+def _scan() -> McapScan:
+    """Return a scan that keeps an MCAP upload's tf and pose messages as they stream past.
+
+    Imported here: the bag readers (rosbags) load only in an API that stores into a bucket.
+    """
+    from loceval.readers.rosbag import McapScan  # noqa: PLC0415
+
+    return McapScan()
 
 
 def _shown(name: str) -> str:
