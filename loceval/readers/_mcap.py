@@ -28,12 +28,28 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
-__all__ = ["HoldsMessages", "RandomAccess", "index_serves", "read_indexed_messages"]
+__all__ = [
+    "MAGIC",
+    "NOT_SERVABLE",
+    "OP_CHANNEL",
+    "OP_CHUNK",
+    "OP_CHUNK_INDEX",
+    "OP_FOOTER",
+    "OP_MESSAGE",
+    "OP_SCHEMA",
+    "RECORD_HEAD",
+    "HoldsMessages",
+    "RandomAccess",
+    "index_serves",
+    "parse_channel",
+    "parse_schema",
+    "read_indexed_messages",
+]
 
-_MAGIC = b"\x89MCAP0\r\n"
-_OP_FOOTER, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK_INDEX, _OP_MESSAGE_INDEX = 0x02, 4, 5, 8, 7
-_OP_SCHEMA = 0x03
-_FOOTER_SIZE = 1 + 8 + 20 + len(_MAGIC)
+MAGIC = b"\x89MCAP0\r\n"
+OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x02, 0x03, 0x04, 0x05, 0x06
+OP_MESSAGE_INDEX, OP_CHUNK_INDEX = 0x07, 0x08
+_FOOTER_SIZE = 1 + 8 + 20 + len(MAGIC)
 _FIRST_READ = 512
 """Bytes read past a message's start; most tf messages fit, larger ones take a second read."""
 _MAX_RUN_GAP = 64 * 1024
@@ -50,7 +66,7 @@ _SPILL = 16 * 1024
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
-_RECORD_HEAD = struct.Struct("<BQ")
+RECORD_HEAD = struct.Struct("<BQ")
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")
 _CHUNK_INDEX_HEAD = struct.Struct("<QQQQ")
 
@@ -64,7 +80,7 @@ class _NotServableError(Exception):
     """The file cannot be served from its index; read it the ordinary way."""
 
 
-_NOT_SERVABLE = (_NotServableError, struct.error, UnicodeDecodeError, OSError)
+NOT_SERVABLE = (_NotServableError, struct.error, UnicodeDecodeError, OSError)
 """What reading the index raises when it cannot serve: unusable, cut short or garbled."""
 
 
@@ -147,7 +163,7 @@ def read_indexed_messages(
     if not isinstance(path, str | os.PathLike):
         try:
             return _read(path, keys)
-        except _NOT_SERVABLE:
+        except NOT_SERVABLE:
             return None
     try:
         fd = os.open(path, os.O_RDONLY)
@@ -155,7 +171,7 @@ def read_indexed_messages(
         return None
     try:
         return _read(_LocalFile(fd), keys)
-    except _NOT_SERVABLE:
+    except NOT_SERVABLE:
         return None
     finally:
         os.close(fd)
@@ -170,7 +186,7 @@ def index_serves(src: RandomAccess) -> bool:
     """
     try:
         _, _, chunk_indexes = _read_summary(src)
-    except _NOT_SERVABLE:
+    except NOT_SERVABLE:
         return False
     return bool(chunk_indexes) and not any(compression for *_, compression in chunk_indexes)
 
@@ -279,10 +295,10 @@ def _read_summary(
     src: RandomAccess,
 ) -> tuple[dict[int, str], dict[int, tuple[str, int, str]], list[_ChunkIndex]]:
     size = src.size
-    if size < 2 * len(_MAGIC) + _FOOTER_SIZE or src.pread(8, 0) != _MAGIC:
+    if size < 2 * len(MAGIC) + _FOOTER_SIZE or src.pread(8, 0) != MAGIC:
         raise _NotServableError
     footer = src.pread(_FOOTER_SIZE, size - _FOOTER_SIZE)
-    if footer[-8:] != _MAGIC or footer[0] != _OP_FOOTER:
+    if footer[-8:] != MAGIC or footer[0] != OP_FOOTER:
         raise _NotServableError
     summary_start, summary_offset_start = struct.unpack_from("<QQ", footer, 9)
     summary_end = summary_offset_start or size - _FOOTER_SIZE
@@ -300,7 +316,7 @@ def _message_data(
 ) -> bytes:
     """Return a message record's data from ``block`` (read more when it runs past it)."""
     opcode, length, record_channel, _, record_time, _ = _MESSAGE_HEAD.unpack_from(block, at)
-    if opcode != _OP_MESSAGE or record_channel != channel_id or record_time != log_time:
+    if opcode != OP_MESSAGE or record_channel != channel_id or record_time != log_time:
         raise _NotServableError
     data_size = length - 22
     if not 0 <= data_size <= src.size:  # a garbage length: no read of exabytes
@@ -322,21 +338,18 @@ def _parse_summary(
     chunk_indexes: list[_ChunkIndex] = []
     pos = 0
     while pos < len(summary):
-        opcode, length = _RECORD_HEAD.unpack_from(summary, pos)
-        body = pos + _RECORD_HEAD.size
+        opcode, length = RECORD_HEAD.unpack_from(summary, pos)
+        body = pos + RECORD_HEAD.size
         pos = body + length
         if pos > len(summary):
             raise _NotServableError
-        if opcode == _OP_SCHEMA:
-            (schema_id,) = _U16.unpack_from(summary, body)
-            name, _ = _string(summary, body + 2)
+        if opcode == OP_SCHEMA:
+            schema_id, name = parse_schema(summary, body)
             schemas[schema_id] = name
-        elif opcode == _OP_CHANNEL:
-            channel_id, schema_id = struct.unpack_from("<HH", summary, body)
-            topic, at = _string(summary, body + 4)
-            encoding, _ = _string(summary, at)
-            channels[channel_id] = (topic, schema_id, encoding)
-        elif opcode == _OP_CHUNK_INDEX:
+        elif opcode == OP_CHANNEL:
+            channel_id, channel = parse_channel(summary, body)
+            channels[channel_id] = channel
+        elif opcode == OP_CHUNK_INDEX:
             _, _, chunk_start, chunk_length = _CHUNK_INDEX_HEAD.unpack_from(summary, body)
             at = body + _CHUNK_INDEX_HEAD.size
             (map_size,) = _U32.unpack_from(summary, at)
@@ -352,14 +365,28 @@ def _parse_summary(
     return schemas, channels, chunk_indexes
 
 
+def parse_schema(buffer: bytes, pos: int) -> tuple[int, str]:
+    """Return ``(schema id, name)`` of the schema record whose body starts at ``pos``."""
+    (schema_id,) = _U16.unpack_from(buffer, pos)
+    return schema_id, _string(buffer, pos + 2)[0]
+
+
+def parse_channel(buffer: bytes, pos: int) -> tuple[int, tuple[str, int, str]]:
+    """Return ``(channel id, (topic, schema id, message encoding))`` of a channel record."""
+    channel_id, schema_id = struct.unpack_from("<HH", buffer, pos)
+    topic, at = _string(buffer, pos + 4)
+    encoding, _ = _string(buffer, at)
+    return channel_id, (topic, schema_id, encoding)
+
+
 def _message_index(record: bytes, channel_id: int) -> list[tuple[int, int]]:
     """Return the ``(log time, offset in the chunk's records)`` pairs of a message index record."""
     if len(record) < 15:
         raise _NotServableError
-    opcode, _ = _RECORD_HEAD.unpack_from(record)
+    opcode, _ = RECORD_HEAD.unpack_from(record)
     (record_channel,) = _U16.unpack_from(record, 9)
     (size,) = _U32.unpack_from(record, 11)
-    if opcode != _OP_MESSAGE_INDEX or record_channel != channel_id or size % 16:
+    if opcode != OP_MESSAGE_INDEX or record_channel != channel_id or size % 16:
         raise _NotServableError
     if 15 + size > len(record):
         raise _NotServableError

@@ -25,7 +25,20 @@ import struct
 from collections.abc import Callable, Generator, Sequence
 from typing import BinaryIO
 
-from loceval.readers._mcap import ManyAtOnce
+from loceval.readers._mcap import (
+    MAGIC,
+    NOT_SERVABLE,
+    OP_CHANNEL,
+    OP_CHUNK,
+    OP_CHUNK_INDEX,
+    OP_FOOTER,
+    OP_MESSAGE,
+    OP_SCHEMA,
+    RECORD_HEAD,
+    ManyAtOnce,
+    parse_channel,
+    parse_schema,
+)
 from loceval.readers.rosbag.bagfile import RemoteFile, normalize_msgtype
 from loceval.readers.rosbag.messages import SUPPORTED_MSGTYPES
 
@@ -48,15 +61,8 @@ _MAX_DEFINITION = 4 * 1024**2
 """The largest schema or channel record read (a message definition is a few KB)."""
 _MAX_COMPRESSION_NAME = 64
 
-_MAGIC = b"\x89MCAP0\r\n"
-_OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 0x02, 0x03, 0x04, 0x05, 0x06
-_OP_CHUNK_INDEX = 0x08
-_RECORD_HEAD = struct.Struct("<BQ")
-_MESSAGE_HEAD = struct.Struct("<HIQQ")
+_MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
 _CHUNK_HEAD = struct.Struct("<QQQII")  # start and end time, uncompressed size, crc, name length
-_U16_U16 = struct.Struct("<HH")
-_U16 = struct.Struct("<H")
-_U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 
 _Request = Generator[int, bytes, None]
@@ -199,7 +205,7 @@ class McapScan:
             self._want = self._parser.send(taken)
         except StopIteration:
             self._parser = None
-        except (_UnusableError, struct.error, UnicodeDecodeError):
+        except (_UnusableError, *NOT_SERVABLE):  # the index reader's "unusable" too
             self._give_up()
         return self._parser is not None
 
@@ -210,26 +216,26 @@ class McapScan:
         self._buffer.clear()
 
     def _file(self) -> _Request:
-        if (yield len(_MAGIC)) != _MAGIC:
+        if (yield len(MAGIC)) != MAGIC:
             raise _UnusableError
         while True:
-            opcode, length = _RECORD_HEAD.unpack((yield _RECORD_HEAD.size))
-            if opcode == _OP_CHUNK:
+            opcode, length = RECORD_HEAD.unpack((yield RECORD_HEAD.size))
+            if opcode == OP_CHUNK:
                 yield from self._chunk(length)
-            elif opcode in {_OP_SCHEMA, _OP_CHANNEL}:
+            elif opcode in {OP_SCHEMA, OP_CHANNEL}:
                 if length > _MAX_DEFINITION:
                     raise _UnusableError
                 self._definition(opcode, (yield length))
-            elif opcode == _OP_MESSAGE:  # a message outside any chunk: no index serves it
+            elif opcode == OP_MESSAGE:  # a message outside any chunk: no index serves it
                 raise _UnusableError
-            elif opcode == _OP_FOOTER:
+            elif opcode == OP_FOOTER:
                 yield -length
-                if (yield len(_MAGIC)) != _MAGIC:
+                if (yield len(MAGIC)) != MAGIC:
                     raise _UnusableError
                 self._complete = True
                 return
             else:
-                self._indexed |= opcode == _OP_CHUNK_INDEX
+                self._indexed |= opcode == OP_CHUNK_INDEX
                 yield -length
 
     def _chunk(self, length: int) -> _Request:
@@ -243,11 +249,11 @@ class McapScan:
         if rest != length - _CHUNK_HEAD.size - name_length - _U64.size:
             raise _UnusableError
         while rest > 0:
-            opcode, size = _RECORD_HEAD.unpack((yield _RECORD_HEAD.size))
-            rest -= _RECORD_HEAD.size + size
+            opcode, size = RECORD_HEAD.unpack((yield RECORD_HEAD.size))
+            rest -= RECORD_HEAD.size + size
             if rest < 0:
                 raise _UnusableError
-            if opcode == _OP_MESSAGE:
+            if opcode == OP_MESSAGE:
                 if size < _MESSAGE_HEAD.size:
                     raise _UnusableError
                 channel_id, _, log_time, _ = _MESSAGE_HEAD.unpack((yield _MESSAGE_HEAD.size))
@@ -256,20 +262,18 @@ class McapScan:
                     self._hold(channel_id, log_time, (yield size))
                 else:
                     yield -size
-            elif opcode in {_OP_SCHEMA, _OP_CHANNEL} and size <= _MAX_DEFINITION:
+            elif opcode in {OP_SCHEMA, OP_CHANNEL} and size <= _MAX_DEFINITION:
                 self._definition(opcode, (yield size))
             else:
                 yield -size
 
     def _definition(self, opcode: int, body: bytes) -> None:
-        if opcode == _OP_SCHEMA:
-            (schema_id,) = _U16.unpack_from(body)
-            self._schemas[schema_id] = _string(body, _U16.size)[0]
+        if opcode == OP_SCHEMA:
+            schema_id, name = parse_schema(body, 0)
+            self._schemas[schema_id] = name
         else:
-            channel_id, schema_id = _U16_U16.unpack_from(body)
-            topic, at = _string(body, _U16_U16.size)
-            encoding, _ = _string(body, at)
-            self._channels[channel_id] = (topic, schema_id, encoding)
+            channel_id, channel = parse_channel(body, 0)
+            self._channels[channel_id] = channel
 
     def _holds(self, channel_id: int, size: int) -> bool:
         if channel_id in self._dropped:
@@ -294,14 +298,6 @@ class McapScan:
         self._dropped.add(channel_id)
         self._held.pop(channel_id, None)
         self._total -= self._held_size.pop(channel_id, 0)
-
-
-def _string(buffer: bytes, pos: int) -> tuple[str, int]:
-    (length,) = _U32.unpack_from(buffer, pos)
-    end = pos + _U32.size + length
-    if end > len(buffer):
-        raise _UnusableError
-    return buffer[pos + _U32.size : end].decode(), end
 
 
 class HeldFile:
