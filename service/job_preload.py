@@ -2,8 +2,9 @@
 
 :mod:`service.limits` runs each job in a process forked from a server process that imported
 this module, so a job does not import NumPy, SciPy, Matplotlib, WeasyPrint and the CAD
-libraries anew (seconds per job). A module that fails to import is left out here (the job
-that needs it reports the failure itself); the server must start whatever is missing.
+libraries anew (seconds per job), nor compile the report templates. A module that fails to
+import is left out here (the job that needs it reports the failure itself); the server must
+start whatever is missing.
 """
 
 from __future__ import annotations
@@ -45,6 +46,9 @@ def _preload() -> None:
     for name in MODULES:
         with contextlib.suppress(Exception):  # e.g. a missing system library of WeasyPrint
             importlib.import_module(name)
+    with contextlib.suppress(Exception):  # Jinja2 missing: the report job says so itself
+        render = importlib.import_module("exporters.report.render")
+        render.preload_templates()  # the repository's templates, compiled once for every job
 
 
 _preload()

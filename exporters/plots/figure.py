@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import base64
 import io
+import operator
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -30,6 +31,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from exporters.colours import ESTIMATE_COLOURS, estimate_colour
+from exporters.plots.png import rgb_png
 from loceval.core.arrays import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.core.gaps import path_breaks
 from loceval.evaluation import EvaluationResult
@@ -251,53 +253,55 @@ def _svg(fig: Figure) -> bytes:
     fig.savefig(buf, format="svg", dpi=RASTER_DPI, metadata={"Date": None, "Creator": "loceval"})
     # Path coordinates are points (1/72 in); matplotlib writes six decimals. Two (1/7200 in)
     # are far below what any screen or printer shows and make the SVG a third smaller.
-    return _SVG_PATH_DATA.sub(lambda m: _SVG_NUMBER.sub(rb"\1", m.group(0)), buf.getvalue())
+    return _SVG_PATH_DATA.sub(_two_decimals, buf.getvalue())
 
 
-PNG_COMPRESS_LEVEL = 1
-"""zlib level of the PNG plots: the PDF engine decodes and recompresses every image anyway,
-so the fastest level costs nothing in the PDF (level 6, PIL's default, took twice as long)."""
+_FIRST_GROUP = operator.itemgetter(1)
+"""A match's first group, as a callable ``re.sub`` calls without a template to expand."""
+
+
+def _two_decimals(path_data: re.Match[bytes]) -> bytes:
+    """Return an SVG path's ``d`` attribute with its numbers cut to two decimals."""
+    return _SVG_NUMBER.sub(_FIRST_GROUP, path_data.group(0))
 
 
 def _png(fig: Figure) -> bytes:
     """Encode the figure as an opaque RGB PNG at :data:`PNG_DPI`.
 
-    The figure is drawn into an RGBA buffer and saved without its alpha channel: every
-    figure has an opaque white background, so the picture is the same, and WeasyPrint
-    would otherwise split the alpha off into a soft mask, decoding and encoding each image
-    once more.
+    The figure is drawn into an RGBA buffer and encoded without its alpha channel
+    (:func:`exporters.plots.png.rgb_png`): every figure has an opaque white background,
+    so the picture is the same, and WeasyPrint would otherwise split the alpha off into a
+    soft mask, decoding and encoding each image once more.
     """
-    from PIL import Image, PngImagePlugin  # noqa: PLC0415  (comes with matplotlib)
-
     buf = io.BytesIO()
     fig.savefig(buf, format="rgba", dpi=PNG_DPI)
     width = int(fig.get_figwidth() * PNG_DPI)  # matplotlib's canvas size: truncated
     rgba = np.frombuffer(buf.getbuffer(), dtype=np.uint8).reshape(-1, width, 4)
-    info = PngImagePlugin.PngInfo()
-    info.add_text("Software", "loceval")
-    out = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(rgba[:, :, :3])).save(
-        out,
-        format="png",
-        compress_level=PNG_COMPRESS_LEVEL,
-        pnginfo=info,
-        dpi=(PNG_DPI, PNG_DPI),
-    )
-    return out.getvalue()
+    return rgb_png(rgba, dpi=PNG_DPI, software="loceval")
+
+
+def _settle_layout(fig: Figure) -> None:
+    """Run the figure's constrained layout once and freeze it.
+
+    ``savefig`` on a figure with a layout engine draws it twice: once, with drawing
+    switched off, to lay it out, and once to encode it. Laying it out here and then
+    switching the engine off makes every encoding a single draw, and the SVG and the PNG
+    of one figure share one layout.
+    """
+    engine = fig.get_layout_engine()
+    if engine is None:
+        return
+    engine.execute(fig)
+    fig.set_layout_engine("none")
 
 
 def encode_plot(
     fig: Figure, formats: Sequence[ImageFormat], *, key: str, title: str, caption: str
 ) -> Plot:
-    """Encode a finished figure in the requested formats (drawn once per format)."""
-    svg = png = None
-    if "svg" in formats:
-        svg = _svg(fig)
-        # The constrained layout is settled by the first save; freezing it spares the
-        # second format another layout pass.
-        fig.set_layout_engine("none")
-    if "png" in formats:
-        png = _png(fig)
+    """Encode a finished figure in the requested formats (one layout, one draw per format)."""
+    _settle_layout(fig)
+    svg = _svg(fig) if "svg" in formats else None
+    png = _png(fig) if "png" in formats else None
     return Plot(key=key, title=title, caption=caption, svg=svg, png=png)
 
 
