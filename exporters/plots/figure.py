@@ -280,28 +280,18 @@ def _png(fig: Figure) -> bytes:
     return rgb_png(rgba, dpi=PNG_DPI, software="loceval")
 
 
-def _settle_layout(fig: Figure) -> None:
-    """Run the figure's constrained layout once and freeze it.
-
-    ``savefig`` on a figure with a layout engine draws it twice: once, with drawing
-    switched off, to lay it out, and once to encode it. Laying it out here and then
-    switching the engine off makes every encoding a single draw, and the SVG and the PNG
-    of one figure share one layout.
-    """
-    engine = fig.get_layout_engine()
-    if engine is None:
-        return
-    engine.execute(fig)
-    fig.set_layout_engine("none")
-
-
 def encode_plot(
     fig: Figure, formats: Sequence[ImageFormat], *, key: str, title: str, caption: str
 ) -> Plot:
-    """Encode a finished figure in the requested formats (one layout, one draw per format)."""
-    _settle_layout(fig)
-    svg = _svg(fig) if "svg" in formats else None
-    png = _png(fig) if "png" in formats else None
+    """Encode a finished figure in the requested formats (drawn once per format)."""
+    svg = png = None
+    if "svg" in formats:
+        svg = _svg(fig)
+        # The constrained layout is settled by the first save; freezing it spares the
+        # second format another layout pass.
+        fig.set_layout_engine("none")
+    if "png" in formats:
+        png = _png(fig)
     return Plot(key=key, title=title, caption=caption, svg=svg, png=png)
 
 
