@@ -4,13 +4,14 @@ The .3dm holds, per trajectory, named ``PolylineCurve`` s on the layer
 ``loceval::<title>::<trajectory>`` (coloured from the palette; one curve per continuous
 piece, so a tracking loss is a break, not a straight chord) with user strings (source,
 poses, simplification deviation, ATE statistics); for estimates the same path cut into
-curves coloured by ATE bin (the report's colours) on the visible sub-layer
-``...::<trajectory>::ATE`` and text dots at the greatest errors on ``...::markers``; and one
-text dot per tracking loss on ``loceval::<title>::tracking loss``. With a measured map,
+curves coloured by ATE bin (the report's colours; each named ``<trajectory> ATE <bin>``,
+the statistics staying on the path's curves) on the visible sub-layer
+``...::<trajectory>::ATE`` and text dots at the greatest errors on ``...::markers``; and
+one text dot per tracking loss on ``loceval::<title>::tracking loss``. With a measured map,
 its wall cells are point clouds per distance bin on ``...::map walls``; each stretch
-outside the tracked room (:mod:`exporters.cad.excursions`) is a purple curve and a text
-dot with its label on ``loceval::<title>::excursions``. The model units are the
-output units; document user text carries the evaluation metadata and the ATE legend.
+outside the tracked room (:mod:`exporters.cad.excursions`) is a purple curve and a text dot
+with its label on ``loceval::<title>::excursions``. The model units are the output units;
+document user text carries the evaluation metadata and the ATE legend.
 
 Rhino stores doubles, so curves are in absolute model coordinates and drop onto the
 building model with File > Import. The base point (the reference's bounding-box centre in
@@ -194,7 +195,9 @@ def export_3dm_json(
         ],
         "paths": paths,
     }
-    return (finite_json(document, indent=1, what="The Grasshopper document") + "\n").encode()
+    return (
+        finite_json(document, indent=1, levels=4, what="The Grasshopper document") + "\n"
+    ).encode()
 
 
 def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped here)
@@ -233,14 +236,11 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
         if path.estimate is None:
             continue
         ate_layer = _add_layer(model, "ATE", path.color_rgb, layer)
+        by_bin = [
+            _bin_attributes(f"{path.name} ATE", b.label, b.color_rgb, ate_layer) for b in bins
+        ]
         for run, curve in zip(placement.ate_runs(path), runs, strict=True):  # one per colour run
-            run_attributes = rhino3dm.ObjectAttributes()
-            run_attributes.Name = f"{path.name} ATE {bins[run.bin_index].label}"
-            run_attributes.LayerIndex = ate_layer
-            run_attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromObject
-            run_attributes.ObjectColor = (*bins[run.bin_index].color_rgb, 255)
-            run_attributes.SetUserString("loceval.ate_bin", bins[run.bin_index].label)
-            model.Objects.AddCurve(curve, run_attributes)
+            model.Objects.AddCurve(curve, by_bin[run.bin_index])  # the model copies both
         worst = [m for m in markers if m.kind == "worst" and m.path == path.name]
         if worst:
             _add_dots(model, worst, _add_layer(model, "markers", path.color_rgb, layer))
@@ -250,6 +250,20 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
     _add_map(model, placement, evaluation)
     _add_excursions(model, placement, evaluation)
     return model
+
+
+def _bin_attributes(name: str, label: str, rgb: tuple[int, int, int], layer: int) -> Any:  # noqa: ANN401
+    """Return the attributes of an ATE run in the bin ``label``: its name and colour.
+
+    The name carries the bin (``SelName`` picks a bin's runs); no user text, which Rhino
+    writes per object as user data (half the file's writing time for 25,000 runs).
+    """
+    attributes = rhino3dm.ObjectAttributes()
+    attributes.Name = f"{name} {label}"
+    attributes.LayerIndex = layer
+    attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromObject
+    attributes.ObjectColor = (*rgb, 255)
+    return attributes
 
 
 def _add_excursions(model: Any, placement: Placement, parent: int) -> None:  # noqa: ANN401
@@ -352,7 +366,10 @@ def _curves(placement: Placement, path: PlacedPath) -> tuple[list[Any], list[Any
     def build() -> tuple[list[Any], list[Any]]:
         strings = _user_strings(path)  # once per path: its statistics cover every pose
         pieces = [_curve(v, strings) for v in _piece_vertices(path)]
-        runs = [_curve(run.vertices, strings) for run in placement.ate_runs(path)]
+        # A run's geometry carries no strings: its object (.3dm) or its entry (JSON) names
+        # the path and the bin, and a path cut into tens of thousands of runs would repeat
+        # the path's statistics in each (more than half of a long run's file and time).
+        runs = [_curve(run.vertices, {}) for run in placement.ate_runs(path)]
         return pieces, runs
 
     return placement.shared(("rhino.curves", id(path)), build)

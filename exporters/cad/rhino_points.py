@@ -146,7 +146,9 @@ def export_points_3dm_json(evaluation: CheckpointEvaluation, options: ExportOpti
         "points": points,
         "paths": paths,
     }
-    return (finite_json(document, indent=1, what="The Grasshopper document") + "\n").encode()
+    return (
+        finite_json(document, indent=1, levels=4, what="The Grasshopper document") + "\n"
+    ).encode()
 
 
 def _polyline(start_end: tuple[float, ...]) -> Any:  # noqa: ANN401

@@ -24,3 +24,35 @@ def test_non_finite_numbers_are_refused_with_their_place(value: float) -> None:
     where = r"\$\.stats\[1\]\.rmse"
     with pytest.raises(ExportError, match=rf"The result holds .* at {where}, a number JSON"):
         finite_json(document)
+
+
+def test_layered_documents_round_trip_with_their_outer_levels_on_lines() -> None:
+    """``levels`` lays out the outer containers over lines and writes deeper ones compactly."""
+    document = {
+        "format": "x",
+        "base_point": [1.0, 2.0, 3.0],
+        "paths": [{"name": "a", "ate": [{"bin": 0, "curve": {"data": "AA=="}}, {"bin": 1}]}],
+        "empty": [],
+    }
+    text = finite_json(document, indent=1, levels=3)
+    assert json.loads(text) == document
+    assert text.splitlines() == [
+        "{",
+        ' "format": "x",',
+        ' "base_point": [1.0, 2.0, 3.0],',  # holds no container: one line at any level
+        ' "paths": [',
+        "  {",
+        '   "name": "a",',
+        '   "ate": [{"bin": 0, "curve": {"data": "AA=="}}, {"bin": 1}]',  # the fourth level
+        "  }",
+        " ],",
+        ' "empty": []',
+        "}",
+    ]
+
+
+def test_layered_documents_refuse_non_finite_numbers_deep_down() -> None:
+    """A NaN below the laid-out levels is refused with its place, as without ``levels``."""
+    document = {"paths": [{"ate": [{"curve": {"x": [0.0, math.nan]}}]}]}
+    with pytest.raises(ExportError, match=r"at \$\.paths\[0\]\.ate\[0\]\.curve\.x\[1\]"):
+        finite_json(document, indent=1, levels=2)

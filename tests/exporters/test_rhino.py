@@ -149,6 +149,9 @@ def test_ate_coloured_curves_and_dots(model_file: Path, two_estimates: Evaluatio
         # the first run starts at the first pose: its colour is the bin of that pose's error
         first_bin = int(np.searchsorted(edges, est.ate_translation.values[0], side="left"))
         assert colours[0] == bins[first_bin].color_rgb
+        label_of = {b.color_rgb: b.label for b in bins}
+        for run, rgb in zip(runs, colours, strict=True):  # named by its bin
+            assert run.Attributes.Name == f"{est.name} ATE {label_of[rgb]}"
         dots = by_layer[f"{path}::markers"]
         assert all(isinstance(o.Geometry, rhino3dm.TextDot) for o in dots)
         assert dots[0].Geometry.Text.startswith(f"{est.name} #1: ATE {est.worst[0].error:.3f} m")
