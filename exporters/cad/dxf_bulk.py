@@ -19,15 +19,17 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
+import numpy as np
 from ezdxf.document import Drawing
 from ezdxf.entities.polyline import Polyline
 from ezdxf.layouts.layout import Modelspace
 
-from loceval.core.arrays import FloatArray
+from loceval.core.arrays import FloatArray, IntArray
 
 __all__ = ["BulkPolylines"]
 
 _VERTEX_FLAG_3D = 32
+_PARTS = 9  # the strings of one VERTEX record (:func:`_vertex_parts`)
 
 
 @dataclass(frozen=True, slots=True)
@@ -140,22 +142,41 @@ class BulkPolylines:
 
 
 def _following_records(item: _Pending) -> str:
-    """Return the records of the text-only polylines after ``item``, as ezdxf writes them."""
-    parts = []
-    for piece in item.following:  # one iteration per piece
-        handle = f"{piece.handle:X}"
-        polyline = (
-            f"  0\nPOLYLINE\n  5\n{handle}\n330\n{item.owner}\n100\nAcDbEntity\n"
-            f"  8\n{item.layer}\n 62\n{piece.aci}\n420\n{piece.true_color}\n"
-            "100\nAcDb3dPolyline\n 66\n1\n 10\n0.0\n 20\n0.0\n 30\n0.0\n 70\n8\n"
-        )
-        seqend = (
-            f"  0\nSEQEND\n  5\n{piece.handle + 1:X}\n330\n{handle}\n100\nAcDbEntity\n"
-            f"  8\n{item.layer}\n"
-        )
-        vertices = _vertex_text(piece.handle + 2, item.owner, item.layer, piece.vertices)
-        parts += [polyline, vertices, seqend]
-    return "".join(parts)
+    """Return the records of the text-only polylines after ``item``, as ezdxf writes them.
+
+    Every piece's records are laid into one list of strings by index (a polyline, its
+    vertices, its SEQEND), with the vertices' text made for all pieces at once
+    (:func:`_vertex_parts`), so no Python code runs per vertex.
+    """
+    pieces = item.following
+    if not pieces:
+        return ""
+    counts = np.array([len(p.vertices) for p in pieces], dtype=np.intp)
+    before = np.cumsum(counts) - counts  # vertices of the pieces before each
+    index = np.arange(len(pieces))
+    # each vertex's handle: its piece's handle + 2 (the polyline, its SEQEND) + its place
+    handles = np.repeat(np.array([p.handle for p in pieces]) + 2 - before, counts)
+    handles += np.arange(int(counts.sum()))
+    vertices = np.concatenate([p.vertices for p in pieces])
+    parts = np.empty(_PARTS * len(vertices) + 2 * len(pieces), dtype=object)
+    starts = _PARTS * before + 2 * index  # where each piece's polyline record goes
+    parts[starts] = [
+        f"  0\nPOLYLINE\n  5\n{p.handle:X}\n330\n{item.owner}\n100\nAcDbEntity\n"
+        f"  8\n{item.layer}\n 62\n{p.aci}\n420\n{p.true_color}\n"
+        "100\nAcDb3dPolyline\n 66\n1\n 10\n0.0\n 20\n0.0\n 30\n0.0\n 70\n8\n"
+        for p in pieces  # one per piece
+    ]
+    parts[starts + 1 + _PARTS * counts] = [
+        f"  0\nSEQEND\n  5\n{p.handle + 1:X}\n330\n{p.handle:X}\n100\nAcDbEntity\n"
+        f"  8\n{item.layer}\n"
+        for p in pieces
+    ]
+    # the vertices fill the slots between, in order
+    vertex_slots = np.ones(len(parts), dtype=bool)
+    vertex_slots[starts] = False
+    vertex_slots[starts + 1 + _PARTS * counts] = False
+    parts[vertex_slots] = _vertex_parts(handles, item.owner, item.layer, vertices)
+    return "".join(parts.tolist())
 
 
 def _vertex_records(item: _Pending) -> str:
@@ -164,7 +185,13 @@ def _vertex_records(item: _Pending) -> str:
 
 
 def _vertex_text(first: int, owner: str, layer: str, vertices: FloatArray) -> str:
-    """Return the VERTEX records of vertices (N, 3) with handles from ``first``.
+    """Return the VERTEX records of vertices (N, 3) with handles from ``first``."""
+    handles = np.arange(first, first + len(vertices))
+    return "".join(_vertex_parts(handles, owner, layer, vertices))
+
+
+def _vertex_parts(handles: IntArray, owner: str, layer: str, vertices: FloatArray) -> list[str]:
+    """Return the VERTEX records of vertices (N, 3) with their handles, in nine parts each.
 
     Built from C-level list operations: the coordinates' ``repr`` comes from one ``repr`` of
     the coordinate list, and the record pieces are interleaved by slice assignment, so no
@@ -176,9 +203,9 @@ def _vertex_text(first: int, owner: str, layer: str, vertices: FloatArray) -> st
         "100\nAcDb3dPolylineVertex\n 10\n"
     )
     coords = repr(vertices.ravel().tolist())[1:-1].split(", ") if n else []
-    parts = [""] * (9 * n)
+    parts = [""] * (_PARTS * n)
     parts[0::9] = ["  0\nVERTEX\n  5\n"] * n
-    parts[1::9] = map("%X".__mod__, range(first, first + n))
+    parts[1::9] = map("%X".__mod__, handles.tolist())
     parts[2::9] = [middle] * n
     parts[3::9] = coords[0::3]
     parts[4::9] = ["\n 20\n"] * n
@@ -186,4 +213,4 @@ def _vertex_text(first: int, owner: str, layer: str, vertices: FloatArray) -> st
     parts[6::9] = ["\n 30\n"] * n
     parts[7::9] = coords[2::3]
     parts[8::9] = [f"\n 70\n{_VERTEX_FLAG_3D}\n"] * n
-    return "".join(parts)
+    return parts

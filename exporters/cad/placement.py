@@ -19,7 +19,6 @@ doubles and get absolute model coordinates, so they drop onto the building model
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
@@ -51,7 +50,7 @@ from loceval import __version__
 from loceval.core.arrays import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.core.gaps import path_breaks
 from loceval.core.geometry import SimilarityTransform
-from loceval.core.polyline import simplify_rdp, simplify_rdp_runs
+from loceval.core.polyline import simplify_rdp_runs
 from loceval.evaluation import EstimateResult, EvaluationResult
 
 _T = TypeVar("_T")
@@ -311,18 +310,29 @@ class Placement:
         tolerance = self.simplify_m * self.units.per_metre
         drawn = ends - starts >= 2
         starts, ends = starts[drawn], ends[drawn]
+        if not len(starts):
+            return []
         # every run simplified in one work list (thousands of short runs on a noisy path)
         keep, _ = simplify_rdp_runs(model, starts, ends, tolerance)
-        base = self.base_point
+        # every run's kept vertices gathered at once (runs share their joining vertex),
+        # then cut into views: no array is built per run
+        kept = np.flatnonzero(keep)
+        first, last = np.searchsorted(kept, starts), np.searchsorted(kept, ends)
+        sizes = last - first
+        offsets = np.cumsum(sizes)
+        gather = kept[np.arange(offsets[-1]) - np.repeat(offsets - sizes - first, sizes)]
+        vertices = model[gather]
+        local = vertices - self.base_point
+        cuts = offsets[:-1]
         return [
-            ATERun(
-                path=path.name,
-                piece=int(piece[start]),
-                bin_index=int(which[start]),
-                vertices=model[start:stop][keep[start:stop]],
-                local_vertices=model[start:stop][keep[start:stop]] - base,
+            ATERun(path=path.name, piece=k, bin_index=b, vertices=v, local_vertices=lv)
+            for k, b, v, lv in zip(
+                piece[starts].tolist(),
+                which[starts].tolist(),
+                np.split(vertices, cuts),
+                np.split(local, cuts),
+                strict=True,
             )
-            for start, stop in zip(starts.tolist(), ends.tolist(), strict=True)
         ]
 
     def markers(self) -> list[Marker]:
@@ -528,18 +538,10 @@ def _simplify_pieces(
         where each piece starts, and the largest deviation introduced.
     """
     n = int(model_m.shape[0])
-    bounds = [0, *(np.flatnonzero(jump) + 1).tolist(), n]
-    kept_parts: list[IntArray] = []
-    starts: list[int] = []
-    deviation = 0.0
-    count = 0
-    for a, b in itertools.pairwise(bounds):  # one iteration per piece (tracking losses + 1)
-        if b <= a:
-            continue
-        kept, dev = simplify_rdp(model_m[a:b], tolerance_m)
-        kept_parts.append(kept + a)
-        starts.append(count)
-        count += int(kept.shape[0])
-        deviation = max(deviation, dev)
-    kept_all = np.concatenate(kept_parts) if kept_parts else np.zeros(0, dtype=np.intp)
-    return kept_all.astype(np.intp), np.asarray(starts, dtype=np.intp), deviation
+    if n == 0:
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp), 0.0
+    # every piece simplified on its own, all in one work list (hundreds of tracking losses)
+    bounds = np.concatenate(([0], np.flatnonzero(jump) + 1, [n])).astype(np.intp)
+    keep, deviation = simplify_rdp_runs(model_m, bounds[:-1], bounds[1:], tolerance_m)
+    kept: IntArray = np.flatnonzero(keep)
+    return kept, np.searchsorted(kept, bounds[:-1]).astype(np.intp), deviation
