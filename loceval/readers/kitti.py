@@ -13,7 +13,7 @@ from loceval.core.rotation import Rotation
 from loceval.errors import ReaderError
 from loceval.readers._common import build_trajectory
 from loceval.readers.source import SourceSpec, TrajectoryFormat
-from loceval.readers.text import NS_PER_S, load_text, parse_table, stamps_from_values
+from loceval.readers.text import NS_PER_S, load_bytes, parse_table, stamps_from_values
 from loceval.trajectory import Trajectory
 
 __all__ = ["KITTI_ROTATION_TOLERANCE", "read_kitti"]
@@ -48,7 +48,7 @@ def read_kitti(path: Path, *, times: Path | None = None, name: str = "") -> Traj
     path = Path(path)
     where = str(path)
     table = parse_table(
-        load_text(path), where=where, delimiter=None, hint=_KITTI_HINT, comments="#"
+        load_bytes(path), where=where, delimiter=None, hint=_KITTI_HINT, comments="#"
     )
     n = len(table)
     width = table.values.shape[1] if n else 12
@@ -98,7 +98,7 @@ def read_kitti(path: Path, *, times: Path | None = None, name: str = "") -> Traj
 def _read_kitti_times(times: Path, n_poses: int, *, poses_where: str) -> StampsNs:
     where = str(times)
     hint = "a KITTI times file holds one time in seconds per line"
-    table = parse_table(load_text(times), where=where, delimiter=None, hint=hint, comments="#")
+    table = parse_table(load_bytes(times), where=where, delimiter=None, hint=hint, comments="#")
     if len(table) and table.values.shape[1] != 1:
         msg = (
             f"{where}, line {int(table.lines[0])}: {table.values.shape[1]} values, but {hint}; "

@@ -1,8 +1,10 @@
 """Shared parsing of whitespace and comma-separated trajectory tables.
 
 :func:`load_text` reads a file (file errors, encodings) and :func:`parse_table` parses a
-table of numbers with NumPy's C parser (``np.loadtxt``) and, only when that fails, walks the
-lines in Python to name the exact line, cell and problem. :func:`stamps_from_values` turns
+table of numbers: plain decimal tables with :mod:`loceval.readers._plain` (from the file's
+bytes as :func:`load_bytes` reads them, when they are ASCII: no decoding), others with
+NumPy's C parser (``np.loadtxt``) and, only when that fails, by walking the lines in Python
+to name the exact line, cell and problem. :func:`stamps_from_values` turns
 stamp columns into int64 nanoseconds. The readers on top are :mod:`loceval.readers.tum`,
 :mod:`loceval.readers.euroc`, :mod:`loceval.readers.kitti`, :mod:`loceval.readers.csv` and
 :mod:`loceval.readers.motive`; each finishes through
@@ -18,7 +20,7 @@ import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import AnyStr, Final
 
 import numpy as np
 
@@ -33,6 +35,8 @@ __all__ = [
     "SURVEY_DELIMITERS",
     "NumericTable",
     "csv_rows",
+    "decode_text",
+    "load_bytes",
     "load_text",
     "parse_table",
     "positions_and_quat",
@@ -81,6 +85,15 @@ def load_text(path: Path) -> str:
     Raises:
         ReaderError: the file is missing, a folder, unreadable, or binary.
     """
+    return decode_text(load_bytes(path))
+
+
+def load_bytes(path: Path) -> bytes:
+    """Read a text file's bytes, undecoded (:func:`parse_table` decodes them when needed).
+
+    Raises:
+        ReaderError: the file is missing, a folder, unreadable, or binary.
+    """
     try:
         raw = path.read_bytes()
     except FileNotFoundError as err:
@@ -100,6 +113,11 @@ def load_text(path: Path) -> str:
             f"e.g. bag:{path}@/odom."
         )
         raise ReaderError(msg)
+    return raw
+
+
+def decode_text(raw: bytes) -> str:
+    """Decode a text file's bytes as :func:`load_text` reads them."""
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -146,7 +164,7 @@ def split_line(line: str, delimiter: str | None, *, where: str = "The table") ->
 
 
 def parse_table(
-    text: str,
+    text: str | bytes,
     *,
     where: str,
     delimiter: str | None,
@@ -163,7 +181,9 @@ def parse_table(
     Blank lines, and with ``comments`` comment lines and trailing comments, are skipped.
 
     Args:
-        text: the whole file.
+        text: the whole file, as text or as its bytes (:func:`load_bytes`: a table of
+            plain ASCII numbers is parsed from them without decoding, anything else is
+            decoded as :func:`load_text` does first).
         where: the file name used in messages.
         delimiter: the cell delimiter, or None for runs of whitespace.
         hint: what a line of this format holds, for the column-count message.
@@ -182,14 +202,21 @@ def parse_table(
     Raises:
         ReaderError: a line has the wrong number of cells or a cell is not a number.
     """
+    if isinstance(text, bytes):
+        if text.isascii():  # the bytes are the text: no decoding and encoding again
+            first_line, first_pos = _skip_leading_lines(text, skip_lines, comments)
+            plain = parse_plain(
+                text[first_pos:], delimiter=delimiter, usecols=usecols, int_first=int_first
+            )
+            if plain is not None:
+                return _plain_table(plain, first_line)
+        text = decode_text(text)
     first_line, first_pos = _skip_leading_lines(text, skip_lines, comments)
     # ASCII text: character offsets are byte offsets, and the encoding is a copy.
     body = text.encode()[first_pos:] if text.isascii() else text[first_pos:].encode()
     plain = parse_plain(body, delimiter=delimiter, usecols=usecols, int_first=int_first)
     if plain is not None:
-        values, rows, first_int = plain
-        numbered: IntArray = rows + (first_line + 1)
-        return NumericTable(values, numbered, np.zeros(len(values), dtype=bool), first_int)
+        return _plain_table(plain, first_line)
     # Without comments below the leading block the C parser need not look for them.
     body_comments = comments if comments and text.find(comments, first_pos) >= 0 else None
     fill = empty_cells and delimiter is not None
@@ -225,6 +252,15 @@ def parse_table(
         empty_cells=empty_cells,
         int_first=int_first,
     )
+
+
+def _plain_table(
+    plain: tuple[FloatArray, IntArray, StampsNs | None], first_line: int
+) -> NumericTable:
+    """Return the table :func:`parse_plain` read from below line ``first_line`` (0-based)."""
+    values, rows, first_int = plain
+    numbered: IntArray = rows + (first_line + 1)
+    return NumericTable(values, numbered, np.zeros(len(values), dtype=bool), first_int)
 
 
 def stamps_from_values(
@@ -356,24 +392,31 @@ def _count_cells(text: str, skip_lines: int, delimiter: str | None) -> int:
     return 1
 
 
-def _skip_leading_lines(text: str, skip_lines: int, comments: str | None) -> tuple[int, int]:
+def _skip_leading_lines(text: AnyStr, skip_lines: int, comments: str | None) -> tuple[int, int]:
     """Return (0-based line, offset) of the first line after ``skip_lines`` with data.
 
     Blank and comment lines right after the skipped ones (TUM headers) are passed over here,
-    so that the data below them can often be numbered without a pass over every line.
+    so that the data below them can often be numbered without a pass over every line. On
+    bytes, offsets are byte offsets (the comment string is ASCII).
     """
+    newline: AnyStr
+    mark: AnyStr | None
+    if isinstance(text, bytes):
+        newline, mark = b"\n", None if comments is None else comments.encode()
+    else:
+        newline, mark = "\n", comments
     pos = 0
     for _ in range(skip_lines):
-        pos = text.find("\n", pos) + 1
+        pos = text.find(newline, pos) + 1
         if pos == 0:
             return skip_lines, len(text)
     line_index = skip_lines
     while pos < len(text):
-        end = text.find("\n", pos)
+        end = text.find(newline, pos)
         end = len(text) if end < 0 else end
         line = text[pos:end]
-        if comments is not None:
-            line = line.split(comments, 1)[0]
+        if mark is not None:
+            line = line.split(mark, 1)[0]
         if line.strip():
             break
         pos, line_index = end + 1, line_index + 1

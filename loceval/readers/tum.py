@@ -12,7 +12,7 @@ from loceval.readers._common import build_trajectory
 from loceval.readers.source import SourceSpec, TrajectoryFormat
 from loceval.readers.text import (
     NS_PER_S,
-    load_text,
+    load_bytes,
     parse_table,
     positions_and_quat,
     stamps_from_values,
@@ -44,7 +44,7 @@ def read_tum(path: Path, *, name: str = "") -> Trajectory:
     """
     path = Path(path)
     where = str(path)
-    table = parse_table(load_text(path), where=where, delimiter=None, hint=_TUM_HINT, comments="#")
+    table = parse_table(load_bytes(path), where=where, delimiter=None, hint=_TUM_HINT, comments="#")
     values = table.values
     width = values.shape[1] if values.ndim == 2 else 0
     if len(table) and width not in {3, 4, 8}:

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from loceval.errors import ReaderError
 from loceval.readers import read_euroc, read_kitti, read_tum
-from loceval.readers.text import load_text, parse_table
+from loceval.readers.text import decode_text, load_text, parse_table
 from tests.factories import (
     T0_NS,
     assert_trajectories_close,
@@ -368,6 +368,33 @@ class TestParseTable:
         )
         assert table.first_int is not None
         assert table.first_int.tolist() == [1403715524907143168, 1403715524907143169]
+
+    @pytest.mark.parametrize(
+        "raw",
+        [
+            b"# t x y z\n\n1 0 0 0\n2 1.5 0 0\n3 2 0 .5\n",  # plain ASCII: read as bytes
+            b"\xef\xbb\xbf# header\r\n1 0 0 0\r\n2 1 0 0\r\n3 2 0 0\r\n",  # BOM, CRLF
+            b"# M\xfcnchen\n1 0 0 0\n2 0 0 0\n3 0 0 0\n",  # Latin-1: decoded first
+            b"1 0 0 0\r2 0 0 0\r3 0 0 0\r",  # CR-only line ends: decoded first
+            b"# c\n1 0 0 0\n\n# mid\n2 0 0 0 # tail\n3 1e-3 0 0\n",  # comments below
+        ],
+    )
+    def test_bytes_parse_as_their_text(self, raw: bytes):
+        """A table given as the file's bytes equals the one parsed from its decoded text."""
+        from_text = parse_table(decode_text(raw), where="f", delimiter=None, hint="h", comments="#")
+        from_bytes = parse_table(raw, where="f", delimiter=None, hint="h", comments="#")
+        np.testing.assert_array_equal(from_bytes.values, from_text.values)
+        np.testing.assert_array_equal(from_bytes.lines, from_text.lines)
+        assert len(from_bytes) == 3
+
+    def test_bytes_errors_name_the_line_as_text_does(self):
+        """A bad cell in bytes is reported with its file line, as from the text."""
+        raw = b"# c\n1 0 0 0\n2 x 0 0\n"
+        with pytest.raises(ReaderError, match=r"f, line 3") as from_bytes:
+            parse_table(raw, where="f", delimiter=None, hint="h", comments="#")
+        with pytest.raises(ReaderError) as from_text:
+            parse_table(raw.decode(), where="f", delimiter=None, hint="h", comments="#")
+        assert str(from_bytes.value) == str(from_text.value)
 
     def test_load_text_old_mac_line_ends(self, tmp_path):
         """CR-only line ends become LF."""
