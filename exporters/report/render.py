@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Final
 from exporters.errors import ExportError, ExportUnavailableError
 from exporters.options import ExportOptions
 from exporters.plots import DEFAULT_MAX_POINTS
+from exporters.report import pdf_png
 from exporters.report.figures import ReportPlots, render_report_plots
 from exporters.report.view import ReportView, build_report_view
 from exporters.viewer import ViewerFragment, viewer_fragment
@@ -221,7 +222,10 @@ def _weasyprint() -> tuple[ModuleType, type[Exception]]:
         if _weasyprint_loaded is None:
             try:
                 import weasyprint  # noqa: PLC0415  (optional dependency: loceval[report])
+                from weasyprint import images  # noqa: PLC0415
                 from weasyprint.urls import FatalURLFetchingError  # noqa: PLC0415
+
+                pdf_png.install(images)  # the figures' PNG rows go into the PDF as they are
             except (ImportError, OSError) as err:  # OSError: pango/glib libraries missing
                 first = (str(err).strip().splitlines() or [type(err).__name__])[0]
                 _weasyprint_loaded = (
