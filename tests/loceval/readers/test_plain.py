@@ -44,6 +44,25 @@ def test_tricky_numbers_match_loadtxt_bit_for_bit(delimiter: str | None) -> None
     assert lines.tolist() == list(range(len(TRICKY)))
 
 
+def test_every_digit_count_in_one_table_matches_loadtxt() -> None:
+    """Numbers of 1 to 19 digits side by side (read in one to five lanes) keep their values."""
+    rng = np.random.default_rng(5)
+    cells = []
+    for digits in range(1, 20):
+        for _ in range(40):
+            text = "".join(rng.choice(list("0123456789"), size=digits))
+            point = int(rng.integers(0, digits + 1))
+            sign = rng.choice(["", "-", "+"])
+            cells.append(f"{sign}{text[:point]}.{text[point:]}" if point < digits else sign + text)
+    order = rng.permutation(len(cells))
+    rows = [" ".join(cells[k] for k in order[i : i + 4]) for i in range(0, len(order), 4)]
+    text = "\n".join(rows) + "\n"
+    parsed = parse_plain(text.encode(), delimiter=None)
+    assert parsed is not None
+    expected = _loadtxt(text, None)
+    assert (parsed[0].view(np.int64) == expected.view(np.int64)).all()
+
+
 def test_random_stamps_across_chunks_match_loadtxt(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(_plain, "_CHUNK_BYTES", 97)
     rng = np.random.default_rng(3)
