@@ -287,12 +287,22 @@ def encode_plot(
     svg = png = None
     if "svg" in formats:
         svg = _svg(fig)
-        # The constrained layout is settled by the first save; freezing it spares the
-        # second format another layout pass.
-        fig.set_layout_engine("none")
+        _freeze_layout(fig)
     if "png" in formats:
         png = _png(fig)
     return Plot(key=key, title=title, caption=caption, svg=svg, png=png)
+
+
+def _freeze_layout(fig: Figure) -> None:
+    """Keep the layout the first save settled; the next save draws the figure only once.
+
+    While a figure has a layout engine, even a placeholder (``"none"``), ``savefig``
+    draws it twice: once without rendering, to lay it out, and once for real. Without an
+    engine it draws once, at the positions the constrained layout gave (the same pixels).
+    """
+    fig.set_layout_engine(None)
+    if fig.get_layout_engine() is not None:  # a matplotlibrc asks for a layout by default
+        fig.set_layout_engine("none")
 
 
 def keep_every_vertex(lines: Sequence[Line2D]) -> None:
