@@ -135,12 +135,16 @@ def _environment(templates_dir: Path) -> jinja2.Environment:
     The environment keeps its compiled templates, so the report, its PDF and the next
     report render without compiling the templates again (0.13 s each on the test machine).
     It checks each template's modification time when it is used, so an edited template is
-    still picked up. Environments are safe to render from several threads.
+    still picked up. Environments are safe to render from several threads. The compiled
+    code is also kept on disk for the next process (:mod:`exporters.report.bytecode`).
     """
     import jinja2  # noqa: PLC0415  (optional dependency: loceval[report])
 
+    from exporters.report.bytecode import bytecode_cache  # noqa: PLC0415  (imports Jinja2)
+
     env = jinja2.Environment(
         loader=jinja2.FileSystemLoader(templates_dir),
+        bytecode_cache=bytecode_cache(),
         autoescape=True,
         undefined=jinja2.StrictUndefined,
         trim_blocks=True,
