@@ -202,21 +202,22 @@ def parse_table(
     Raises:
         ReaderError: a line has the wrong number of cells or a cell is not a number.
     """
-    if isinstance(text, bytes):
-        if text.isascii():  # the bytes are the text: no decoding and encoding again
-            first_line, first_pos = _skip_leading_lines(text, skip_lines, comments)
-            plain = parse_plain(
-                text[first_pos:], delimiter=delimiter, usecols=usecols, int_first=int_first
-            )
-            if plain is not None:
-                return _plain_table(plain, first_line)
+    if isinstance(text, bytes) and not text.isascii():
         text = decode_text(text)
-    first_line, first_pos = _skip_leading_lines(text, skip_lines, comments)
-    # ASCII text: character offsets are byte offsets, and the encoding is a copy.
-    body = text.encode()[first_pos:] if text.isascii() else text[first_pos:].encode()
+    if isinstance(text, bytes):  # ASCII: the bytes are the text, decoded only if need be
+        first_line, first_pos = _skip_leading_lines(text, skip_lines, comments)
+        body = text[first_pos:]
+    else:  # ASCII text: character offsets are byte offsets, and the encoding is a copy
+        first_line, first_pos = _skip_leading_lines(text, skip_lines, comments)
+        body = text.encode()[first_pos:] if text.isascii() else text[first_pos:].encode()
     plain = parse_plain(body, delimiter=delimiter, usecols=usecols, int_first=int_first)
     if plain is not None:
-        return _plain_table(plain, first_line)
+        values, rows, first_int = plain
+        numbered: IntArray = rows + (first_line + 1)
+        return NumericTable(values, numbered, np.zeros(len(values), dtype=bool), first_int)
+    if isinstance(text, bytes):
+        text = decode_text(text)  # old Mac line ends become LF: the leading lines again
+        first_line, first_pos = _skip_leading_lines(text, skip_lines, comments)
     # Without comments below the leading block the C parser need not look for them.
     body_comments = comments if comments and text.find(comments, first_pos) >= 0 else None
     fill = empty_cells and delimiter is not None
@@ -252,15 +253,6 @@ def parse_table(
         empty_cells=empty_cells,
         int_first=int_first,
     )
-
-
-def _plain_table(
-    plain: tuple[FloatArray, IntArray, StampsNs | None], first_line: int
-) -> NumericTable:
-    """Return the table :func:`parse_plain` read from below line ``first_line`` (0-based)."""
-    values, rows, first_int = plain
-    numbered: IntArray = rows + (first_line + 1)
-    return NumericTable(values, numbered, np.zeros(len(values), dtype=bool), first_int)
 
 
 def stamps_from_values(
