@@ -8,9 +8,12 @@ import io
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
+from matplotlib.layout_engine import ConstrainedLayoutEngine
 from PIL import Image
 
 from exporters import write_artifacts
@@ -110,3 +113,37 @@ def test_yaw_pitch_roll_of_a_rotation_matrix(
     rebuilt = Rotation.from_euler("ZYX", np.array(got), degrees=True).as_matrix()
     np.testing.assert_allclose(rebuilt, matrix, atol=1e-12)
     assert all(math.isfinite(a) for a in got)
+
+
+def test_each_figure_is_laid_out_once_and_drawn_once_per_format(
+    two_estimates: EvaluationResult, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """One constrained layout per figure, shared by its SVG and PNG, and no draw that
+    renders nothing (savefig makes one to lay out a figure that still has its engine)."""
+    layouts: list[Figure] = []
+    draws: list[Figure] = []
+    execute, draw = ConstrainedLayoutEngine.execute, Figure.draw
+
+    def counted_layout(self: ConstrainedLayoutEngine, fig: Figure) -> None:
+        layouts.append(fig)
+        execute(self, fig)
+
+    def counted_draw(self: Figure, renderer: Any) -> None:
+        draws.append(self)
+        draw(self, renderer)
+
+    monkeypatch.setattr(ConstrainedLayoutEngine, "execute", counted_layout)
+    monkeypatch.setattr(Figure, "draw", counted_draw)
+    plots = render_report_plots(two_estimates, ExportOptions(), formats=("svg", "png"))
+
+    drawn = [*plots.figures, *([plots.clock] if plots.clock is not None else [])]
+    assert len(drawn) >= 5
+    assert len(layouts) == len(drawn)
+    assert len(set(map(id, layouts))) == len(layouts)
+    assert len(draws) == 2 * len(drawn)  # one SVG and one PNG each
+    assert {id(fig): draws.count(fig) for fig in draws} == {id(fig): 2 for fig in layouts}
+    for fig in layouts:
+        assert fig.get_layout_engine() is None  # nothing left to lay the figure out again
+    for plot in drawn:
+        assert plot.svg is not None
+        assert plot.png is not None
