@@ -52,13 +52,16 @@ def rgb_png(rgba: np.ndarray, *, dpi: float, software: str) -> bytes:
         msg = f"Expected an (H, W, 4) uint8 canvas, got {rgba.dtype} of shape {rgba.shape}."
         raise ValueError(msg)
     height, width = int(rgba.shape[0]), int(rgba.shape[1])
-    rgb = rgba[:, :, :3]
+    # The differences are taken over whole RGBA pixels (contiguous memory, a third of the
+    # time of subtracting the strided RGB bytes) and their colour copied into the rows.
+    up = np.empty_like(rgba)
+    up[0] = rgba[0]
+    np.subtract(rgba[1:], rgba[:-1], out=up[1:])  # uint8 wraps modulo 256, as PNG's Up
     rows = np.empty((height, 1 + 3 * width), dtype=np.uint8)
     rows[:, 0] = _FILTER_UP
     pixels = rows[:, 1:].view()
     pixels.shape = (height, width, 3)  # a view of the rows' bytes (raises rather than copy)
-    pixels[0] = rgb[0]
-    np.subtract(rgb[1:], rgb[:-1], out=pixels[1:])  # uint8 wraps modulo 256, as PNG's Up
+    pixels[...] = up[:, :, :3]
     per_metre = round(dpi / _METRES_PER_INCH)
     return b"".join(
         (
