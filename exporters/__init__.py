@@ -312,20 +312,21 @@ def _render_into(
 
 
 _REPORTS: Final = frozenset({"report.html", "report.pdf"})
-"""The artifacts that embed the report's figures (SVG in the HTML, PNG in the PDF)."""
+"""The artifacts that embed the report's figures (SVG in both; PNG in a WeasyPrint PDF)."""
 
 
 class _ReportFigures:
     """Renders ``report.html`` and ``report.pdf`` of one run, drawing each figure once.
 
-    When a run writes both reports, every figure is drawn once and encoded as SVG and as
-    PNG; a run writing one of them draws only its format.
+    When a run writes both reports, every figure is drawn once and encoded in the formats
+    the two embed (SVG for both with the repository's templates; SVG and PNG when a folder
+    of one's own has its PDF laid out by WeasyPrint); a run writing one draws only its own.
     """
 
     def __init__(self, result: EvaluationResult, options: ExportOptions, wanted: list[str]) -> None:
         self._result = result
         self._options = options
-        self._both = _REPORTS.issubset(wanted)
+        self._wanted = _REPORTS.intersection(wanted)
         self._plots: ReportPlots | None = None
 
     def render(self, name: str) -> bytes:
@@ -333,13 +334,17 @@ class _ReportFigures:
         spec = ARTIFACTS[name]
         spec.load()  # the libraries' message (ExportUnavailableError) when one is missing
         from exporters.report import (  # noqa: PLC0415  (matplotlib, Jinja2)
+            DEFAULT_TEMPLATES_DIR,
             render_report_html,
             render_report_pdf,
             render_report_plots,
+            report_figure_formats,
         )
 
-        if self._both and self._plots is None:
-            self._plots = render_report_plots(self._result, self._options, formats=("svg", "png"))
+        if self._plots is None:
+            folder = self._options.templates_dir or DEFAULT_TEMPLATES_DIR
+            formats = report_figure_formats(folder, self._wanted)
+            self._plots = render_report_plots(self._result, self._options, formats=formats)
         if name == "report.html":
             return render_report_html(self._result, self._options, plots=self._plots)
         return render_report_pdf(self._result, self._options, plots=self._plots)

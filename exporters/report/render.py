@@ -1,7 +1,13 @@
-"""Rendering the evaluation report: Jinja2 to HTML, WeasyPrint to an A4 PDF.
+"""Rendering the evaluation report: Jinja2 to HTML, Typst to an A4 PDF.
 
-:func:`render_template`, :func:`check_templates` and :func:`html_to_pdf` are shared with
-the summary report (:mod:`exporters.summary`).
+The PDF is typeset by Typst from ``report.typ`` beside the HTML template, reading the same
+view model (:mod:`exporters.report.typeset`): no system library. A templates folder of
+one's own that has no ``.typ`` template (HTML templates only) gets its PDF laid out from its
+HTML by WeasyPrint instead, which is an optional extra (``loceval[html-pdf]``, with the
+system libraries pango) and is used for nothing else.
+
+:func:`render_template`, :func:`check_templates`, :func:`pdf_engine` and :func:`html_to_pdf`
+are shared with the summary and control-point reports.
 """
 
 from __future__ import annotations
@@ -9,18 +15,20 @@ from __future__ import annotations
 import base64
 import contextlib
 import functools
+import logging
 import re
 import threading
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Final, Literal, TypeAlias
 
 from exporters.errors import ExportError, ExportUnavailableError
 from exporters.options import ExportOptions
-from exporters.plots import DEFAULT_MAX_POINTS
+from exporters.plots import DEFAULT_MAX_POINTS, ImageFormat
 from exporters.report import pdf_png
 from exporters.report.figures import ReportPlots, render_report_plots
+from exporters.report.typeset import check_typst, typeset_pdf
 from exporters.report.view import ReportView, build_report_view
 from exporters.viewer import ViewerFragment, viewer_fragment
 from loceval.core.display import shown_text
@@ -31,22 +39,48 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DEFAULT_TEMPLATES_DIR",
+    "PDF_TEMPLATE_NAME",
     "TEMPLATE_NAME",
+    "PdfEngine",
     "check_pdf",
     "check_templates",
     "html_to_pdf",
     "pdf_available",
+    "pdf_engine",
+    "pdf_figure_format",
     "preload_templates",
     "render_report",
     "render_report_html",
     "render_report_pdf",
     "render_template",
     "render_view_html",
+    "render_view_pdf",
+    "report_figure_formats",
 ]
+
+logger = logging.getLogger(__name__)
 
 DEFAULT_TEMPLATES_DIR: Final[Path] = Path(__file__).resolve().parents[2] / "templates"
 """The repository's ``templates/`` folder, used when the options name none."""
 TEMPLATE_NAME: Final = "report.html.j2"
+PDF_TEMPLATE_NAME: Final = "report.typ"
+
+PdfEngine: TypeAlias = Literal["typst", "weasyprint"]
+"""What lays out a PDF: Typst from a ``.typ`` template, or WeasyPrint from the HTML."""
+
+
+def pdf_engine(templates_dir: Path, typst_template: str = PDF_TEMPLATE_NAME) -> PdfEngine:
+    """Return what lays out the PDFs of a templates folder.
+
+    Typst when the folder has the ``.typ`` template (the repository's does); a folder of
+    one's own with HTML templates only is laid out from its HTML by WeasyPrint.
+    """
+    return "typst" if (templates_dir / typst_template).is_file() else "weasyprint"
+
+
+def pdf_figure_format(templates_dir: Path, typst_template: str = PDF_TEMPLATE_NAME) -> ImageFormat:
+    """Return how a PDF of the folder embeds figures: SVG (Typst, vectors) or PNG (WeasyPrint)."""
+    return "svg" if pdf_engine(templates_dir, typst_template) == "typst" else "png"
 
 
 _SEPARATOR: Final = re.compile(r"(?<=[^\W_])([_/@:.])(?=[^\W_])")
@@ -230,12 +264,15 @@ def _weasyprint() -> tuple[ModuleType, type[Exception]]:
                 from weasyprint.urls import FatalURLFetchingError  # noqa: PLC0415
 
                 pdf_png.install(images)  # the figures' PNG rows go into the PDF as they are
+                _quieten(weasyprint.LOGGER, weasyprint.PROGRESS_LOGGER)
             except (ImportError, OSError) as err:  # OSError: pango/glib libraries missing
                 first = (str(err).strip().splitlines() or [type(err).__name__])[0]
                 _weasyprint_loaded = (
-                    "report.pdf needs WeasyPrint and its system libraries (pango); install "
-                    f"loceval[report] and the packages libpango-1.0-0 and libpangoft2-1.0-0 "
-                    f"({first[:200]})."
+                    "The PDF of HTML templates of one's own (a templates folder without a "
+                    ".typ template) is laid out by WeasyPrint, which needs its system "
+                    "libraries (pango): install loceval[html-pdf] and the packages "
+                    "libpango-1.0-0 and libpangoft2-1.0-0, or put the repository's .typ "
+                    f"templates in the folder ({first[:200]})."
                 )
             else:
                 _weasyprint_loaded = (weasyprint, FatalURLFetchingError)
@@ -245,26 +282,55 @@ def _weasyprint() -> tuple[ModuleType, type[Exception]]:
     return loaded
 
 
-def check_pdf() -> None:
-    """Check that PDFs can be laid out here, before any work whose end is a PDF.
+class _Quiet(logging.Filter):
+    """Drops WeasyPrint's per-step progress lines and its notes on print-only CSS.
+
+    WeasyPrint logs some twenty INFO lines per PDF (``weasyprint.progress``) and a warning
+    for each ``print-color-adjust`` of the stylesheet (browsers need it to print colours;
+    WeasyPrint always prints them): noise in the service's log, once per report.
+    """
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.name.endswith(".progress") and record.levelno < logging.WARNING:
+            return False
+        return "print-color-adjust" not in record.getMessage()
+
+
+def _quieten(*loggers: logging.Logger) -> None:
+    """Put the filter on WeasyPrint's loggers (once: the import runs once per process)."""
+    for each in loggers:
+        each.addFilter(_Quiet())
+
+
+def check_pdf(
+    templates_dir: Path = DEFAULT_TEMPLATES_DIR, typst_template: str = PDF_TEMPLATE_NAME
+) -> None:
+    """Check that PDFs of a templates folder can be made here, before any work for one.
 
     Raises:
-        ExportUnavailableError: WeasyPrint or its system libraries (pango) are missing.
+        ExportUnavailableError: the folder's PDFs need WeasyPrint (no ``.typ`` template)
+            and it or its system libraries (pango) are missing; or typst is missing.
     """
-    _weasyprint()
+    if pdf_engine(templates_dir, typst_template) == "typst":
+        check_typst()
+    else:
+        _weasyprint()
 
 
-def pdf_available() -> bool:
-    """Tell whether this process can write PDFs (WeasyPrint and pango load).
+def pdf_available(
+    templates_dir: Path = DEFAULT_TEMPLATES_DIR, typst_template: str = PDF_TEMPLATE_NAME
+) -> bool:
+    """Tell whether this process can write the PDFs of a templates folder.
 
-    Uses the same once-per-process import as the PDF render, so the first call may take
-    about half a second and later calls none.
+    With the repository's templates (Typst) always, where loceval[report] is installed;
+    with HTML templates of one's own, when WeasyPrint and pango load (the same
+    once-per-process import as the PDF's, so the first call may take half a second).
 
     Returns:
-        False when WeasyPrint or its system libraries are missing, True otherwise.
+        False when the PDF's engine is missing, True otherwise.
     """
     try:
-        check_pdf()
+        check_pdf(templates_dir, typst_template)
     except ExportUnavailableError:
         return False
     return True
@@ -337,6 +403,22 @@ def _embedded_fetcher(images: Mapping[str, tuple[str, bytes]]) -> object:
     return EmbeddedFetcher(allowed_protocols=("data",), fail_on_errors=True)
 
 
+def render_view_pdf(view: ReportView, *, templates_dir: Path) -> bytes:
+    """Lay a view model out as the report's A4 PDF.
+
+    Typst typesets ``report.typ`` of the folder (figures as SVG: the view must have been
+    built with ``image_format="svg"``); a folder without one has its HTML laid out by
+    WeasyPrint (figures as PNG: ``image_format="png"``, see :func:`pdf_figure_format`).
+
+    Raises:
+        ExportUnavailableError: the PDF's engine is missing.
+        ExportError: the templates are missing or failed.
+    """
+    if pdf_engine(templates_dir) == "typst":
+        return typeset_pdf(templates_dir / PDF_TEMPLATE_NAME, view, label="report")
+    return html_to_pdf(render_view_html(view, templates_dir=templates_dir))
+
+
 def render_report(
     result: EvaluationResult,
     *,
@@ -346,9 +428,9 @@ def render_report(
 ) -> tuple[bytes, bytes]:
     """Render the report as HTML and PDF, drawing each figure once for both.
 
-    The HTML embeds the plots as SVG; the PDF is the same templates laid out by WeasyPrint
-    with the plots as 200 dpi PNG (WeasyPrint draws matplotlib's SVG slowly: seconds per
-    report, where PNG costs almost nothing).
+    The HTML embeds the plots as SVG, and so does the PDF Typst typesets (as vectors);
+    the PDF of HTML templates of one's own, laid out by WeasyPrint, embeds them as 200 dpi
+    PNG (WeasyPrint draws matplotlib's SVG slowly).
 
     Args:
         result: the evaluation.
@@ -361,13 +443,30 @@ def render_report(
         ``(html, pdf)`` as bytes.
 
     Raises:
-        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
+        ExportUnavailableError: Jinja2, matplotlib or the PDF's engine is missing.
         ExportError: the templates are missing or the layout failed.
     """
     options = options or ExportOptions()
-    plots = render_report_plots(result, options, formats=("svg", "png"), max_points=max_points)
-    html = render_report_html(result, options, plots=plots, templates_dir=templates_dir)
-    return html, render_report_pdf(result, options, plots=plots, templates_dir=templates_dir)
+    folder = _templates_dir(options, templates_dir)
+    formats = report_figure_formats(folder, ("report.html", "report.pdf"))
+    plots = render_report_plots(result, options, formats=formats, max_points=max_points)
+    html = render_report_html(result, options, plots=plots, templates_dir=folder)
+    return html, render_report_pdf(result, options, plots=plots, templates_dir=folder)
+
+
+def report_figure_formats(templates_dir: Path, names: Iterable[str]) -> tuple[ImageFormat, ...]:
+    """Return the encodings the reports ``names`` of a folder embed their figures in.
+
+    ``report.html`` embeds SVG; ``report.pdf`` SVG too when Typst typesets it, PNG when
+    WeasyPrint lays out the folder's HTML.
+    """
+    wanted = set(names)
+    formats: list[ImageFormat] = []
+    if "report.html" in wanted:
+        formats.append("svg")
+    if "report.pdf" in wanted:
+        formats.append(pdf_figure_format(templates_dir))
+    return tuple(dict.fromkeys(formats))
 
 
 def render_report_html(
@@ -408,21 +507,22 @@ def render_report_pdf(
 ) -> bytes:
     """Render ``report.pdf``: the same report on A4 pages (the ARTIFACTS exporter).
 
-    Plots are embedded as PNG (see :func:`render_report`).
+    Typeset by Typst from ``report.typ`` with the figures as vectors, or, for a folder of
+    HTML templates only, laid out from the HTML by WeasyPrint with PNG figures.
 
     Args:
         result: the evaluation.
         options: title, evaluation id, templates folder.
-        plots: the figures already drawn, with their PNG (:func:`render_report_plots`);
-            default: draw them here.
+        plots: the figures already drawn, in the PDF's format (:func:`pdf_figure_format`;
+            :func:`render_report_plots`); default: draw them here.
         templates_dir: the template folder; default ``options.templates_dir``, else the
             repository's ``templates/``.
 
     Raises:
-        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
+        ExportUnavailableError: Jinja2, matplotlib or the PDF's engine is missing.
         ExportError: the templates are missing or the layout failed.
     """
     folder = _templates_dir(options, templates_dir)
-    check_pdf()  # before drawing anything: without WeasyPrint there is no PDF to draw for
-    view = build_report_view(result, options, plots=plots, image_format="png")
-    return html_to_pdf(render_view_html(view, templates_dir=folder))
+    check_pdf(folder)  # before drawing anything: without its engine there is no PDF to draw for
+    view = build_report_view(result, options, plots=plots, image_format=pdf_figure_format(folder))
+    return render_view_pdf(view, templates_dir=folder)

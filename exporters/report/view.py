@@ -201,6 +201,9 @@ class ReportView:
     """What a time in the report counts (pose numbers when the reference has no times)."""
     """Where that value goes, when the example alone does not say it (page and API)."""
     map: MapView | None = None  # the map section (exporters.report.mapsection)
+    contents: tuple[tuple[str, str], ...] = ()
+    """The sections in report order, as (anchor, title): the contents list of both renderings
+    (the interactive view's entry is the HTML's only: the PDF keeps its figures)."""
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -458,6 +461,26 @@ def _summary(result: EvaluationResult) -> str:
     )
 
 
+def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple[str, str], ...]:
+    """Every section of the report, in order, as (anchor, title) for the contents list."""
+    return tuple(
+        entry
+        for entry, shown in (
+            (("verdict", "Verdict"), True),
+            (("evaluated", "What was evaluated"), True),
+            (("statistics", "Error statistics"), True),
+            (("ranging", "Ranging"), ranging),
+            (("map", "The map against the building plan"), map_section),
+            (("viewer", "Interactive view"), True),
+            (("plots", "Plots"), True),
+            (("clocks", "Clocks and device offset"), True),
+            (("worst", "Greatest errors"), True),
+            (("warnings", f"Warnings ({warnings})"), True),
+        )
+        if shown
+    )
+
+
 def build_report_view(
     result: EvaluationResult,
     options: ExportOptions,
@@ -513,6 +536,9 @@ def build_report_view(
             rotation=[e.rpe_rotation for e in estimates],
         ),
     )
+    ranging = build_ranging_view(result)
+    map_view = build_map_view(result)
+    warnings = _warnings(result)
     shares = tuple(
         (
             f"≤ {t:g} m",
@@ -541,7 +567,7 @@ def build_report_view(
         tables=tables,
         figures=figures,
         worst=_worst(result),
-        warnings=_warnings(result),
+        warnings=warnings,
         notes=_notes(result),
         confidence=build_confidence_view(
             result,
@@ -550,7 +576,7 @@ def build_report_view(
         clocks=build_clock_section(
             result, number=len(figures) + 1, plot=clock, image_format=image_format
         ),
-        ranging=build_ranging_view(result),
+        ranging=ranging,
         tolerance_example=tolerance_example,
         tolerance_where=tolerance_where,
         times_note=(
@@ -559,5 +585,8 @@ def build_report_view(
             if result.reference.indexed
             else _TIMES_NOTE
         ),
-        map=build_map_view(result),
+        map=map_view,
+        contents=_contents(
+            ranging=ranging is not None, map_section=map_view is not None, warnings=len(warnings)
+        ),
     )
