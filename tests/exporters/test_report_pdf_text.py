@@ -175,6 +175,5 @@ def test_a_sentence_one_template_lacks_is_found(tmp_path: Path) -> None:
     shorter = html.replace("Times in this report are seconds", "Times here are seconds")
     missing, extra = text_differences(shorter, pdf, tmp_path, title=TITLE)
     assert missing == ["times here are seconds since the first pose of the reference."]
-    assert (
-        extra == "times in this report are seconds since the first pose of the reference.".split()
-    )
+    sentence = "times in this report are seconds since the first pose of the reference."
+    assert extra == sentence.split(" ")
