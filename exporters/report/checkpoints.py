@@ -3,7 +3,8 @@
 One section per estimate: the plan view with the error arrows (scaled, the scale shown),
 the statistics over the scored visits, the Hilti and LaMAria scores, the recall per
 threshold, a table per control point and the lists of unvisited points and unmatched stops.
-The template is ``templates/checkpoints.html.j2`` (it shares ``report.css``).
+The templates are ``templates/checkpoints.html.j2`` (it shares ``report.css``) and, for the
+PDF, ``templates/checkpoints.typ`` (Typst, the same view model).
 """
 
 from __future__ import annotations
@@ -17,8 +18,10 @@ import numpy as np
 from exporters.options import ExportOptions
 from exporters.report.render import (
     DEFAULT_TEMPLATES_DIR,
+    check_pdf,
     check_templates,
-    html_to_pdf,
+    layout_pdf,
+    pdf_figure_format,
     render_template,
 )
 from exporters.viewer.checkpoints import checkpoint_scene
@@ -30,6 +33,7 @@ if TYPE_CHECKING:
     from loceval.core.arrays import FloatArray
 
 __all__ = [
+    "CHECKPOINT_PDF_TEMPLATE",
     "CHECKPOINT_TEMPLATE",
     "CheckpointReportView",
     "EstimateSection",
@@ -38,6 +42,7 @@ __all__ = [
 ]
 
 CHECKPOINT_TEMPLATE: Final = "checkpoints.html.j2"
+CHECKPOINT_PDF_TEMPLATE: Final = "checkpoints.typ"
 _STATS: Final = (("RMSE", "rmse"), ("MEAN", "mean"), ("MEDIAN", "median"), ("STD", "std"),
                  ("MIN", "min"), ("MAX", "max"))  # fmt: skip
 
@@ -212,17 +217,21 @@ def build_checkpoint_view(
 def render_checkpoint_report(
     evaluation: CheckpointEvaluation, options: ExportOptions, *, pdf: bool
 ) -> tuple[bytes, bytes | None]:
-    """Render ``report.html`` (SVG plots) and, with ``pdf``, ``report.pdf`` (PNG plots).
+    """Render ``report.html`` (SVG plots) and, with ``pdf``, ``report.pdf``.
+
+    The PDF is typeset by Typst from the HTML's view model, its plots as vectors (for a
+    folder of HTML templates only, WeasyPrint lays out the HTML with PNG plots).
 
     Raises:
-        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
+        ExportUnavailableError: Jinja2, matplotlib or the PDF's engine is missing.
         ExportError: the templates are missing or the layout failed.
     """
     folder = options.templates_dir or DEFAULT_TEMPLATES_DIR
     check_templates(folder, CHECKPOINT_TEMPLATE, label="control-point report")
+    if pdf:
+        check_pdf(folder, CHECKPOINT_PDF_TEMPLATE)
 
-    def render(image_format: str) -> bytes:
-        view = build_checkpoint_view(evaluation, options, image_format=image_format)
+    def render_html(view: CheckpointReportView, *, interactive: bool) -> bytes:
         return render_template(
             folder,
             CHECKPOINT_TEMPLATE,
@@ -231,9 +240,20 @@ def render_checkpoint_report(
             report=view,
             # the interactive section is the HTML's only (the PDF keeps its figures)
             viewer=scene_fragment(checkpoint_scene(evaluation, options), folder)
-            if image_format == "svg"
+            if interactive
             else None,
         )
 
-    html = render("svg")
-    return html, html_to_pdf(render("png")) if pdf else None
+    view = build_checkpoint_view(evaluation, options, image_format="svg")
+    html = render_html(view, interactive=True)
+    if not pdf:
+        return html, None
+    if pdf_figure_format(folder, CHECKPOINT_PDF_TEMPLATE) != "svg":
+        view = build_checkpoint_view(evaluation, options, image_format="png")
+    return html, layout_pdf(
+        folder,
+        CHECKPOINT_PDF_TEMPLATE,
+        view,
+        label="control-point report",
+        html=lambda: render_html(view, interactive=False),
+    )

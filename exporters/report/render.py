@@ -18,7 +18,7 @@ import functools
 import logging
 import re
 import threading
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Final, Literal, TypeAlias
@@ -45,6 +45,7 @@ __all__ = [
     "check_pdf",
     "check_templates",
     "html_to_pdf",
+    "layout_pdf",
     "pdf_available",
     "pdf_engine",
     "pdf_figure_format",
@@ -403,6 +404,32 @@ def _embedded_fetcher(images: Mapping[str, tuple[str, bytes]]) -> object:
     return EmbeddedFetcher(allowed_protocols=("data",), fail_on_errors=True)
 
 
+def layout_pdf(
+    templates_dir: Path,
+    typst_template: str,
+    view: object,
+    *,
+    label: str,
+    html: Callable[[], bytes],
+) -> bytes:
+    """Lay a view model out as an A4 PDF with the folder's engine (:func:`pdf_engine`).
+
+    Args:
+        templates_dir: the template folder.
+        typst_template: the ``.typ`` template's name (Typst typesets it from ``view``).
+        view: the view model.
+        label: names the template in messages.
+        html: renders the HTML WeasyPrint lays out, for a folder without ``typst_template``.
+
+    Raises:
+        ExportUnavailableError: the PDF's engine is missing.
+        ExportError: the templates are missing or failed.
+    """
+    if pdf_engine(templates_dir, typst_template) == "typst":
+        return typeset_pdf(templates_dir / typst_template, view, label=label)
+    return html_to_pdf(html())
+
+
 def render_view_pdf(view: ReportView, *, templates_dir: Path) -> bytes:
     """Lay a view model out as the report's A4 PDF.
 
@@ -414,9 +441,13 @@ def render_view_pdf(view: ReportView, *, templates_dir: Path) -> bytes:
         ExportUnavailableError: the PDF's engine is missing.
         ExportError: the templates are missing or failed.
     """
-    if pdf_engine(templates_dir) == "typst":
-        return typeset_pdf(templates_dir / PDF_TEMPLATE_NAME, view, label="report")
-    return html_to_pdf(render_view_html(view, templates_dir=templates_dir))
+    return layout_pdf(
+        templates_dir,
+        PDF_TEMPLATE_NAME,
+        view,
+        label="report",
+        html=lambda: render_view_html(view, templates_dir=templates_dir),
+    )
 
 
 def render_report(

@@ -6,7 +6,8 @@ one evaluation (a reference and one or more estimated systems). The service buil
 per-system statistics, the trend over time and the repeatability of the reference path)
 into a view model (:class:`SummaryView`) and renders it with the evaluation report's look
 (``templates/summary.html.j2``, ``templates/report.css``) as self-contained HTML (SVG
-plots) and as an A4 PDF (PNG plots, WeasyPrint).
+plots) and as an A4 PDF typeset by Typst from the same view (``templates/summary.typ``,
+the plots as vectors).
 
 Split by concern as the evaluation report is: :mod:`~exporters.summary.model` (the input,
 statistics and repeatability rows), :mod:`~exporters.summary.view` (the formatted view
@@ -43,6 +44,7 @@ from exporters.summary.render import (
     render_summary_html,
     render_summary_pdf,
     render_summary_view_html,
+    render_summary_view_pdf,
     summary_formats,
 )
 from exporters.summary.view import SummaryFigure, SummaryView, build_summary_view
@@ -67,6 +69,7 @@ __all__ = [
     "render_summary_pdf",
     "render_summary_plots",
     "render_summary_view_html",
+    "render_summary_view_pdf",
     "repeatability",
     "summary_formats",
     "system_stats",

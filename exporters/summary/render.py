@@ -1,7 +1,9 @@
-"""Rendering the summary report: its view model through ``templates/summary.html.j2``.
+"""Rendering the summary report: its view model through ``summary.html.j2`` and ``summary.typ``.
 
-HTML with SVG plots, and an A4 PDF (PNG plots, WeasyPrint), with the evaluation report's
-Jinja2 render and template check (:mod:`exporters.report`).
+HTML with SVG plots, and an A4 PDF typeset by Typst from the same view model (the plots as
+vectors), with the evaluation report's Jinja2 render, template check and PDF engines
+(:mod:`exporters.report`): a folder of HTML templates only has WeasyPrint lay its HTML out
+(PNG plots).
 """
 
 from __future__ import annotations
@@ -9,7 +11,14 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Final
 
 from exporters.errors import ExportOptionsError
-from exporters.report import DEFAULT_TEMPLATES_DIR, check_templates, html_to_pdf, render_template
+from exporters.report import (
+    DEFAULT_TEMPLATES_DIR,
+    check_pdf,
+    check_templates,
+    layout_pdf,
+    pdf_figure_format,
+    render_template,
+)
 from exporters.summary.model import SummaryInput, repeatability
 from exporters.summary.plots import render_summary_plots
 from exporters.summary.view import SummaryView, build_summary_view
@@ -20,16 +29,19 @@ if TYPE_CHECKING:
 
 __all__ = [
     "SUMMARY_FORMATS",
+    "SUMMARY_PDF_TEMPLATE_NAME",
     "SUMMARY_TEMPLATE_NAME",
     "render_summary",
     "render_summary_files",
     "render_summary_html",
     "render_summary_pdf",
     "render_summary_view_html",
+    "render_summary_view_pdf",
     "summary_formats",
 ]
 
 SUMMARY_TEMPLATE_NAME: Final = "summary.html.j2"
+SUMMARY_PDF_TEMPLATE_NAME: Final = "summary.typ"
 
 SUMMARY_FORMATS: Final = ("summary.html", "summary.pdf")
 """The files a summary report can be written as, in the order they are written."""
@@ -68,16 +80,35 @@ def render_summary_html(summary: SummaryInput, *, templates_dir: Path) -> bytes:
     return render_summary_view_html(build_summary_view(summary), templates_dir=folder)
 
 
-def render_summary_pdf(summary: SummaryInput, *, templates_dir: Path) -> bytes:
-    """Render the summary as an A4 PDF (PNG plots, WeasyPrint).
+def render_summary_view_pdf(view: SummaryView, *, templates_dir: Path) -> bytes:
+    """Lay a summary view model out as an A4 PDF (Typst, or WeasyPrint for HTML-only folders).
 
     Raises:
-        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
+        ExportUnavailableError: the PDF's engine is missing.
         ExportError: the templates are missing or the layout failed.
     """
     folder = _templates(templates_dir)
-    view = build_summary_view(summary, image_format="png")
-    return html_to_pdf(render_summary_view_html(view, templates_dir=folder))
+    return layout_pdf(
+        folder,
+        SUMMARY_PDF_TEMPLATE_NAME,
+        view,
+        label="summary",
+        html=lambda: render_summary_view_html(view, templates_dir=folder),
+    )
+
+
+def render_summary_pdf(summary: SummaryInput, *, templates_dir: Path) -> bytes:
+    """Render the summary as an A4 PDF (Typst; plots as vectors).
+
+    Raises:
+        ExportUnavailableError: matplotlib or the PDF's engine is missing.
+        ExportError: the templates are missing or the layout failed.
+    """
+    folder = _templates(templates_dir)
+    check_pdf(folder, SUMMARY_PDF_TEMPLATE_NAME)
+    image_format = pdf_figure_format(folder, SUMMARY_PDF_TEMPLATE_NAME)
+    view = build_summary_view(summary, image_format=image_format)
+    return render_summary_view_pdf(view, templates_dir=folder)
 
 
 def render_summary(summary: SummaryInput, *, templates_dir: Path) -> tuple[bytes, bytes]:
@@ -91,21 +122,21 @@ def render_summary(summary: SummaryInput, *, templates_dir: Path) -> tuple[bytes
         ``(html, pdf)`` as bytes.
 
     Raises:
-        ExportUnavailableError: Jinja2, matplotlib or WeasyPrint is missing.
+        ExportUnavailableError: Jinja2, matplotlib or the PDF's engine is missing.
         ExportError: the templates are missing or the layout failed.
     """
     folder = _templates(templates_dir)
-    plots = render_summary_plots(summary, formats=("svg", "png"))
+    check_pdf(folder, SUMMARY_PDF_TEMPLATE_NAME)
+    printed = pdf_figure_format(folder, SUMMARY_PDF_TEMPLATE_NAME)
+    plots = render_summary_plots(summary, formats=tuple(dict.fromkeys(("svg", printed))))
     rows = repeatability(summary.runs)
-    html = render_summary_view_html(
-        build_summary_view(summary, image_format="svg", plots=plots, repeatability_rows=rows),
-        templates_dir=folder,
-    )
-    printable = render_summary_view_html(
-        build_summary_view(summary, image_format="png", plots=plots, repeatability_rows=rows),
-        templates_dir=folder,
-    )
-    return html, html_to_pdf(printable)
+    view = build_summary_view(summary, image_format="svg", plots=plots, repeatability_rows=rows)
+    html = render_summary_view_html(view, templates_dir=folder)
+    if printed != "svg":  # WeasyPrint lays out the folder's HTML, with PNG figures
+        view = build_summary_view(
+            summary, image_format=printed, plots=plots, repeatability_rows=rows
+        )
+    return html, render_summary_view_pdf(view, templates_dir=folder)
 
 
 def summary_formats(names: Collection[str] | None) -> tuple[str, ...]:
@@ -139,8 +170,8 @@ def render_summary_files(
 ) -> dict[str, bytes]:
     """Render the summary as the files ``formats`` ask for (all when None), and no other.
 
-    An HTML-only summary never lays out a PDF, so it renders where WeasyPrint's system
-    libraries (pango) are missing; both formats draw each plot once (:func:`render_summary`).
+    An HTML-only summary never lays out a PDF; both formats draw each plot once
+    (:func:`render_summary`).
 
     Args:
         summary: the runs and what they are.
@@ -153,7 +184,7 @@ def render_summary_files(
 
     Raises:
         ExportOptionsError: a format that is no summary format.
-        ExportUnavailableError: Jinja2, matplotlib or (for the PDF) WeasyPrint is missing.
+        ExportUnavailableError: Jinja2, matplotlib or (for the PDF) its engine is missing.
         ExportError: the templates are missing or the layout failed.
     """
     wanted = summary_formats(formats)
