@@ -53,6 +53,18 @@ def no_weasyprint(monkeypatch: pytest.MonkeyPatch) -> None:
 
 
 @pytest.fixture
+def html_only_templates(tmp_path: Path) -> Path:
+    """A copy of the repository's templates without its Typst ones: a user's HTML templates.
+
+    Its PDFs are laid out from the HTML by WeasyPrint (the optional loceval[html-pdf]).
+    """
+    source = Path(__file__).resolve().parents[1] / "templates"
+    folder = tmp_path / "html-templates"
+    shutil.copytree(source, folder, ignore=shutil.ignore_patterns("*.typ", "_typst"))
+    return folder
+
+
+@pytest.fixture
 def rng() -> np.random.Generator:
     """Return the one seeded random generator tests use."""
     return np.random.default_rng(20240601)
@@ -80,7 +92,11 @@ def require_tool(name: str) -> str:
 
 @functools.cache
 def pdf_unavailable() -> str | None:
-    """Why WeasyPrint cannot render PDFs here (its system libraries), or None when it can.
+    """Why WeasyPrint cannot lay out PDFs here, or None when it can.
+
+    WeasyPrint lays out only the PDFs of HTML templates of one's own (the optional
+    loceval[html-pdf], with the system libraries pango); the repository's reports are
+    typeset by Typst and need neither.
 
     Probed in a subprocess, so a missing library's import-time warning or error stays there.
     """
@@ -94,13 +110,14 @@ def pdf_unavailable() -> str | None:
         return None
     last = (probe.stderr.strip().splitlines() or ["import failed"])[-1]
     return (
-        f"WeasyPrint cannot load its system libraries ({last[:200]}); install the packages "
-        "that .ci/run installs (libpango-1.0-0 libpangoft2-1.0-0)"
+        f"WeasyPrint (for PDFs of HTML templates of one's own) cannot be loaded ({last[:200]}); "
+        "install loceval[html-pdf] and the packages that .ci/run installs (libpango-1.0-0 "
+        "libpangoft2-1.0-0)"
     )
 
 
 def pytest_runtest_setup(item: pytest.Item) -> None:
-    """Tests marked ``pdf`` need WeasyPrint's system libraries: skip without them (fail in CI)."""
+    """Tests marked ``pdf`` need WeasyPrint and pango: skip without them (fail in CI)."""
     if item.get_closest_marker("pdf") is not None:
         reason = pdf_unavailable()
         if reason is not None:

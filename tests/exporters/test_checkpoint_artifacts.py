@@ -70,7 +70,6 @@ def test_arrow_scale() -> None:
     assert error_vector_scale(evaluation) == pytest.approx(5.0)
 
 
-@pytest.mark.pdf
 def test_report_and_dxf(evaluation: CheckpointEvaluation, tmp_path: Path) -> None:
     """Every artifact is written; the report and the DXF carry the points and the errors."""
     options = ExportOptions(

@@ -1,8 +1,14 @@
-"""WeasyPrint is imported once per process, and its absence is a clear export error."""
+"""WeasyPrint is imported once per process, and its absence is a clear export error.
+
+WeasyPrint lays out only the PDFs of HTML templates of one's own (a folder without the
+``.typ`` templates: the ``html_only_templates`` fixture); the repository's are typeset by
+Typst and need no WeasyPrint.
+"""
 
 from __future__ import annotations
 
 import threading
+from pathlib import Path
 from types import ModuleType
 
 import pytest
@@ -23,22 +29,31 @@ def test_missing_weasyprint_is_an_unavailable_export_every_time() -> None:
 
 
 @pytest.mark.usefixtures("no_weasyprint")
-def test_pdf_available_is_false_without_weasyprint() -> None:
+def test_pdf_available_is_false_without_weasyprint(html_only_templates: Path) -> None:
     """Without WeasyPrint the check says False (never raises) and keeps the outcome."""
-    assert pdf_available() is False
-    assert pdf_available() is False
+    assert pdf_available(html_only_templates) is False
+    assert pdf_available(html_only_templates) is False
     assert isinstance(report_render._weasyprint_loaded, str)  # the same cached outcome
     with pytest.raises(ExportUnavailableError, match=r"libpango-1\.0-0"):
         html_to_pdf(b"<p>x</p>")
 
 
+@pytest.mark.usefixtures("no_weasyprint")
+def test_the_repositorys_templates_need_no_weasyprint() -> None:
+    """Typst typesets the default templates' PDFs: available without WeasyPrint."""
+    assert pdf_available() is True
+    assert report_render._weasyprint_loaded is None  # not even looked for
+
+
 @pytest.mark.pdf
-def test_pdf_available_is_true_with_weasyprint(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_pdf_available_is_true_with_weasyprint(
+    monkeypatch: pytest.MonkeyPatch, html_only_templates: Path
+) -> None:
     """With WeasyPrint and pango the check says True and keeps the loaded module."""
     monkeypatch.setattr(report_render, "_weasyprint_loaded", None)
-    assert pdf_available() is True
+    assert pdf_available(html_only_templates) is True
     assert isinstance(report_render._weasyprint_loaded, tuple)
-    assert pdf_available() is True
+    assert pdf_available(html_only_templates) is True
 
 
 @pytest.mark.pdf

@@ -53,7 +53,6 @@ def _figures(html: bytes) -> list[bytes]:
     ]
 
 
-@pytest.mark.pdf
 def test_both_reports_from_one_drawing_match_each_alone(
     two_estimates: EvaluationResult, tmp_path: Path
 ) -> None:

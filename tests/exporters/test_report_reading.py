@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from exporters.options import ExportOptions, FrontDoor
-from exporters.report import build_report_view, html_to_pdf, render_report, render_view_html
+from exporters.report import build_report_view, render_report, render_view_html, render_view_pdf
 from exporters.report.render import DEFAULT_TEMPLATES_DIR
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from loceval.readers import parse_source, read_trajectory
@@ -41,8 +41,8 @@ def _pdf_text(pdf: bytes, tmp_path: Path, *, layout: bool = True) -> list[str]:
 
 
 def _pdf(result: EvaluationResult, **options: object) -> bytes:
-    view = build_report_view(result, ExportOptions(**options), plots=(), image_format="png")  # type: ignore[arg-type]
-    return html_to_pdf(render_view_html(view, templates_dir=DEFAULT_TEMPLATES_DIR))
+    view = build_report_view(result, ExportOptions(**options), plots=(), image_format="svg")  # type: ignore[arg-type]
+    return render_view_pdf(view, templates_dir=DEFAULT_TEMPLATES_DIR)
 
 
 def _precise(rng: np.random.Generator) -> EvaluationResult:
@@ -55,7 +55,6 @@ def _precise(rng: np.random.Generator) -> EvaluationResult:
 # --- item 8: one unit per figure and interval ------------------------------------------
 
 
-@pytest.mark.pdf
 def test_interval_reads_in_the_unit_of_its_value(rng: np.random.Generator, tmp_path: Path) -> None:
     """``RMSE 3.0 mm (2.9–3.1)``: the interval in mm like the value, never metres after it."""
     result = _precise(rng)
@@ -71,7 +70,6 @@ def test_interval_reads_in_the_unit_of_its_value(rng: np.random.Generator, tmp_p
     assert lo <= value <= hi
 
 
-@pytest.mark.pdf
 def test_clock_offsets_read_in_one_unit(rng: np.random.Generator, tmp_path: Path) -> None:
     """The offsets that fit read in ms like the estimated offset next to them."""
     result = _precise(rng)
@@ -106,7 +104,6 @@ def _fragments_are_whole_parts(name: str, tokens: list[str]) -> list[str]:
     return bad
 
 
-@pytest.mark.pdf
 def test_long_names_break_only_at_separators(rng: np.random.Generator, tmp_path: Path) -> None:
     """``fr2_desk_groundtruth`` wraps after an underscore, never as ``groun|dtruth``."""
     truth = walk(rng, n=1500)
@@ -137,7 +134,6 @@ def test_long_names_break_only_at_separators(rng: np.random.Generator, tmp_path:
 # --- item 10: no heading alone at a page's foot ----------------------------------------
 
 
-@pytest.mark.pdf
 @pytest.mark.parametrize("worst", [22, 25, 28])
 def test_warnings_heading_stays_with_its_table(
     rng: np.random.Generator, tmp_path: Path, worst: int
@@ -189,7 +185,6 @@ def test_each_front_door_names_itself() -> None:
     assert export_from_options(options, front_door="cli").front_door is FrontDoor.CLI
 
 
-@pytest.mark.pdf
 def test_service_pdf_has_no_flag(rng: np.random.Generator, tmp_path: Path) -> None:
     """The PDF made for the page or the API does not tell its reader to pass a flag."""
     truth = walk(rng, n=1200)
@@ -265,7 +260,6 @@ def test_uncompared_estimates_are_not_about_the_reference(rng: np.random.Generat
     assert result.to_dict()["comparison_notes"] == list(result.comparison_notes)
 
 
-@pytest.mark.pdf
 def test_whole_report_renders_for_the_tf_bag(rng: np.random.Generator, tmp_path: Path) -> None:
     """The PDF lists the chain under how the trajectories were read, not under Warnings."""
     bag = _tf_bag(tmp_path, rng)

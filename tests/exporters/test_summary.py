@@ -386,7 +386,6 @@ def test_path_distances_on_long_paths(rng: np.random.Generator) -> None:
 # --- HTML -------------------------------------------------------------------------------
 
 
-@pytest.mark.pdf
 def test_table_values_equal_the_inputs(week: SummaryInput, rendered: tuple[str, bytes]) -> None:
     """Every run's row shows its date, dataset and each system's RMSEs and verdict."""
     html, _ = rendered
@@ -416,7 +415,6 @@ def test_no_tolerance_shows_a_dash_for_the_verdict() -> None:
     assert "none given" in html
 
 
-@pytest.mark.pdf
 def test_failed_runs_are_listed_with_their_reasons(rendered: tuple[str, bytes]) -> None:
     """A failed run is listed in the header and its row with its reason; the rest are reported."""
     html, pdf = rendered
@@ -439,7 +437,6 @@ def test_all_runs_failed_shows_only_the_reasons() -> None:
     assert "<img" not in html
 
 
-@pytest.mark.pdf
 def test_html_is_self_contained(rendered: tuple[str, bytes]) -> None:
     """No external URL: plots are data: URIs and there are no links, scripts or stylesheets."""
     html, _ = rendered
@@ -451,7 +448,6 @@ def test_html_is_self_contained(rendered: tuple[str, bytes]) -> None:
     assert all(src.startswith("data:image/svg+xml;base64,") for src in sources)
 
 
-@pytest.mark.pdf
 def test_html_shows_header_trend_and_repeatability(
     week: SummaryInput, rendered: tuple[str, bytes]
 ) -> None:
@@ -505,7 +501,6 @@ def test_missing_template_is_an_export_error(tmp_path: Path) -> None:
 # --- empty, one run and PDF ---------------------------------------------------------------
 
 
-@pytest.mark.pdf
 def test_empty_selection_says_so_in_html_and_pdf() -> None:
     """No runs: one clear sentence, no tables or figures, in the HTML and in the PDF."""
     summary = _summary([])
@@ -518,7 +513,6 @@ def test_empty_selection_says_so_in_html_and_pdf() -> None:
     assert "No recordings matched the selection" in _pdf_text(pdf)
 
 
-@pytest.mark.pdf
 def test_pdf_has_the_run_dates_and_dataset_names(
     week: SummaryInput, rendered: tuple[str, bytes]
 ) -> None:
@@ -533,7 +527,6 @@ def test_pdf_has_the_run_dates_and_dataset_names(
     assert "RTAB-Map" in text
 
 
-@pytest.mark.pdf
 def test_one_run_renders_html_and_pdf() -> None:
     """A single run is a single point in the trend; the report says there is no re-drive yet."""
     runs = [_run(0, {"A": SystemFigures(0.04, 0.01, 100, "pass")}, xyz=_loop(500))]
