@@ -259,13 +259,14 @@ def _weasyprint() -> tuple[ModuleType, type[Exception]]:
     global _weasyprint_loaded  # noqa: PLW0603  (the process-wide outcome of one import)
     with _WEASYPRINT_LOCK:
         if _weasyprint_loaded is None:
+            # before the import: WeasyPrint parses its own stylesheets as it is imported
+            _quieten(logging.getLogger("weasyprint"), logging.getLogger("weasyprint.progress"))
             try:
-                import weasyprint  # noqa: PLC0415  (optional dependency: loceval[report])
+                import weasyprint  # noqa: PLC0415  (optional dependency: loceval[html-pdf])
                 from weasyprint import images  # noqa: PLC0415
                 from weasyprint.urls import FatalURLFetchingError  # noqa: PLC0415
 
                 pdf_png.install(images)  # the figures' PNG rows go into the PDF as they are
-                _quieten(weasyprint.LOGGER, weasyprint.PROGRESS_LOGGER)
             except (ImportError, OSError) as err:  # OSError: pango/glib libraries missing
                 first = (str(err).strip().splitlines() or [type(err).__name__])[0]
                 _weasyprint_loaded = (
@@ -298,9 +299,10 @@ class _Quiet(logging.Filter):
 
 
 def _quieten(*loggers: logging.Logger) -> None:
-    """Put the filter on WeasyPrint's loggers (once: the import runs once per process)."""
+    """Put the filter on WeasyPrint's loggers, once per process."""
     for each in loggers:
-        each.addFilter(_Quiet())
+        if not any(isinstance(f, _Quiet) for f in each.filters):
+            each.addFilter(_Quiet())
 
 
 def check_pdf(
