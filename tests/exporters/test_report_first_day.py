@@ -158,7 +158,9 @@ def _named(rng: np.random.Generator) -> EvaluationResult:
         source=f"tum:/srv/recordings/site-7/level-2/{NAMES[0]}",
     )
     est = noisy(rng, truth, every=2, sigma=0.02, drift=0.0, name=NAMES[2])
-    est = Trajectory(est.stamps_ns, est.positions_xyz, est.quat_xyzw, name=NAMES[2], source=NAMES[1])
+    est = Trajectory(
+        est.stamps_ns, est.positions_xyz, est.quat_xyzw, name=NAMES[2], source=NAMES[1]
+    )
     inputs = (
         {
             "role": "reference",
