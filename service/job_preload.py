@@ -1,7 +1,7 @@
 """Imported once by the jobs' forkserver: what every job's process starts with.
 
 :mod:`service.limits` runs each job in a process forked from a server process that imported
-this module, so a job does not import NumPy, SciPy, Matplotlib, WeasyPrint and the CAD
+this module, so a job does not import NumPy, SciPy, Matplotlib, Typst and the CAD
 libraries anew (seconds per job), nor compile the report templates. A module that fails to
 import is left out here (the job that needs it reports the failure itself); the server must
 start whatever is missing.
@@ -31,8 +31,9 @@ MODULES: Final = (
     "exporters.plots.series",
     "exporters.plots.render",
     "exporters.report.render",
+    "exporters.report.typeset",
     "jinja2",
-    "weasyprint",
+    "typst",
     "exporters.cad.dxf",
     "exporters.cad.rhino",
     "exporters.cad.gltf",
@@ -44,11 +45,14 @@ MODULES: Final = (
 
 def _preload() -> None:
     for name in MODULES:
-        with contextlib.suppress(Exception):  # e.g. a missing system library of WeasyPrint
+        with contextlib.suppress(Exception):  # a missing optional library: its job says so
             importlib.import_module(name)
     with contextlib.suppress(Exception):  # Jinja2 missing: the report job says so itself
         render = importlib.import_module("exporters.report.render")
         render.preload_templates()  # the repository's templates, compiled once for every job
+    with contextlib.suppress(Exception):  # typst missing: the report job says so itself
+        # the fonts Typst sets the PDFs in, read once (matplotlib's DejaVu)
+        importlib.import_module("exporters.report.typeset").preload_fonts()
 
 
 _preload()

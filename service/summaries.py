@@ -42,8 +42,7 @@ def summary_files(
 ) -> dict[str, bytes]:
     """Return the summary files in ``formats`` (``summary.html``, ``summary.pdf``) by name.
 
-    Only the formats asked for are rendered: an HTML-only summary never lays out a PDF, so
-    it is made where WeasyPrint's system libraries (pango) are missing.
+    Only the formats asked for are rendered: an HTML-only summary never lays out a PDF.
     """
     # exporters.summary draws with matplotlib: imported when a summary is made, not at start-up.
     from exporters.summary import SummaryInput, render_summary_files  # noqa: PLC0415

@@ -18,6 +18,7 @@ from jinja2 import Environment, FileSystemLoader
 from exporters import ARTIFACTS
 from exporters.cad.site import BUILDING_SUFFIXES
 from exporters.report import pdf_available
+from exporters.summary.render import SUMMARY_PDF_TEMPLATE_NAME
 from loceval import __version__
 from loceval.core.display import shown_text
 from loceval.options import option
@@ -51,6 +52,15 @@ def _templates_dir(request: Request) -> Path:
     return Path(request.app.state.settings.templates_dir)
 
 
+def _pdf_reports(templates_dir: Path) -> bool:
+    """Whether this server writes the report's and the summary's PDFs.
+
+    Always with the repository's templates (Typst typesets them); a folder of HTML templates
+    of one's own needs WeasyPrint and pango to lay them out.
+    """
+    return pdf_available(templates_dir) and pdf_available(templates_dir, SUMMARY_PDF_TEMPLATE_NAME)
+
+
 @router.get("/", response_class=HTMLResponse, include_in_schema=False)
 def index(request: Request) -> HTMLResponse:
     """Return the browser page.
@@ -60,8 +70,9 @@ def index(request: Request) -> HTMLResponse:
 
     Returns:
         The rendered page, never cached without a check. ``<body data-pdf-reports>`` says
-        whether this server can write PDFs (WeasyPrint and pango load; checked once per
-        process): when it cannot, the page asks for no ``report.pdf`` or ``summary.pdf``.
+        whether this server can write PDFs (always with the repository's templates; HTML
+        templates of one's own need WeasyPrint and pango, checked once per process): when it
+        cannot, the page asks for no ``report.pdf`` or ``summary.pdf``.
         ``<body data-artifacts>`` lists the files an evaluation can make (the server's
         :data:`exporters.ARTIFACTS`, in order), the upload hint names the building model
         formats and the up-axis choice offers the option table's choices, and
@@ -72,7 +83,7 @@ def index(request: Request) -> HTMLResponse:
     template = _environment(_templates_dir(request)).get_template(_PAGE)
     html = template.render(
         version=__version__,
-        pdf_reports=pdf_available(),
+        pdf_reports=_pdf_reports(_templates_dir(request)),
         artifacts=list(ARTIFACTS),
         building_formats=", ".join(s.lstrip(".").upper() for s in BUILDING_SUFFIXES),
         building_up=option("building_up"),

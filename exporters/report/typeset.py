@@ -29,7 +29,14 @@ from exporters.errors import ExportError, ExportUnavailableError
 if TYPE_CHECKING:
     import typst
 
-__all__ = ["DOCUMENT_INPUT", "check_typst", "typeset_pdf", "typst_available", "typst_document"]
+__all__ = [
+    "DOCUMENT_INPUT",
+    "check_typst",
+    "preload_fonts",
+    "typeset_pdf",
+    "typst_available",
+    "typst_document",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -109,6 +116,11 @@ def _fonts() -> typst.Fonts:
     return typst.Fonts(
         include_system_fonts=False, include_embedded_fonts=True, font_paths=[str(folder)]
     )
+
+
+def preload_fonts() -> None:
+    """Read the fonts now (the service's job processes start with them read)."""
+    _fonts()
 
 
 def typst_available() -> bool:

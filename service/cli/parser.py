@@ -301,8 +301,7 @@ def _add_report(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparse
         type=names,
         default=None,
         metavar="NAME,...",
-        help="summary files to write: summary.html, summary.pdf (default: both; the PDF needs "
-        "WeasyPrint's system libraries, pango)",
+        help="summary files to write: summary.html, summary.pdf (default: both)",
     )
     report.set_defaults(handler="service.cli.report:run_report")
 

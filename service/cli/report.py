@@ -33,8 +33,9 @@ def run_report(args: argparse.Namespace) -> int:
 
     ``--formats`` picks summary.html, summary.pdf or both (the default). The formats and the
     template are checked first; then, before any recording is evaluated, whether a PDF can
-    be laid out: without WeasyPrint's system libraries (pango) the command stops there and
-    says how to write the HTML alone.
+    be made (Typst, with the repository's templates; HTML templates of one's own need
+    WeasyPrint and pango): when it cannot, the command stops there and says how to write
+    the HTML alone.
     """
     from exporters.summary import SummaryRun, summary_formats  # noqa: PLC0415
     from service.summaries import summary_files  # noqa: PLC0415
@@ -121,12 +122,14 @@ def _evo_run(path: Path, modified: dt.datetime) -> Any:  # noqa: ANN401  (a Summ
 
 
 def _check_pdf() -> None:
-    """Stop before the evaluations if no PDF can be laid out, naming the HTML-only way out."""
+    """Stop before the evaluations if no PDF can be made, naming the HTML-only way out."""
     from exporters.errors import ExportUnavailableError  # noqa: PLC0415
     from exporters.report import check_pdf  # noqa: PLC0415
+    from exporters.summary.render import SUMMARY_PDF_TEMPLATE_NAME  # noqa: PLC0415
+    from service.settings import Settings  # noqa: PLC0415
 
     try:
-        check_pdf()
+        check_pdf(Settings().templates_dir, SUMMARY_PDF_TEMPLATE_NAME)
     except ExportUnavailableError as err:
         # the CLI shows it as "--formats: ... Use --formats summary.html."
         raise ExportUnavailableError(str(err), option="formats", suggest="summary.html") from err

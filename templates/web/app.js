@@ -16,8 +16,9 @@
   const ALL_ARTIFACTS = JSON.parse(document.body.dataset.artifacts || "[]");
   const OPENED_IN_TAB = new Set(["report.html", "report.pdf"]);
   const NONE = "— none —"; // the empty choice of an optional dataset field (device, building)
-  // The server renders whether it can write PDFs (WeasyPrint and pango): without, the page
-  // asks for no report.pdf and its schedules for summary.html only.
+  // The server renders whether it can write PDFs (always with its own templates, which Typst
+  // typesets; HTML templates of an administrator's own need WeasyPrint and pango): without,
+  // the page asks for no report.pdf and its schedules for summary.html only.
   const PDF_REPORTS = document.body.dataset.pdfReports !== "no";
   // The API's options document (GET /api/v1/options), rendered into the page by the server:
   // key, kind, default, bounds, choices and help of every option, from the one table the
@@ -1799,7 +1800,7 @@
         estimates: [{ selector: estimate || null, name: estimateName || null }],
         options: readOptions(),
       },
-      // the API's default is both summaries; summary.pdf needs pango on the server
+      // the API's default is both summaries; a server that cannot write PDFs makes the HTML
       ...(PDF_REPORTS ? {} : { produce: { summary_formats: ["summary.html"] } }),
     };
   }

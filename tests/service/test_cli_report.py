@@ -106,9 +106,13 @@ def test_an_html_only_report_runs_without_weasyprint(
 
 @pytest.mark.usefixtures("no_weasyprint")
 def test_the_default_report_without_weasyprint_exits_1_naming_the_html_only_way(
-    tmp_path: Path, rng, template: Path, capsys
+    tmp_path: Path, rng, template: Path, capsys, *, html_only_templates: Path, monkeypatch
 ):
-    """Both files by default: without pango it stops before evaluating, writing nothing."""
+    """HTML templates of one's own, both files: without pango it stops before evaluating.
+
+    (The repository's templates need no WeasyPrint: test_pdf_without_weasyprint.py.)
+    """
+    monkeypatch.setenv("LOCEVAL_TEMPLATES_DIR", str(html_only_templates))
     bag = _bag(tmp_path, rng, "run0", noise=0.02)
     out = tmp_path / "weekly"
     argv = ["report", "--datasets", str(bag), "--template", str(template), "--out", str(out)]
