@@ -91,7 +91,8 @@ def _locked(names: set[str]) -> str:
     for block in re.split(r"\n(?=\S)", text):
         found = re.match(r"([A-Za-z0-9][A-Za-z0-9._-]*)==", block)
         if found:
-            kept = "\n".join(line for line in block.splitlines() if not line.strip().startswith("#"))
+            lines = [line for line in block.splitlines() if not line.strip().startswith("#")]
+            kept = "\n".join(lines)
             blocks[canonicalize_name(found.group(1))] = kept.rstrip(" \\")
     assert names <= set(blocks), sorted(names - set(blocks))
     return "\n".join(blocks[name] for name in sorted(names)) + "\n"
