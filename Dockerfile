@@ -33,15 +33,10 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
     PIP_DISABLE_PIP_VERSION_CHECK=1 \
     PIP_NO_CACHE_DIR=1
 
-# System libraries WeasyPrint loads at runtime (PDF reports: Pango, HarfBuzz font subsetting,
-# a font to render with), make for `make setup` and tini as process 1 (below). Only what is
-# named, then drop apt's lists.
+# make for `make setup` and tini as process 1 (below); nothing else from the system: the PDF
+# reports are typeset by Typst (a wheel) in matplotlib's own fonts. Then drop apt's lists.
 RUN apt-get update \
     && DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
-        libpango-1.0-0 \
-        libpangoft2-1.0-0 \
-        libharfbuzz-subset0 \
-        fonts-dejavu-core \
         make \
         tini \
     && rm -rf /var/lib/apt/lists/*

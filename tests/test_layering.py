@@ -20,7 +20,7 @@ from typing import Final
 
 import pytest
 
-BANNED = ("fastapi", "pydantic", "ezdxf", "trimesh", "rhino3dm", "weasyprint", "jinja2",
+BANNED = ("fastapi", "pydantic", "ezdxf", "trimesh", "rhino3dm", "weasyprint", "typst", "jinja2",
           "matplotlib", "rosbags", "exporters", "service")  # fmt: skip
 
 
