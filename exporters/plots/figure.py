@@ -29,9 +29,11 @@ from typing import Literal, TypeAlias
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.layout_engine import PlaceHolderLayoutEngine
 from matplotlib.lines import Line2D
 
 from exporters.colours import ESTIMATE_COLOURS, estimate_colour
+from exporters.plots.layout import lay_out
 from exporters.plots.png import rgb_png
 from loceval.core.arrays import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.core.gaps import path_breaks
@@ -295,25 +297,20 @@ def encode_plot(
 
 
 def _lay_out_once(fig: Figure) -> None:
-    """Lay the figure out once, then take its layout engine away so each save draws once.
+    """Lay the figure out once, with the fixed layout (:func:`exporters.plots.layout.lay_out`).
 
-    ``savefig`` of a figure that has a layout engine draws it twice: first without
-    rendering, with the renderer of the format being saved, to run the layout, then for
-    real. The SVG renderer measures text by turning it into glyph paths, so that first
-    draw cost about as much as the real one. Here the engine runs once, with the figure's
-    own raster renderer (which measures text with FreeType directly), and is removed:
-    every format is then drawn once, at the same positions, so a figure's SVG and PNG show
-    one layout (the fr2_desk report's seven figures as SVG: 1.10 -> 0.77 s). Positions
-    differ from a layout measured by the SVG renderer by a fraction of a pixel (text
-    extents rounded differently), which no reader sees.
+    The figure has no layout engine (:func:`new_figure`), so every format is then drawn
+    once, at the same positions: a figure's SVG and PNG show one layout. A figure made with
+    an engine of its own (or a matplotlibrc asking for one) has it run once and removed.
     """
     engine = fig.get_layout_engine()
-    if engine is not None and fig.axes:
-        with contextlib.suppress(ValueError):  # as Figure.draw: axes too small to lay out
-            engine.execute(fig)
-    fig.set_layout_engine(None)
-    if fig.get_layout_engine() is not None:  # a matplotlibrc asks for a layout by default
+    if engine is not None and not isinstance(engine, PlaceHolderLayoutEngine):
+        if fig.axes:
+            with contextlib.suppress(ValueError):  # as Figure.draw: axes too small to lay out
+                engine.execute(fig)
         fig.set_layout_engine("none")
+        return
+    lay_out(fig)
 
 
 def keep_every_vertex(lines: Sequence[Line2D]) -> None:
@@ -327,8 +324,14 @@ def keep_every_vertex(lines: Sequence[Line2D]) -> None:
 
 
 def new_figure(height_in: float) -> Figure:
-    """Return an empty figure of the report's width, ``height_in`` inches high."""
-    return Figure(figsize=(WIDTH_IN, height_in), dpi=150, layout="constrained")
+    """Return an empty figure of the report's width, ``height_in`` inches high.
+
+    It has no layout engine: :func:`encode_plot` lays it out once, with the fixed layout of
+    :mod:`exporters.plots.layout` (constrained layout cost as much as the drawing).
+    """
+    fig = Figure(figsize=(WIDTH_IN, height_in), dpi=150)
+    fig.set_layout_engine("none")  # whatever a matplotlibrc asks for
+    return fig
 
 
 def style_axes(ax: Axes) -> None:
@@ -342,12 +345,18 @@ def style_axes(ax: Axes) -> None:
 def legend_above(fig: Figure, ax: Axes) -> None:
     """Put the legend of ``ax`` above the figure, in one row if it fits, else two."""
     handles, labels = ax.get_legend_handles_labels()
-    # One row when it fits the figure's width (about 95 characters at 8 pt), else two.
+    # One row when it fits the figure's width (about 95 characters at 8 pt), else two, or as
+    # many as the longest labels need to stay within the width (a summary's run labels).
     ncols = len(labels) if sum(len(t) + 6 for t in labels) <= 95 else -(-len(labels) // 2)
+    widest = max((len(t) + 6 for t in labels), default=1)
+    ncols = min(ncols, max(95 // widest, 1))
     fig.legend(
         handles,
         labels,
-        loc="outside upper center",
+        loc="upper center",
+        bbox_to_anchor=(0.5, 1.0),
+        bbox_transform=fig.transFigure,
+        borderaxespad=0.3,
         ncols=max(ncols, 1),
         frameon=False,
         fontsize=8,

@@ -233,7 +233,7 @@ def plot_ate_path(
     ax.add_collection(collection)
     ax.update_datalim(xy)
     ax.autoscale_view()
-    colorbar = fig.colorbar(collection, ax=ax, shrink=0.85, ticks=bounds[:-1])
+    colorbar = fig.colorbar(collection, ax=ax, shrink=0.85, ticks=bounds[:-1], use_gridspec=False)
     colorbar.ax.set_yticklabels([f"{b:g}" for b in bounds[:-1]])
     colorbar.set_label("ATE [m] (bins as in the CAD files)")
     if tolerance is not None:

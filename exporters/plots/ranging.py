@@ -164,7 +164,7 @@ def _anchors_on_plan(
     points = ax.scatter(
         used[:, 0], used[:, 1], c=rmse, cmap="viridis", marker="^", s=40, zorder=3, label="anchor"
     )
-    fig.colorbar(points, ax=ax, label="range RMSE [m]", shrink=0.8)
+    fig.colorbar(points, ax=ax, label="range RMSE [m]", shrink=0.8, use_gridspec=False)
     for anchor in ranging.anchors:
         ax.annotate(
             anchor.id,

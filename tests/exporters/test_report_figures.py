@@ -18,6 +18,7 @@ from PIL import Image
 
 from exporters import write_artifacts
 from exporters.options import ExportOptions
+from exporters.plots import figure as figure_module
 from exporters.plots.figure import PNG_DPI, WIDTH_IN
 from exporters.report import render_report_html, render_report_plots
 from exporters.report.provenance import yaw_pitch_roll_deg
@@ -117,28 +118,36 @@ def test_yaw_pitch_roll_of_a_rotation_matrix(
 def test_each_figure_is_laid_out_once_and_drawn_once_per_format(
     two_estimates: EvaluationResult, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """One constrained layout per figure, shared by its SVG and PNG, and no draw that
-    renders nothing (savefig makes one to lay out a figure that still has its engine)."""
+    """One fixed layout per figure, shared by its SVG and PNG, no constrained layout, and no
+    draw that renders nothing (savefig makes one to lay out a figure that has an engine)."""
     layouts: list[Figure] = []
     draws: list[Figure] = []
-    execute, draw = ConstrainedLayoutEngine.execute, Figure.draw
+    constrained: list[Figure] = []
+    lay_out, draw = figure_module.lay_out, Figure.draw
+    execute = ConstrainedLayoutEngine.execute
 
-    def counted_layout(self: ConstrainedLayoutEngine, fig: Figure) -> None:
+    def counted_layout(fig: Figure) -> None:
         layouts.append(fig)
-        execute(self, fig)
+        lay_out(fig)
 
     def counted_draw(self: Figure, renderer: Any) -> None:
         draws.append(self)
         draw(self, renderer)
 
-    monkeypatch.setattr(ConstrainedLayoutEngine, "execute", counted_layout)
+    def counted_constrained(self: ConstrainedLayoutEngine, fig: Figure) -> None:
+        constrained.append(fig)
+        execute(self, fig)
+
+    monkeypatch.setattr(figure_module, "lay_out", counted_layout)
     monkeypatch.setattr(Figure, "draw", counted_draw)
+    monkeypatch.setattr(ConstrainedLayoutEngine, "execute", counted_constrained)
     plots = render_report_plots(two_estimates, ExportOptions(), formats=("svg", "png"))
 
     drawn = [*plots.figures, *([plots.clock] if plots.clock is not None else [])]
     assert len(drawn) >= 5
     assert len(layouts) == len(drawn)
     assert len(set(map(id, layouts))) == len(layouts)
+    assert constrained == []  # the constrained layout engine runs for none of them
     assert len(draws) == 2 * len(drawn)  # one SVG and one PNG each
     assert {id(fig): draws.count(fig) for fig in draws} == {id(fig): 2 for fig in layouts}
     for fig in layouts:
