@@ -4,11 +4,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from loceval.controlpoints import ControlPoints
 from loceval.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from loceval.checkpoint_evaluation import CheckpointEvaluation
 
 NS = 1_000_000_000
 T0_NS = 1_700_000_000 * NS  # epoch-scale stamps, as a real recording has
@@ -114,3 +118,19 @@ def write_visits(path: Path, recording: StopAndGo) -> Path:
         rows.append(f"{pid},{a / NS:.6f},{b / NS:.6f}")
     path.write_text("\n".join(rows) + "\n", encoding="utf-8")
     return path
+
+
+def survey_evaluation(rng: np.random.Generator) -> CheckpointEvaluation:
+    """A 3 x 4 grid at 30 cm visited twice, scored without alignment (the reports' example)."""
+    from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points
+    from loceval.evaluation import EvaluationConfig
+    from loceval.registration.alignment import AlignMethod
+
+    recording = stop_and_go(rng, grid_points(3, 4), passes=2)
+    return evaluate_control_points(
+        recording.points,
+        [recording.estimate],
+        EvaluationConfig(align=AlignMethod.NONE),
+        CheckpointConfig(),
+        reference_name="survey",
+    )

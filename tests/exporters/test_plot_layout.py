@@ -92,20 +92,9 @@ def _cases(tmp_path: Path) -> dict[str, Callable[[], object]]:
 
     def checkpoints() -> object:
         from exporters.plots.checkpoints import plot_checkpoint_plan
-        from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points
-        from loceval.evaluation import EvaluationConfig
-        from loceval.registration.alignment import AlignMethod
-        from tests.checkpoint_factory import grid_points, stop_and_go
+        from tests.checkpoint_factory import survey_evaluation
 
-        rec = stop_and_go(np.random.default_rng(3), grid_points(3, 4), passes=2)
-        evaluation = evaluate_control_points(
-            rec.points,
-            [rec.estimate],
-            EvaluationConfig(align=AlignMethod.NONE),
-            CheckpointConfig(),
-            reference_name="survey",
-        )
-        return plot_checkpoint_plan(evaluation, 0)
+        return plot_checkpoint_plan(survey_evaluation(np.random.default_rng(3)), 0)
 
     def report(result: Callable[[], EvaluationResult]) -> Callable[[], object]:
         return lambda: render_report_plots(result(), ExportOptions())

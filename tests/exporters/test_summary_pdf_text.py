@@ -30,11 +30,8 @@ from exporters.summary import (
     render_summary_view_pdf,
 )
 from exporters.summary.evo import evo_summary_run
-from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points
-from loceval.evaluation import EvaluationConfig
 from loceval.readers.evo_result import read_result_zip
-from loceval.registration.alignment import AlignMethod
-from tests.checkpoint_factory import grid_points, stop_and_go
+from tests.checkpoint_factory import survey_evaluation
 from tests.exporters._pdf_text import text_differences
 from tests.exporters.test_summary import _failed, _loop, _run, _summary, _week_runs
 from tests.exporters.test_summary_evo import EVO, MONDAY
@@ -83,14 +80,7 @@ def test_checkpoint_pdf_prints_what_the_html_prints(
     rng: np.random.Generator, tmp_path: Path
 ) -> None:
     """The control-point report: survey, one section per estimate, warnings; both ways."""
-    recording = stop_and_go(rng, grid_points(3, 4), passes=2)
-    evaluation = evaluate_control_points(
-        recording.points,
-        [recording.estimate],
-        EvaluationConfig(align=AlignMethod.NONE),
-        CheckpointConfig(),
-        reference_name="survey",
-    )
+    evaluation = survey_evaluation(rng)
     options = ExportOptions(title="Level 2 control points", evaluation_id="cp-1")
     view = build_checkpoint_view(evaluation, options, image_format="svg")
     html = render_template(
