@@ -94,15 +94,17 @@ ENVELOPE_DIVISOR = 5
 RASTER_MIN_POINTS = 500
 """An error-coloured path with more segments is embedded as a bitmap inside the SVG (axes,
 labels and the colour bar stay vector): thousands of separately coloured SVG segments
-would make the HTML large and WeasyPrint slow."""
+would make the HTML and the PDF large and slow to draw."""
 RASTER_DPI = 150
 """Resolution of those bitmaps."""
 
 PNG_DPI = 200
-"""Resolution of PNG plots (the PDF's; print quality on A4)."""
+"""Resolution of PNG plots (print quality on A4: the PDF WeasyPrint lays out of HTML templates
+of one's own; the reports' own PDFs embed the SVG)."""
 
 ImageFormat: TypeAlias = Literal["svg", "png"]
-"""How a plot is encoded: SVG for the HTML, PNG for the PDF (WeasyPrint draws SVG slowly)."""
+"""How a plot is encoded: SVG for the HTML and Typst's PDF, PNG for a PDF WeasyPrint lays out
+(it draws SVG slowly)."""
 
 NS_PER_S = 1_000_000_000
 """Nanoseconds per second."""

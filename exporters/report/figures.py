@@ -1,7 +1,9 @@
 """The report's figures, drawn once per run and encoded for each report that embeds them.
 
-The HTML report embeds every figure as SVG and the PDF as PNG; a run writing both draws
-each figure once and encodes it twice (:func:`render_report_plots` with both formats).
+The HTML report and its PDF (Typst) embed every figure as SVG: a run writing both draws and
+encodes each figure once. A PDF WeasyPrint lays out of HTML templates of one's own embeds
+PNG: then each figure is drawn once and encoded twice (:func:`render_report_plots` with both
+formats).
 """
 
 from __future__ import annotations
@@ -22,8 +24,8 @@ __all__ = ["ReportPlots", "render_report_plots"]
 class ReportPlots:
     """Every figure of the report, drawn once and encoded in each format a report embeds.
 
-    The HTML report embeds the SVG and the PDF the PNG of the same figures, so a run that
-    writes both draws each figure once (:func:`render_report_plots`).
+    Both reports embed the SVG (a WeasyPrint PDF the PNG) of the same figures, so a run
+    that writes both draws each figure once (:func:`render_report_plots`).
 
     Attributes:
         figures: the numbered figures, in report order (:func:`exporters.plots.render_plots`).
@@ -47,7 +49,8 @@ def render_report_plots(
     Args:
         result: the evaluation.
         options: the export options (the building's floor plan under the plan views).
-        formats: the encodings to produce: ``svg`` (HTML), ``png`` (PDF) or both.
+        formats: the encodings to produce: ``svg`` (HTML and Typst's PDF), ``png`` (a
+            WeasyPrint PDF) or both.
         max_points: most vertices drawn per plotted line (drawing only).
 
     Returns:

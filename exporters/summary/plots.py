@@ -1,7 +1,7 @@
 """The summary report's figures: errors over the runs, and the reference paths from above.
 
 Drawn like the evaluation report's plots (:mod:`exporters.plots`): a figure built directly,
-no pyplot, rendered to SVG for the HTML and PNG for the PDF.
+no pyplot, rendered to SVG for the HTML and the PDF (PNG for a PDF WeasyPrint lays out).
 """
 
 from __future__ import annotations
