@@ -45,6 +45,7 @@ if TYPE_CHECKING:
     from ezdxf.entities.text import Text
 
 __all__ = [
+    "FRAME_BUILDING_UP_TO",
     "MESH_SUFFIXES",
     "BuildingModel",
     "FloorPlan",
@@ -60,6 +61,9 @@ __all__ = [
 
 MESH_SUFFIXES: Final = (".obj", ".ply", ".stl", ".glb", ".ifc")
 """Building files :func:`read_building` reads as a mesh."""
+FRAME_BUILDING_UP_TO: Final = 20.0
+"""A building model up to this many times the paths' size is framed with them: the report's
+plan views and the viewer's first view show its outer walls; a campus is not framed."""
 _Y_UP_TO_Z_UP: Final = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """(3, 3) rotation +90° about X: (x, y, z) Y-up -> (x, -z, y) Z-up."""
 _INSUNITS_PER_METRE: Final = {

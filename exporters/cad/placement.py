@@ -41,6 +41,7 @@ from exporters.colours import (
     ATEBin,
     ate_bins,
     ate_edges_m,
+    error_bins,
     layer_name,
     palette_color,
     unique_layer_names,
@@ -279,8 +280,8 @@ class Placement:
         }
 
     def ate_bins(self) -> tuple[ATEBin, ...]:
-        """Return the ATE colour bins every output uses (:func:`ate_edges_m`)."""
-        return ate_bins(ate_edges_m(self.result))
+        """Return the ATE colour bins every output uses (:func:`error_bins`)."""
+        return error_bins(self.result)
 
     def ate_runs(self, path: PlacedPath) -> list[ATERun]:
         """Return an estimate's path cut where its ATE changes bin, each run simplified.

@@ -34,6 +34,7 @@ from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.core.arrays import FloatArray
 from loceval.core.display import display_text
 from loceval.core.gaps import path_breaks
+from loceval.core.lengths import coordinate_decimals, length_unit
 
 __all__ = ["checkpoint_scene", "export_checkpoint_viewer_html"]
 
@@ -112,6 +113,10 @@ def checkpoint_scene(evaluation: CheckpointEvaluation, options: ExportOptions) -
         "base": (base_m * scale).tolist(),
         "crs": options.crs,
         "t0_ns": str(t0_ns),
+        "coordinate_decimals": coordinate_decimals(scale),
+        "lengths": length_unit(
+            float(v.error_m) for e in evaluation.estimates for v in e.result.visits
+        ).to_dict(),
         "bins": bins_json(bins),
         "paths": paths,
         "worst": [],

@@ -425,8 +425,9 @@ def greatest_errors(
     """The ``count`` greatest errors, largest first, with time and reference position.
 
     Large errors come in bursts of neighbouring poses (a system that loses track is off for
-    a while), so the list names distinct places: each listed error is the greatest one not
-    within ``separation_s`` of a greater listed one (greedy non-maximum suppression in
+    a while), so the list names distinct places: each listed error is the greatest within
+    ``separation_s`` either side of itself (a peak, not the flank of a greater one) and lies
+    at least that far from every greater listed one (greedy non-maximum suppression in
     time). Every output numbers these the same way, ``#1`` ... ``#N`` by rank.
 
     Args:
@@ -448,18 +449,22 @@ def greatest_errors(
     blocks = remaining.reshape(blocks_n, _PEAK_BLOCK)  # a view: masking updates it
     block_max = blocks.max(axis=1)
     picked: list[int] = []
-    for _ in range(min(count, n)):  # one pick per listed error (a handful), not per pose
+    values = errors.values
+    while len(picked) < min(count, n):  # one pass per listed error or skipped flank
         b = int(np.argmax(block_max))
         if block_max[b] == -np.inf:
             break
         i = b * _PEAK_BLOCK + int(np.argmax(blocks[b]))
-        picked.append(i)
         if reach_ns <= 0:
             lo, hi = i, i + 1
         else:  # poses closer than the separation (strictly) belong to this one's burst
             lo = int(np.searchsorted(stamps, stamps[i] - reach_ns, side="right"))
             hi = int(np.searchsorted(stamps, stamps[i] + reach_ns, side="left"))
-        remaining[lo:hi] = -np.inf
+        # listed only when it is the greatest within the separation either side: a pose on
+        # the flank of a listed burst (2 s from its peak, greater than the rest) is not
+        if values[i] >= values[lo:hi].max():
+            picked.append(i)
+        remaining[lo:hi] = -np.inf  # each pass masks its window: at most N / window passes
         first, last = lo // _PEAK_BLOCK, (hi - 1) // _PEAK_BLOCK
         block_max[first : last + 1] = blocks[first : last + 1].max(axis=1)
     t0 = int(reference.stamps_ns[0]) if t0_ns is None else int(t0_ns)
