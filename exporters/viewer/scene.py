@@ -78,6 +78,7 @@ def bins_json(bins: Sequence[ATEBin]) -> list[dict[str, object]]:
             "high": None if math.isinf(b.high_m) else b.high_m,
             "color": hex_colour(b.color_rgb),
             "label": b.label,
+            "beyond": b.beyond,
         }
         for b in bins
     ]
