@@ -21,6 +21,7 @@ import numpy as np
 
 from loceval.core.arrays import FloatArray
 from loceval.core.display import display_text
+from loceval.core.lengths import LengthUnit, length_unit
 from loceval.evaluation import EvaluationResult
 
 RGB: TypeAlias = tuple[int, int, int]
@@ -66,6 +67,11 @@ _MAX_EXTRA_EDGES: Final = 4  # at most this many 1-2-5 edges above the last thre
 
 
 # --- names and colours -----------------------------------------------------------------
+
+
+def hex_colour(rgb: RGB) -> str:
+    """Return an RGB colour as ``#rrggbb``."""
+    return "#{:02x}{:02x}{:02x}".format(*rgb)
 
 
 def palette_color(index: int) -> RGB:
@@ -189,6 +195,17 @@ def error_bins(result: EvaluationResult) -> tuple[ATEBin, ...]:
     if tolerance is not None:
         return tolerance_bins(tolerance.distance_m)
     return ate_bins(ate_edges_m(result))
+
+
+def error_unit(result: EvaluationResult) -> LengthUnit:
+    """Return the unit every label of this evaluation's errors reads in (viewer, CAD files).
+
+    One group (:func:`loceval.core.lengths.length_unit`): the largest error of each
+    estimate; millimetres when all are below 0.1 m.
+    """
+    return length_unit(
+        float(e.ate_translation.values.max()) for e in result.estimates if len(e.ate_translation)
+    )
 
 
 def scale_words(result: EvaluationResult) -> str:

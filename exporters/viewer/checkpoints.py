@@ -18,7 +18,7 @@ from typing import Final
 import numpy as np
 
 from exporters.cad.site import check_options
-from exporters.colours import ate_bins, palette_color
+from exporters.colours import ate_bins, hex_colour, palette_color
 from exporters.options import ExportOptions, Units
 from exporters.viewer.page import DEFAULT_TEMPLATES_DIR, scene_fragment, viewer_page
 from exporters.viewer.reduce import display_indices
@@ -26,7 +26,6 @@ from exporters.viewer.scene import (
     bins_json,
     building_scene,
     flat_rounded,
-    hex_colour,
     vertex_decimals,
 )
 from loceval import __version__

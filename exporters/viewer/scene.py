@@ -35,7 +35,14 @@ from exporters.cad.building import (
 from exporters.cad.excursions import EXCURSION_RGB, excursion_paths
 from exporters.cad.site import check_options
 from exporters.cad.spaces import placed_on_building
-from exporters.colours import ATEBin, error_bins, palette_color, scale_words
+from exporters.colours import (
+    ATEBin,
+    error_bins,
+    error_unit,
+    hex_colour,
+    palette_color,
+    scale_words,
+)
 from exporters.options import ExportOptions, Units
 from exporters.tables import ERROR_DECIMALS
 from exporters.viewer.reduce import display_indices
@@ -44,7 +51,7 @@ from loceval.core.arrays import BoolArray, FloatArray, IntArray
 from loceval.core.display import display_text
 from loceval.core.gaps import path_breaks
 from loceval.core.geometry import SimilarityTransform
-from loceval.core.lengths import LengthUnit, coordinate_decimals, length_unit
+from loceval.core.lengths import LengthUnit, coordinate_decimals
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.metrics.pose_errors import WorstPose
 from loceval.trajectory import Trajectory
@@ -53,7 +60,6 @@ __all__ = [
     "bins_json",
     "building_scene",
     "flat_rounded",
-    "hex_colour",
     "vertex_decimals",
     "viewer_scene",
 ]
@@ -64,11 +70,6 @@ _RESOLUTION_M: Final = 1e-4  # vertices are rounded to 0.1 mm
 _MAX_BUILDING_FACES: Final = 400_000
 _MAX_ELLIPSES: Final = 400  # uncertainty ellipses per estimate: more only blur into a band
 _SIGMAS: Final = 2.0  # the ellipses are 2-sigma (about 86 % of a 2D normal's mass)
-
-
-def hex_colour(rgb: tuple[int, int, int]) -> str:
-    """Return an RGB colour as ``#rrggbb``."""
-    return "#{:02x}{:02x}{:02x}".format(*rgb)
 
 
 def bins_json(bins: Sequence[ATEBin]) -> list[dict[str, object]]:
@@ -138,7 +139,7 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
     min_gap_ns = round(result.config.max_gap_s * _NS_PER_S)
     ref_losses = reference.tracking_losses(min_gap_ns)
     bins = error_bins(result)
-    unit = length_unit(_errors_shown(result))  # one unit for every error the viewer shows
+    unit = error_unit(result)  # one unit for every error the viewer shows (and the CAD labels)
     paths: list[dict[str, object]] = []
     worst: list[dict[str, object]] = []
     beyond: list[dict[str, object]] = []
@@ -274,13 +275,6 @@ def _must_keep(est: EstimateResult) -> IntArray:
             keep += [s.first_index - 1, s.first_index, s.last_index, s.last_index + 1]
             keep.append(s.max_error_index)
     return np.array(keep, dtype=np.intp)
-
-
-def _errors_shown(result: EvaluationResult) -> list[float]:
-    """The largest error of each estimate: the group whose unit the viewer uses."""
-    return [
-        float(e.ate_translation.values.max()) for e in result.estimates if len(e.ate_translation)
-    ]
 
 
 def _beyond(

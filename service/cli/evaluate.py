@@ -102,6 +102,10 @@ def run_evaluate(args: argparse.Namespace) -> int:
             the_map=the_map,
         )
         result = run_job(job, args.out)
+    if isinstance(result, EvaluationResult) and export is not None and export.building:
+        from exporters.cad.spaces import placed_on_building  # noqa: PLC0415  (CAD libraries)
+
+        result = placed_on_building(result, export)  # the stretches' rooms, as result.json
     if args.json:
         from exporters.cad.jsondoc import finite_json  # noqa: PLC0415
 
