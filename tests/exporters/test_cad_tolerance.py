@@ -10,6 +10,7 @@ exactly where it is beyond.
 
 from __future__ import annotations
 
+import io
 import json
 import re
 from pathlib import Path
@@ -239,3 +240,20 @@ def test_hops_reads_the_coloured_runs(run: EvaluationResult) -> None:
     assert {tuple(r["color"]) for r in slam["ate"]} == {b.color_rgb for b in bins}
     assert [b["beyond"] for b in document["ate_bins"]] == [False, False, True, True, True]
     assert "within 0.025 m" in document["ate_legend"]
+
+
+def test_dxf_legends_outside_the_building(run: EvaluationResult, tmp_path: Path) -> None:
+    """With a building, the DXF's title and legends lie outside its extent (not in a room)."""
+    from exporters.cad.dxf import export_dxf
+    from tests.exporters.office import write_office
+
+    ifc = write_office(tmp_path / "office.ifc")
+    options = ExportOptions(units=Units.M, building=ifc, title="office")
+    doc = ezdxf.read(io.StringIO(export_dxf(run, options).decode("utf-8")))
+    lo, hi = np.array([-0.2, -0.2]), np.array([10.2, 6.2])  # the outer walls' faces
+    texts = [t for t in doc.modelspace().query("TEXT") if t.dxf.layer in ("loceval", "slam ATE")]
+    assert len(texts) >= 7  # the title, the heading, the legend sentence, five bins
+    for text in texts:
+        x, y = text.dxf.insert.x, text.dxf.insert.y
+        inside = lo[0] <= x <= hi[0] and lo[1] <= y <= hi[1]
+        assert not inside, (text.dxf.text, x, y)
