@@ -249,11 +249,8 @@ def plot_ate_path(
     ax.autoscale_view()
     colorbar = fig.colorbar(collection, ax=ax, shrink=0.85, ticks=bounds[:-1])
     colorbar.ax.set_yticklabels([f"{b:g}" for b in bounds[:-1]])
-    colorbar.set_label(
-        "ATE [m]: green within the tolerance, orange to red beyond"
-        if tolerance is not None
-        else "ATE [m] (bins as in the viewer and the CAD files)"
-    )
+    # the caption says what the colours mean (the tolerance in words)
+    colorbar.set_label("ATE [m]" if tolerance is not None else "ATE [m] (bins as in the CAD files)")
     if tolerance is not None:
         colorbar.ax.axhline(tolerance, color="black", linewidth=1.2)
         colorbar.ax.text(

@@ -97,7 +97,7 @@ def verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> Ve
         ""
         if worst is None
         else (
-            f"The largest error is {worst.error:.2f} m, "
+            f"The largest error is {length_unit([worst.error]).text(worst.error)}, "
             f"{worst.t_s:.1f} s into the recording "
             f"at x, y, z = {format_xyz(worst.position_xyz)} m."
         )
