@@ -182,26 +182,38 @@ def failing_spans(
     np.minimum.at(first_worst, run_id[hit], hit)
     steps = np.linalg.norm(np.diff(reference.positions_xyz, axis=0), axis=1)
     travelled = np.concatenate(([0.0], np.cumsum(steps)))  # no stretch crosses a break
-    stamps = ate.stamps_ns
     order = np.lexsort((starts, -worst))  # the worst first, ties by time
-    out = []
-    for k in order.tolist():  # one iteration per stretch, not per pose
-        a, b, w = int(starts[k]), int(ends[k]), int(first_worst[k])
-        pos = reference.positions_xyz[w]
-        out.append(
-            FailingSpan(
-                start_s=(int(stamps[a]) - t0_ns) / _NS_PER_S,
-                end_s=(int(stamps[b]) - t0_ns) / _NS_PER_S,
-                poses=b - a + 1,
-                max_error_m=float(values[w]),
-                max_error_position_xyz=(float(pos[0]), float(pos[1]), float(pos[2])),
-                length_m=float(travelled[b] - travelled[a]),
-                first_index=a,
-                last_index=b,
-                max_error_index=w,
-                max_error_s=(int(stamps[w]) - t0_ns) / _NS_PER_S,
-            )
+    a, b, w = starts[order], ends[order], first_worst[order]
+    seconds = (ate.stamps_ns - t0_ns) / _NS_PER_S
+    # every field gathered at once; the loop only builds one record per stretch
+    columns = zip(
+        seconds[a].tolist(),
+        seconds[b].tolist(),
+        (b - a + 1).tolist(),
+        values[w].tolist(),
+        reference.positions_xyz[w].tolist(),
+        (travelled[b] - travelled[a]).tolist(),
+        a.tolist(),
+        b.tolist(),
+        w.tolist(),
+        seconds[w].tolist(),
+        strict=True,
+    )
+    out = [
+        FailingSpan(
+            start_s=start,
+            end_s=end,
+            poses=poses,
+            max_error_m=max_error,
+            max_error_position_xyz=(pos[0], pos[1], pos[2]),
+            length_m=length,
+            first_index=first,
+            last_index=last,
+            max_error_index=at,
+            max_error_s=at_s,
         )
+        for start, end, poses, max_error, pos, length, first, last, at, at_s in columns
+    ]
     return tuple(out)
 
 
