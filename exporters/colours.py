@@ -145,14 +145,17 @@ def ate_bins(thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
         # spread the bins evenly over the green -> yellow -> orange -> red ramp
         color = _ramp(0.0 if count == 1 else k / (count - 1))
         low, high = bounds[k], bounds[k + 1]
-        if k == 0:
-            label = f"<= {high:g} m"
-        elif math.isinf(high):
-            label = f"> {low:g} m"
-        else:
-            label = f"{low:g}-{high:g} m"
-        bins.append(ATEBin(low, high, color, label))
+        bins.append(ATEBin(low, high, color, _bin_label(low, high, first=k == 0)))
     return tuple(bins)
+
+
+def _bin_label(low_m: float, high_m: float, *, first: bool) -> str:
+    """Return a bin's legend text: ``<= 0.05 m`` (the first), ``0.05-0.1 m`` or ``> 0.15 m``."""
+    if first:
+        return f"<= {high_m:g} m"
+    if math.isinf(high_m):
+        return f"> {low_m:g} m"
+    return f"{low_m:g}-{high_m:g} m"
 
 
 _WITHIN_RGB: Final[tuple[RGB, ...]] = ((0, 122, 61), (120, 200, 80))
@@ -175,12 +178,7 @@ def tolerance_bins(distance_m: float) -> tuple[ATEBin, ...]:
     bins = []
     for k, rgb in enumerate(colours):
         low, high = edges[k], edges[k + 1]
-        if k == 0:
-            label = f"<= {high:g} m"
-        elif math.isinf(high):
-            label = f"> {low:g} m"
-        else:
-            label = f"{low:g}-{high:g} m"
+        label = _bin_label(low, high, first=k == 0)
         bins.append(ATEBin(low, high, rgb, label, beyond=k >= len(_WITHIN_RGB)))
     return tuple(bins)
 

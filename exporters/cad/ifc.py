@@ -51,7 +51,7 @@ import ifcopenshell.guid
 import numpy as np
 
 from exporters.cad.building import georeferenced_options
-from exporters.cad.ifc_map import add_excursions, add_map
+from exporters.cad.ifc_map import add_annotation, add_excursions, add_map
 from exporters.cad.placement import Marker, PlacedPath, Placement, place_evaluation
 from exporters.colours import hex_colour, scale_words
 from exporters.errors import ExportError, ExportOptionsError
@@ -335,21 +335,13 @@ class IfcBuilder:
         for item in items:
             self.style(item, path.layer, path.color_rgb)
         curves_only = all(len(vertices[p]) >= 2 for p in pieces)
-        representation = f.create_entity(
-            "IfcShapeRepresentation",
-            ContextOfItems=self.annotation_ctx,
-            RepresentationIdentifier="Annotation",
-            RepresentationType="Curve3D" if curves_only else "GeometricSet",
-            Items=items,
-        )
-        annotation = f.create_entity(
-            "IfcAnnotation",
-            GlobalId=self.guid(f"path/{path.name}"),
-            Name=path.name,
-            Description=f"loceval {path.kind.value}: {path.source}",
-            ObjectType=TRAJECTORY_TYPE,
-            ObjectPlacement=self.local_placement(),
-            Representation=f.createIfcProductDefinitionShape(None, None, [representation]),
+        annotation = add_annotation(
+            self,
+            name=path.name,
+            kind=TRAJECTORY_TYPE,
+            description=f"loceval {path.kind.value}: {path.source}",
+            representation=("Curve3D" if curves_only else "GeometricSet", items),
+            key=f"path/{path.name}",
         )
         properties = _path_properties(path, pieces=len(pieces))
         self.pset(annotation, "Loceval_Path", properties)
@@ -368,23 +360,16 @@ class IfcBuilder:
             b = bins[run.bin_index]
             self.style(curve, f"{path.layer} ATE {b.label}", b.color_rgb)
             items.append(curve)
-        representation = f.create_entity(
-            "IfcShapeRepresentation",
-            ContextOfItems=self.annotation_ctx,
-            RepresentationIdentifier="Annotation",
-            RepresentationType="Curve3D",
-            Items=items,
+        legend = scale_words(placement.result)
+        annotation = add_annotation(
+            self,
+            name=f"{path.name} ATE",
+            kind=ATE_TYPE,
+            description=legend,
+            representation=("Curve3D", items),
+            key=f"ate/{path.name}",
         )
-        annotation = f.create_entity(
-            "IfcAnnotation",
-            GlobalId=self.guid(f"ate/{path.name}"),
-            Name=f"{path.name} ATE",
-            Description=scale_words(placement.result),
-            ObjectType=ATE_TYPE,
-            ObjectPlacement=self.local_placement(),
-            Representation=f.createIfcProductDefinitionShape(None, None, [representation]),
-        )
-        scale: dict[str, object] = {"Legend": scale_words(placement.result)}
+        scale: dict[str, object] = {"Legend": legend}
         scale |= {f"Bin{k}": f"{b.label}: {hex_colour(b.color_rgb)}" for k, b in enumerate(bins, 1)}
         self.pset(annotation, "Loceval_ATE", scale)
         return annotation

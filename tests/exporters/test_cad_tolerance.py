@@ -23,9 +23,8 @@ from exporters.colours import ATEBin, error_bins, tolerance_bins
 from exporters.options import ExportOptions, Units
 from exporters.report.view import build_report_view
 from exporters.viewer.scene import viewer_scene
-from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
-from loceval.registration.alignment import AlignMethod
-from tests.exporters.office import TOLERANCE_M, office_run
+from loceval.evaluation import EvaluationResult
+from tests.exporters.office import TOLERANCE_M, evaluate_office
 
 ezdxf = pytest.importorskip("ezdxf")
 rhino3dm = pytest.importorskip("rhino3dm")
@@ -39,9 +38,7 @@ _RANK = re.compile(r"#(\d+)\b")
 @pytest.fixture(scope="module")
 def run() -> EvaluationResult:
     """The office run against a 0.025 m tolerance, no alignment (the ATE is the known error)."""
-    truth, estimate, _ = office_run()
-    config = EvaluationConfig(align=AlignMethod.NONE, tolerance=Tolerance(TOLERANCE_M, 0.95))
-    return evaluate(truth, [estimate], config)
+    return evaluate_office()
 
 
 @pytest.fixture(scope="module")

@@ -19,11 +19,9 @@ from exporters.options import ExportOptions, Units, UpAxis
 from exporters.plots.underlay import draw_floor_plan, floor_plan_note
 from exporters.report import render_report_html
 from exporters.report.view import build_report_view
-from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
-from loceval.registration.alignment import AlignMethod
+from loceval.evaluation import EvaluationResult
 from tests.exporters.office import (
-    TOLERANCE_M,
-    office_run,
+    evaluate_office,
     write_office,
     write_office_glb,
     write_office_plan,
@@ -33,9 +31,7 @@ from tests.exporters.office import (
 @pytest.fixture(scope="module")
 def run() -> EvaluationResult:
     """The office run against 0.025 m @ 95 %, no alignment."""
-    truth, estimate, _ = office_run()
-    config = EvaluationConfig(align=AlignMethod.NONE, tolerance=Tolerance(TOLERANCE_M, 0.95))
-    return evaluate(truth, [estimate], config)
+    return evaluate_office()
 
 
 @pytest.mark.parametrize("kind", ["ifc", "dxf"])

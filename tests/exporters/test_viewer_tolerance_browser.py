@@ -23,7 +23,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -33,18 +32,19 @@ import pytest
 from exporters.options import ExportOptions, Units, UpAxis
 from exporters.tables import export_errors_csv
 from exporters.viewer import export_viewer_html
-from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
-from loceval.registration.alignment import AlignMethod
+from loceval.evaluation import EvaluationResult
 from tests.exporters.ifcfactory import OFFICE_HEIGHT_M, OFFICE_WALLS, wall_corners
 from tests.exporters.office import (
     TOLERANCE_M,
-    office_run,
+    evaluate_office,
     room_of,
     write_office,
     write_office_glb,
     write_office_plan,
 )
-from tests.exporters.test_viewer_browser import CHROMIUM, CHROMIUM_ARGS, ROOT, hex_rgb, open_viewer
+from tests.exporters.test_viewer_browser import ROOT, browser, hex_rgb, open_viewer
+
+__all__ = ["browser"]  # the module-scoped fixture: one browser for this module
 
 pytestmark = [pytest.mark.slow]
 
@@ -54,30 +54,9 @@ OUTER_MAX = np.array([10.2, 6.2])
 
 
 @pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    """The system Chromium driven by Playwright, WebGL on SwiftShader (one per module)."""
-    from tests.conftest import skip_or_fail
-
-    if not CHROMIUM.is_file():
-        skip_or_fail(f"{CHROMIUM} is not installed (apt package chromium)")
-    try:
-        from playwright.sync_api import sync_playwright
-    except ImportError:
-        skip_or_fail("the playwright package is not installed (pip install playwright)")
-    with sync_playwright() as p:
-        chromium = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
-        try:
-            yield chromium
-        finally:
-            chromium.close()
-
-
-@pytest.fixture(scope="module")
 def run() -> EvaluationResult:
     """The office run, no alignment (the ATE is the known error), tolerance 0.025 m @ 95 %."""
-    truth, estimate, _ = office_run()
-    config = EvaluationConfig(align=AlignMethod.NONE, tolerance=Tolerance(TOLERANCE_M, 0.95))
-    return evaluate(truth, [estimate], config)
+    return evaluate_office()
 
 
 @pytest.fixture(scope="module")
