@@ -163,7 +163,7 @@ def export_viewer_html(result: EvaluationResult, options: ExportOptions) -> byte
     reference = result.reference
     subtitle = (
         f"{len(result.estimates)} estimate(s) against {reference.name or 'the reference'} · "
-        f"frame {reference.frame_id or 'reference frame'} · units {options.units} · "
+        f"frame {reference.frame_id or 'reference frame'} · coordinates in {options.units} · "
         f"drag to pan or turn, wheel to zoom, click a point for its figures"
     )
     return viewer_page(viewer_fragment(result, options), title=options.title, subtitle=subtitle)
