@@ -773,14 +773,22 @@
         const w = node.offsetWidth; const h = node.offsetHeight;
         const { x, y } = item.at;
         const g = LABEL_GAP_PX;
-        const spots = item.fixed ? [[item.centre ? x - w / 2 : x, y]] : [[x + g, y - h / 2], [x - g - w, y - h / 2], [x - w / 2, y - g - h],
-          [x - w / 2, y + g], [x + g, y - h - g / 2], [x + g, y + g / 2], [x - g - w, y - h - g / 2], [x - g - w, y + g / 2]];
+        // beside the point, then above and below it, then stacked further up and down
+        const spots = item.fixed ? [[item.centre ? x - w / 2 : x, y]] : [[x + g, y - h / 2], [x - g - w, y - h / 2],
+          [x - w / 2, y - g - h], [x - w / 2, y + g]];
+        if (!item.fixed) {
+          for (let k = 1; k <= 3; k++) {
+            const up = y - h / 2 - k * (h + 2); const down = y - h / 2 + k * (h + 2);
+            spots.push([x + g, up], [x + g, down], [x - g - w, up], [x - g - w, down]);
+          }
+        }
         let chosen = null;
         for (const [sx, sy] of spots) {
           const b = { x: Math.min(Math.max(sx, 2), r.width - w - 2), y: Math.min(Math.max(sy, 2), r.height - h - 2), w, h };
           if (w + 4 > r.width || h + 4 > r.height) break;
-          // a label pushed inside the frame must stay next to its anchor
-          if (!item.fixed && (Math.abs(b.x - sx) > w / 2 + g || Math.abs(b.y - sy) > h + g)) continue;
+          // a label pushed inside the frame must stay by its point: it may slide sideways
+          // by up to its width and up or down by its height, no further
+          if (!item.fixed && (Math.abs(b.x - sx) > w || Math.abs(b.y - sy) > h)) continue;
           if (fits(b)) { chosen = b; break; }
         }
         if (!chosen) { node.style.display = "none"; continue; }
@@ -866,13 +874,19 @@
         const p = paths[k];
         items.push({ node: layers[k].label, at: anchorAt(p.xyz[3 * j], p.xyz[3 * j + 1], p.xyz[3 * j + 2], r) });
       }
-      // the greatest errors beyond the tolerance first, then those within it, by rank
-      for (const w of [...worstLabels].sort((a, b) => a.within - b.within || a.rank - b.rank)) {
+      // the greatest errors that matter most first (beyond the tolerance; without one, the
+      // three greatest), then the stretches outside the tracked room, then the other greatest
+      // errors by rank, then the rooms
+      const worstItem = (w) => {
         const xyz = paths[w.path].xyz;
-        items.push({ node: w.node, off: !layers[w.path].visible, at: anchorAt(xyz[3 * w.index], xyz[3 * w.index + 1], xyz[3 * w.index + 2], r) });
-      }
-      for (const s of spaceLabels) items.push({ node: s.node, at: anchorAt(s.xyz[0], s.xyz[1], s.xyz[2], r), centre: true });
+        return { node: w.node, off: !layers[w.path].visible, at: anchorAt(xyz[3 * w.index], xyz[3 * w.index + 1], xyz[3 * w.index + 2], r) };
+      };
+      const major = (w) => (scene.tolerance ? !w.within : w.rank <= 3);
+      const ranked = [...worstLabels].sort((a, b) => a.rank - b.rank);
+      items.push(...ranked.filter(major).map(worstItem));
       for (const x of excursions) items.push({ node: x.node, off: !x.line.visible, at: anchorAt(x.xyz[0], x.xyz[1], x.xyz[2], r) });
+      items.push(...ranked.filter((w) => !major(w)).map(worstItem));
+      for (const s of spaceLabels) items.push({ node: s.node, at: anchorAt(s.xyz[0], s.xyz[1], s.xyz[2], r), centre: true });
       for (const a of anchorLabels) items.push({ node: a.node, at: anchorAt(a.xyz[0], a.xyz[1], a.xyz[2], r) });
       items.push(...axisItems(r));
       updateScale(r);
