@@ -65,6 +65,9 @@ __all__ = [
 ]
 
 _NS_PER_S: Final = 1_000_000_000
+MAX_STRETCHES: Final = 500
+"""Stretches beyond the tolerance the viewer lists and keeps in its display set, the worst
+first (a noisy run hovering at the tolerance has tens of thousands; result.json has all)."""
 _TIME_DECIMALS: Final = 6  # microseconds: finer than any recording's stamps need here
 _RESOLUTION_M: Final = 1e-4  # vertices are rounded to 0.1 mm
 _MAX_BUILDING_FACES: Final = 400_000
@@ -209,6 +212,9 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
         else {"distance_m": tolerance.distance_m, "share": tolerance.share},
         "verdicts": verdicts,
         "beyond": beyond,
+        "beyond_total": sum(
+            len(e.verdict.failing_spans) for e in result.estimates if e.verdict is not None
+        ),
         "frame_building_up_to": FRAME_BUILDING_UP_TO,
         "building_warnings": [] if result.building is None else list(result.building.warnings),
         "excursion_color": hex_colour(EXCURSION_RGB),
@@ -271,7 +277,7 @@ def _must_keep(est: EstimateResult) -> IntArray:
     """
     keep = [w.index for w in est.worst]
     if est.verdict is not None:
-        for s in est.verdict.failing_spans:  # one per stretch
+        for s in est.verdict.failing_spans[:MAX_STRETCHES]:  # one per listed stretch
             keep += [s.first_index - 1, s.first_index, s.last_index, s.last_index + 1]
             keep.append(s.max_error_index)
     return np.array(keep, dtype=np.intp)
@@ -286,7 +292,7 @@ def _beyond(
         return []
     tolerance_m = verdict.tolerance.distance_m
     out: list[dict[str, object]] = []
-    for rank, s in enumerate(verdict.failing_spans, start=1):  # one per stretch
+    for rank, s in enumerate(verdict.failing_spans[:MAX_STRETCHES], start=1):
         first, last, at = np.searchsorted(kept, [s.first_index, s.last_index, s.max_error_index])
         out.append(
             {

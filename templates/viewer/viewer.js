@@ -463,9 +463,11 @@
         button.addEventListener("click", () => focusStretch(k));
         list.append(el("li", {}, button));
       });
-      const count = beyond.length === 1 ? "1 stretch" : `${beyond.length} stretches`;
+      const total = scene.beyond_total || beyond.length;
+      const count = total === 1 ? "1 stretch" : `${total.toLocaleString("en")} stretches`;
+      const shown = total > beyond.length ? ` (the ${beyond.length} worst listed; result.json has all)` : "";
       const details = el("details", { className: "lv-beyond", open: "" },
-        el("summary", { text: `Beyond the tolerance: ${count}, worst first` }), list);
+        el("summary", { text: `Beyond the tolerance: ${count}, worst first${shown}` }), list);
       root.append(details);
       return details;
     }
