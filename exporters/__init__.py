@@ -186,7 +186,20 @@ def render_artifact(name: str, result: EvaluationResult, options: ExportOptions)
         ExportUnavailableError: its libraries are not installed.
         ExportError: the exporter failed.
     """
-    return _artifact(name).load()(result, options)
+    return _artifact(name).load()(_on_building(result, options), options)
+
+
+def _on_building(result: EvaluationResult, options: ExportOptions) -> EvaluationResult:
+    """Return the result placed on the options' building (its rooms, its warnings), once.
+
+    Every artifact of a run then names the same rooms (``result.json``, the report, the
+    viewer); the CAD libraries are loaded only when there is a building.
+    """
+    if options.building is None:
+        return result
+    from exporters.cad.spaces import placed_on_building  # noqa: PLC0415  (CAD libraries)
+
+    return placed_on_building(result, options)
 
 
 def _artifact(name: str) -> ArtifactSpec:
@@ -289,6 +302,7 @@ def _render_into(
     on_written: ArtifactCallback | None = None,
 ) -> None:
     """Render every wanted artifact into ``staging``, placing the CAD paths only once."""
+    result = _on_building(result, options)
     placement = None
     if CAD_ARTIFACTS.intersection(wanted):
         # Placing (site transform, units, simplification) is shared by every CAD file.

@@ -1,7 +1,11 @@
 """The colours and names every output shares: the trajectory palette, layer names, ATE bins.
 
-The report, the DXF, the .3dm and the GLB colour a path's ATE with the same bins
-(:func:`ate_bins`, :func:`ate_edges_m`), so a site engineer reads one legend everywhere.
+Every picture of the errors (the viewer, the report's figures, the DXF, .3dm, GLB and IFC
+ATE layers, the Grasshopper document and Hops) colours a path's ATE with the same bins
+(:func:`error_bins`), so a site engineer reads one legend everywhere. With a tolerance the
+scale is anchored to it (:func:`tolerance_bins`): two shades of green within it, orange to
+red by how far beyond; without one, the threshold bands (:func:`ate_bins`,
+:func:`ate_edges_m`).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import numpy as np
 
 from loceval.core.arrays import FloatArray
 from loceval.core.display import display_text
+from loceval.core.lengths import LengthUnit, length_unit
 from loceval.evaluation import EvaluationResult
 
 RGB: TypeAlias = tuple[int, int, int]
@@ -62,6 +67,11 @@ _MAX_EXTRA_EDGES: Final = 4  # at most this many 1-2-5 edges above the last thre
 
 
 # --- names and colours -----------------------------------------------------------------
+
+
+def hex_colour(rgb: RGB) -> str:
+    """Return an RGB colour as ``#rrggbb``."""
+    return "#{:02x}{:02x}{:02x}".format(*rgb)
 
 
 def palette_color(index: int) -> RGB:
@@ -111,12 +121,14 @@ class ATEBin:
         high_m: upper bound (inclusive), metres; ``inf`` for the last bin.
         color_rgb: its colour.
         label: legend text (``"0.05-0.10 m"``).
+        beyond: errors in it exceed the tolerance (a tolerance-anchored scale).
     """
 
     low_m: float
     high_m: float
     color_rgb: RGB
     label: str
+    beyond: bool = False
 
 
 def ate_bins(thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
@@ -133,14 +145,77 @@ def ate_bins(thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
         # spread the bins evenly over the green -> yellow -> orange -> red ramp
         color = _ramp(0.0 if count == 1 else k / (count - 1))
         low, high = bounds[k], bounds[k + 1]
-        if k == 0:
-            label = f"<= {high:g} m"
-        elif math.isinf(high):
-            label = f"> {low:g} m"
-        else:
-            label = f"{low:g}-{high:g} m"
-        bins.append(ATEBin(low, high, color, label))
+        bins.append(ATEBin(low, high, color, _bin_label(low, high, first=k == 0)))
     return tuple(bins)
+
+
+def _bin_label(low_m: float, high_m: float, *, first: bool) -> str:
+    """Return a bin's legend text: ``<= 0.05 m`` (the first), ``0.05-0.1 m`` or ``> 0.15 m``."""
+    if first:
+        return f"<= {high_m:g} m"
+    if math.isinf(high_m):
+        return f"> {low_m:g} m"
+    return f"{low_m:g}-{high_m:g} m"
+
+
+_WITHIN_RGB: Final[tuple[RGB, ...]] = ((0, 122, 61), (120, 200, 80))
+"""Within the tolerance: dark green up to half of it, light green up to it."""
+_BEYOND_RGB: Final[tuple[RGB, ...]] = ((255, 170, 0), (240, 95, 0), (200, 0, 0))
+"""Beyond it: orange up to 1.5 times it, dark orange up to twice, red past that."""
+_BEYOND_FACTORS: Final = (1.5, 2.0)
+
+
+def tolerance_bins(distance_m: float) -> tuple[ATEBin, ...]:
+    """Return the colour scale anchored to a tolerance: green within, orange to red beyond.
+
+    Bins: ``<= t/2`` and ``t/2-t`` (shades of green, within), ``t-1.5t``, ``1.5t-2t`` and
+    ``> 2t`` (orange, dark orange, red: beyond, by how far). Their upper bounds are
+    inclusive, as the tolerance's "within" is (an error equal to it is within).
+    """
+    t = float(distance_m)
+    edges = [0.0, t / 2.0, t, *(f * t for f in _BEYOND_FACTORS), math.inf]
+    colours = [*_WITHIN_RGB, *_BEYOND_RGB]
+    bins = []
+    for k, rgb in enumerate(colours):
+        low, high = edges[k], edges[k + 1]
+        label = _bin_label(low, high, first=k == 0)
+        bins.append(ATEBin(low, high, rgb, label, beyond=k >= len(_WITHIN_RGB)))
+    return tuple(bins)
+
+
+def error_bins(result: EvaluationResult) -> tuple[ATEBin, ...]:
+    """Return the one ATE colour scale of an evaluation's every picture of its errors.
+
+    Anchored to the tolerance when one was given (:func:`tolerance_bins`), else the
+    threshold bands widened to the errors' range (:func:`ate_bins` of :func:`ate_edges_m`).
+    """
+    tolerance = result.config.tolerance
+    if tolerance is not None:
+        return tolerance_bins(tolerance.distance_m)
+    return ate_bins(ate_edges_m(result))
+
+
+def error_unit(result: EvaluationResult) -> LengthUnit:
+    """Return the unit every label of this evaluation's errors reads in (viewer, CAD files).
+
+    One group (:func:`loceval.core.lengths.length_unit`): the largest error of each
+    estimate; millimetres when all are below 0.1 m.
+    """
+    return length_unit(
+        float(e.ate_translation.values.max()) for e in result.estimates if len(e.ate_translation)
+    )
+
+
+def scale_words(result: EvaluationResult) -> str:
+    """Return the legend's sentence: what the colours mean, the tolerance in words."""
+    tolerance = result.config.tolerance
+    if tolerance is None:
+        return "ATE colours by the report's distance bands (no tolerance given)."
+    t = tolerance.distance_m
+    return (
+        f"Tolerance: within {t:g} m for {tolerance.share * 100:g} % of poses. Green: within "
+        f"{t:g} m; orange to red: beyond it (red past {_BEYOND_FACTORS[-1] * t:g} m)."
+    )
 
 
 def _ramp(fraction: float) -> RGB:

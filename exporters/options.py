@@ -46,7 +46,9 @@ class ExportOptions:
         simplify_m: largest deviation, in metres, that polyline simplification may
             introduce (0 keeps every vertex).
         building: a building model (OBJ/PLY/STL/GLB/IFC) to put in the glTF scene, if any.
-        building_up: the up axis of an OBJ, PLY or STL building (``"y"`` for Y-up exports).
+        building_up: the up axis of a mesh building (OBJ, PLY, STL, GLB): ``format`` (the
+            default) follows the file format (Y for GLB, Z for the others), ``z`` or
+            ``y`` override it.
         evaluation_id: the id named in every file's metadata.
         title: a human title for reports and file metadata.
         templates_dir: where the report templates live (``templates/`` by default).
@@ -64,7 +66,7 @@ class ExportOptions:
     title: str = "loceval evaluation"
     templates_dir: Path | None = None
     crs: str | None = None
-    building_up: UpAxis = UpAxis.Z
+    building_up: UpAxis = UpAxis.FORMAT
     front_door: FrontDoor = FrontDoor.CLI
 
     def __post_init__(self) -> None:

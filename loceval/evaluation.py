@@ -10,10 +10,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from loceval._version import __version__
+from loceval.assessment.spaces import Building, locate_verdict
 from loceval.assessment.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
-from loceval.calibration.offsets import DeviceSource, OffsetCheck, check_offsets
+from loceval.calibration.offsets import DeviceSource, OffsetCheck, check_offsets, parse_offset
 from loceval.core.arrays import IntArray
-from loceval.core.gaps import gap_threshold_ns
+from loceval.core.gaps import gap_threshold_ns, path_breaks
 from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
 from loceval.metrics.excursions import Excursion, find_excursions
@@ -36,7 +37,7 @@ from loceval.registration.association import (
     associate,
     association_notes,
 )
-from loceval.trajectory import MAX_OFFSET_M, Trajectory
+from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from loceval.assessment.assess import Assessment
@@ -251,6 +252,22 @@ class EvaluationResult:
     ranging_options: Mapping[str, object] = field(default_factory=dict)
     map: MapEvaluation | None = None
     """The robot's map against the building plan (:mod:`loceval.maps`), if one was given."""
+    building: Building | None = None
+    """The building model the paths were placed on: its spaces and warnings
+    (:func:`loceval.assessment.spaces.on_building`), once an exporter placed them."""
+
+    def with_building(self, building: Building) -> EvaluationResult:
+        """Return the result placed on ``building``: each stretch in its space, kept.
+
+        See :func:`loceval.assessment.spaces.locate_verdict`.
+        """
+        estimates = tuple(
+            replace(e, verdict=locate_verdict(e.verdict, e.reference.positions_xyz, building))
+            if e.verdict is not None
+            else e
+            for e in self.estimates
+        )
+        return replace(self, estimates=estimates, building=building)
 
     def to_dict(self) -> dict[str, object]:
         """Return the CLI's ``--json`` document (also the service's result schema)."""
@@ -284,39 +301,13 @@ class EvaluationResult:
             },
             **ranging,
             **({} if self.map is None else {"map": self.map.to_dict()}),
+            **({} if self.building is None else {"building": self.building.to_dict()}),
             "estimates": [_estimate_dict(e, self.config, t0) for e in self.estimates],
             "comparisons": None
             if self.comparisons is None
             else [c.to_dict() for c in self.comparisons],
             "comparison_notes": list(self.comparison_notes),
         }
-
-
-def parse_offset(text: str) -> SimilarityTransform:
-    """Parse ``"x y z qx qy qz qw"`` (or ``"x y z"``) into a rigid offset.
-
-    Raises:
-        InputError: not 3 or 7 finite numbers, x y z over MAX_OFFSET_M, a non-unit quaternion.
-    """
-    try:
-        values = [float(v) for v in text.replace(",", " ").split()]
-    except ValueError:
-        values = []
-    if len(values) not in (3, 7) or not np.isfinite(values).all():
-        msg = (
-            f'The device offset takes "x y z qx qy qz qw" in metres and a unit quaternion '
-            f'(or just "x y z"), got {text!r}.'
-        )
-        raise InputError(msg, option="offset")
-    if float(np.abs(values[:3]).max()) > MAX_OFFSET_M:
-        msg = f"The device offset's x y z {values[:3]!r} exceed ±{MAX_OFFSET_M:g} m; give metres."
-        raise InputError(msg, option="offset")
-    quat = np.array(values[3:] if len(values) == 7 else [0.0, 0.0, 0.0, 1.0])
-    norm = float(np.linalg.norm(quat))
-    if abs(norm - 1.0) > 1e-3:
-        msg = f"The device offset's quaternion must be unit (x y z w), its norm is {norm:.6g}."
-        raise InputError(msg, option="offset")
-    return SimilarityTransform.from_pose(np.array(values[:3]), quat / norm)
 
 
 def evaluate(
@@ -466,7 +457,9 @@ def _evaluate_one(
     verdict = None
     if config.tolerance is not None:
         judged = None if assessment is None else assessment.tolerance
-        verdict = tolerance_verdict_of(ate_t, ref, config.tolerance, t0_ns, judged)
+        losses = reference.tracking_losses(min_gap_ns)
+        breaks = path_breaks(ref.stamps_ns, min_gap_ns=min_gap_ns, losses=losses)
+        verdict = tolerance_verdict_of(ate_t, ref, config.tolerance, t0_ns, judged, breaks=breaks)
     return EstimateResult(
         estimate=estimate,
         association=matched,

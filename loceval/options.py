@@ -290,8 +290,8 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
     OptionSpec(
         "building_up",
         OptionKind.CHOICE,
-        UpAxis.Z.value,
-        "the up axis of an OBJ, PLY or STL building model (y for Y-up exports)",
+        UpAxis.FORMAT.value,
+        "a mesh building's up axis: format = y for GLB (glTF spec), z for OBJ/PLY/STL; or z, y",
         "the building model's up axis",
         "building-up",
         choices=tuple(UpAxis),

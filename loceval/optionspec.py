@@ -68,8 +68,14 @@ class StampSource(StrEnum):
 
 
 class UpAxis(StrEnum):
-    """The up axis of a building mesh file (OBJ, PLY, STL): CAD's Z, or Y as many exporters."""
+    """The up axis of a building mesh file (OBJ, PLY, STL, GLB).
 
+    ``format``: the file format's own convention: Y for glTF/GLB (its specification says
+    Y up), Z for OBJ, PLY and STL (as CAD programs export them). ``z`` and ``y`` override
+    it, for a GLB written from Z-up data or an OBJ from a Y-up exporter.
+    """
+
+    FORMAT = "format"
     Z = "z"
     Y = "y"
 

@@ -5,7 +5,8 @@ the site transform maps the evaluation frame into). :func:`read_building` reads
 
 - OBJ, PLY, STL (trimesh): model coordinates in the given units, Z up as CAD programs
   export them, or Y up (``up="y"``) as many OBJ exporters write them;
-- GLB (trimesh): glTF conventions, metres and Y up;
+- GLB (trimesh): metres, Y up as the glTF specification says, or Z up (``up="z"``) for a
+  file written from Z-up data without turning it (as trimesh and many exporters write it);
 - IFC (ifcopenshell.geom): every element with a body, openings cut. When the file has an
   ``IfcMapConversion`` its model coordinates are the map's (Eastings, Northings, height
   in metres) and the conversion is the site transform: the evaluation frame is taken to be
@@ -21,6 +22,7 @@ segments in the evaluation frame: what the report's plan views draw under the pa
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -37,21 +39,31 @@ from loceval.core.geometry import SimilarityTransform
 if TYPE_CHECKING:
     import ifcopenshell
     from ezdxf.entities.circle import Circle
+    from ezdxf.entities.lwpolyline import LWPolyline
+    from ezdxf.entities.mtext import MText
+    from ezdxf.entities.polyline import Polyline
+    from ezdxf.entities.text import Text
 
 __all__ = [
+    "FRAME_BUILDING_UP_TO",
     "MESH_SUFFIXES",
     "BuildingModel",
     "FloorPlan",
     "georeferenced_options",
+    "mesh_vertices_m",
     "read_building",
     "read_floor_plan",
     "read_georeference",
     "read_underlay",
+    "resolved_up",
     "section_segments",
 ]
 
 MESH_SUFFIXES: Final = (".obj", ".ply", ".stl", ".glb", ".ifc")
 """Building files :func:`read_building` reads as a mesh."""
+FRAME_BUILDING_UP_TO: Final = 20.0
+"""A building model up to this many times the paths' size is framed with them: the report's
+plan views and the viewer's first view show its outer walls; a campus is not framed."""
 _Y_UP_TO_Z_UP: Final = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 """(3, 3) rotation +90° about X: (x, y, z) Y-up -> (x, -z, y) Z-up."""
 _INSUNITS_PER_METRE: Final = {
@@ -114,10 +126,16 @@ class FloorPlan:
     Attributes:
         segments_m: (K, 2, 2) float64 segment end points (x, y), model metres.
         source: the file it was read from.
+        outlines: the closed polylines' rings, (K, 2) model metres each (the candidates
+            for rooms, :mod:`exporters.cad.spaces`).
+        labels: the texts (``TEXT``, ``MTEXT``) and their insertion points (x, y),
+            model metres.
     """
 
     segments_m: FloatArray
     source: Path
+    outlines: tuple[FloatArray, ...] = ()
+    labels: tuple[tuple[str, tuple[float, float]], ...] = ()
 
     def __post_init__(self) -> None:
         """Copy the array read-only."""
@@ -129,13 +147,30 @@ class FloorPlan:
 # --- reading -------------------------------------------------------------------------------
 
 
-def read_building(path: Path, *, units: Units = Units.M, up: UpAxis = UpAxis.Z) -> BuildingModel:
+def resolved_up(path: Path, up: UpAxis = UpAxis.FORMAT) -> UpAxis:
+    """Return the up axis a mesh file is read with: ``up``, or its format's convention.
+
+    ``format`` means Y for a GLB (the glTF specification is Y up) and Z for OBJ, PLY and
+    STL (as CAD programs export them); an IFC is always Z up and a DXF plan has none.
+    """
+    up = UpAxis(up)
+    if up is not UpAxis.FORMAT:
+        return up
+    return UpAxis.Y if path.suffix.lower() == ".glb" else UpAxis.Z
+
+
+def read_building(
+    path: Path, *, units: Units = Units.M, up: UpAxis = UpAxis.FORMAT
+) -> BuildingModel:
     """Read a building model (OBJ, PLY, STL, GLB or IFC) as a mesh in model coordinates.
+
+    Read once per file, units and up axis (while the file is unchanged): the viewer, the
+    report's plan views, the GLB and the building checks share one reading.
 
     Args:
         path: the file.
         units: the length units of an OBJ, PLY or STL file (GLB is metres; IFC says).
-        up: the up axis of an OBJ, PLY or STL file (``"y"`` for Y-up exports).
+        up: the up axis of a mesh file (:func:`resolved_up`; an IFC is always Z up).
 
     Returns:
         The building; for an IFC with a map conversion, with its site and CRS.
@@ -145,24 +180,68 @@ def read_building(path: Path, *, units: Units = Units.M, up: UpAxis = UpAxis.Z) 
             triangles.
     """
     suffix = _check_file(path, MESH_SUFFIXES)
+    axis = UpAxis.Z if suffix == ".ifc" else resolved_up(path, up)
+    return _read_building_cached(path, _file_key(path), Units(units), axis)
+
+
+@functools.lru_cache(maxsize=8)
+def _read_building_cached(
+    path: Path, _key: tuple[int, int], units: Units, up: UpAxis
+) -> BuildingModel:
+    """Read a building; cached by path, size and modification time (``_key``)."""
+    suffix = path.suffix.lower()
     if suffix == ".ifc":
         return _read_ifc(path)
-    vertices, faces = _read_trimesh(path, suffix)
-    if suffix == ".glb":  # glTF: metres, Y up
-        vertices = vertices @ _Y_UP_TO_Z_UP.T
-    else:
+    return BuildingModel(mesh_vertices_m(path, units=units, up=up), _raw_mesh(path)[1], path)
+
+
+def mesh_vertices_m(path: Path, *, units: Units, up: UpAxis) -> FloatArray:
+    """Return a mesh file's (V, 3) vertices in model metres, Z up, read with ``up``.
+
+    Args:
+        path: an OBJ, PLY, STL or GLB file.
+        units: the length units of an OBJ, PLY or STL file (a GLB is metres).
+        up: its up axis (``format``: :func:`resolved_up`).
+    """
+    vertices = _raw_mesh(path)[0]
+    if path.suffix.lower() != ".glb":
         vertices = vertices / Units(units).per_metre
-        if UpAxis(up) is UpAxis.Y:
-            vertices = vertices @ _Y_UP_TO_Z_UP.T
-    return BuildingModel(vertices, faces, path)
+    if resolved_up(path, up) is UpAxis.Y:
+        vertices = vertices @ _Y_UP_TO_Z_UP.T
+    return vertices
+
+
+def _file_key(path: Path) -> tuple[int, int]:
+    """Return (size, modification time in ns): a changed file is read again."""
+    try:
+        stat = path.stat()
+    except OSError as err:
+        msg = f"The building model {str(path)!r} cannot be read ({err.strerror}); check the path."
+        raise ExportOptionsError(msg, option="building") from err
+    return stat.st_size, stat.st_mtime_ns
+
+
+def _raw_mesh(path: Path) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Return a mesh file's vertices as stored and its faces (read once per file version)."""
+    return _raw_mesh_cached(path, _file_key(path))
+
+
+@functools.lru_cache(maxsize=4)
+def _raw_mesh_cached(path: Path, _key: tuple[int, int]) -> tuple[FloatArray, NDArray[np.int64]]:
+    vertices, faces = _read_trimesh(path, path.suffix.lower())
+    vertices.flags.writeable = False
+    faces.flags.writeable = False
+    return vertices, faces
 
 
 def read_floor_plan(path: Path, *, units: Units = Units.M) -> FloorPlan:
     """Read the 2D lines of a DXF drawing's model space as a floor plan.
 
     Lines, polylines (light-weight and 2D/3D, closed or open), arcs and circles (in 5°
-    chords) become segments; their Z is dropped. The drawing's ``$INSUNITS`` gives its
-    units; ``units`` is used when the drawing leaves them unset.
+    chords) become segments; their Z is dropped. Closed polylines are also kept as
+    outlines and texts as labels (the plan's rooms, :mod:`exporters.cad.spaces`). The
+    drawing's ``$INSUNITS`` gives its units; ``units`` is used when the drawing leaves
+    them unset. Read once per file version and units.
 
     Args:
         path: the DXF file.
@@ -171,15 +250,27 @@ def read_floor_plan(path: Path, *, units: Units = Units.M) -> FloorPlan:
     Raises:
         ExportOptionsError: a missing or unreadable file, or one without lines.
     """
+    _check_file(path, (".dxf",))
+    return _read_floor_plan_cached(path, _file_key(path), Units(units))
+
+
+@functools.lru_cache(maxsize=4)
+def _read_floor_plan_cached(path: Path, _key: tuple[int, int], units: Units) -> FloorPlan:
+    return _read_floor_plan(path, units=units)
+
+
+def _read_floor_plan(path: Path, *, units: Units = Units.M) -> FloorPlan:
+    """Read a DXF floor plan (:func:`read_floor_plan`), uncached."""
     from ezdxf.entities.arc import Arc  # noqa: PLC0415
     from ezdxf.entities.circle import Circle  # noqa: PLC0415
     from ezdxf.entities.line import Line  # noqa: PLC0415
     from ezdxf.entities.lwpolyline import LWPolyline  # noqa: PLC0415
+    from ezdxf.entities.mtext import MText  # noqa: PLC0415
     from ezdxf.entities.polyline import Polyline  # noqa: PLC0415
+    from ezdxf.entities.text import Text  # noqa: PLC0415
     from ezdxf.filemanagement import readfile  # noqa: PLC0415  (only a floor plan needs it)
     from ezdxf.lldxf.const import DXFError  # noqa: PLC0415
 
-    _check_file(path, (".dxf",))
     try:
         doc = readfile(str(path))
     except (OSError, DXFError, UnicodeDecodeError) as err:
@@ -187,15 +278,18 @@ def read_floor_plan(path: Path, *, units: Units = Units.M) -> FloorPlan:
         raise ExportOptionsError(msg, option="building") from err
     per_metre = _INSUNITS_PER_METRE.get(int(doc.header.get("$INSUNITS", 0)), units.per_metre)
     chains: list[FloatArray] = []
+    outlines: list[FloatArray] = []
+    labels: list[tuple[str, tuple[float, float]]] = []
     for entity in doc.modelspace():  # one iteration per drawing entity, not per vertex
         if isinstance(entity, Line):
             chains.append(np.array([entity.dxf.start.xyz, entity.dxf.end.xyz])[:, :2])
-        elif isinstance(entity, LWPolyline):
-            xy = np.array(list(entity.vertices()), dtype=np.float64).reshape(-1, 2)
-            chains.append(np.vstack([xy, xy[:1]]) if entity.closed else xy)
-        elif isinstance(entity, Polyline):
-            xy = np.array([v.dxf.location.xyz for v in entity.vertices])[:, :2]
-            chains.append(np.vstack([xy, xy[:1]]) if entity.is_closed else xy)
+        elif isinstance(entity, LWPolyline | Polyline):
+            xy, closed = _polyline(entity)
+            chains.append(np.vstack([xy, xy[:1]]) if closed else xy)
+            if closed and len(xy) >= 3:
+                outlines.append(xy / per_metre)
+        elif isinstance(entity, Text | MText):
+            labels += _label(entity, per_metre)
         elif isinstance(entity, Arc):  # an ARC is a CIRCLE with angles: test it first
             chains.append(_arc(entity, full=False))
         elif isinstance(entity, Circle):
@@ -207,11 +301,34 @@ def read_floor_plan(path: Path, *, units: Units = Units.M) -> FloorPlan:
             "plan with its walls as lines or polylines."
         )
         raise ExportOptionsError(msg, option="building")
-    return FloorPlan(np.concatenate(segments) / per_metre, path)
+    return FloorPlan(
+        np.concatenate(segments) / per_metre, path, outlines=tuple(outlines), labels=tuple(labels)
+    )
+
+
+def _label(entity: Text | MText, per_metre: float) -> list[tuple[str, tuple[float, float]]]:
+    """Return a text's words and insertion point (x, y) in metres (none when empty)."""
+    from ezdxf.entities.mtext import MText  # noqa: PLC0415
+
+    text = entity.plain_text() if isinstance(entity, MText) else entity.dxf.text
+    words = " ".join(str(text).split())
+    at = entity.dxf.insert
+    return [(words, (float(at.x) / per_metre, float(at.y) / per_metre))] if words else []
+
+
+def _polyline(entity: LWPolyline | Polyline) -> tuple[FloatArray, bool]:
+    """Return a polyline's (K, 2) vertices and whether it is closed."""
+    from ezdxf.entities.lwpolyline import LWPolyline  # noqa: PLC0415
+
+    if isinstance(entity, LWPolyline):
+        xy = np.array(list(entity.vertices()), dtype=np.float64).reshape(-1, 2)
+        return xy, bool(entity.closed)
+    xyz = np.array([v.dxf.location.xyz for v in entity.vertices], dtype=np.float64)
+    return xyz.reshape(-1, 3)[:, :2], bool(entity.is_closed)
 
 
 def read_underlay(
-    path: Path, *, units: Units = Units.M, up: UpAxis = UpAxis.Z
+    path: Path, *, units: Units = Units.M, up: UpAxis = UpAxis.FORMAT
 ) -> BuildingModel | FloorPlan:
     """Read a building model or, for a ``.dxf``, a floor plan (see :func:`section_segments`)."""
     if path.suffix.lower() == ".dxf":
@@ -350,7 +467,10 @@ def _read_ifc(path: Path) -> BuildingModel:
     vertices: list[FloatArray] = []
     faces: list[NDArray[np.int64]] = []
     count = 0
-    iterator = ifcopenshell.geom.iterator(settings, model, 1)
+    # spaces are rooms (their air), not building elements: they name places (spaces.py)
+    iterator = ifcopenshell.geom.iterator(
+        settings, model, 1, exclude=["IfcSpace", "IfcOpeningElement"]
+    )
     if iterator.initialize():
         while True:  # one iteration per building element, not per vertex
             geometry = iterator.get().geometry  # type: ignore[no-untyped-call]

@@ -41,6 +41,7 @@ from exporters.cad.dxf_bulk import BulkPolylines
 from exporters.cad.dxf_map import add_excursion_layer, add_map_layers
 from exporters.cad.georef import add_geodata
 from exporters.cad.placement import RGB, Marker, PlacedPath, Placement, place_evaluation
+from exporters.colours import scale_words
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
 from loceval.core.arrays import FloatArray
@@ -102,7 +103,7 @@ def _drawing(placement: Placement) -> tuple[Drawing, BulkPolylines]:
     doc.header["$PDSIZE"] = 0.6 * text_h
 
     info = doc.layers.add(_INFO_LAYER, color=colors.WHITE)
-    info.description = "loceval: title and units of this drawing"
+    info.description = "loceval: title, units and colour scale of this drawing"
     title = f"{placement.title} - evaluation {placement.evaluation_id} - units {placement.units}"
     msp.add_text(
         title,
@@ -170,7 +171,13 @@ def _text(value: object) -> str:
 
 
 def _extents(placement: Placement) -> tuple[FloatArray, FloatArray]:
+    """Return the drawing's extent: the paths and the building model, when one is given.
+
+    The title goes above it and the legends below it: outside the building's rooms.
+    """
     allv = np.concatenate([p.vertices for p in placement.paths])
+    if placement.building_bounds is not None:
+        allv = np.concatenate([allv, placement.building_bounds])
     return allv.min(axis=0), allv.max(axis=0)
 
 
@@ -259,6 +266,12 @@ def _add_ate_layer(
     msp.add_text(
         f"{path.name}: ATE translation",
         height=text_h,
+        dxfattribs={"layer": name, "insert": (x, y, z)},
+    )
+    y -= 1.5 * text_h  # what the colours mean: the tolerance in words
+    msp.add_text(
+        scale_words(placement.result),
+        height=0.7 * text_h,
         dxfattribs={"layer": name, "insert": (x, y, z)},
     )
     for k, ate_bin in enumerate(bins, start=1):

@@ -48,7 +48,7 @@ from exporters.cad.building import read_building
 from exporters.cad.excursions import EXCURSION_LAYER, EXCURSION_RGB, placed_excursions
 from exporters.cad.gltf_scene import Z_UP_TO_Y_UP, GlbScene, linear_rgba, node_matrix
 from exporters.cad.placement import ATERun, Marker, Placement, place_evaluation
-from exporters.colours import map_bins
+from exporters.colours import map_bins, scale_words
 from exporters.options import ExportOptions
 from loceval.core.arrays import FloatArray
 from loceval.evaluation import EvaluationResult
@@ -99,7 +99,10 @@ def export_glb(
         extras = {
             "kind": "ate",
             "path": path.name,
-            "ate_bins": [{"label": b.label, "color": list(b.color_rgb)} for b in bins],
+            "legend": scale_words(result),
+            "ate_bins": [
+                {"label": b.label, "color": list(b.color_rgb), "beyond": b.beyond} for b in bins
+            ],
         }
         scene.add_lines(f"{path.name} ATE", strips, [1.0, 1.0, 1.0, 1.0], extras, colours)
     markers = placement.markers()

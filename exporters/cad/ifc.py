@@ -6,7 +6,10 @@ one ``IfcIndexedPolyCurve`` per continuous piece: the placed path (the same vert
 DXF) cut where the trajectory has no pose for longer than the evaluation's ``max_gap_s``
 (:func:`tracking_losses`). Each curve is styled in the path's palette colour. A property
 set ``Loceval_Path`` holds its kind, source, vertex counts, ATE/RPE statistics and verdict;
-the project's ``Loceval_Evaluation`` holds the file-level metadata. The greatest errors
+the project's ``Loceval_Evaluation`` holds the file-level metadata. Each estimate also has
+an ``ATE`` annotation (``ObjectType`` ``"ATE"``): its path cut into runs coloured by the one
+error scale (anchored to the tolerance when there is one), the legend in ``Loceval_ATE``.
+The greatest errors
 and the tracking losses are ``IfcAnnotation`` points (``ObjectType`` ``"greatest error"``
 or ``"tracking loss"``) whose name is their label; a greatest error also has the line to
 the reference pose its error is measured to. A measured map adds the plan's walls
@@ -48,8 +51,9 @@ import ifcopenshell.guid
 import numpy as np
 
 from exporters.cad.building import georeferenced_options
-from exporters.cad.ifc_map import add_excursions, add_map
+from exporters.cad.ifc_map import add_annotation, add_excursions, add_map
 from exporters.cad.placement import Marker, PlacedPath, Placement, place_evaluation
+from exporters.colours import hex_colour, scale_words
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval.core.arrays import FloatArray
@@ -58,6 +62,7 @@ from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries
 
 __all__ = [
+    "ATE_TYPE",
     "MARKER_TYPES",
     "TRAJECTORY_TYPE",
     "Georeference",
@@ -67,6 +72,8 @@ __all__ = [
 
 TRAJECTORY_TYPE: Final = "trajectory"
 """``ObjectType`` of the annotation of a trajectory."""
+ATE_TYPE: Final = "ATE"
+"""``ObjectType`` of an estimate's path coloured by its error (the one colour scale)."""
 MARKER_TYPES: Final = {"worst": "greatest error", "gap": "tracking loss"}
 """``ObjectType`` of the point annotations, by marker kind."""
 _PREFIX: Final = {Units.MM: "MILLI", Units.CM: "CENTI", Units.M: None}
@@ -260,6 +267,8 @@ class IfcBuilder:
         markers = placement.markers()
         for path in placement.paths:
             elements.append(self._path(path))
+            if path.estimate is not None and placement.ate_runs(path):
+                elements.append(self._ate(path))
             elements += [self._marker(m, k) for k, m in enumerate(markers) if m.path == path.name]
         elements += add_map(self) + add_excursions(self)
         f.create_entity(
@@ -326,24 +335,43 @@ class IfcBuilder:
         for item in items:
             self.style(item, path.layer, path.color_rgb)
         curves_only = all(len(vertices[p]) >= 2 for p in pieces)
-        representation = f.create_entity(
-            "IfcShapeRepresentation",
-            ContextOfItems=self.annotation_ctx,
-            RepresentationIdentifier="Annotation",
-            RepresentationType="Curve3D" if curves_only else "GeometricSet",
-            Items=items,
-        )
-        annotation = f.create_entity(
-            "IfcAnnotation",
-            GlobalId=self.guid(f"path/{path.name}"),
-            Name=path.name,
-            Description=f"loceval {path.kind.value}: {path.source}",
-            ObjectType=TRAJECTORY_TYPE,
-            ObjectPlacement=self.local_placement(),
-            Representation=f.createIfcProductDefinitionShape(None, None, [representation]),
+        annotation = add_annotation(
+            self,
+            name=path.name,
+            kind=TRAJECTORY_TYPE,
+            description=f"loceval {path.kind.value}: {path.source}",
+            representation=("Curve3D" if curves_only else "GeometricSet", items),
+            key=f"path/{path.name}",
         )
         properties = _path_properties(path, pieces=len(pieces))
         self.pset(annotation, "Loceval_Path", properties)
+        return annotation
+
+    def _ate(self, path: PlacedPath) -> ifcopenshell.entity_instance:
+        """The estimate cut into runs of one ATE bin, each curve in its bin's colour."""
+        f, placement = self.f, self.placement
+        bins = placement.ate_bins()
+        items = []
+        for run in placement.ate_runs(path):  # one curve per colour run
+            curve = f.create_entity(
+                "IfcIndexedPolyCurve", Points=self.point_list(self.coords(run.vertices)),
+                SelfIntersect=False,
+            )  # fmt: skip
+            b = bins[run.bin_index]
+            self.style(curve, f"{path.layer} ATE {b.label}", b.color_rgb)
+            items.append(curve)
+        legend = scale_words(placement.result)
+        annotation = add_annotation(
+            self,
+            name=f"{path.name} ATE",
+            kind=ATE_TYPE,
+            description=legend,
+            representation=("Curve3D", items),
+            key=f"ate/{path.name}",
+        )
+        scale: dict[str, object] = {"Legend": legend}
+        scale |= {f"Bin{k}": f"{b.label}: {hex_colour(b.color_rgb)}" for k, b in enumerate(bins, 1)}
+        self.pset(annotation, "Loceval_ATE", scale)
         return annotation
 
     def _marker(self, marker: Marker, index: int) -> ifcopenshell.entity_instance:
@@ -460,7 +488,7 @@ def _estimate_properties(est: EstimateResult) -> dict[str, object]:
             values[f"{prefix}_{key}_{unit}"] = float(getattr(stats, key))
         values[f"{prefix}_n"] = int(stats.n)
     if est.verdict is not None:
-        values["Verdict"] = "PASS" if est.verdict.passed else "FAIL"
+        values["Verdict"] = est.verdict.result.upper()  # PASS, FAIL or UNDECIDED
         values["VerdictSummary"] = est.verdict.summary
         values["Tolerance_m"] = float(est.verdict.tolerance.distance_m)
         values["ShareWithin"] = float(est.verdict.share_within)

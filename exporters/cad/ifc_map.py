@@ -34,7 +34,14 @@ from exporters.cad.placement import Placement
 from exporters.colours import map_bins
 from loceval.core.arrays import FloatArray
 
-__all__ = ["EXCURSION_TYPE", "MAP_TYPES", "IfcBuilder", "add_excursions", "add_map"]
+__all__ = [
+    "EXCURSION_TYPE",
+    "MAP_TYPES",
+    "IfcBuilder",
+    "add_annotation",
+    "add_excursions",
+    "add_map",
+]
 
 MAP_TYPES: Final = {"plan": "map plan", "walls": "map walls"}
 """``ObjectType`` of the map's annotations."""
@@ -116,7 +123,7 @@ def _plan(
     ]
     for item in items:
         builder.style(item, MAP_TYPES["plan"], _PLAN_RGB)
-    annotation = _annotation(
+    annotation = add_annotation(
         builder,
         name="map plan",
         kind=MAP_TYPES["plan"],
@@ -132,7 +139,7 @@ def _cloud(
 ) -> ifcopenshell.entity_instance:
     cloud = builder.point_list(points)
     builder.style(cloud, name, rgb)
-    annotation = _annotation(
+    annotation = add_annotation(
         builder,
         name=name,
         kind=MAP_TYPES["walls"],
@@ -154,7 +161,7 @@ def add_excursions(builder: IfcBuilder) -> list[ifcopenshell.entity_instance]:
             SelfIntersect=False,
         )
         builder.style(curve, EXCURSION_TYPE, EXCURSION_RGB)
-        annotation = _annotation(
+        annotation = add_annotation(
             builder,
             name=path.label[:255],
             kind=EXCURSION_TYPE,
@@ -179,7 +186,7 @@ def add_excursions(builder: IfcBuilder) -> list[ifcopenshell.entity_instance]:
     return out
 
 
-def _annotation(
+def add_annotation(
     builder: IfcBuilder,
     *,
     name: str,
@@ -188,6 +195,7 @@ def _annotation(
     representation: tuple[str, list[ifcopenshell.entity_instance]],
     key: str | None = None,
 ) -> ifcopenshell.entity_instance:
+    """Return an ``IfcAnnotation`` of ``representation`` (type, items) at the site's origin."""
     f = builder.f
     shape = f.create_entity(
         "IfcShapeRepresentation",

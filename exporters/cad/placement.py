@@ -26,7 +26,7 @@ from typing import Final, TypeVar, cast
 
 import numpy as np
 
-from exporters.cad.building import georeferenced_options
+from exporters.cad.building import FloorPlan, georeferenced_options, read_underlay
 from exporters.cad.site import (
     BUILDING_SUFFIXES,
     check_options,
@@ -41,6 +41,8 @@ from exporters.colours import (
     ATEBin,
     ate_bins,
     ate_edges_m,
+    error_bins,
+    error_unit,
     layer_name,
     palette_color,
     unique_layer_names,
@@ -78,7 +80,6 @@ __all__ = [
 ]
 
 _NS_PER_S: Final = 1_000_000_000
-_WORST_SEPARATION_S: Final = 2.0  # greatest errors closer in time than this share a marker
 _MARKER_MERGE_SHARE: Final = 0.05  # losses closer than 5 % of the drawing share a marker
 
 
@@ -169,6 +170,7 @@ class Marker:
         position: (x, y, z) model coordinates in the output units.
         target: for ``"worst"``, the reference position the error is measured to.
         label: the text to show.
+        rank: for ``"worst"``, its number ``#1`` ... ``#N`` (0 for a loss).
     """
 
     path: str
@@ -176,6 +178,7 @@ class Marker:
     position: tuple[float, float, float]
     target: tuple[float, float, float] | None
     label: str
+    rank: int = 0
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -213,6 +216,8 @@ class Placement:
         title: a human title.
         paths: the reference first, then the estimates in evaluation order.
         crs: the projected CRS the site places the paths in (``"EPSG:25832"``), if known.
+        building_bounds: (2, 3) [min, max] of the building model in model coordinates,
+            output units, when one is given (legends are placed outside it).
     """
 
     result: EvaluationResult
@@ -224,6 +229,7 @@ class Placement:
     title: str
     paths: tuple[PlacedPath, ...]
     crs: str | None = None
+    building_bounds: FloatArray | None = None
     _memo: dict[Hashable, object] = field(default_factory=dict, init=False, repr=False)
 
     def shared(self, key: Hashable, make: Callable[[], _T]) -> _T:
@@ -279,8 +285,8 @@ class Placement:
         }
 
     def ate_bins(self) -> tuple[ATEBin, ...]:
-        """Return the ATE colour bins every output uses (:func:`ate_edges_m`)."""
-        return ate_bins(ate_edges_m(self.result))
+        """Return the ATE colour bins every output uses (:func:`error_bins`)."""
+        return error_bins(self.result)
 
     def ate_runs(self, path: PlacedPath) -> list[ATERun]:
         """Return an estimate's path cut where its ATE changes bin, each run simplified.
@@ -336,25 +342,22 @@ class Placement:
         ]
 
     def markers(self) -> list[Marker]:
-        """Return one marker per tracking loss and the greatest-error markers.
+        """Return one marker per tracking loss and one per greatest error, numbered by rank.
 
         A tracking loss of the reference is marked once (at its last pose before the
         loss), not once per trajectory; an estimate's own loss is marked where the
         reference kept tracking. Losses whose markers lie within 5 % of the drawing's size
-        of each other share one, labelled by the longest; greatest errors closer than 2 s
-        to a greater one are left out (one excursion). Their labels would only pile up.
+        of each other share one, labelled by the longest (their labels would only pile
+        up). Every greatest error is marked, ``#1`` ... ``#N`` by rank as the report and
+        the viewer number them (the core lists distinct peaks, 2 s apart).
         """
         out = self._gap_markers()
+        unit = error_unit(self.result)
         for path in self.paths:
             est = path.estimate
             if est is None:
                 continue
-            labelled: list[float] = []
-            for rank, worst in enumerate(est.worst, start=1):
-                # the greatest errors come in bursts of neighbouring poses: one marker each
-                if any(abs(worst.t_s - t) < _WORST_SEPARATION_S for t in labelled):
-                    continue
-                labelled.append(worst.t_s)
+            for rank, worst in enumerate(est.worst, start=1):  # a handful (--worst)
                 here = self.to_model(est.aligned.positions_xyz[worst.index : worst.index + 1])
                 there = self.to_model(np.array([worst.position_xyz]))
                 out.append(
@@ -364,8 +367,10 @@ class Placement:
                         position=_xyz(here[0]),
                         target=_xyz(there[0]),
                         label=(
-                            f"{path.name} #{rank}: ATE {worst.error:.3f} m at t={worst.t_s:.1f} s"
+                            f"{path.name} #{rank}: ATE {unit.text(worst.error)} "
+                            f"at t={worst.t_s:.1f} s"
                         ),
+                        rank=rank,
                     )
                 )
         return out
@@ -520,7 +525,27 @@ def place_evaluation(result: EvaluationResult, options: ExportOptions) -> Placem
         title=options.title,
         paths=tuple(paths),
         crs=options.crs,
+        building_bounds=_building_bounds(options),
     )
+
+
+def _building_bounds(options: ExportOptions) -> FloatArray | None:
+    """Return the building's (2, 3) bounding box in model coordinates, output units, or None.
+
+    Raises:
+        ExportOptionsError: a building model that cannot be read.
+    """
+    if options.building is None:
+        return None
+    underlay = read_underlay(options.building, units=options.units, up=options.building_up)
+    if isinstance(underlay, FloorPlan):
+        ends = underlay.segments_m.reshape(-1, 2)
+        points = np.column_stack([ends, np.zeros(len(ends))])
+    else:
+        points = underlay.vertices_m
+    bounds = np.stack([points.min(axis=0), points.max(axis=0)])
+    out: FloatArray = bounds * Units(options.units).per_metre
+    return out
 
 
 def _simplify_pieces(

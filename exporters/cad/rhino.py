@@ -40,7 +40,7 @@ from exporters.cad.excursions import EXCURSION_LAYER, EXCURSION_RGB, placed_excu
 from exporters.cad.georef import set_earth_anchor
 from exporters.cad.jsondoc import finite_json
 from exporters.cad.placement import Marker, PlacedPath, Placement, layer_name, place_evaluation
-from exporters.colours import map_bins
+from exporters.colours import hex_colour, map_bins, scale_words
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
 from loceval.core.arrays import FloatArray
@@ -182,7 +182,10 @@ def export_3dm_json(
         "rhino_unit_system": _UNIT_SYSTEMS[placement.units].name,
         "base_point": placement.base_point.tolist(),
         "metadata": placement.metadata(),
-        "ate_bins": [{"label": b.label, "color": list(b.color_rgb)} for b in bins],
+        "ate_bins": [
+            {"label": b.label, "color": list(b.color_rgb), "beyond": b.beyond} for b in bins
+        ],
+        "ate_legend": scale_words(placement.result),
         "markers": [
             {
                 "kind": m.kind,
@@ -220,7 +223,10 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
     root = _add_layer(model, ROOT_LAYER, (255, 255, 255), None)
     evaluation = _add_layer(model, evaluation_layer(placement), (255, 255, 255), root)
     bins = placement.ate_bins()
-    model.Strings["loceval.ate_bins"] = "; ".join(f"{b.label}: {_hex(b.color_rgb)}" for b in bins)
+    model.Strings["loceval.ate_bins"] = "; ".join(
+        f"{b.label}: {hex_colour(b.color_rgb)}" for b in bins
+    )
+    model.Strings["loceval.ate_legend"] = scale_words(placement.result)
     markers = placement.markers()
     for path in placement.paths:
         layer = _add_layer(model, path.layer, path.color_rgb, evaluation)
@@ -398,7 +404,3 @@ def _user_strings(path: PlacedPath) -> dict[str, str]:
         stats = path.estimate.ate_translation.stats.to_dict()
         strings.update({f"loceval.ate_{k}_m": repr(v) for k, v in stats.items() if k != "n"})
     return strings
-
-
-def _hex(rgb: tuple[int, int, int]) -> str:
-    return "#{:02x}{:02x}{:02x}".format(*rgb)

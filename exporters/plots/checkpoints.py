@@ -80,8 +80,8 @@ def plot_checkpoint_plan(
     fig = new_figure(5.0)
     ax = fig.add_subplot()
     style_axes(ax)
-    draw_floor_plan(ax, floor_plan)
     xy = points.positions_xyz[:, :2]
+    building = draw_floor_plan(ax, floor_plan, xy)
     ax.scatter(xy[:, 0], xy[:, 1], s=14, marker="+", color="#212121", label="control point")
     visited = {v.point_id for v in entry.result.visits}
     if len(points) <= 60:
@@ -119,7 +119,7 @@ def plot_checkpoint_plan(
             f"surveyed point along the horizontal error of each visit, drawn {scale:g} times "
             "longer than the error; the bar shows the plan length of the error it names."
         )
-        + floor_plan_note(floor_plan),
+        + floor_plan_note(building),
     )
 
 

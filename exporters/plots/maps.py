@@ -9,7 +9,8 @@ from matplotlib.axes import Axes
 from matplotlib.collections import LineCollection
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
-from exporters.cad.placement import ate_bins, ate_edges_m
+from exporters.cad.building import FRAME_BUILDING_UP_TO
+from exporters.colours import error_bins, scale_words
 from exporters.plots.figure import (
     DEFAULT_MAX_POINTS,
     MAX_SPAN_MARKERS,
@@ -46,12 +47,24 @@ __all__ = [
 ]
 
 
-def _xy_figure_height(result: EvaluationResult, *, plot_width_in: float) -> float:
-    """Height for an equal-aspect x-y plot of the paths, so little paper is wasted."""
+def _paths_xy(result: EvaluationResult) -> FloatArray:
+    """Return (N, 2) every path's x-y (the reference and the aligned estimates)."""
     xy = [result.reference.positions_xyz[:, :2]]
     xy.extend(e.aligned.positions_xyz[:, :2] for e in result.estimates)
-    lo = np.min([p.min(axis=0) for p in xy if p.size], axis=0)
-    hi = np.max([p.max(axis=0) for p in xy if p.size], axis=0)
+    return np.concatenate(xy)
+
+
+def _xy_figure_height(
+    result: EvaluationResult, *, plot_width_in: float, floor_plan: FloatArray | None = None
+) -> float:
+    """Height for an equal-aspect x-y plot of the paths (and a framed building)."""
+    xy = _paths_xy(result)
+    if floor_plan is not None and len(floor_plan) and len(xy):
+        ends = floor_plan.reshape(-1, 2)
+        paths_size = max(float(np.linalg.norm(np.ptp(xy, axis=0))), 1.0)
+        if float(np.linalg.norm(np.ptp(ends, axis=0))) <= FRAME_BUILDING_UP_TO * paths_size:
+            xy = np.concatenate([xy, ends])
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
     dx, dy = float(hi[0] - lo[0]), float(hi[1] - lo[1])
     ratio = 1.0 if dx <= 0 else dy / dx
     return float(np.clip(plot_width_in * ratio, 2.6, 7.5)) + 1.2
@@ -160,9 +173,9 @@ def plot_overlay_xy(
     ``floor_plan`` (see :func:`exporters.plots.underlay.floor_plan_segments`) is drawn
     under the paths in light grey.
     """
-    fig = new_figure(_xy_figure_height(result, plot_width_in=WIDTH_IN - 0.8))
+    fig = new_figure(_xy_figure_height(result, plot_width_in=WIDTH_IN - 0.8, floor_plan=floor_plan))
     ax = fig.add_subplot()
-    draw_floor_plan(ax, floor_plan)
+    building = draw_floor_plan(ax, floor_plan, _paths_xy(result))
     _draw_reference_xy(ax, result, max_points, on_top=True)
     for k in range(len(result.estimates)):
         _draw_estimate(ax, result, k, max_points)
@@ -182,7 +195,7 @@ def plot_overlay_xy(
             f"The ground truth in cyan and the aligned estimates ({names}) seen from "
             "above; the circle marks the start."
         )
-        + floor_plan_note(floor_plan),
+        + floor_plan_note(building),
     )
 
 
@@ -207,8 +220,9 @@ def plot_ate_path(
     keep_segment = ~breaks_between(path_jumps(result, e.aligned.stamps_ns), kept)
     # Each drawn segment takes the larger error of its two ends, so a peak shows.
     seg_err = np.maximum(ate[kept][:-1], ate[kept][1:])
-    # The one ATE colour scale of every output (DXF, .3dm, GLB): the evaluation's bins.
-    bins = ate_bins(ate_edges_m(result))
+    # The one ATE colour scale of every output (viewer, DXF, .3dm, GLB, IFC): anchored to
+    # the tolerance when there is one.
+    bins = error_bins(result)
     inner = [b.high_m for b in bins[:-1]]
     top = max([1.5 * inner[-1]] if inner else [1.0])
     top = max(top, float(ate.max()) if ate.size else 0.0)
@@ -216,9 +230,9 @@ def plot_ate_path(
     cmap = ListedColormap([tuple(c / 255.0 for c in b.color_rgb) for b in bins])
     norm = BoundaryNorm(bounds, cmap.N)
     tolerance = e.verdict.tolerance.distance_m if e.verdict is not None else None
-    fig = new_figure(_xy_figure_height(result, plot_width_in=WIDTH_IN - 1.8))
+    fig = new_figure(_xy_figure_height(result, plot_width_in=WIDTH_IN - 1.8, floor_plan=floor_plan))
     ax = fig.add_subplot()
-    draw_floor_plan(ax, floor_plan)
+    building = draw_floor_plan(ax, floor_plan, _paths_xy(result))
     _draw_reference_xy(ax, result, max_points)
     collection = LineCollection(
         list(segments[keep_segment]),
@@ -235,7 +249,8 @@ def plot_ate_path(
     ax.autoscale_view()
     colorbar = fig.colorbar(collection, ax=ax, shrink=0.85, ticks=bounds[:-1], use_gridspec=False)
     colorbar.ax.set_yticklabels([f"{b:g}" for b in bounds[:-1]])
-    colorbar.set_label("ATE [m] (bins as in the CAD files)")
+    # the caption says what the colours mean (the tolerance in words)
+    colorbar.set_label("ATE [m]" if tolerance is not None else "ATE [m] (bins as in the CAD files)")
     if tolerance is not None:
         colorbar.ax.axhline(tolerance, color="black", linewidth=1.2)
         colorbar.ax.text(
@@ -267,14 +282,14 @@ def plot_ate_path(
     style_axes(ax)
     caption = (
         f"{name}'s aligned path coloured by its absolute trajectory error (ATE) at each "
-        "pose, over the ground truth in cyan."
+        f"pose, over the ground truth in cyan. {scale_words(result)}"
     )
     if tolerance is not None and e.verdict is not None and e.verdict.failing_spans:
         caption += (
             " Numbered circles mark where the worst stretches beyond the tolerance peak "
             "(see the verdict)."
         )
-    caption += floor_plan_note(floor_plan)
+    caption += floor_plan_note(building)
     return encode_plot(
         fig,
         formats,

@@ -19,6 +19,7 @@ from exporters.plots import (
 from exporters.report.clocks import time_offset_text
 from loceval.core.arrays import FloatArray
 from loceval.core.gaps import GAP_RATE_FACTOR
+from loceval.core.lengths import format_coordinate
 from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.registration.alignment import AlignWindow
 from loceval.trajectory import Trajectory
@@ -64,8 +65,11 @@ def estimate_name(e: EstimateResult, k: int) -> str:
 
 
 def format_xyz(position: Iterable[float]) -> str:
-    """Return a position as the report writes it: ``1.23, 4.56, 0.10``."""
-    return ", ".join(f"{v:.2f}" for v in position)
+    """Return a position in metres as the report writes it, to the mm: ``1.234, 4.560, 0.100``.
+
+    The one rule for coordinates (:func:`loceval.core.lengths.format_coordinate`).
+    """
+    return ", ".join(format_coordinate(v, per_metre=1.0) for v in position)
 
 
 def _size(value: object) -> str:

@@ -7,15 +7,15 @@ errors, numbered figures); the templates only loop over it.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
+from exporters.cad.spaces import placed_on_building
+from exporters.colours import scale_words
 from exporters.options import ExportOptions, FrontDoor
 from exporters.plots import (
     DEFAULT_MAX_POINTS,
-    MAX_SPAN_MARKERS,
     REFERENCE_COLOUR,
     ImageFormat,
     Plot,
@@ -25,23 +25,36 @@ from exporters.plots import (
 from exporters.plots.clock import plot_clock_correlation
 from exporters.plots.figure import FigureView, number_figures
 from exporters.report.clocks import ClockSection, build_clock_section
-from exporters.report.confidence import ConfidenceView, build_confidence_view, undecided_headline
+from exporters.report.confidence import ConfidenceView, build_confidence_view
 from exporters.report.figures import ReportPlots, render_report_plots
 from exporters.report.mapsection import MapView, build_map_view
 from exporters.report.provenance import (
     alignment_rows,
     estimate_name,
-    format_xyz,
     input_rows,
     option_rows,
     trajectory_rows,
 )
 from exporters.report.ranging import RangingView, build_ranging_view
+from exporters.report.verdicts import (
+    BuildingView,
+    VerdictView,
+    building_view,
+    verdict_view,
+)
+from loceval.core.lengths import MM_BELOW_M, LengthUnit, length_unit
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.options import option
 
-__all__ = ["BEST_MARK", "ReportView", "build_report_view"]
+__all__ = [
+    "BEST_MARK",
+    "MM_BELOW_M",
+    "LengthUnit",
+    "ReportView",
+    "build_report_view",
+    "length_unit",
+]
 
 BEST_MARK: Final = "★"
 """Marks the lowest value of a statistics row (with bold, so it survives grey print)."""
@@ -89,36 +102,6 @@ class StatsTable:
     marks_best: bool
     length: LengthUnit | None = None
     """The unit of the translation rows (their intervals are printed in it too)."""
-
-
-@dataclass(frozen=True, slots=True)
-class SpanView:
-    """A stretch of the path beyond the tolerance, as the verdict lists it."""
-
-    number: int
-    start_s: str
-    end_s: str
-    duration_s: str
-    poses: int
-    max_error_m: str
-    where: str
-
-
-@dataclass(frozen=True, slots=True)
-class VerdictView:
-    """One estimate's verdict in words."""
-
-    name: str
-    colour: str
-    status: str  # "pass", "fail", "undecided" or "none"
-    badge: str
-    headline: str
-    details: tuple[str, ...]
-    spans: tuple[SpanView, ...]
-    spans_total: int
-    map_figure: int | None
-    shares: str
-    glance: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -204,39 +187,14 @@ class ReportView:
     contents: tuple[tuple[str, str], ...] = ()
     """The sections in report order, as (anchor, title): the contents list of both renderings
     (the interactive view's entry is the HTML's only: the PDF keeps its figures)."""
+    legend: str = ""
+    """What the error colours mean: the tolerance in words (every figure and the viewer)."""
+    building: BuildingView | None = None
+    """The building model the paths were placed on, its spaces and warnings."""
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
     return f"{value:.{decimals}f}"
-
-
-MM_BELOW_M: Final = 0.1
-"""A table of lengths reads in millimetres when all its values are below this many metres."""
-
-
-@dataclass(frozen=True, slots=True)
-class LengthUnit:
-    """How one table prints lengths: ``m`` with 3 decimals, or ``mm`` with 1.
-
-    Chosen per table from its magnitudes (:func:`length_unit`): a sub-centimetre system's
-    RMSE reads ``6.2 mm``, not ``0.006 m``, and a car's ``12.345 m``, not ``12345.0 mm``.
-    """
-
-    symbol: str
-    per_metre: float
-    decimals: int
-
-    def format(self, value_m: float) -> str:
-        """Return ``value_m`` in this unit, without the symbol."""
-        return _fmt(value_m * self.per_metre, self.decimals)
-
-
-def length_unit(values_m: Iterable[float]) -> LengthUnit:
-    """Return millimetres when every finite value is below 0.1 m, else metres."""
-    finite = [abs(v) for v in values_m if math.isfinite(v)]
-    if finite and max(finite) < MM_BELOW_M:
-        return LengthUnit("mm", 1000.0, 1)
-    return LengthUnit("m", 1.0, 3)
 
 
 def _stats_rows(
@@ -298,103 +256,6 @@ def _stats_table(
     )
 
 
-def _verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> VerdictView:
-    e = result.estimates[k]
-    name = estimate_name(e, k)
-    colour = estimate_colour(k)
-    ate = e.ate_translation
-    shares = " · ".join(f"{share * 100:.1f} % within {t:g} m" for t, share in e.within.items())
-    worst = e.worst[0] if e.worst else None
-    worst_text = (
-        ""
-        if worst is None
-        else (
-            f"The largest error is {worst.error:.2f} m, "
-            f"{worst.t_s:.1f} s into the recording "
-            f"at x, y, z = {format_xyz(worst.position_xyz)} m."
-        )
-    )
-    verdict = e.verdict
-    if verdict is None:
-        return VerdictView(
-            name=name,
-            colour=colour,
-            status="none",
-            badge="NO VERDICT",
-            headline=(
-                f"{name}: typical error (RMSE) {ate.stats.rmse:.3f} m over "
-                f"{len(ate):,} poses; no tolerance to judge it against."
-            ),
-            details=(worst_text,) if worst_text else (),
-            spans=(),
-            spans_total=0,
-            map_figure=None,
-            shares=shares,
-            glance=f"typical error (RMSE) {ate.stats.rmse:.3f} m; {shares}",
-        )
-    tol = verdict.tolerance
-    share_pct = verdict.share_within * 100
-    if verdict.passed:
-        headline = (
-            f"{name} meets the tolerance: {share_pct:.1f} % of its poses are within "
-            f"{tol.distance_m:g} m of the ground truth ({tol.share * 100:g} % required)."
-        )
-    elif verdict.result == "undecided":
-        headline = undecided_headline(name, verdict)
-    else:
-        headline = (
-            f"{name} does not meet the tolerance: only {share_pct:.1f} % of its poses are "
-            f"within {tol.distance_m:g} m of the ground truth ({tol.share * 100:g} % required)."
-        )
-    details: list[str] = []
-    spans = verdict.failing_spans
-    if spans:
-        over = sum(s.poses for s in spans)
-        where = (
-            f" The worst are listed below and numbered on its map (Figure {map_figure})."
-            if map_figure is not None
-            else " The worst are listed below."
-        )
-        details.append(
-            f"Its error exceeds {tol.distance_m:g} m in {len(spans):,} "
-            f"stretch{'es' if len(spans) != 1 else ''} of the path, {over:,} of "
-            f"{len(ate):,} poses ({100.0 * over / max(len(ate), 1):.1f} %).{where}"
-        )
-    else:
-        details.append(f"Its error never exceeds {tol.distance_m:g} m.")
-    if worst_text:
-        details.append(worst_text)
-    shown = spans[:MAX_SPAN_MARKERS]
-    span_views = tuple(
-        SpanView(
-            number=n,
-            start_s=f"{s.start_s:.2f}",
-            end_s=f"{s.end_s:.2f}",
-            duration_s=f"{s.end_s - s.start_s:.2f}",
-            poses=s.poses,
-            max_error_m=_fmt(s.max_error_m),
-            where=format_xyz(s.max_error_position_xyz),
-        )
-        for n, s in enumerate(shown, start=1)
-    )
-    return VerdictView(
-        name=name,
-        colour=colour,
-        status=verdict.result,
-        badge=verdict.result.upper(),
-        headline=headline,
-        details=tuple(details),
-        spans=span_views,
-        spans_total=len(spans),
-        map_figure=map_figure,
-        shares=shares,
-        glance=(
-            f"{share_pct:.1f} % of poses within {tol.distance_m:g} m "
-            f"({tol.share * 100:g} % required)"
-        ),
-    )
-
-
 def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
     tables = []
     for k, e in enumerate(result.estimates):
@@ -427,6 +288,8 @@ def _warnings(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
         out.extend((estimate_name(e, k), w) for w in e.warnings)
     # Why two estimates were not compared is about the pair, not about the reference.
     out.extend(("comparison of estimates", w) for w in result.comparison_notes)
+    if result.building is not None:  # how the model is placed: an up axis, the site
+        out.extend(("building model", w) for w in result.building.warnings)
     return tuple((about, unbroken_arrows(w)) for about, w in out)
 
 
@@ -504,6 +367,7 @@ def build_report_view(
     Returns:
         The view model the templates render.
     """
+    result = placed_on_building(result, options)  # the stretches' rooms, the building's warnings
     if plots is None:
         plots = render_report_plots(result, options, formats=(image_format,), max_points=max_points)
     if isinstance(plots, ReportPlots):
@@ -554,7 +418,7 @@ def build_report_view(
         summary=_summary(result),
         tolerance=None if cfg.tolerance is None else str(cfg.tolerance),
         verdicts=tuple(
-            _verdict_view(result, k, figure_of.get(f"ate_path_{k}")) for k in range(len(estimates))
+            verdict_view(result, k, figure_of.get(f"ate_path_{k}")) for k in range(len(estimates))
         ),
         shares=shares,
         estimate_names=tuple(estimate_name(e, k) for k, e in enumerate(estimates)),
@@ -589,4 +453,6 @@ def build_report_view(
         contents=_contents(
             ranging=ranging is not None, map_section=map_view is not None, warnings=len(warnings)
         ),
+        legend=scale_words(result),
+        building=building_view(result),
     )

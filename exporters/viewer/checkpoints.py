@@ -18,7 +18,7 @@ from typing import Final
 import numpy as np
 
 from exporters.cad.site import check_options
-from exporters.colours import ate_bins, palette_color
+from exporters.colours import ate_bins, hex_colour, palette_color
 from exporters.options import ExportOptions, Units
 from exporters.viewer.page import DEFAULT_TEMPLATES_DIR, scene_fragment, viewer_page
 from exporters.viewer.reduce import display_indices
@@ -26,7 +26,6 @@ from exporters.viewer.scene import (
     bins_json,
     building_scene,
     flat_rounded,
-    hex_colour,
     vertex_decimals,
 )
 from loceval import __version__
@@ -34,6 +33,7 @@ from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.core.arrays import FloatArray
 from loceval.core.display import display_text
 from loceval.core.gaps import path_breaks
+from loceval.core.lengths import coordinate_decimals, length_unit
 
 __all__ = ["checkpoint_scene", "export_checkpoint_viewer_html"]
 
@@ -112,6 +112,10 @@ def checkpoint_scene(evaluation: CheckpointEvaluation, options: ExportOptions) -
         "base": (base_m * scale).tolist(),
         "crs": options.crs,
         "t0_ns": str(t0_ns),
+        "coordinate_decimals": coordinate_decimals(scale),
+        "lengths": length_unit(
+            float(v.error_m) for e in evaluation.estimates for v in e.result.visits
+        ).to_dict(),
         "bins": bins_json(bins),
         "paths": paths,
         "worst": [],

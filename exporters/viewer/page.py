@@ -39,8 +39,9 @@ DEFAULT_TEMPLATES_DIR: Final[Path] = Path(__file__).resolve().parents[2] / "temp
 _SCRIPT: Final = Path("viewer") / "viewer.js"
 _STYLE: Final = Path("viewer") / "viewer.css"
 _PAGE_STYLE: Final = (
-    "html,body{margin:0;height:100%;background:#f3f5f8}"
-    "body{display:flex;flex-direction:column;font:14px/1.4 system-ui,sans-serif;color:#1d2430}"
+    "html,body{margin:0;background:#f3f5f8}"
+    "body{min-height:100vh;display:flex;flex-direction:column;font:14px/1.4 system-ui,sans-serif;"
+    "color:#1d2430}"
     "header{padding:8px 12px}header h1{font-size:16px;margin:0}header p{margin:2px 0 0;"
     "color:#4a5565;font-size:12px}.loceval-viewer{flex:1 1 auto;margin:0 12px 12px}"
 )
@@ -162,7 +163,7 @@ def export_viewer_html(result: EvaluationResult, options: ExportOptions) -> byte
     reference = result.reference
     subtitle = (
         f"{len(result.estimates)} estimate(s) against {reference.name or 'the reference'} · "
-        f"frame {reference.frame_id or 'reference frame'} · units {options.units} · "
+        f"frame {reference.frame_id or 'reference frame'} · coordinates in {options.units} · "
         f"drag to pan or turn, wheel to zoom, click a point for its figures"
     )
     return viewer_page(viewer_fragment(result, options), title=options.title, subtitle=subtitle)

@@ -26,10 +26,23 @@ from typing import Final
 
 import numpy as np
 
-from exporters.cad.building import BuildingModel, georeferenced_options, read_underlay
+from exporters.cad.building import (
+    FRAME_BUILDING_UP_TO,
+    BuildingModel,
+    georeferenced_options,
+    read_underlay,
+)
 from exporters.cad.excursions import EXCURSION_RGB, excursion_paths
 from exporters.cad.site import check_options
-from exporters.colours import ATEBin, ate_bins, ate_edges_m, palette_color
+from exporters.cad.spaces import placed_on_building
+from exporters.colours import (
+    ATEBin,
+    error_bins,
+    error_unit,
+    hex_colour,
+    palette_color,
+    scale_words,
+)
 from exporters.options import ExportOptions, Units
 from exporters.tables import ERROR_DECIMALS
 from exporters.viewer.reduce import display_indices
@@ -38,7 +51,8 @@ from loceval.core.arrays import BoolArray, FloatArray, IntArray
 from loceval.core.display import display_text
 from loceval.core.gaps import path_breaks
 from loceval.core.geometry import SimilarityTransform
-from loceval.evaluation import EvaluationResult
+from loceval.core.lengths import LengthUnit, coordinate_decimals
+from loceval.evaluation import EstimateResult, EvaluationResult
 from loceval.metrics.pose_errors import WorstPose
 from loceval.trajectory import Trajectory
 
@@ -46,24 +60,19 @@ __all__ = [
     "bins_json",
     "building_scene",
     "flat_rounded",
-    "hex_colour",
     "vertex_decimals",
     "viewer_scene",
 ]
 
 _NS_PER_S: Final = 1_000_000_000
-_WORST_SEPARATION_S: Final = 2.0  # as the CAD markers: one label per excursion
-_WORST_LABELS: Final = 3  # labels per estimate: more only pile up on a plan
+MAX_STRETCHES: Final = 500
+"""Stretches beyond the tolerance the viewer lists and keeps in its display set, the worst
+first (a noisy run hovering at the tolerance has tens of thousands; result.json has all)."""
 _TIME_DECIMALS: Final = 6  # microseconds: finer than any recording's stamps need here
 _RESOLUTION_M: Final = 1e-4  # vertices are rounded to 0.1 mm
 _MAX_BUILDING_FACES: Final = 400_000
 _MAX_ELLIPSES: Final = 400  # uncertainty ellipses per estimate: more only blur into a band
 _SIGMAS: Final = 2.0  # the ellipses are 2-sigma (about 86 % of a 2D normal's mass)
-
-
-def hex_colour(rgb: tuple[int, int, int]) -> str:
-    """Return an RGB colour as ``#rrggbb``."""
-    return "#{:02x}{:02x}{:02x}".format(*rgb)
 
 
 def bins_json(bins: Sequence[ATEBin]) -> list[dict[str, object]]:
@@ -73,6 +82,7 @@ def bins_json(bins: Sequence[ATEBin]) -> list[dict[str, object]]:
             "high": None if math.isinf(b.high_m) else b.high_m,
             "color": hex_colour(b.color_rgb),
             "label": b.label,
+            "beyond": b.beyond,
         }
         for b in bins
     ]
@@ -114,6 +124,7 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
         ExportOptionsError: bad units or site, or a building file that cannot be read.
     """
     check_options(options)
+    result = placed_on_building(result, options)  # the stretches' spaces, the warnings
     options = georeferenced_options(options)
     units = Units(options.units)
     site = options.site
@@ -130,9 +141,12 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
 
     min_gap_ns = round(result.config.max_gap_s * _NS_PER_S)
     ref_losses = reference.tracking_losses(min_gap_ns)
-    bins = ate_bins(ate_edges_m(result))
+    bins = error_bins(result)
+    unit = error_unit(result)  # one unit for every error the viewer shows (and the CAD labels)
     paths: list[dict[str, object]] = []
     worst: list[dict[str, object]] = []
+    beyond: list[dict[str, object]] = []
+    verdicts: list[dict[str, object]] = []
 
     ref_breaks = path_breaks(reference.stamps_ns, min_gap_ns=min_gap_ns, losses=ref_losses)
     kept = display_indices(reference.positions_xyz, ref_breaks)
@@ -153,8 +167,9 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
         stamps = est.association.reference.stamps_ns
         errors = est.ate_translation.values
         breaks = path_breaks(stamps, min_gap_ns=min_gap_ns, losses=ref_losses)
-        ranks = np.array([w.index for w in est.worst], dtype=np.intp)
-        kept = display_indices(est.aligned.positions_xyz, breaks, errors_m=errors, must_keep=ranks)
+        kept = display_indices(
+            est.aligned.positions_xyz, breaks, errors_m=errors, must_keep=_must_keep(est)
+        )
         stats = est.ate_translation.stats
         paths.append(
             {
@@ -172,7 +187,13 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
                 "uncertainty": _uncertainty(est.aligned, kept, site, scale),
             }
         )
-        worst += _worst_labels(est.worst, kept, path=len(paths) - 1, name=name)
+        labels_name = name if len(result.estimates) > 1 else ""
+        worst += _worst_labels(
+            est.worst, kept, path=len(paths) - 1, name=labels_name, unit=unit, result=result
+        )
+        beyond += _beyond(est, kept, path=len(paths) - 1, name=name, unit=unit)
+        verdicts.append(_verdict(est, name, unit))
+    tolerance = result.config.tolerance
     return {
         "generator": f"loceval {__version__}",
         "title": options.title,
@@ -182,7 +203,20 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
         "base": (base_m * scale).tolist(),
         "crs": options.crs,
         "t0_ns": str(t0_ns),
+        "coordinate_decimals": coordinate_decimals(scale),
+        "lengths": unit.to_dict(),
         "bins": bins_json(bins),
+        "legend": scale_words(result),
+        "tolerance": None
+        if tolerance is None
+        else {"distance_m": tolerance.distance_m, "share": tolerance.share},
+        "verdicts": verdicts,
+        "beyond": beyond,
+        "beyond_total": sum(
+            len(e.verdict.failing_spans) for e in result.estimates if e.verdict is not None
+        ),
+        "frame_building_up_to": FRAME_BUILDING_UP_TO,
+        "building_warnings": [] if result.building is None else list(result.building.warnings),
         "excursion_color": hex_colour(EXCURSION_RGB),
         "paths": paths,
         "worst": worst,
@@ -197,32 +231,118 @@ def viewer_scene(result: EvaluationResult, options: ExportOptions) -> dict[str, 
             for x in excursion_paths(result)
         ],
         "building": building_scene(options, base_m, scale, decimals),
+        "spaces": _space_labels(result, local, decimals),
     }
 
 
 def _worst_labels(
-    ranked: tuple[WorstPose, ...], kept: IntArray, *, path: int, name: str
+    ranked: tuple[WorstPose, ...],
+    kept: IntArray,
+    *,
+    path: int,
+    name: str,
+    unit: LengthUnit,
+    result: EvaluationResult,
 ) -> list[dict[str, object]]:
-    """One label per excursion of the greatest errors, at its display vertex."""
+    """Every greatest error's label at its display vertex, numbered #1..#N by rank.
+
+    The core lists distinct peaks (:func:`loceval.metrics.pose_errors.greatest_errors`),
+    so the numbers have no gap and are the report's and the CAD files'. The viewer shows
+    as many as fit without overlapping, the greatest first.
+    """
+    tolerance = result.config.tolerance
     out: list[dict[str, object]] = []
-    labelled: list[float] = []
     for rank, worst in enumerate(ranked, start=1):  # a handful (--worst), not per pose
-        t_s = worst.t_s
-        if any(abs(t_s - t) < _WORST_SEPARATION_S for t in labelled):
-            continue
-        if len(labelled) == _WORST_LABELS:
-            break
-        labelled.append(t_s)
         index = int(np.searchsorted(kept, worst.index))
-        error = worst.error
+        within = tolerance is not None and worst.error <= tolerance.distance_m
+        who = f"{name} " if name else ""
         out.append(
             {
                 "path": path,
+                "rank": rank,
                 "index": min(index, len(kept) - 1),
-                "label": f"{name} #{rank}: {error:.3f} m at t={t_s:.1f} s",
+                "label": f"{who}#{rank} {unit.text(worst.error)}",
+                "title": f"{who}#{rank}: {unit.text(worst.error)} at t = {worst.t_s:.1f} s",
+                "within": within,
             }
         )
     return out
+
+
+def _must_keep(est: EstimateResult) -> IntArray:
+    """Poses every display set keeps: the greatest errors and both edges of each stretch.
+
+    A stretch beyond the tolerance starts and ends at drawn vertices, and so do its
+    neighbours within it: its colour is drawn where it is and nowhere else.
+    """
+    keep = [w.index for w in est.worst]
+    if est.verdict is not None:
+        for s in est.verdict.failing_spans[:MAX_STRETCHES]:  # one per listed stretch
+            keep += [s.first_index - 1, s.first_index, s.last_index, s.last_index + 1]
+            keep.append(s.max_error_index)
+    return np.array(keep, dtype=np.intp)
+
+
+def _beyond(
+    est: EstimateResult, kept: IntArray, *, path: int, name: str, unit: LengthUnit
+) -> list[dict[str, object]]:
+    """The stretches beyond the tolerance, worst first, with their display vertices."""
+    verdict = est.verdict
+    if verdict is None:
+        return []
+    tolerance_m = verdict.tolerance.distance_m
+    out: list[dict[str, object]] = []
+    for rank, s in enumerate(verdict.failing_spans[:MAX_STRETCHES], start=1):
+        first, last, at = np.searchsorted(kept, [s.first_index, s.last_index, s.max_error_index])
+        out.append(
+            {
+                "estimate": name,
+                "path": path,
+                "rank": rank,
+                "t0_s": round(s.start_s, _TIME_DECIMALS),
+                "t1_s": round(s.end_s, _TIME_DECIMALS),
+                "duration_s": round(s.duration_s, _TIME_DECIMALS),
+                "length_m": round(s.length_m, 3),
+                "max_error_m": round(s.max_error_m, ERROR_DECIMALS),
+                "max_error_s": round(s.max_error_s, _TIME_DECIMALS),
+                "space": s.space,
+                "i0": int(first),
+                "i1": int(last),
+                "at": int(min(at, len(kept) - 1)),
+                "text": (
+                    f"{s.words(tolerance_m)}: from t = {s.start_s:.1f} s, "
+                    f"{s.length_m:.1f} m travelled, worst {unit.text(s.max_error_m)}"
+                ),
+            }
+        )
+    return out
+
+
+def _verdict(est: EstimateResult, name: str, unit: LengthUnit) -> dict[str, object]:
+    """An estimate's verdict as the viewer's header shows it."""
+    verdict = est.verdict
+    if verdict is None:
+        rmse = est.ate_translation.stats.rmse if len(est.ate_translation) else math.nan
+        return {
+            "name": name,
+            "status": "none",
+            "text": f"no tolerance; typical error (RMSE) {unit.text(rmse)}",
+        }
+    interval = ""
+    if verdict.share_ci95 is not None:
+        lo, hi = verdict.share_ci95
+        interval = f", interval {lo * 100:.1f}-{hi * 100:.1f} %"
+    tol = verdict.tolerance
+    return {
+        "name": name,
+        "status": verdict.result,
+        "share_within": verdict.share_within,
+        "ci95": None if verdict.share_ci95 is None else list(verdict.share_ci95),
+        "text": (
+            f"{verdict.share_within * 100:.1f} % within {tol.distance_m:g} m "
+            f"({tol.share * 100:g} % required{interval})"
+        ),
+    }
 
 
 def _uncertainty(
@@ -252,6 +372,26 @@ def _uncertainty(
     angle = np.arctan2(vectors[:, 1, 1], vectors[:, 0, 1])
     ellipse = np.column_stack([major, minor, angle])
     return {"index": pick.tolist(), "ellipse": flat_rounded(ellipse, 6)}
+
+
+def _space_labels(
+    result: EvaluationResult, local: Callable[[FloatArray], FloatArray], decimals: int
+) -> list[dict[str, object]]:
+    """The building's named spaces: a label at each footprint's centre, at its floor."""
+    if result.building is None or not result.building.spaces:
+        return []
+    out: list[dict[str, object]] = []
+    for space in result.building.spaces:  # tens to hundreds
+        x, y = space.outline_xy.mean(axis=0)
+        z = (
+            space.floor_m
+            if math.isfinite(space.floor_m)
+            else float(result.reference.positions_xyz[:, 2].min())
+        )
+        out.append(
+            {"name": space.name, "xyz": flat_rounded(local(np.array([[x, y, z]]))[0], decimals)}
+        )
+    return out
 
 
 def _anchors(

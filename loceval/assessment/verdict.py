@@ -17,7 +17,7 @@ from loceval.trajectory import Trajectory
 if TYPE_CHECKING:
     from loceval.assessment.uncertainty import ToleranceVerdict
 
-__all__ = ["FailingSpan", "Tolerance", "Verdict", "tolerance_verdict_of"]
+__all__ = ["FailingSpan", "Tolerance", "Verdict", "failing_spans", "tolerance_verdict_of"]
 
 _NS_PER_S = 1_000_000_000
 
@@ -64,9 +64,27 @@ class Tolerance:
 
 @dataclass(frozen=True, slots=True)
 class FailingSpan:
-    """A stretch of consecutive matched poses whose error exceeds the tolerance.
+    """A stretch beyond the tolerance: consecutive matched poses whose error exceeds it.
 
-    Times are seconds since the reference's first pose.
+    A stretch ends where the error comes back within the tolerance or where the path
+    breaks (a tracking loss of the reference or of the estimate: what happened in between
+    was not measured). Times are seconds since the reference's first pose; indices count
+    the matched poses (``errors.csv``'s rows of the estimate).
+
+    Attributes:
+        start_s: the first pose beyond the tolerance.
+        end_s: the last one.
+        poses: how many poses it holds.
+        max_error_m: its worst error, metres.
+        max_error_position_xyz: the ground truth's position at the worst error, metres.
+        length_m: the distance the device travelled from its first to its last pose
+            (along the ground truth), metres.
+        first_index: the matched pose it starts at.
+        last_index: the matched pose it ends at (inclusive).
+        max_error_index: the matched pose of its worst error.
+        max_error_s: the time of its worst error.
+        space: the building's space (room) it lies in, when the building model names its
+            spaces: the one holding most of its poses (:mod:`loceval.assessment.spaces`).
     """
 
     start_s: float
@@ -74,16 +92,129 @@ class FailingSpan:
     poses: int
     max_error_m: float
     max_error_position_xyz: tuple[float, float, float]
+    length_m: float = 0.0
+    first_index: int = 0
+    last_index: int = 0
+    max_error_index: int = 0
+    max_error_s: float = 0.0
+    space: str | None = None
+
+    @property
+    def duration_s(self) -> float:
+        """Return the time from its first to its last pose, seconds."""
+        return self.end_s - self.start_s
+
+    def words(self, tolerance_m: float) -> str:
+        """Return the stretch as a site engineer says it: "beyond 0.025 m for 4.1 s in 2.14 Office".
+
+        Durations read to a tenth of a second (:mod:`loceval.core.lengths`).
+        """
+        where = "" if self.space is None else f" in {self.space}"
+        return f"beyond {tolerance_m:g} m for {self.duration_s:.1f} s{where}"
 
     def to_dict(self) -> dict[str, object]:
         """Return the JSON form."""
         return {
             "start_s": self.start_s,
             "end_s": self.end_s,
+            "duration_s": self.duration_s,
             "poses": self.poses,
+            "length_m": self.length_m,
             "max_error_m": self.max_error_m,
+            "max_error_s": self.max_error_s,
             "max_error_position": list(self.max_error_position_xyz),
+            "first_index": self.first_index,
+            "last_index": self.last_index,
+            "max_error_index": self.max_error_index,
+            "space": self.space,
         }
+
+
+def failing_spans(
+    ate: ErrorSeries,
+    reference: Trajectory,
+    tolerance_m: float,
+    t0_ns: int,
+    *,
+    breaks: BoolArray | None = None,
+) -> tuple[FailingSpan, ...]:
+    """Return the stretches whose error exceeds ``tolerance_m``, the worst first.
+
+    Vectorised over poses: the stretches are the runs of ``error > tolerance_m`` cut at
+    ``breaks``; their lengths come from one cumulative sum of the ground truth's steps and
+    their worst errors from one ``maximum.reduceat``.
+
+    Args:
+        ate: ATE translation errors, metres, in time order.
+        reference: the reference at the errors' stamps (the device's true positions).
+        tolerance_m: the tolerance's distance, metres.
+        t0_ns: the stamp times count from (the reference's first pose).
+        breaks: (N - 1,) True after each pose where the path breaks (a tracking loss,
+            :func:`loceval.core.gaps.path_breaks`); no break by default.
+
+    Returns:
+        The stretches, sorted by their worst error (largest first), ties by time.
+    """
+    values = ate.values
+    n = len(values)
+    over: BoolArray = values > tolerance_m
+    if not over.any():
+        return ()
+    flags = over.astype(np.int8)
+    # a run starts where "over" rises or a break lies just before an over pose
+    rises = np.diff(np.concatenate(([0], flags))) == 1
+    cut = np.zeros(n, dtype=bool)
+    if breaks is not None and n > 1:
+        cut[1:] = np.asarray(breaks, dtype=bool) & over[1:] & over[:-1]
+    starts = np.flatnonzero(rises | cut)
+    # each run ends before the next start or where "over" falls
+    run_id = np.cumsum(rises | cut) - 1
+    idx = np.flatnonzero(over)
+    ends = np.zeros(len(starts), dtype=np.intp)
+    np.maximum.at(ends, run_id[idx], idx)  # the last over pose of each run (inclusive)
+    worst = np.maximum.reduceat(values, starts)  # the worst value in [start, next start)
+    # the worst pose of each run: the first pose of the run with that value
+    run_worst = np.full(n, np.inf)
+    run_worst[starts[0] :] = np.repeat(worst, np.diff(np.append(starts, n)))
+    is_worst = over & (values == run_worst)
+    first_worst = np.full(len(starts), n, dtype=np.intp)
+    hit = np.flatnonzero(is_worst)
+    np.minimum.at(first_worst, run_id[hit], hit)
+    steps = np.linalg.norm(np.diff(reference.positions_xyz, axis=0), axis=1)
+    travelled = np.concatenate(([0.0], np.cumsum(steps)))  # no stretch crosses a break
+    order = np.lexsort((starts, -worst))  # the worst first, ties by time
+    a, b, w = starts[order], ends[order], first_worst[order]
+    seconds = (ate.stamps_ns - t0_ns) / _NS_PER_S
+    # every field gathered at once; the loop only builds one record per stretch
+    columns = zip(
+        seconds[a].tolist(),
+        seconds[b].tolist(),
+        (b - a + 1).tolist(),
+        values[w].tolist(),
+        reference.positions_xyz[w].tolist(),
+        (travelled[b] - travelled[a]).tolist(),
+        a.tolist(),
+        b.tolist(),
+        w.tolist(),
+        seconds[w].tolist(),
+        strict=True,
+    )
+    out = [
+        FailingSpan(
+            start_s=start,
+            end_s=end,
+            poses=poses,
+            max_error_m=max_error,
+            max_error_position_xyz=(pos[0], pos[1], pos[2]),
+            length_m=length,
+            first_index=first,
+            last_index=last,
+            max_error_index=at,
+            max_error_s=at_s,
+        )
+        for start, end, poses, max_error, pos, length, first, last, at, at_s in columns
+    ]
+    return tuple(out)
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,6 +280,8 @@ def tolerance_verdict_of(
     tolerance: Tolerance,
     t0_ns: int,
     judged: ToleranceVerdict | None,
+    *,
+    breaks: BoolArray | None = None,
 ) -> Verdict:
     """Return the verdict of the ATE against ``tolerance`` and the stretches that exceed it.
 
@@ -158,33 +291,16 @@ def tolerance_verdict_of(
         tolerance: the tolerance.
         t0_ns: the stamp times count from (the reference's first pose).
         judged: the share's interval verdict, if intervals were computed.
+        breaks: (N - 1,) where the path breaks (tracking loss): a stretch ends there.
     """
     share = share_within(ate, [tolerance.distance_m])[tolerance.distance_m]
-    over: BoolArray = ate.values > tolerance.distance_m
-    spans = []
-    if over.any():
-        edges = np.diff(np.concatenate(([0], over.astype(np.int8), [0])))
-        starts = np.flatnonzero(edges == 1)
-        ends = np.flatnonzero(edges == -1)  # exclusive
-        for a, b in zip(starts, ends, strict=True):  # one iteration per failing stretch
-            k = a + int(np.argmax(ate.values[a:b]))
-            pos = reference.positions_xyz[k]
-            spans.append(
-                FailingSpan(
-                    start_s=(int(ate.stamps_ns[a]) - t0_ns) / _NS_PER_S,
-                    end_s=(int(ate.stamps_ns[b - 1]) - t0_ns) / _NS_PER_S,
-                    poses=int(b - a),
-                    max_error_m=float(ate.values[k]),
-                    max_error_position_xyz=(float(pos[0]), float(pos[1]), float(pos[2])),
-                )
-            )
-    spans.sort(key=lambda s: s.max_error_m, reverse=True)
+    spans = failing_spans(ate, reference, tolerance.distance_m, t0_ns, breaks=breaks)
     outcome = "" if judged is None else judged.outcome.value
     return Verdict(
         tolerance=tolerance,
         share_within=share,
         passed=share >= tolerance.share if judged is None else outcome == "pass",
-        failing_spans=tuple(spans),
+        failing_spans=spans,
         share_ci95=None if judged is None else judged.ci95,
         outcome=outcome,
     )

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Final
 
 import numpy as np
 
@@ -23,6 +24,7 @@ from loceval.trajectory import Trajectory
 
 __all__ = [
     "DEFAULT_THRESHOLDS_M",
+    "WORST_SEPARATION_S",
     "ErrorSeries",
     "ErrorStats",
     "RPEUnit",
@@ -407,28 +409,69 @@ def share_within(errors: ErrorSeries, thresholds: Sequence[float]) -> dict[float
     return {float(t): float(c) / values.size for t, c in zip(thresholds, counts, strict=True)}
 
 
+WORST_SEPARATION_S: Final = 2.0
+"""Listed greatest errors lie at least this far apart in time: a burst is listed once."""
+_PEAK_BLOCK: Final = 1024  # block maxima make each pick O(N / block + block + window)
+
+
 def greatest_errors(
-    errors: ErrorSeries, reference: Trajectory, *, count: int = 10, t0_ns: int | None = None
+    errors: ErrorSeries,
+    reference: Trajectory,
+    *,
+    count: int = 10,
+    t0_ns: int | None = None,
+    separation_s: float = WORST_SEPARATION_S,
 ) -> tuple[WorstPose, ...]:
     """The ``count`` greatest errors, largest first, with time and reference position.
+
+    Large errors come in bursts of neighbouring poses (a system that loses track is off for
+    a while), so the list names distinct places: each listed error is the greatest within
+    ``separation_s`` either side of itself (a peak, not the flank of a greater one) and lies
+    at least that far from every greater listed one (greedy non-maximum suppression in
+    time). Every output numbers these the same way, ``#1`` ... ``#N`` by rank.
 
     Args:
         errors: per matched pose.
         reference: the matched reference poses (positions for each error).
-        count: how many.
+        count: how many at most (fewer when the recording is short).
         t0_ns: the stamp ``t_s`` counts from; the first matched pose by default (the
             evaluation passes the whole reference's first pose, one clock for everything).
+        separation_s: the least time between two listed errors, seconds (0: every pose).
     """
-    k = min(count, len(errors))
-    if k == 0:
+    n = len(errors)
+    if min(count, n) == 0:
         return ()
-    idx = np.argpartition(-errors.values, k - 1)[:k]
-    idx = idx[np.argsort(-errors.values[idx], kind="stable")]
+    stamps = errors.stamps_ns
+    reach_ns = round(separation_s * _NS_PER_S)
+    blocks_n = -(-n // _PEAK_BLOCK)
+    remaining = np.full(blocks_n * _PEAK_BLOCK, -np.inf)
+    remaining[:n] = errors.values
+    blocks = remaining.reshape(blocks_n, _PEAK_BLOCK)  # a view: masking updates it
+    block_max = blocks.max(axis=1)
+    picked: list[int] = []
+    values = errors.values
+    while len(picked) < min(count, n):  # one pass per listed error or skipped flank
+        b = int(np.argmax(block_max))
+        if block_max[b] == -np.inf:
+            break
+        i = b * _PEAK_BLOCK + int(np.argmax(blocks[b]))
+        if reach_ns <= 0:
+            lo, hi = i, i + 1
+        else:  # poses closer than the separation (strictly) belong to this one's burst
+            lo = int(np.searchsorted(stamps, stamps[i] - reach_ns, side="right"))
+            hi = int(np.searchsorted(stamps, stamps[i] + reach_ns, side="left"))
+        # listed only when it is the greatest within the separation either side: a pose on
+        # the flank of a listed burst (2 s from its peak, greater than the rest) is not
+        if values[i] >= values[lo:hi].max():
+            picked.append(i)
+        remaining[lo:hi] = -np.inf  # each pass masks its window: at most N / window passes
+        first, last = lo // _PEAK_BLOCK, (hi - 1) // _PEAK_BLOCK
+        block_max[first : last + 1] = blocks[first : last + 1].max(axis=1)
     t0 = int(reference.stamps_ns[0]) if t0_ns is None else int(t0_ns)
     return tuple(
         WorstPose(
-            stamp_ns=int(errors.stamps_ns[i]),
-            t_s=(int(errors.stamps_ns[i]) - t0) / _NS_PER_S,
+            stamp_ns=int(stamps[i]),
+            t_s=(int(stamps[i]) - t0) / _NS_PER_S,
             error=float(errors.values[i]),
             position_xyz=(
                 float(reference.positions_xyz[i, 0]),
@@ -437,7 +480,7 @@ def greatest_errors(
             ),
             index=int(i),
         )
-        for i in idx
+        for i in picked
     )
 
 

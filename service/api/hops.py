@@ -124,9 +124,26 @@ COMPONENTS: Final[dict[str, dict[str, Any]]] = {
                 **_TREE,
             ),
             _param(
+                "ATE paths",
+                "AP",
+                "each estimate cut into runs of one error colour (none for the reference)",
+                "Curve",
+                "Rhino.Geometry.Curve",
+                **_TREE,
+            ),
+            _param(
+                "ATE colours",
+                "AC",
+                "the colour of each ATE run as R,G,B: the report's and the viewer's scale, "
+                "green within the tolerance, orange to red beyond",
+                "Text",
+                "System.String",
+                **_TREE,
+            ),
+            _param(
                 "Statistics",
                 "S",
-                "kind, source, ATE/RPE statistics and verdict as JSON",
+                "kind, source, ATE/RPE statistics, verdict and colour legend as JSON",
                 "Text",
                 "System.String",
                 **_TREE,
@@ -326,7 +343,8 @@ def _solve_paths(
             f"{body.modelunits}; scale them or evaluate with matching units."
         )
     trees: dict[str, dict[str, list[dict[str, str]]]] = {
-        "Paths": {}, "Names": {}, "Colours": {}, "ATE": {}, "Statistics": {}
+        "Paths": {}, "Names": {}, "Colours": {}, "ATE": {}, "ATE paths": {}, "ATE colours": {},
+        "Statistics": {},
     }  # fmt: skip
     for k, path in enumerate(paths):
         branch = f"{{{k}}}"
@@ -339,9 +357,16 @@ def _solve_paths(
         trees["Colours"][branch] = [_item("System.String", ",".join(map(str, path["color"])))]
         ate = path.get("ate_translation_m")
         trees["ATE"][branch] = [] if not ate else [_item("System.Double", ate["rmse"])]
-        trees["Statistics"][branch] = [
-            _item("System.String", json.dumps(_statistics(path, estimate)))
+        # the runs paths.3dm.json carries, in the one error colour scale (exporters.colours)
+        runs = path.get("ate", [])
+        trees["ATE paths"][branch] = [
+            _item("Rhino.Geometry.PolylineCurve", r["curve"]) for r in runs
         ]
+        trees["ATE colours"][branch] = [
+            _item("System.String", ",".join(map(str, r["color"]))) for r in runs
+        ]
+        statistics = {**_statistics(path, estimate), "ate_legend": document.get("ate_legend")}
+        trees["Statistics"][branch] = [_item("System.String", json.dumps(statistics))]
     values = [{"ParamName": name, "InnerTree": tree} for name, tree in trees.items()]
     return values, warnings
 

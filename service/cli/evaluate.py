@@ -102,6 +102,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
             the_map=the_map,
         )
         result = run_job(job, args.out)
+    if isinstance(result, EvaluationResult) and args.building is not None:
+        from exporters.cad.spaces import placed_on_building  # noqa: PLC0415  (CAD libraries)
+
+        # the stretches' rooms and the building's warnings, as result.json has them
+        placed = export or export_from_options(args, front_door="cli", building=args.building)
+        result = placed_on_building(result, placed)
     if args.json:
         from exporters.cad.jsondoc import finite_json  # noqa: PLC0415
 

@@ -6,6 +6,7 @@ from collections.abc import Sequence
 from typing import Any, cast
 
 from loceval.checkpoint_evaluation import CheckpointEvaluation
+from loceval.core.lengths import LengthUnit, length_unit
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats, RPEUnit
 
@@ -29,8 +30,14 @@ def format_tables(result: EvaluationResult) -> str:
         )
     for title, stats, unit in _sections(result):
         lines += ["", title, _row("error metric", [e.name for e in result.estimates])]
+        # a table of lengths reads in one unit: mm when all its values are below 0.1 m
+        length = None if unit != "m" else length_unit(_values(stats))
+
+        def cell(value: float, unit: str = unit, length: LengthUnit | None = length) -> str:
+            return f"{value:.3f} {unit}" if length is None else length.text(value)
+
         for label, key in _ROWS:
-            cells = ["-" if s is None else f"{getattr(s, key):.3f} {unit}" for s in stats]
+            cells = ["-" if s is None else cell(getattr(s, key)) for s in stats]
             lines.append(_row(label, cells))
     lines += ["", "Share of poses within (ATE)"]
     for t in result.config.thresholds_m:
@@ -40,7 +47,7 @@ def format_tables(result: EvaluationResult) -> str:
     if any(d is not None for d in drifts):
         cells = ["-" if d is None else f"{d.mean:.2f} %" for d in drifts]
         lines.append(_row("drift (mean)", cells))
-    lines += [f"\n{e.name}: {e.verdict.summary}" for e in result.estimates if e.verdict]
+    lines += _verdict_lines(result)
     lines += _excursion_lines(result)
     lines += _map_lines(result)
     if result.comparisons:
@@ -58,6 +65,7 @@ def format_tables(result: EvaluationResult) -> str:
         *(("reference", w) for w in result.reference_warnings),
         *((e.name, w) for e in result.estimates for w in e.warnings),
         *(("comparison", w) for w in result.comparison_notes),
+        *(("building model", w) for w in (result.building.warnings if result.building else ())),
     ]
     if warnings:
         lines += ["", "Warnings", *(f"  {who}: {w}" for who, w in warnings)]
@@ -102,6 +110,33 @@ def format_checkpoint_tables(result: CheckpointEvaluation) -> str:
     if warnings:
         lines += ["", "Warnings", *(f"  {who}: {w}" for who, w in warnings)]
     return "\n".join(lines)
+
+
+_STRETCHES_LISTED = 5  # as the report's verdict lists them
+
+
+def _values(stats: Sequence[ErrorStats | None]) -> list[float]:
+    return [getattr(s, key) for s in stats if s is not None for _, key in _ROWS]
+
+
+def _verdict_lines(result: EvaluationResult) -> list[str]:
+    """Each verdict, then its worst stretches beyond the tolerance, with their rooms."""
+    lines: list[str] = []
+    for e in result.estimates:
+        verdict = e.verdict
+        if verdict is None:
+            continue
+        lines += ["", f"{e.name}: {verdict.summary}"]
+        spans = verdict.failing_spans
+        unit = length_unit(s.max_error_m for s in spans[:_STRETCHES_LISTED])
+        lines.extend(
+            f"  #{k} {s.words(verdict.tolerance.distance_m)}: from t = {s.start_s:.1f} s, "
+            f"{s.length_m:.1f} m travelled, worst {unit.text(s.max_error_m)}"
+            for k, s in enumerate(spans[:_STRETCHES_LISTED], start=1)
+        )
+        if len(spans) > _STRETCHES_LISTED:
+            lines.append(f"  ... {len(spans) - _STRETCHES_LISTED} more (result.json lists all)")
+    return lines
 
 
 def _excursion_lines(result: EvaluationResult) -> list[str]:

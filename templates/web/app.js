@@ -82,8 +82,19 @@
   }
 
   /** A length in metres as the report prints it: three decimals. */
-  function formatMetres(m) {
-    return typeof m === "number" && Number.isFinite(m) ? `${m.toFixed(3)} m` : "—";
+  // The one rule for lengths, as the viewer, the reports and the command line print them
+  // (loceval/core/lengths.py, README "Units and digits"): a group of lengths shown together
+  // (a table) reads in millimetres to a tenth when every value is below 0.1 m, else in
+  // metres to the millimetre.
+  function lengthUnit(values) {
+    const finite = values.filter((v) => typeof v === "number" && Number.isFinite(v)).map(Math.abs);
+    return finite.length && Math.max(...finite) < 0.1
+      ? { symbol: "mm", perMetre: 1000, decimals: 1 }
+      : { symbol: "m", perMetre: 1, decimals: 3 };
+  }
+
+  function formatMetres(m, unit = lengthUnit([m])) {
+    return typeof m === "number" && Number.isFinite(m) ? `${(m * unit.perMetre).toFixed(unit.decimals)} ${unit.symbol}` : "—";
   }
 
   function formatSeconds(s) {
@@ -1204,14 +1215,15 @@
     const ranging = evaluation.result && evaluation.result.ranging;
     setHidden($("current-ranging"), !ranging);
     if (!ranging) return;
+    const anchors = Array.isArray(ranging.anchors) ? ranging.anchors : [];
+    const unit = lengthUnit([ranging.overall || {}, ...anchors].flatMap((s) => [s.bias_m, s.std_m, s.rmse_m]));
     const row = (name, s, className) => el("tr", { className },
       el("th", { scope: "row", className: "name", text: name }),
       el("td", { className: "num", "data-label": "Ranges", text: typeof s.n === "number" ? s.n.toLocaleString() : "—" }),
-      el("td", { className: "num", "data-label": "Bias", text: formatMetres(s.bias_m) }),
-      el("td", { className: "num", "data-label": "Std", text: formatMetres(s.std_m) }),
-      el("td", { className: "num ranging-rmse", "data-label": "RMSE", dataset: { valueM: String(s.rmse_m) }, text: formatMetres(s.rmse_m) }),
+      el("td", { className: "num", "data-label": "Bias", text: formatMetres(s.bias_m, unit) }),
+      el("td", { className: "num", "data-label": "Std", text: formatMetres(s.std_m, unit) }),
+      el("td", { className: "num ranging-rmse", "data-label": "RMSE", dataset: { valueM: String(s.rmse_m) }, text: formatMetres(s.rmse_m, unit) }),
       el("td", { className: "num", "data-label": "Outliers", text: formatShare(s.outlier_share) }));
-    const anchors = Array.isArray(ranging.anchors) ? ranging.anchors : [];
     $("ranging-body").replaceChildren(
       row("All anchors", ranging.overall || {}, "overall"),
       ...anchors.map((a) => row(String(a.id), a, "anchor")));
@@ -1399,12 +1411,13 @@
     const body = $("summary-body");
     body.replaceChildren();
     const estimates = (evaluation.result && Array.isArray(evaluation.result.estimates)) ? evaluation.result.estimates : [];
+    const unit = lengthUnit((evaluation.summary || []).flatMap((row) => [row.ate_rmse_m, row.rpe_rmse_m]));
     (evaluation.summary || []).forEach((row, i) => {
       const facts = verdictFacts(estimates[i] && estimates[i].verdict);
       body.append(el("tr", {},
         el("th", { scope: "row", className: "name", text: row.name }),
-        el("td", { className: "num ate", "data-label": "ATE RMSE", dataset: { valueM: String(row.ate_rmse_m) }, text: formatMetres(row.ate_rmse_m) }),
-        el("td", { className: "num", "data-label": "RPE RMSE", text: formatMetres(row.rpe_rmse_m) }),
+        el("td", { className: "num ate", "data-label": "ATE RMSE", dataset: { valueM: String(row.ate_rmse_m) }, text: formatMetres(row.ate_rmse_m, unit) }),
+        el("td", { className: "num", "data-label": "RPE RMSE", text: formatMetres(row.rpe_rmse_m, unit) }),
         el("td", { className: "num", "data-label": "Matched", text: typeof row.matched === "number" ? row.matched.toLocaleString() : "—" }),
         el("td", { className: "verdict-cell", "data-label": "Verdict" }, verdictBadge(row.verdict),
           facts ? el("div", { className: "muted small verdict-facts", text: facts }) : null)));
@@ -1572,14 +1585,15 @@
       cell.textContent = "—";
       return cell;
     }
+    const unit = lengthUnit(summary.map((s) => s.ate_rmse_m));
     if (summary.length === 1) {
       cell.dataset.valueM = String(summary[0].ate_rmse_m);
-      cell.append(formatMetres(summary[0].ate_rmse_m), ...verdictMark(summary[0].verdict));
+      cell.append(formatMetres(summary[0].ate_rmse_m, unit), ...verdictMark(summary[0].verdict));
       return cell;
     }
     for (const s of summary) {
       cell.append(el("div", {}, el("span", { className: "muted small", text: `${s.name} ` }),
-        formatMetres(s.ate_rmse_m), ...verdictMark(s.verdict)));
+        formatMetres(s.ate_rmse_m, unit), ...verdictMark(s.verdict)));
     }
     return cell;
   }

@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exporters.cad.placement import ate_bins, ate_edges_m, parse_site
+from exporters.cad.placement import parse_site
+from exporters.colours import error_bins, scale_words, tolerance_bins
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval.core.polyline import polyline_distances
@@ -136,8 +137,13 @@ def test_audit_clean(tmp_path: Path, two_estimates: EvaluationResult, options: E
 
 
 def test_ate_layer(drawing: ezdxf.document.Drawing, two_estimates: EvaluationResult):
-    """The ATE layer (on, not frozen) covers the estimate in the report's colours, with legend."""
-    bins = ate_bins(ate_edges_m(two_estimates))
+    """The ATE layer (on, not frozen) covers the estimate in the report's colours, with legend.
+
+    The evaluation has a tolerance (0.10 m): the colours are the scale anchored to it and the
+    legend names it in words.
+    """
+    bins = error_bins(two_estimates)  # anchored to its tolerance (0.10 m)
+    assert bins == tolerance_bins(0.10)
     bin_colours = {b.color_rgb for b in bins}
     for est in two_estimates.estimates:
         layer = drawing.layers.get(f"{est.name} ATE")
@@ -153,7 +159,9 @@ def test_ate_layer(drawing: ezdxf.document.Drawing, two_estimates: EvaluationRes
         assert len(vertices) >= 2
         texts = [t.dxf.text for t in drawing.modelspace().query(f'TEXT[layer=="{est.name} ATE"]')]
         assert texts[0] == f"{est.name}: ATE translation"
-        assert texts[1:] == [b.label for b in bins]
+        assert texts[1] == scale_words(two_estimates)
+        assert "within 0.1 m for 95 % of poses" in texts[1]
+        assert texts[2:] == [b.label for b in bins]
 
 
 def test_ate_pieces_follow_the_estimate(two_estimates: EvaluationResult):

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from exporters.cad.placement import ate_bins, ate_edges_m, parse_site, place_evaluation
+from exporters.cad.placement import parse_site, place_evaluation
+from exporters.colours import error_bins
 from exporters.errors import ExportError, ExportOptionsError
 from exporters.options import ExportOptions, Units
 from loceval.core.polyline import polyline_distances
@@ -132,7 +133,7 @@ def test_ate_coloured_curves_and_dots(model_file: Path, two_estimates: Evaluatio
     model = rhino3dm.File3dm.Read(str(model_file))
     layers = {layer.FullPath: layer for layer in model.Layers}
     by_layer = objects_by_layer(model)
-    bins = ate_bins(ate_edges_m(two_estimates))
+    bins = error_bins(two_estimates)  # anchored to its tolerance (0.10 m)
     edges = np.array([b.high_m for b in bins[:-1]])
     assert model.Strings["loceval.ate_bins"].startswith(f"{bins[0].label}: #")
     for est in two_estimates.estimates:

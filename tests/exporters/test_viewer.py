@@ -19,6 +19,7 @@ from exporters.cad.placement import place_evaluation
 from exporters.cad.points_placement import place_control_points
 from exporters.cad.site import parse_site
 from exporters.checkpoints import checkpoint_errors_csv, write_checkpoint_artifacts
+from exporters.colours import error_bins, hex_colour
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
 from exporters.tables import export_errors_csv
@@ -194,7 +195,10 @@ def test_scene_worst_labels_and_bins(two_estimates: EvaluationResult) -> None:
         assert f"{error:.3f} m" in label["label"]
         assert label["label"].startswith(path["name"])
     bins = scene["bins"]
-    assert bins[0]["color"] == "#00aa00"
+    # the evaluation's tolerance (0.10 m) anchors the scale: green within, orange to red beyond
+    expected = error_bins(two_estimates)
+    assert [b["color"] for b in bins] == [hex_colour(b.color_rgb) for b in expected]
+    assert [b["beyond"] for b in bins] == [False, False, True, True, True]
     assert bins[-1]["high"] is None
     assert [b["high"] for b in bins[:-1]] == sorted(b["high"] for b in bins[:-1])
 

@@ -168,6 +168,12 @@ def errors_by_estimate(result: EvaluationResult) -> dict[str, list[tuple[float, 
     return out
 
 
+def length_text(scene: dict, value_m: float) -> str:
+    """An error as the viewer prints it: the scene's unit of lengths (the one rule)."""
+    unit = scene["lengths"]
+    return f"{value_m * unit['per_metre']:.{unit['decimals']}f} {unit['symbol']}"
+
+
 def check_paths_drawn(viewer: Opened) -> None:
     """Each path alone: its projected vertices carry its colour (reference) or the ATE scale."""
     paths = viewer.scene["paths"]
@@ -209,7 +215,7 @@ def check_timeline(viewer: Opened, result: EvaluationResult, positions: list[int
             if name in errors:
                 assert errors[name] == rows[nearest][1], (name, t)
                 assert abs(times[nearest] - t) < 1.0
-                assert f"{name}: {errors[name]:.4f} m" in readout
+                assert f"{name}: {length_text(viewer.scene, errors[name])}" in readout
                 compared += 1
             else:  # no estimate there: before, after, or inside a break of its path
                 path = next(p for p in viewer.scene["paths"] if p["name"] == name)
@@ -240,9 +246,10 @@ def check_click(viewer: Opened, k: int, i: int) -> None:
     assert f"t = {t:.3f} s" in tip.inner_text()
     if path["kind"] == "estimate":
         assert float(info.get_attribute("data-error-m")) == path["err"][j]
-        assert f"ATE = {path['err'][j]:.4f} m" in text
+        assert f"ATE = {length_text(viewer.scene, path['err'][j])}" in text
     base = viewer.scene["base"]
-    assert f"x = {path['xyz'][3 * j] + base[0]:.3f} {viewer.scene['units']}" in text
+    digits = viewer.scene["coordinate_decimals"]  # to the millimetre in the model's units
+    assert f"x = {path['xyz'][3 * j] + base[0]:.{digits}f} {viewer.scene['units']}" in text
     for j in range(len(viewer.scene["paths"])):
         viewer.api(f"showPath({j}, true)")
 

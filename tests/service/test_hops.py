@@ -129,12 +129,31 @@ def test_solve_returns_the_dxf_polylines(api: Api, evaluation: dict[str, Any], r
     ).json()
     expected_rmse = result["estimates"][0]["ate"]["translation_m"]["rmse"]
     assert float(ate["{1}"][0]["data"]) == expected_rmse
+    # the estimate's runs in the one error colour scale, as paths.3dm.json has them
+    runs = output(document, "ATE paths")
+    colours = output(document, "ATE colours")
+    assert runs["{0}"] == colours["{0}"] == []
+    assert len(runs["{1}"]) == len(colours["{1}"]) >= 1
+    assert all(item["type"] == "Rhino.Geometry.PolylineCurve" for item in runs["{1}"])
+    scale = {",".join(map(str, b["color"])) for b in result_bins(api, evaluation)}
+    assert {json.loads(item["data"]) for item in colours["{1}"]} <= scale
     statistics = json.loads(json.loads(output(document, "Statistics")["{1}"][0]["data"]))
     assert statistics["kind"] == "estimate"
+    assert (
+        statistics["ate_legend"].startswith("ATE colours")
+        or "Tolerance" in statistics["ate_legend"]
+    )
     assert (
         statistics["rpe"]["translation_m"]["rmse"]
         == result["estimates"][0]["rpe"]["translation_m"]["rmse"]
     )
+
+
+def result_bins(api: Api, evaluation: dict[str, Any]) -> list[dict[str, Any]]:
+    """The colour bins of the evaluation's paths.3dm.json."""
+    url = f"/api/v1/evaluations/{evaluation['id']}/artifacts/paths.3dm.json"
+    bins: list[dict[str, Any]] = api.client.get(url, headers=api.headers).json()["ate_bins"]
+    return bins
 
 
 def test_one_trajectory_and_unit_warning(api: Api, evaluation: dict[str, Any]) -> None:
