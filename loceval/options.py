@@ -100,6 +100,20 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         auto=True,
     ),
     OptionSpec(
+        "clock_drift_ppm",
+        OptionKind.NUMBER,
+        0.0,
+        "how fast the estimate's clock runs against the reference's, ppm (negative: slow), "
+        "applied with the time offset at its first pose; auto: estimated from the motion, "
+        "with any clock step",
+        "the clock drift",
+        "clock-drift",
+        "PPM|auto",
+        minimum=-1000.0,  # loceval.calibration.drift.MAX_RATE_PPM
+        maximum=1000.0,
+        auto=True,
+    ),
+    OptionSpec(
         "stamp",
         OptionKind.CHOICE,
         StampSource.HEADER.value,

@@ -2,12 +2,16 @@
 
 :func:`check_offsets` is what :func:`loceval.evaluation.evaluate` runs for each estimate:
 
-- **Time offset**: always estimated (:func:`loceval.calibration.clock.estimate_time_offset`). Given
-  a
-  value (0 by default), the value is applied and the data only check it (a warning when they
-  disagree beyond 3 sigma and a few ms); ``auto`` applies the estimate (the candidate
-  nearest 0 when the motion repeats). A check that cannot run (too few poses, no motion)
-  becomes a warning, never a failure; an ``auto`` that cannot run fails with the reason.
+- **Time offset**: always estimated (:func:`loceval.calibration.clock.estimate_time_offset`).
+  Given a value (0 by default), the value is applied and the data only check it (a warning
+  when they disagree beyond 3 sigma and a few ms); ``auto`` applies the estimate (the
+  candidate nearest 0 when the motion repeats). A check that cannot run (too few poses, no
+  motion) becomes a warning, never a failure; an ``auto`` that cannot run fails with the
+  reason.
+- **Clock drift**: checked alike on runs long enough (:mod:`loceval.calibration.drift`); a
+  given rate (0 by default) is applied, ``auto`` applies the estimated rate and steps when
+  significant. The offset is then a line along the run (:attr:`OffsetCheck.clock`), whose
+  value at the estimate's first pose is ``time_offset_s``.
 - **Device offset**: ``auto`` estimates it
   (:func:`loceval.calibration.handeye.estimate_device_offset`)
   jointly with the time offset and applies it to the reference; a given one (``offset``,
@@ -30,6 +34,7 @@ from loceval.errors import InputError, LocevalError
 
 if TYPE_CHECKING:
     from loceval.calibration.clock import TimeOffsetEstimate
+    from loceval.calibration.drift import ClockModel
     from loceval.calibration.handeye import DeviceOffsetComparison, DeviceOffsetEstimate
     from loceval.core.geometry import SimilarityTransform
     from loceval.trajectory import Trajectory
@@ -63,6 +68,8 @@ class OffsetCheck:
         device_applied: the estimated device offset is the one applied.
         comparison: how far the estimate is from the given one (both present).
         warnings: sentences for the user.
+        clock_drift_ppm: the clock rate applied when the clock was not checked (given).
+        notes: sentences for information (nothing to do).
     """
 
     time_offset_s: float
@@ -73,6 +80,20 @@ class OffsetCheck:
     device_applied: bool = False
     comparison: DeviceOffsetComparison | None = None
     warnings: tuple[str, ...] = ()
+    clock_drift_ppm: float = 0.0
+    notes: tuple[str, ...] = ()
+
+    def clock(self, estimate: Trajectory) -> ClockModel:
+        """The time offset applied along ``estimate``'s run (its first stamp the epoch)."""
+        from loceval.calibration.drift import ClockModel  # noqa: PLC0415
+
+        if self.time_offset is not None:
+            return dataclasses.replace(self.time_offset.model, offset_s=self.time_offset_s)
+        return ClockModel(
+            offset_s=self.time_offset_s,
+            epoch_ns=int(estimate.stamps_ns[0]),
+            rate_ppm=self.clock_drift_ppm,
+        )
 
     def time_offset_dict(self) -> dict[str, object]:
         """Return the contract's ``time_offset`` object."""
@@ -84,6 +105,11 @@ class OffsetCheck:
             "source": "given",
             "estimated_s": None,
             "candidates_s": [],
+            "rate_ppm": self.clock_drift_ppm,
+            "rate_source": "given",
+            "estimated_rate_ppm": None,
+            "sigma_rate_ppm": None,
+            "steps": [],
         }
 
     def device_offset_dict(self) -> dict[str, object] | None:
@@ -113,14 +139,23 @@ def _unstamped(
     time_offset_s: float | None,
     device: SimilarityTransform | None,
     device_source: DeviceSource,
+    clock_drift_ppm: float | None,
 ) -> OffsetCheck:
     """The check of a pair one of which has pose numbers for stamps: nothing to check.
 
     Raises:
-        InputError: the time offset was asked to be estimated (``auto``).
+        InputError: the time offset was asked to be estimated (``auto``), or a clock drift
+            given or asked for.
     """
     which = " and ".join(repr(n) for n in names)
     have = "has" if len(names) == 1 else "have"
+    if clock_drift_ppm is None or clock_drift_ppm != 0.0:
+        msg = (
+            f"{which} {have} no times (poses are numbered, as a KITTI file without its times "
+            "file), so no clock drift can be estimated or applied; give the times file "
+            "(kitti:PATH@times=TIMES) or a clock drift of 0."
+        )
+        raise InputError(msg, option="clock_drift_ppm")
     if time_offset_s is None:
         msg = (
             f"{which} {have} no times (poses are numbered, as a KITTI file without its times "
@@ -151,6 +186,8 @@ def check_offsets(
     auto_device: bool = False,
     max_gap_s: float,
     with_scale: bool = False,
+    clock_drift_ppm: float | None = 0.0,
+    tolerance_s: float = 0.01,
 ) -> OffsetCheck:
     """Estimate the time (and device) offset of one estimate; check or apply them.
 
@@ -163,6 +200,10 @@ def check_offsets(
         auto_device: estimate the device offset and apply it (``device`` must be None).
         max_gap_s: longest reference interval that is not a tracking loss, seconds.
         with_scale: the estimate has its own scale (monocular; Sim(3) alignment).
+        clock_drift_ppm: the given clock rate, ppm (applied and checked); None estimates it
+            and applies it (and its steps) when significant.
+        tolerance_s: the association's tolerance (a drift not applied that moves the offset
+            by more over the run is a warning).
 
     Returns:
         What was given, estimated and applied, with the warnings.
@@ -178,17 +219,19 @@ def check_offsets(
     pair = ((reference, "the reference"), (estimate, "the estimate"))
     numbered = [t.name or role for t, role in pair if t.indexed]
     if numbered:
-        return _unstamped(numbered, time_offset_s, device, device_source)
+        return _unstamped(numbered, time_offset_s, device, device_source, clock_drift_ppm)
     clock = _estimated(
         lambda: estimate_time_offset(
             reference,
             estimate,
             given_offset_s=time_offset_s,
+            clock_drift_ppm=clock_drift_ppm,
+            tolerance_s=tolerance_s,
             max_gap_s=max_gap_s,
             with_scale=with_scale,
             max_pairs=ESTIMATE_MAX_PAIRS if auto_time else CHECK_MAX_PAIRS,
         ),
-        applied=auto_time,
+        applied=auto_time or clock_drift_ppm is None,
         what="time offset",
         notes=notes,
     )
@@ -200,9 +243,14 @@ def check_offsets(
         time_offset=clock,
         device_given=device,
         device_source=device_source,
+        clock_drift_ppm=clock_drift_ppm or 0.0,
+        notes=() if clock is None else clock.notes,
     )
     if not (auto_device or device is not None):
         return dataclasses.replace(check, warnings=tuple(notes))
+    # The device's relative motions take the stamps on the reference's clock, the drift
+    # applied (the constant part stays with the time offset, refined jointly when auto).
+    estimate = check.clock(estimate).restamped(estimate)
     if not (reference.has_orientation and estimate.has_orientation):
         if auto_device:
             side = reference.name if not reference.has_orientation else estimate.name
@@ -248,7 +296,8 @@ def check_offsets(
             f"{_APPLIED_NOTE} {describe_offset(applied_s, clock.sigma_s)} (jointly with the "
             "device offset)."
         )
-    return OffsetCheck(
+    return dataclasses.replace(
+        check,
         time_offset_s=applied_s,
         time_offset=clock,
         device=found,
