@@ -94,8 +94,12 @@ def make_drifting_recording(
     estimate_orientation: bool = True,
     tracking_losses: int = 3,
     position_noise_m: float = 0.001,
+    **options: float,
 ) -> DriftRecording:
-    """Generate a recording (:func:`tests.calibration_factory.make_recording`) on ``clock``."""
+    """Generate a recording (:func:`tests.calibration_factory.make_recording`) on ``clock``.
+
+    ``options`` go to ``make_recording`` (noise, drift of the estimate's frame).
+    """
     rec = make_recording(
         rng,
         motion=motion,
@@ -106,6 +110,7 @@ def make_drifting_recording(
         estimate_orientation=estimate_orientation,
         tracking_losses=tracking_losses,
         position_noise_m=position_noise_m,
+        **options,
     )
     drifting = restamp(rec.estimate, clock)
     return DriftRecording(

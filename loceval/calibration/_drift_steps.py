@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from loceval.calibration._drift_windows import RowMaker, huber, robust_rms
+from loceval.calibration._drift_windows import PositionRows, RowMaker, huber, robust_rms
 from loceval.calibration.common import NS_PER_S
 from loceval.core.arrays import FloatArray, IntArray
 from loceval.trajectory import Trajectory
@@ -20,7 +20,16 @@ from loceval.trajectory import Trajectory
 STEP_Z = 6.0
 """A step is added to the model when its size exceeds this many sigma (a higher bar than
 the rate's: binary segmentation tries every window boundary, and picks the best)."""
+STEP_WINDOW_Z = 4.0
+"""... and one window's own scatter this many times: a step shows in the windows either side
+of it, while a slow wander of the offsets (the estimate's heading drift seen through the
+windows' motions) that a step would fit is small against it."""
 MAX_STEPS = 3
+BOOTSTRAP_DRAWS = 128
+"""Cost curves drawn for the sigma of a step's time."""
+BOOTSTRAP_SEED = 42
+CORRELATION_LAGS = 4
+"""Window lags whose residual correlation widens the covariance (Bartlett weights)."""
 HUBER_K = 2.0
 """Windows beyond this many robust sigmas of the line weigh less (Huber)."""
 
@@ -65,7 +74,11 @@ def robust_line(
     Standardised residuals ``e = (o - X b) / sigma`` get Huber weights at HUBER_K robust
     scales (the MAD of ``e``). The covariance is ``s² (X^T W X)^-1`` with ``W`` the Huber
     weights over ``sigma²`` and ``s²`` Huber's scale estimate ``sum psi(u)² s_0² / (n - p)``
-    over the mean ``psi'`` squared, times Student's factor for ``n - p`` degrees of freedom.
+    over the mean ``psi'`` squared, times Student's factor for ``n - p`` degrees of freedom,
+    times the long-run variance factor of the residuals' correlation along the run
+    ``1 + 2 sum_l (1 - l / (L + 1)) rho_l`` (Bartlett, ``L`` = CORRELATION_LAGS; never
+    below 1): neighbouring windows share slow errors (heading drift), which independent
+    windows would not.
     """
     from scipy.special import stdtrit  # noqa: PLC0415  (scipy loads when a drift is fitted)
 
@@ -92,14 +105,35 @@ def robust_line(
     scale2 = float((psi**2).sum()) * scale0**2 / dof / mean_dpsi**2
     info = (x.T * (w * weights)) @ x
     cov = scale2 * np.linalg.pinv(info)
+    # The sandwich of the same fit, heteroscedasticity-consistent (HC1): where the
+    # windows' own sigmas misjudge each other (a window with few telling motions), it
+    # says more than the scale; each parameter takes the larger of the two variances.
+    inv = np.linalg.pinv(info)
+    u = w * weights * (o - x @ coef)
+    hc = inv @ ((x.T * u**2) @ x) @ inv * n / dof
+    widen = np.sqrt(np.maximum(np.diag(hc) / np.maximum(np.diag(cov), 1e-300), 1.0))
+    cov = cov * np.outer(widen, widen)
     factor = float(stdtrit(dof, 0.99865)) / 3.0  # Student's t at 3 sigma, over 3
     return Line(
         coef=coef,
-        cov=cov * factor**2,
+        cov=cov * factor**2 * _long_run_factor(psi),
         scale=math.sqrt(scale2),
         weights=weights,
         breaks_s=breaks_s,
     )
+
+
+def _long_run_factor(u: FloatArray) -> float:
+    """``1 + 2 sum_l (1 - l / (L + 1)) rho_l`` of residuals in time order, at least 1."""
+    total = float(u @ u)
+    if total <= 0 or u.shape[0] <= CORRELATION_LAGS + 2:
+        return 1.0
+    lags = range(1, CORRELATION_LAGS + 1)
+    rho = [float(u[lag:] @ u[:-lag]) / total for lag in lags]
+    bartlett = sum(
+        (1.0 - lag / (CORRELATION_LAGS + 1)) * r for lag, r in zip(lags, rho, strict=True)
+    )
+    return max(1.0, 1.0 + 2.0 * bartlett)
 
 
 def fit_with_steps(c: FloatArray, o: FloatArray, sigma: FloatArray, *, window_s: float) -> Line:
@@ -108,7 +142,7 @@ def fit_with_steps(c: FloatArray, o: FloatArray, sigma: FloatArray, *, window_s:
     Binary segmentation: every boundary between two windows (two windows at least on either
     side of it, and of any step already in) is tried with the current Huber weights held;
     the one of least weighted squares is refitted robustly and kept when its size exceeds
-    :data:`STEP_Z` sigma.
+    :data:`STEP_Z` sigma and :data:`STEP_WINDOW_Z` times one window's scatter.
     """
     order = np.argsort(c)
     c, o, sigma = c[order], o[order], sigma[order]
@@ -133,7 +167,8 @@ def fit_with_steps(c: FloatArray, o: FloatArray, sigma: FloatArray, *, window_s:
         assert best is not None  # noqa: S101
         trial = robust_line(c, o, sigma, (*line.breaks_s, best))
         size, sd = trial.coef[-1], math.sqrt(trial.cov[-1, -1])
-        if abs(size) <= STEP_Z * sd:
+        window_sd = trial.scale * float(np.median(sigma))
+        if abs(size) <= max(STEP_Z * sd, STEP_WINDOW_Z * window_sd):
             break
         line = trial
     weights = np.empty_like(line.weights)
@@ -183,33 +218,100 @@ def refine_step(
 
     si, sj = rows.stamp_i, rows.stamp_j
     group = np.zeros(si.shape[0], dtype=np.intp)
+    brk = epoch + round(boundary * NS_PER_S)
+    if isinstance(rows, PositionRows):
+        # Aligned on the rows whose side is not in question (a quarter window away).
+        clear = np.abs(si - brk) > 0.25 * window_s * NS_PER_S
+        shift = np.where(si >= brk, line.coef[2 + k], 0.0)
+        rows.hold_alignment(offsets(si, after=False) + shift, clear)
     r0, ok0 = rows.residuals(offsets(si, after=False), offsets(sj, after=False), None, group, 1)
     r1, ok1 = rows.residuals(offsets(si, after=True), offsets(sj, after=True), None, group, 1)
     r01, ok01 = rows.residuals(offsets(si, after=False), offsets(sj, after=True), None, group, 1)
-    ok = ok0 & ok1 & ok01
-    scale = max(robust_rms(np.minimum(np.abs(r0), np.abs(r1))[ok]), 1e-12)
-
-    def cost(r: FloatArray) -> FloatArray:
-        out: FloatArray = np.where(ok, np.minimum((r / scale) ** 2, 25.0).sum(axis=1), 0.0)
-        return out
-
-    c0, c1, c01 = cost(r0), cost(r1), cost(r01)
+    ok = (ok0 & ok1 & ok01)[:, None]
+    # The residuals' scale under the line as fitted: each row with the offsets of its side
+    # of the windows' boundary (the smaller of two residuals would understate it).
+    fitted = np.choose(np.where(sj < brk, 0, np.where(si >= brk, 1, 2))[:, None], (r0, r1, r01))
+    scale = max(robust_rms(fitted[ok[:, 0]]), 1e-12)
+    z0, z1, z01 = (np.where(ok, r / scale, 0.0) for r in (r0, r1, r01))
     cand = part.stamps_ns[1:]  # the step takes effect from stamp q on (q >= 1)
-    by_j, by_i = np.argsort(sj, kind="stable"), np.argsort(si, kind="stable")
-
-    def cumulative(c: FloatArray, order: IntArray) -> FloatArray:
-        return np.concatenate(([0.0], np.cumsum(c[order])))
-
-    nj = np.searchsorted(sj[by_j], cand, side="left")  # rows whose end is before s_q
-    ni = np.searchsorted(si[by_i], cand, side="left")  # rows whose start is before s_q
-    c1_i, c01_i, c01_j = cumulative(c1, by_i), cumulative(c01, by_i), cumulative(c01, by_j)
-    total = cumulative(c0, by_j)[nj] + (c1_i[-1] - c1_i[ni]) + (c01_i[ni] - c01_j[nj])
+    curve = _ChangeCost(si, sj, cand)
+    total = curve.total((z0**2).sum(axis=1), (z1**2).sum(axis=1), (z01**2).sum(axis=1))
     q = int(np.argmin(total))
-    near = cand[total - total[q] <= 1.0]
+    spread_ns = _change_spread(curve, (z0, z1, z01), q, cand)
     before_ns, after_ns = int(part.stamps_ns[q]), int(cand[q])
     # Reference times (ns after the reference's first pose) of the poses either side.
     t_before = before_ns - ref_t0_ns + offsets(np.array([before_ns]), after=False)[0] * NS_PER_S
     t_after = after_ns - ref_t0_ns + offsets(np.array([after_ns]), after=True)[0] * NS_PER_S
-    width_ns = float(max(int(near.max()) - after_ns, after_ns - int(near.min())))
-    sigma_ns = math.hypot(width_ns, (t_after - t_before) / math.sqrt(12.0))
+    sigma_ns = math.hypot(spread_ns, (t_after - t_before) / math.sqrt(12.0))
     return after_ns, (0.5 * (t_before + t_after), sigma_ns)
+
+
+class _ChangeCost:
+    """The cost of every change point from per-row costs, by cumulative sums.
+
+    A row ``(s_i, s_j)`` costs ``c0`` when the change is after its end (``s_j < s_q``),
+    ``c1`` when it is at or before its start (``s_i >= s_q``), and ``c01`` in between.
+    """
+
+    def __init__(self, si: IntArray, sj: IntArray, cand: IntArray) -> None:
+        """Sort the rows by start and by end, and find each candidate's place."""
+        self.si, self.sj = si, sj
+        self.by_i = np.argsort(si, kind="stable")
+        self.by_j = np.argsort(sj, kind="stable")
+        self.ni = np.searchsorted(si[self.by_i], cand, side="left")  # rows starting before
+        self.nj = np.searchsorted(sj[self.by_j], cand, side="left")  # rows ending before
+
+    def total(self, c0: FloatArray, c1: FloatArray, c01: FloatArray) -> FloatArray:
+        """(..., Q) the cost of each candidate; the costs are (..., n) per row."""
+
+        def cumulative(c: FloatArray, order: IntArray) -> FloatArray:
+            zero = np.zeros((*c.shape[:-1], 1))
+            return np.concatenate((zero, np.cumsum(c[..., order], axis=-1)), axis=-1)
+
+        c1_i, c01_i, c01_j = (
+            cumulative(c1, self.by_i),
+            cumulative(c01, self.by_i),
+            cumulative(c01, self.by_j),
+        )
+        out: FloatArray = (
+            cumulative(c0, self.by_j)[..., self.nj]
+            + (c1_i[..., -1:] - c1_i[..., self.ni])
+            + (c01_i[..., self.ni] - c01_j[..., self.nj])
+        )
+        return out
+
+
+def _change_spread(
+    curve: _ChangeCost,
+    z: tuple[FloatArray, FloatArray, FloatArray],
+    q: int,
+    cand: IntArray,
+) -> float:
+    """The RMS distance (ns) of the change point from ``cand[q]``, by parametric bootstrap.
+
+    The change point's cost curve is a random walk about the true one, whose argmin
+    scatters several times wider than the profile's ``cost - least <= 1`` interval when one
+    row tells little (Hinkley 1970); so the curve is drawn again :data:`BOOTSTRAP_DRAWS`
+    times with the change at ``q``: each row's standardised residuals in the state that
+    change gives it are Gaussian noise ``e``, so in another state they are ``e + d`` (``d``
+    the difference of the two states' residuals, in which the noise cancels), and the row
+    costs ``|e + d|²`` there. The drawn argmins' RMS distance from ``q`` is the sigma.
+    """
+    from scipy.signal import lfilter  # noqa: PLC0415  (scipy loads when a step is found)
+
+    sq = cand[q]
+    state = np.where(curve.sj < sq, 0, np.where(curve.si >= sq, 1, 2))
+    z_hat = np.choose(state[:, None], z)
+    # The rows' residuals follow one another (positions share the estimate's slow drift):
+    # the noise is drawn with their lag-one correlation (an AR(1) process along the rows).
+    order = np.argsort(curve.si, kind="stable")
+    seq = z_hat[order]
+    rho = float(np.clip((seq[1:] * seq[:-1]).sum() / max((seq * seq).sum(), 1e-300), 0.0, 0.99))
+    rng = np.random.default_rng(BOOTSTRAP_SEED)  # a fixed seed: the same data, the same sigma
+    white = rng.standard_normal((BOOTSTRAP_DRAWS, *z_hat.shape))
+    noise = np.empty_like(white)
+    noise[:, order] = lfilter([math.sqrt(1.0 - rho**2)], [1.0, -rho], white, axis=1)
+    costs = [((noise + (zs - z_hat)) ** 2).sum(axis=-1) for zs in z]
+    drawn = np.argmin(curve.total(*costs), axis=-1)
+    moved = (cand[drawn] - sq).astype(np.float64)
+    return float(np.sqrt(np.mean(moved**2)))

@@ -15,7 +15,14 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from loceval.calibration.common import NS_PER_S, PoseSampler, make_pairs, rotvec_of
+from loceval.calibration.common import (
+    NS_PER_S,
+    PoseSampler,
+    make_pairs,
+    quat_matrices,
+    rotate,
+    rotvec_of,
+)
 from loceval.core.arrays import BoolArray, FloatArray, IntArray
 from loceval.core.geometry import compose_quat, conjugate_quat
 from loceval.trajectory import Trajectory
@@ -32,6 +39,7 @@ MAX_WINDOW_SIGMA_S = 0.1
 WEAK_AXIS_SHARE = 1e-3
 """The device rotation is not refined along directions whose information is below this share
 of the largest (as :data:`loceval.calibration.handeye.WEAK_EXCITATION`)."""
+LEVER_ROUNDS = 40
 _FD_STEP_S = 1e-3
 _CONVERGED_S = 1e-6
 
@@ -308,6 +316,60 @@ class PositionRows:
         self.t = (self.stamp_i - sampler.origin_ns).astype(np.float64) / NS_PER_S
         self.p = estimate.positions_xyz[::stride]
         self.with_scale = with_scale
+        self.held: tuple[FloatArray, FloatArray, FloatArray] | None = None
+        self.lever = np.zeros(3)
+
+    def _reference(self, t: FloatArray) -> FloatArray:
+        """The reference's positions at ``t``, moved by the lever arm (in its body frame)."""
+        q = self.sampler.positions_at(t)
+        if not self.lever.any():
+            return q
+        out: FloatArray = q + rotate(self.sampler.quat_at(t), np.broadcast_to(self.lever, q.shape))
+        return out
+
+    def refine_lever(self, d: FloatArray, bounds_ns: IntArray) -> None:
+        """Estimate the lever arm from the tracked body to the estimated point (metres).
+
+        A position-only system measures a point (a tag, an antenna) some way from the
+        tracked body; as the body turns, that point swings about it, a motion no rigid
+        alignment takes up and which, as it goes with the velocity, would bias every
+        window's offset alike. With the reference's orientations it is one vector in the
+        body's frame: least squares of ``R_ref L = s R_w p_est + t_w - p_ref`` over all
+        rows, alternating with the windows' alignments (which take up part of the swing, so
+        that each round gets about half of what is left) until it moves by under a micrometre.
+        """
+        if self.sampler.quat is None:
+            return
+        group = np.searchsorted(bounds_ns, self.stamp_i, side="right")
+        groups = bounds_ns.shape[0] + 1
+        t = self.t + d
+        ok = self.sampler.valid(t)
+        body = self.sampler.positions_at(t)
+        rot_ref = quat_matrices(self.sampler.quat_at(t))
+        for _round in range(LEVER_ROUNDS):
+            before = self.lever
+            q = self._reference(t)
+            rot, scale, trans = _umeyama_groups(
+                self.p, q, group, ok, groups=groups, with_scale=self.with_scale
+            )
+            aligned = scale[group, None] * np.einsum("nij,nj->ni", rot[group], self.p)
+            gap = aligned + trans[group] - body
+            # R^T R = I: the normal equations' solution is the mean of R^T gap.
+            self.lever = np.einsum("nji,nj->i", rot_ref[ok], gap[ok]) / max(int(ok.sum()), 1)
+            if np.abs(self.lever - before).max() < 1e-6:
+                break
+
+    def hold_alignment(self, d: FloatArray, use: BoolArray) -> None:
+        """Align the rows ``use`` once, at offsets ``d``, and keep that for what follows.
+
+        Judging one row under two offsets (a step's sides) must not align anew each time:
+        the alignment would take up part of the difference it is to tell.
+        """
+        t = self.t + d
+        group = np.zeros(t.shape[0], dtype=np.intp)
+        q = self._reference(t)
+        ok = self.sampler.valid(t) & use
+        self.held = _umeyama_groups(self.p, q, group, ok, groups=1, with_scale=self.with_scale)
 
     def residuals(
         self,
@@ -320,13 +382,40 @@ class PositionRows:
         """(n, 3) residuals after each group's alignment, and the rows on tracked reference."""
         t = self.t + d_i
         ok = self.sampler.valid(t)
-        q = self.sampler.positions_at(t)
+        q = self._reference(t)
         use = ok if mask is None else mask & ok
+        if self.held is not None:
+            rot, scale, trans = self.held
+            aligned = scale[group, None] * np.einsum("nij,nj->ni", rot[group], self.p)
+            return q - aligned - trans[group], ok
         rot, scale, trans = _umeyama_groups(
             self.p, q, group, use, groups=groups, with_scale=self.with_scale
         )
         aligned = scale[group, None] * np.einsum("nij,nj->ni", rot[group], self.p) + trans[group]
-        return q - aligned, ok
+        return _detrended(q - aligned, self.t, group, use, groups=groups), ok
+
+
+def _detrended(
+    r: FloatArray, t: FloatArray, group: IntArray, use: BoolArray, *, groups: int
+) -> FloatArray:
+    """Residuals less each group's straight line in time (its drift velocity), least squares.
+
+    An estimate drifts (SLAM): within a window its positions move away from the reference
+    at a nearly constant velocity, which a rigid alignment cannot take up and which the
+    offset's Jacobian (the reference's velocity) would otherwise partly explain; shared by
+    every window, it would bias all their offsets alike.
+    """
+    w = use.astype(np.float64)
+    n = np.maximum(np.bincount(group, w, minlength=groups), 1.0)
+    dt = t - np.bincount(group, w * t, minlength=groups)[group] / n[group]
+    var = np.maximum(np.bincount(group, w * dt * dt, minlength=groups), 1e-300)
+    cols = [np.bincount(group, w * dt * r[:, k], minlength=groups) / var for k in range(3)]
+    slope = np.stack(cols, axis=1)
+    mean = np.stack(
+        [np.bincount(group, w * r[:, k], minlength=groups) / n for k in range(3)], axis=1
+    )
+    out: FloatArray = r - mean[group] - slope[group] * dt[:, None]
+    return out
 
 
 def _umeyama_groups(
@@ -382,6 +471,7 @@ class RowMaker:
         self.rotation = rotation
         self.offset_ns = offset_ns
         self.with_scale = with_scale
+        self.lever = np.zeros(3)
 
     def make(self, trajectory: Trajectory, max_rows: int) -> Rows:
         """The rows of ``trajectory`` (at most ``max_rows``, thinned evenly)."""
@@ -393,7 +483,9 @@ class RowMaker:
                 offset_ns=self.offset_ns,
                 max_pairs=max_rows,
             )
-        return PositionRows(self.sampler, trajectory, with_scale=self.with_scale, max_rows=max_rows)
+        rows = PositionRows(self.sampler, trajectory, with_scale=self.with_scale, max_rows=max_rows)
+        rows.lever = self.lever
+        return rows
 
 
 @dataclass(frozen=True, slots=True, eq=False)
