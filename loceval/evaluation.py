@@ -429,8 +429,9 @@ def _evaluate_one(
     clocked = offsets.clock(estimate).restamped(estimate)
     if len(clocked) < len(estimate):
         notes.append(
-            f"{len(estimate) - len(clocked)} poses of the estimate were dropped: its clock was "
-            "set back, and their stamps fall among those of the poses before the step."
+            f"{len(estimate) - len(clocked)} poses of the estimate were dropped: with the "
+            "clock's step applied, their stamps fall among those of the poses before it (a "
+            "clock set back, or a step whose time the motion tells only roughly)."
         )
     matched = associate(
         reference,

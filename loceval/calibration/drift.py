@@ -190,8 +190,9 @@ class ClockModel:
         """
         if not self.varies:
             return trajectory
-        stamps = trajectory.stamps_ns + np.rint(self.varying_s(trajectory.stamps_ns) * NS_PER_S)
-        stamps = stamps.astype(np.int64)
+        # In int64: float64 holds an epoch stamp only to a quarter of a microsecond.
+        moved_ns = np.rint(self.varying_s(trajectory.stamps_ns) * NS_PER_S).astype(np.int64)
+        stamps = trajectory.stamps_ns + moved_ns
         keep = np.concatenate(([True], stamps[1:] > np.maximum.accumulate(stamps)[:-1]))
         if keep.all():
             return replace(trajectory, stamps_ns=stamps)
