@@ -248,9 +248,18 @@ def check_offsets(
     )
     if not (auto_device or device is not None):
         return dataclasses.replace(check, warnings=tuple(notes))
-    # The device's relative motions take the stamps on the reference's clock, the drift
-    # applied (the constant part stays with the time offset, refined jointly when auto).
-    estimate = check.clock(estimate).restamped(estimate)
+    # The device offset is estimated on the clock the data show (their offset, drift and
+    # steps), whatever is applied: a given offset or a drift not applied that the data
+    # contradict would bend the relative motions, and with them the device offset, beyond
+    # its sigma (a ground robot's rotation about its only axis most). The offset is refined
+    # jointly; the refined one is applied only when it is the one applied (``auto``).
+    data_clock = _data_clock(clock) or check.clock(estimate)
+    applied_clock = check.clock(estimate)
+    same_shape = (data_clock.rate_ppm, data_clock.steps) == (
+        applied_clock.rate_ppm,
+        applied_clock.steps,
+    )
+    estimate = data_clock.restamped(estimate)
     if not (reference.has_orientation and estimate.has_orientation):
         if auto_device:
             side = reference.name if not reference.has_orientation else estimate.name
@@ -262,8 +271,7 @@ def check_offsets(
     found = _device(
         reference,
         estimate,
-        applied_s,
-        joint=auto_time and auto_device,
+        data_clock.offset_s,
         auto_device=auto_device,
         max_gap_s=max_gap_s,
         with_scale=with_scale,
@@ -287,7 +295,7 @@ def check_offsets(
         f"Device offset estimated from the motion and applied to the reference: ({t_mm}) mm "
         f"from the tracked body to the sensor, from {found.pairs} relative motions."
     )
-    if auto_time and clock is not None and found.sigma_time_offset_s is not None:
+    if auto_time and same_shape and clock is not None and found.sigma_time_offset_s is not None:
         # The joint fit refines the clock's estimate with the device offset: apply that.
         clock = _with_joint(clock, found.time_offset_s, found.sigma_time_offset_s)
         applied_s = clock.value_s
@@ -311,13 +319,12 @@ def _device(
     estimate: Trajectory,
     time_offset_s: float,
     *,
-    joint: bool,
     auto_device: bool,
     max_gap_s: float,
     with_scale: bool,
     notes: list[str],
 ) -> DeviceOffsetEstimate | None:
-    """Estimate the device offset; None (and a note) when a mere check cannot run."""
+    """Estimate the device offset with the time offset; None (a note) if a check cannot run."""
     from loceval.calibration.handeye import estimate_device_offset  # noqa: PLC0415
 
     return _estimated(
@@ -325,7 +332,7 @@ def _device(
             reference,
             estimate,
             time_offset_s=time_offset_s,
-            fit_time_offset=joint,
+            fit_time_offset=True,
             with_scale=with_scale,
             max_gap_s=max_gap_s,
             max_pairs=ESTIMATE_MAX_PAIRS if auto_device else CHECK_MAX_PAIRS,
@@ -350,6 +357,16 @@ def _estimated(
             raise
         notes.append(f"The {what} could not be checked against the motion: {err}")
         return None
+
+
+def _data_clock(clock: TimeOffsetEstimate | None) -> ClockModel | None:
+    """The clock the data show: their offset, with the drift and steps when significant."""
+    if clock is None or clock.estimated_s is None:
+        return None
+    drift = clock.drift
+    if drift is not None and (drift.significant or drift.steps):
+        return drift.model(with_rate=True, with_steps=True, offset_s=drift.offset_s)
+    return dataclasses.replace(clock.model, offset_s=clock.estimated_s, rate_ppm=clock.rate_ppm)
 
 
 def _with_joint(clock: TimeOffsetEstimate, value_s: float, sigma_s: float) -> TimeOffsetEstimate:
