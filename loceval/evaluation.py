@@ -11,7 +11,7 @@ import numpy as np
 
 from loceval._version import __version__
 from loceval.assessment.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
-from loceval.calibration.offsets import DeviceSource, OffsetCheck, check_offsets
+from loceval.calibration.offsets import DeviceSource, OffsetCheck, check_offsets, parse_offset
 from loceval.core.arrays import IntArray
 from loceval.core.gaps import gap_threshold_ns
 from loceval.core.geometry import SimilarityTransform
@@ -36,7 +36,7 @@ from loceval.registration.association import (
     associate,
     association_notes,
 )
-from loceval.trajectory import MAX_OFFSET_M, Trajectory
+from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from loceval.assessment.assess import Assessment
@@ -302,33 +302,6 @@ class EvaluationResult:
         }
 
 
-def parse_offset(text: str) -> SimilarityTransform:
-    """Parse ``"x y z qx qy qz qw"`` (or ``"x y z"``) into a rigid offset.
-
-    Raises:
-        InputError: not 3 or 7 finite numbers, x y z over MAX_OFFSET_M, a non-unit quaternion.
-    """
-    try:
-        values = [float(v) for v in text.replace(",", " ").split()]
-    except ValueError:
-        values = []
-    if len(values) not in (3, 7) or not np.isfinite(values).all():
-        msg = (
-            f'The device offset takes "x y z qx qy qz qw" in metres and a unit quaternion '
-            f'(or just "x y z"), got {text!r}.'
-        )
-        raise InputError(msg, option="offset")
-    if float(np.abs(values[:3]).max()) > MAX_OFFSET_M:
-        msg = f"The device offset's x y z {values[:3]!r} exceed ±{MAX_OFFSET_M:g} m; give metres."
-        raise InputError(msg, option="offset")
-    quat = np.array(values[3:] if len(values) == 7 else [0.0, 0.0, 0.0, 1.0])
-    norm = float(np.linalg.norm(quat))
-    if abs(norm - 1.0) > 1e-3:
-        msg = f"The device offset's quaternion must be unit (x y z w), its norm is {norm:.6g}."
-        raise InputError(msg, option="offset")
-    return SimilarityTransform.from_pose(np.array(values[:3]), quat / norm)
-
-
 def evaluate(
     reference: Trajectory,
     estimates: Sequence[Trajectory],
@@ -424,15 +397,7 @@ def _evaluate_one(
     notes.extend(offsets.warnings)
     if offsets.device_applied and offsets.device is not None:
         reference = recorded.with_body_offset(offsets.device.transform)
-    # A drifting clock: the stamps move by the offset's change along the run; the
-    # association adds the offset at the first pose (time_offset_s) to all of them.
-    clocked = offsets.clock(estimate).restamped(estimate)
-    if len(clocked) < len(estimate):
-        notes.append(
-            f"{len(estimate) - len(clocked)} poses of the estimate were dropped: with the "
-            "clock's step applied, their stamps fall among those of the poses before it (a "
-            "clock set back, or a step whose time the motion tells only roughly)."
-        )
+    clocked = offsets.clocked(estimate, notes)  # the association adds time_offset_s
     matched = associate(
         reference,
         clocked,

@@ -23,6 +23,7 @@ from loceval.calibration.common import (
     rotate,
     rotvec_of,
 )
+from loceval.calibration.motion import DriftSignals, MotionSignal, grid_dt_s, motion_signal
 from loceval.core.arrays import BoolArray, FloatArray, IntArray
 from loceval.core.geometry import compose_quat, conjugate_quat
 from loceval.trajectory import Trajectory
@@ -44,36 +45,8 @@ _FD_STEP_S = 1e-3
 _CONVERGED_S = 1e-6
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class DriftSignals:
-    """The motion signals of both sides on one grid (from the run's coarse search).
-
-    Attributes:
-        reference: (F,) the reference's signal from its first pose, every ``dt_s``.
-        reference_mask: (F,) where it is valid.
-        estimate: (G,) the estimate's, from its first stamp (its clock).
-        estimate_mask: (G,) where it is valid.
-        dt_s: the grid's step, seconds.
-    """
-
-    reference: FloatArray
-    reference_mask: BoolArray
-    estimate: FloatArray
-    estimate_mask: BoolArray
-    dt_s: float
-
-
-# --- stage 1: the windows' coarse offsets -----------------------------------------------------
-
-
 def motion_signals(reference: Trajectory, estimate: Trajectory, *, max_gap_ns: int) -> DriftSignals:
     """The motion signals (angular speed, or speed position-only) of both sides."""
-    from loceval.calibration.clock import (  # noqa: PLC0415  (clock imports the drift)
-        MotionSignal,
-        grid_dt_s,
-        motion_signal,
-    )
-
     use_rotation = reference.has_orientation and estimate.has_orientation
     signal = MotionSignal.ANGULAR_SPEED if use_rotation else MotionSignal.SPEED
     dt = grid_dt_s(reference, estimate)

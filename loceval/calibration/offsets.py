@@ -30,16 +30,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, TypeVar
 
+import numpy as np
+
+from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError, LocevalError
+from loceval.trajectory import MAX_OFFSET_M
 
 if TYPE_CHECKING:
     from loceval.calibration.clock import TimeOffsetEstimate
     from loceval.calibration.drift import ClockModel
     from loceval.calibration.handeye import DeviceOffsetComparison, DeviceOffsetEstimate
-    from loceval.core.geometry import SimilarityTransform
     from loceval.trajectory import Trajectory
 
-__all__ = ["CHECK_MAX_PAIRS", "DeviceSource", "OffsetCheck", "check_offsets"]
+__all__ = ["CHECK_MAX_PAIRS", "DeviceSource", "OffsetCheck", "check_offsets", "parse_offset"]
 
 CHECK_MAX_PAIRS = 1_000
 """Most relative motions the least squares use when the result only checks a given value."""
@@ -82,6 +85,21 @@ class OffsetCheck:
     warnings: tuple[str, ...] = ()
     clock_drift_ppm: float = 0.0
     notes: tuple[str, ...] = ()
+
+    def clocked(self, estimate: Trajectory, notes: list[str]) -> Trajectory:
+        """``estimate`` with the offset's change along the run added to its stamps.
+
+        The association then adds ``time_offset_s`` (the offset at the first pose) to all.
+        Poses that a step puts among those before it are dropped, with a note.
+        """
+        clocked = self.clock(estimate).restamped(estimate)
+        if len(clocked) < len(estimate):
+            notes.append(
+                f"{len(estimate) - len(clocked)} poses of the estimate were dropped: with the "
+                "clock's step applied, their stamps fall among those of the poses before it "
+                "(a clock set back, or a step whose time the motion tells only roughly)."
+            )
+        return clocked
 
     def clock(self, estimate: Trajectory) -> ClockModel:
         """The time offset applied along ``estimate``'s run (its first stamp the epoch)."""
@@ -380,3 +398,30 @@ def _with_joint(clock: TimeOffsetEstimate, value_s: float, sigma_s: float) -> Ti
         estimated_s=value_s,
         candidates_s=tuple(candidates),
     )
+
+
+def parse_offset(text: str) -> SimilarityTransform:
+    """Parse ``"x y z qx qy qz qw"`` (or ``"x y z"``) into a rigid offset.
+
+    Raises:
+        InputError: not 3 or 7 finite numbers, x y z over MAX_OFFSET_M, a non-unit quaternion.
+    """
+    try:
+        values = [float(v) for v in text.replace(",", " ").split()]
+    except ValueError:
+        values = []
+    if len(values) not in (3, 7) or not np.isfinite(values).all():
+        msg = (
+            f'The device offset takes "x y z qx qy qz qw" in metres and a unit quaternion '
+            f'(or just "x y z"), got {text!r}.'
+        )
+        raise InputError(msg, option="offset")
+    if float(np.abs(values[:3]).max()) > MAX_OFFSET_M:
+        msg = f"The device offset's x y z {values[:3]!r} exceed ±{MAX_OFFSET_M:g} m; give metres."
+        raise InputError(msg, option="offset")
+    quat = np.array(values[3:] if len(values) == 7 else [0.0, 0.0, 0.0, 1.0])
+    norm = float(np.linalg.norm(quat))
+    if abs(norm - 1.0) > 1e-3:
+        msg = f"The device offset's quaternion must be unit (x y z w), its norm is {norm:.6g}."
+        raise InputError(msg, option="offset")
+    return SimilarityTransform.from_pose(np.array(values[:3]), quat / norm)
