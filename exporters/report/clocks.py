@@ -86,9 +86,9 @@ def drift_words(e: EstimateResult, config: EvaluationConfig) -> str:
     if drift.steps:
         words += "; " + "; ".join(describe_step(s) for s in drift.steps)
     if clock.rate_ppm != 0.0 or clock.steps_applied:
-        stepped = " and the steps" if clock.steps_applied else ""
         whose = "estimated" if config.auto_clock_drift else "given"
-        return f"{words}. The {whose} rate{stepped} were applied along the run."
+        what = "rate and the steps were" if clock.steps_applied else "rate was"
+        return f"{words}. The {whose} {what} applied along the run."
     if not drift.significant and not drift.steps:
         return f"{words}: no drift beyond {SIGNIFICANT_Z:g} sigma, so none was applied."
     return f"{words}. This was not corrected: one offset was applied to the whole run."
