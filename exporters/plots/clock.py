@@ -145,7 +145,7 @@ def plot_clock_drift(
                     markerfacecolor=face,
                     elinewidth=0.8,
                     linewidth=0,
-                    label=f"{name}: windows (1 sigma)" if used else "left out (outliers)",
+                    label=f"{name}: windows (1 sigma)" if used else "weighed less (outliers)",
                 )
         t = np.linspace(0.0, drift.duration_s, 400)
         stamps = drift.epoch_ns + np.rint(t * 1e9).astype(np.int64)

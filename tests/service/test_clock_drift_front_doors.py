@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from service.cli import main
+from tests.calibration_factory import Motion
 from tests.clock_factory import ClockTruth, DriftRecording, make_drifting_recording
 from tests.factories import write_tum
 from tests.service._api_fixtures import assert_problem, open_api
@@ -145,3 +146,21 @@ def test_api_bad_values_are_422(tmp_path: Path, value: object, detail: str) -> N
             "options": {"formats": ["result.json"], "clock_drift_ppm": value},
         }
         assert_problem(api.evaluate(body), 422, detail=detail)
+
+
+def test_cli_lists_the_quiet_check_under_notes(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A repeating loop whose given offset the data fit: a note, printed apart from warnings."""
+    loop = make_drifting_recording(
+        np.random.default_rng(2), ClockTruth(offset_s=0.0), motion=Motion.LOOP, duration_s=300.0
+    )
+    ref = write_tum(tmp_path / "truth.txt", loop.reference)
+    est = write_tum(tmp_path / "robot.txt", loop.estimate)
+    assert main(["evaluate", str(ref), str(est), "--no-ci"]) == 0
+    out = capsys.readouterr().out
+    notes = out.split("\nNotes\n", 1)[1].split("\nWarnings\n", 1)[0]
+    assert "The motion repeats, so" in notes
+    assert "the given 0 s is one of them" in notes
+    warnings = out.split("\nWarnings\n", 1)[1] if "\nWarnings\n" in out else ""
+    assert "The motion repeats" not in warnings
