@@ -363,3 +363,23 @@ def test_model_restamps_and_drops_interleaved_poses() -> None:
     assert (np.diff(back.stamps_ns) > 0).all()
     assert len(traj) - len(back) == 1
     assert back.stamps_ns[300] == traj.stamps_ns[301] - 50_000_000
+
+
+def test_control_points_take_a_given_rate() -> None:
+    """A control-point evaluation applies a given clock rate from the estimate's first pose."""
+    from loceval.checkpoint_evaluation import CheckpointConfig, evaluate_control_points
+    from loceval.registration.alignment import AlignMethod
+    from tests.checkpoint_factory import grid_points, stop_and_go
+
+    rec = stop_and_go(np.random.default_rng(4), grid_points(3, 4), passes=1)
+    result = evaluate_control_points(
+        rec.points,
+        [rec.estimate],
+        EvaluationConfig(align=AlignMethod.NONE, clock_drift_ppm=-500.0),
+        CheckpointConfig(),
+    )
+    stamps = result.estimates[0].estimate.stamps_ns
+    since_s = (rec.estimate.stamps_ns - rec.estimate.stamps_ns[0]) / 1e9
+    np.testing.assert_allclose(
+        (stamps - rec.estimate.stamps_ns) / 1e9, since_s * slope_of_rate(-500.0), atol=1e-9
+    )
