@@ -42,7 +42,8 @@ WEAK_AXIS_SHARE = 1e-3
 of the largest (as :data:`loceval.calibration.handeye.WEAK_EXCITATION`)."""
 LEVER_ROUNDS = 40
 _FD_STEP_S = 1e-3
-_CONVERGED_S = 1e-6
+_CONVERGED_S = 1e-5
+"""Gauss-Newton stops when no window moves more (10 µs: a tenth of a good window's sigma)."""
 
 
 def motion_signals(reference: Trajectory, estimate: Trajectory, *, max_gap_ns: int) -> DriftSignals:

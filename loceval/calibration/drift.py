@@ -131,6 +131,7 @@ def estimate_clock_drift(
     max_pairs: int = 40_000,
     given: ClockModel | None = None,
     signals: DriftSignals | None = None,
+    rounds: int = 2,
 ) -> ClockDrift:
     """Estimate the drift (and steps) of the estimate's clock along the run.
 
@@ -147,6 +148,8 @@ def estimate_clock_drift(
         max_pairs: most relative motions (or poses, position-only) used (thinned evenly).
         given: a model to search the windows about (default: ``offset_s`` constant).
         signals: the motion signals, if the caller has them (else computed here).
+        rounds: how often the device rotation (or lever arm) is fitted again and the windows
+            with it (2 when the drift is to be applied; 1 does for a check).
 
     Returns:
         The rate, the offset at the first pose and the steps, with sigmas and the windows.
@@ -200,7 +203,7 @@ def estimate_clock_drift(
     # rotation is fitted again first, to offsets that follow the line, and once more after
     # (the first line, from the run's rotation, can be off by milliseconds, which leaves
     # the rotation a few hundredths of a degree off, and the rate a few tenths of a sigma).
-    for _round in range(2):
+    for _round in range(max(rounds, 1)):
         if isinstance(rows, RotationPairs):
             rows.refine_rotation(*_line_offsets(rows, line, epoch_ns))
             maker.rotation = rows.rotation
@@ -476,6 +479,7 @@ def check_clock_drift(
             max_pairs=max_rows,
             given=prior,
             signals=signals,
+            rounds=2 if given_rate_ppm is None else 1,
         )
     except InputError as err:
         if given_rate_ppm is None:

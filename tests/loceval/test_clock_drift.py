@@ -383,3 +383,13 @@ def test_control_points_take_a_given_rate() -> None:
     np.testing.assert_allclose(
         (stamps - rec.estimate.stamps_ns) / 1e9, since_s * slope_of_rate(-500.0), atol=1e-9
     )
+
+
+@pytest.mark.parametrize("dof", [5, 8, 20, 62, 500])
+def test_student_factor_matches_scipy(dof: int) -> None:
+    """The line's Student factor (an expansion, no scipy import) is scipy's within 0.3 %."""
+    from scipy.stats import t as student
+
+    from loceval.calibration._drift_steps import _student_at_3_sigma
+
+    assert _student_at_3_sigma(dof) == pytest.approx(student.ppf(0.99865, dof), rel=0.003)
