@@ -187,7 +187,7 @@ def test_drift_not_asked_is_a_warning_with_the_figure(drifting: DriftRecording) 
     assert e.offsets is not None
     assert e.offsets.clock(drifting.estimate).varies is False
     spec = option("clock_drift_ppm")
-    rate = [w for w in e.warnings if w.startswith("The estimate's clock runs 2")]
+    rate = [w for w in e.warnings if w.startswith("The estimate's clock runs ")]
     assert len(rate) == 1
     assert "ppm slow, so the time offset moves by 1" in rate[0]  # ~120 ms
     assert "more than the 10 ms association tolerance" in rate[0]
