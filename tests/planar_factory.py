@@ -3,12 +3,13 @@
 A robot drives a closed path on the floor (rotation about z only) and the estimate follows
 its sensor, mounted at a known offset. The families vary what the rotation about z of the
 device offset is told by: the loop's shape (ellipse, racetrack, figure eight, a wobbly
-random loop, a limacon), the speed profile (constant, sinusoidal, stop-and-go), whether the robot drives
-forward (heading along the path) or also turns on its own (holonomic), the noise, the
-estimate's heading and position drift, its rate, the run's length and the mounting.
+random loop, a limacon), the speed profile (constant, sinusoidal, stop-and-go), whether the
+robot drives forward (heading along the path) or also turns on its own (holonomic), the
+noise, the estimate's heading and position drift, its rate, the run's length and the
+mounting.
 
 :data:`TUNING` and :data:`HELD_OUT` split the families: the honest sigma of
-:mod:`loceval.calibration.handeye` was chosen on the first only.
+:mod:`loceval.calibration.handeye` was checked on the first only.
 """
 
 from __future__ import annotations
@@ -207,9 +208,8 @@ def make_planar_recording(rng: np.random.Generator, family: PlanarFamily) -> Rec
     world = Rotation.from_euler("xyz", rng.uniform(-180, 180, 3), degrees=True)
     yaw_rate = family.yaw_drift_deg_per_min * rng.choice([-1, 1]) / 60.0
     heading_error = np.radians(
-        yaw_rate * t_est + np.cumsum(rng.normal(0.0, 0.02, t_est.size)) * np.sqrt(
-            30.0 / family.estimate_rate_hz
-        )
+        yaw_rate * t_est
+        + np.cumsum(rng.normal(0.0, 0.02, t_est.size)) * np.sqrt(30.0 / family.estimate_rate_hz)
     )
     drift_r = Rotation.from_euler("z", heading_error[:, None])
     if family.drift_model == "odometry":
