@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from loceval._version import __version__
+from loceval.calibration.clockmodel import ClockModel
 from loceval.checkpoints.config import CheckpointConfig
 from loceval.checkpoints.fit import CheckpointResult, evaluate_checkpoints
 from loceval.controlpoints import ControlPoints, Visits
@@ -157,6 +158,9 @@ def evaluate_control_points(
     for k, estimate in enumerate(estimates):  # one iteration per estimate
         report(f"scoring {estimate.name}", k / max(len(estimates), 1))
         shifted = estimate.shifted(offset_ns) if offset_ns else estimate
+        if config.clock_drift_ppm:  # a given clock rate, from the estimate's first stamp
+            epoch_ns = int(shifted.stamps_ns[0])
+            shifted = ClockModel(0.0, epoch_ns, rate_ppm=config.clock_drift_ppm).restamped(shifted)
         result = evaluate_checkpoints(
             points,
             shifted,

@@ -91,6 +91,9 @@ class EvaluationConfig:
         no_ci: skip the confidence intervals and comparisons (their ``ci95`` is null).
         reference_sigma_m: the reference's own per-axis standard deviation, metres.
         auto_time_offset: apply the time offset estimated from the motion.
+        clock_drift_ppm: how fast the estimates' clocks run against the reference's, ppm,
+            applied with the time offset at each estimate's first pose.
+        auto_clock_drift: apply the clock drift (and steps) estimated from the motion.
         auto_device: apply the device offset estimated from the motion to the reference.
         reference_offset_source: ``urdf`` (a URDF or ``/tf_static``) or ``given``.
         planar: measure position errors in x-y only (each matched estimate pose takes
@@ -119,6 +122,8 @@ class EvaluationConfig:
     reference_offset_source: DeviceSource = "given"
     planar: bool = False
     min_excursion_s: float = number_default("min_excursion_s")
+    clock_drift_ppm: float = number_default("clock_drift_ppm")
+    auto_clock_drift: bool = False
 
     def __post_init__(self) -> None:
         """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
@@ -132,6 +137,7 @@ class EvaluationConfig:
             raise InputError(msg, option="max_gap_s")
         check_option("max_gap_s", self.max_gap_s, unit="seconds")
         check_option("time_offset_s", self.time_offset_s, unit="seconds")
+        check_option("clock_drift_ppm", self.clock_drift_ppm, unit="ppm")
         if self.calibrate_at_s is not None:
             check_option("calibrate_at_s", self.calibrate_at_s, unit="seconds")
         check_option("rpe_delta", self.rpe_delta, unit=_RPE_UNIT_WORDS[self.rpe_unit])
@@ -171,6 +177,8 @@ class EvaluationConfig:
             "auto_device": self.auto_device,
             "planar": self.planar,
             "min_excursion_s": self.min_excursion_s,
+            "clock_drift_ppm": self.clock_drift_ppm,
+            "auto_clock_drift": self.auto_clock_drift,
         }
 
 
@@ -197,6 +205,7 @@ class EstimateResult:
         assessment: intervals, consistency and reference error (None: nothing to assess).
         offsets: the time and device offsets given, estimated and applied.
         excursions: the stretches outside the tracked room (:mod:`loceval.metrics.excursions`).
+        notes: what the evaluation found that asks nothing of the user (the clock check).
     """
 
     estimate: Trajectory
@@ -216,6 +225,7 @@ class EstimateResult:
     assessment: Assessment | None = None
     offsets: OffsetCheck | None = None
     excursions: tuple[Excursion, ...] = ()
+    notes: tuple[str, ...] = ()
 
     @property
     def name(self) -> str:
@@ -399,19 +409,22 @@ def _evaluate_one(
         auto_device=config.auto_device,
         max_gap_s=config.max_gap_s,
         with_scale=config.align is AlignMethod.SIM3,
+        clock_drift_ppm=None if config.auto_clock_drift else config.clock_drift_ppm,
+        tolerance_s=config.max_dt_s,
     )
     notes.extend(offsets.warnings)
     if offsets.device_applied and offsets.device is not None:
         reference = recorded.with_body_offset(offsets.device.transform)
+    clocked = offsets.clocked(estimate, notes)  # the association adds time_offset_s
     matched = associate(
         reference,
-        estimate,
+        clocked,
         method=config.association,
         max_dt_ns=round(config.max_dt_s * _NS_PER_S),
         max_gap_ns=round(config.max_gap_s * _NS_PER_S),
         offset_ns=round(offsets.time_offset_s * _NS_PER_S),
     )
-    notes.extend(association_notes(matched, len(estimate), reference.loss_words))
+    notes.extend(association_notes(matched, len(clocked), reference.loss_words))
     min_gap_ns = round(config.max_gap_s * _NS_PER_S)
     own_gaps = estimate.tracking_losses(min_gap_ns)
     if own_gaps:
@@ -477,9 +490,10 @@ def _evaluate_one(
         warnings=tuple(notes),
         offsets=offsets,
         assessment=assessment,
+        notes=offsets.notes,
         excursions=find_excursions(
             reference.tracking_losses(min_gap_ns),
-            estimate,
+            clocked,
             alignment.transform,
             ref.stamps_ns,
             ate_t.values,
@@ -578,7 +592,7 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig, t0: int) -> dict
         "reference_error": _assessed(e, "reference_error"),
         "excursions": [x.to_dict(t0) for x in e.excursions],
         "warnings": list(e.warnings),
-        "notes": list(e.estimate.notes),
+        "notes": [*e.estimate.notes, *e.notes],
     }
 
 

@@ -100,6 +100,20 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         auto=True,
     ),
     OptionSpec(
+        "clock_drift_ppm",
+        OptionKind.NUMBER,
+        0.0,
+        "how fast the estimate's clock runs against the reference's, ppm (negative: slow), "
+        "applied with the time offset at its first pose; auto: estimated from the motion, "
+        "with any clock step",
+        "the clock drift",
+        "clock-drift",
+        "PPM|auto",
+        minimum=-1000.0,  # loceval.calibration.drift.MAX_RATE_PPM
+        maximum=1000.0,
+        auto=True,
+    ),
+    OptionSpec(
         "stamp",
         OptionKind.CHOICE,
         StampSource.HEADER.value,
@@ -564,29 +578,13 @@ def option(key: str) -> OptionSpec:
 
 
 def number_default(key: str) -> float:
-    """Return the default of a number option.
-
-    Raises:
-        TypeError: the option has no number default (a bug).
-    """
-    default = option(key).default
-    if isinstance(default, bool) or not isinstance(default, int | float):
-        msg = f"Option {key!r} has no number default."
-        raise TypeError(msg)
-    return float(default)
+    """Return the default of a number option (:meth:`OptionSpec.number_default`)."""
+    return option(key).number_default()
 
 
 def choice_default(key: str) -> str:
-    """Return the default of a choice or text option.
-
-    Raises:
-        TypeError: the option has no text default (a bug).
-    """
-    default = option(key).default
-    if not isinstance(default, str):
-        msg = f"Option {key!r} has no text default."
-        raise TypeError(msg)
-    return default
+    """Return the default of a choice or text option (:meth:`OptionSpec.text_default`)."""
+    return option(key).text_default()
 
 
 def check_option(key: str, value: float, *, unit: str = "") -> None:

@@ -214,6 +214,29 @@ class OptionSpec:
             parts.append(f"at most {self.maximum:g}")
         return " and ".join(parts)
 
+    def number_default(self) -> float:
+        """Return the default of a number option.
+
+        Raises:
+            TypeError: the option has no number default (a bug).
+        """
+        default = self.default
+        if isinstance(default, bool) or not isinstance(default, int | float):
+            msg = f"Option {self.key!r} has no number default."
+            raise TypeError(msg)
+        return float(default)
+
+    def text_default(self) -> str:
+        """Return the default of a choice or text option.
+
+        Raises:
+            TypeError: the option has no text default (a bug).
+        """
+        if not isinstance(self.default, str):
+            msg = f"Option {self.key!r} has no text default."
+            raise TypeError(msg)
+        return self.default
+
     def bounds_problem(self, value: float, *, unit: str = "") -> str:
         """Return what is wrong with a number for this option ("" when it is fine)."""
         if self.within_bounds(value):

@@ -110,6 +110,7 @@ def config_from_options(
     values = option_values(options)
     check_device_choice(values, front_door=front_door)
     auto_time = is_auto(values["time_offset_s"])
+    auto_drift = is_auto(values["clock_drift_ppm"])
     check_option("clutter_m", values["clutter_m"], unit="metres")  # the map's, checked as early
     checkpoints_from_options(values)  # control-point options fail as fast as the others
     tolerance = values["tolerance"]
@@ -135,6 +136,8 @@ def config_from_options(
         reference_offset_source="given" if device_transform is None else "urdf",
         planar=values["planar"],
         min_excursion_s=values["min_excursion_s"],
+        clock_drift_ppm=0.0 if auto_drift else float(values["clock_drift_ppm"]),
+        auto_clock_drift=auto_drift,
     )
 
 

@@ -1,4 +1,8 @@
-"""The report's clock plot: the motion correlation against the time offset, per estimate."""
+"""The report's clock plots, per estimate.
+
+The motion correlation against the time offset, and the time offset along the run (the
+clock's drift and steps).
+"""
 
 from __future__ import annotations
 
@@ -17,9 +21,11 @@ from exporters.plots.figure import (
     new_figure,
     style_axes,
 )
+from loceval.calibration.clock import TimeOffsetEstimate
+from loceval.calibration.drift import ClockDrift
 from loceval.evaluation import EvaluationResult
 
-__all__ = ["ZOOM_S", "plot_clock_correlation"]
+__all__ = ["ZOOM_S", "drift_checked", "plot_clock_correlation", "plot_clock_drift"]
 
 ZOOM_S = 1.0
 """Half-width of the lower panel around each estimate's offset, seconds."""
@@ -83,4 +89,101 @@ def plot_clock_correlation(
     )
     return encode_plot(
         fig, formats, key="clock_correlation", title="Clock check: correlation", caption=caption
+    )
+
+
+def drift_checked(result: EvaluationResult) -> list[tuple[int, TimeOffsetEstimate, ClockDrift]]:
+    """The estimates whose clock's drift was checked: (index, time offset, drift)."""
+    out = []
+    for k, e in enumerate(result.estimates):
+        clock = None if e.offsets is None else e.offsets.time_offset
+        if clock is not None and clock.drift is not None:
+            out.append((k, clock, clock.drift))
+    return out
+
+
+def plot_clock_drift(
+    result: EvaluationResult, *, formats: Sequence[ImageFormat] = ("svg",)
+) -> Plot | None:
+    """The time offset along the run: the windows' offsets, the fitted line and what was applied.
+
+    One panel per estimate whose drift was checked. Its offsets are shown as their change
+    from the fitted line's offset at the estimate's first pose, in ms, against minutes of
+    the estimate's clock: the windows with 1-sigma bars (hollow where the line weighed them
+    less), the fitted line with its steps, and, dashed, the change applied when it is not
+    that line (the drift not applied).
+
+    Args:
+        result: the evaluation.
+        formats: the encodings to produce.
+
+    Returns:
+        The plot, or None when no estimate's drift was checked.
+    """
+    checked = drift_checked(result)
+    if not checked:
+        return None
+    fig = new_figure(1.2 + 1.6 * len(checked))
+    axes = fig.subplots(len(checked), 1, squeeze=False)[:, 0]
+    for ax, (k, clock, drift) in zip(axes, checked, strict=True):
+        colour = estimate_colour(k)
+        name = result.estimates[k].name or f"estimate {k + 1}"
+        w = drift.windows
+        base_s = drift.offset_s
+        ok = np.isfinite(w.offset_s)
+        minutes = w.centre_s / 60.0
+        for used, face in ((True, colour), (False, "white")):
+            sel = ok & (w.used == used)
+            if sel.any():
+                ax.errorbar(
+                    minutes[sel],
+                    (w.offset_s[sel] - base_s) * 1e3,
+                    yerr=w.sigma_s[sel] * 1e3,
+                    fmt="o",
+                    markersize=3,
+                    color=colour,
+                    markerfacecolor=face,
+                    elinewidth=0.8,
+                    linewidth=0,
+                    label=f"{name}: windows (1 sigma)" if used else "weighed less (outliers)",
+                )
+        t = np.linspace(0.0, drift.duration_s, 400)
+        stamps = drift.epoch_ns + np.rint(t * 1e9).astype(np.int64)
+        fitted = drift.model(with_rate=True, with_steps=True, offset_s=base_s)
+        ax.plot(
+            t / 60.0,
+            fitted.varying_s(stamps) * 1e3,
+            color=colour,
+            linewidth=1.2,
+            label=f"fitted: {drift.rate_ppm:+.2f} +/- {drift.sigma_rate_ppm:.2f} ppm"
+            + (
+                f", {len(drift.steps)} step{'s' if len(drift.steps) > 1 else ''}"
+                if drift.steps
+                else ""
+            ),
+        )
+        applied = clock.model
+        if applied.rate_ppm != drift.rate_ppm or len(applied.steps) != len(drift.steps):
+            # The change applied along the run (its level is the time offset's business).
+            ax.plot(
+                t / 60.0,
+                applied.varying_s(stamps) * 1e3,
+                color="#616161",
+                linestyle="--",
+                linewidth=1.0,
+                label="applied" if applied.varies else "applied: a constant offset",
+            )
+        ax.set_ylabel("offset change [ms]")
+        style_axes(ax)
+        ax.legend(loc="best", fontsize=7, frameon=False)
+    axes[-1].set_xlabel("minutes along the run (the estimate's clock)")
+    caption = (
+        "The time offset measured in windows along the run, as its change from the fitted "
+        "line's offset at the estimate's first pose: a clock that runs fast or slow makes a "
+        "slope (1 ppm is 3.6 ms per hour), a clock step a jump. Bars are 1 sigma; hollow "
+        "windows weighed less in the fit. Dashed: the change applied along the run, where "
+        "it is not the fitted one (the drift not corrected)."
+    )
+    return encode_plot(
+        fig, formats, key="clock_drift", title="Clock along the run", caption=caption
     )

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from exporters.options import ExportOptions
 from exporters.plots import DEFAULT_MAX_POINTS, ImageFormat, Plot, render_plots
-from exporters.plots.clock import plot_clock_correlation
+from exporters.plots.clock import plot_clock_correlation, plot_clock_drift
 from exporters.plots.underlay import floor_plan_segments
 from loceval.evaluation import EvaluationResult
 
@@ -31,10 +31,13 @@ class ReportPlots:
         figures: the numbered figures, in report order (:func:`exporters.plots.render_plots`).
         clock: the figure of the "Clocks and device offset" section, or None (no clock
             offset estimated).
+        clock_drift: the section's figure of the offset along the run, or None (no clock's
+            drift checked).
     """
 
     figures: tuple[Plot, ...]
     clock: Plot | None
+    clock_drift: Plot | None = None
 
 
 def render_report_plots(
@@ -64,4 +67,5 @@ def render_report_plots(
             floor_plan=floor_plan_segments(result.reference.positions_xyz[:, 2], options),
         ),
         clock=plot_clock_correlation(result, max_points=max_points, formats=formats),
+        clock_drift=plot_clock_drift(result, formats=formats),
     )

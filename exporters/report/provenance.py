@@ -16,7 +16,7 @@ from exporters.plots import (
     describe_rpe_step,
     estimate_colour,
 )
-from exporters.report.clocks import time_offset_text
+from exporters.report.clocks import clock_drift_text, time_offset_text
 from loceval.core.arrays import FloatArray
 from loceval.core.gaps import GAP_RATE_FACTOR
 from loceval.core.lengths import format_coordinate
@@ -160,6 +160,7 @@ def option_rows(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
     rows = [
         ("Association", association),
         ("Time offset", time_offset_text(cfg)),
+        ("Clock drift", clock_drift_text(cfg)),
         (
             "Alignment",
             "none (the estimates are compared in the reference's frame as they are)"

@@ -22,7 +22,7 @@ from exporters.plots import (
     describe_rpe_step,
     estimate_colour,
 )
-from exporters.plots.clock import plot_clock_correlation
+from exporters.plots.clock import plot_clock_correlation, plot_clock_drift
 from exporters.plots.figure import FigureView, number_figures
 from exporters.report.clocks import ClockSection, build_clock_section
 from exporters.report.confidence import ConfidenceView, build_confidence_view
@@ -371,10 +371,11 @@ def build_report_view(
     if plots is None:
         plots = render_report_plots(result, options, formats=(image_format,), max_points=max_points)
     if isinstance(plots, ReportPlots):
-        rendered, clock = plots.figures, plots.clock
+        rendered, clock, drift = plots.figures, plots.clock, plots.clock_drift
     else:
         rendered = tuple(plots)
         clock = plot_clock_correlation(result, max_points=max_points, formats=(image_format,))
+        drift = plot_clock_drift(result, formats=(image_format,))
     tolerance_example, tolerance_where = _tolerance_hint(options.front_door)
     figures = number_figures(rendered, image_format)
     figure_of = {f.key: f.number for f in figures}
@@ -438,7 +439,11 @@ def build_report_view(
             {(t.number, "translation"): t.length.format for t in tables if t.length is not None},
         ),
         clocks=build_clock_section(
-            result, number=len(figures) + 1, plot=clock, image_format=image_format
+            result,
+            number=len(figures) + 1,
+            plot=clock,
+            drift_plot=drift,
+            image_format=image_format,
         ),
         ranging=ranging,
         tolerance_example=tolerance_example,

@@ -5,7 +5,7 @@ The offset is what :func:`loceval.registration.association.associate` adds to th
 reference's clock. An estimate that *lags* (its stamps are late, e.g. processing delay)
 has a negative offset.
 
-Three stages:
+Four stages:
 
 1. **Coarse**: a motion signal of each trajectory (angular speed from orientations, or
    speed from positions when either side is position-only) on one grid, gaps masked. Its
@@ -22,8 +22,12 @@ Three stages:
    (see :func:`loceval.calibration.common.hac_covariance`) times a safety factor measured by
    Monte Carlo on synthetic recordings (``SIGMA_SAFETY``, 1.5).
 
-Only the position-only refinement imports scipy (on first use), so checking the clock of an
-evaluation with orientations costs no scipy start-up.
+4. **Drift**: on runs of a minute or more, the offset measured in windows along the run and a
+   robust line with its steps fitted through them (:mod:`loceval.calibration.drift`): the
+   clock's rate and steps, checked always, applied when asked (``clock_drift_ppm``). With a
+   drift applied, ``value_s`` is the offset at the estimate's first pose.
+
+Only the position-only refinement and the drift's line import scipy (on first use).
 """
 
 from __future__ import annotations
@@ -46,7 +50,21 @@ from loceval.calibration.common import (
     rotvec_of,
     weak_axes,
 )
-from loceval.core.arrays import BoolArray, FloatArray
+from loceval.calibration.drift import (
+    MAX_RATE_PPM,
+    ClockDrift,
+    ClockModel,
+    check_clock_drift,
+)
+from loceval.calibration.motion import (
+    CANDIDATE_SHARE,
+    MIN_SAMPLES,
+    MotionSignal,
+    coarse_search,
+    grid_dt_s,
+    motion_signal,
+)
+from loceval.core.arrays import FloatArray
 from loceval.core.geometry import compose_quat, conjugate_quat
 from loceval.errors import AlignmentError, AssociationError, InputError
 from loceval.registration.alignment import align_umeyama
@@ -60,27 +78,21 @@ __all__ = [
     "TimeOffsetEstimate",
     "describe_offset",
     "estimate_time_offset",
+    "grid_dt_s",
     "motion_signal",
 ]
 
-CANDIDATE_SHARE = 0.9
-"""A correlation peak within this share of the best one is a candidate offset."""
-AMBIGUITY_NOISE_SHARE = 0.5
-"""... and falls short of it by at most this share of the best one's own shortfall from 1
-(plus 0.02): noise lowers every peak alike, a different motion lowers one more."""
-MIN_OVERLAP_SHARE = 0.5
-"""Lags are searched where the overlap holds at least this share of the shorter signal."""
-MIN_CANDIDATE_SEPARATION_S = 1.0
-"""Peaks closer than this to a higher one belong to it (the peak's own width)."""
 DISAGREEMENT_MIN_S = 0.003
 """A given offset is flagged when the estimate differs by more than this and 3 sigma."""
-MIN_CORRELATION = 0.2
-"""Below this best correlation the motions do not match at any offset."""
-WEAK_CORRELATION = 0.5
-"""Below this best correlation the result carries a warning."""
-_MIN_ANGULAR_STD_RAD_S = np.radians(0.5)
-_MIN_SPEED_STD_M_S = 0.002
-_MIN_SAMPLES = 20
+DEFAULT_TOLERANCE_S = 0.01
+"""The association's tolerance a drift not applied is held to (the ``max_dt_s`` default)."""
+DRIFT_MAX_ROWS = 40_000
+"""Most relative motions (or poses) the drift's windows use when it is to be applied: a
+one-hour 30 Hz run whole."""
+DRIFT_CHECK_MAX_ROWS = 8_000
+"""... and when it is only checked (a fifth of the cost; the rate's sigma about doubles, still
+far below the tolerance a check holds it to)."""
+_MIN_SAMPLES = MIN_SAMPLES
 
 
 class OffsetSource(StrEnum):
@@ -88,13 +100,6 @@ class OffsetSource(StrEnum):
 
     GIVEN = "given"
     ESTIMATED = "estimated"
-
-
-class MotionSignal(StrEnum):
-    """The signal that was correlated."""
-
-    ANGULAR_SPEED = "angular_speed"
-    SPEED = "speed"
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -113,6 +118,14 @@ class TimeOffsetEstimate:
         scores: (L,) Pearson's correlation at each lag (NaN where the overlap is short).
         correlation: the best correlation found.
         warnings: sentences for the user (ambiguity, disagreement, weak correlation).
+        epoch_ns: the estimate's first stamp, where ``value_s`` holds when the clock drifts.
+        rate_ppm: the clock rate applied: the offset falls by that many µs per second of
+            the estimate's clock (0: a constant offset).
+        rate_source: ``given`` or ``estimated`` (``auto``).
+        drift: what the data say about the clock along the run (None: not checked, the
+            run being too short or too still).
+        steps_applied: the drift's steps are applied.
+        notes: sentences for information (nothing to do).
     """
 
     value_s: float
@@ -125,6 +138,12 @@ class TimeOffsetEstimate:
     scores: FloatArray = field(repr=False)
     correlation: float
     warnings: tuple[str, ...] = ()
+    epoch_ns: int = 0
+    rate_ppm: float = 0.0
+    rate_source: OffsetSource = OffsetSource.GIVEN
+    drift: ClockDrift | None = field(default=None, repr=False)
+    steps_applied: bool = False
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         """Make the curve read-only copies."""
@@ -133,14 +152,39 @@ class TimeOffsetEstimate:
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
 
+    @property
+    def model(self) -> ClockModel:
+        """The offset applied along the run (constant unless a drift is applied)."""
+        steps = () if self.drift is None or not self.steps_applied else self.drift.steps
+        return ClockModel(
+            offset_s=self.value_s,
+            epoch_ns=self.epoch_ns,
+            rate_ppm=self.rate_ppm,
+            steps=tuple((s.stamp_ns, s.size_s) for s in steps),
+        )
+
     def to_dict(self) -> dict[str, object]:
-        """Return the contract's ``time_offset`` object."""
+        """Return the contract's ``time_offset`` object.
+
+        ``value_s`` is the offset at the estimate's first pose; ``rate_ppm`` the clock rate
+        applied from there (``rate_source`` says whose); ``estimated_rate_ppm`` and
+        ``sigma_rate_ppm`` what the data say (null: not checked); ``steps`` the clock's
+        jumps the data show, each with ``applied``.
+        """
+        drift = self.drift
         return {
             "value_s": self.value_s,
             "sigma_s": self.sigma_s,
             "source": self.source.value,
             "estimated_s": self.estimated_s,
             "candidates_s": list(self.candidates_s),
+            "rate_ppm": self.rate_ppm,
+            "rate_source": self.rate_source.value,
+            "estimated_rate_ppm": None if drift is None else drift.rate_ppm,
+            "sigma_rate_ppm": None if drift is None else drift.sigma_rate_ppm,
+            "steps": []
+            if drift is None
+            else [{**s.to_dict(), "applied": self.steps_applied} for s in drift.steps],
         }
 
 
@@ -159,30 +203,151 @@ def estimate_time_offset(
     estimate: Trajectory,
     *,
     given_offset_s: float | None = None,
+    clock_drift_ppm: float | None = 0.0,
+    tolerance_s: float = DEFAULT_TOLERANCE_S,
     max_gap_s: float = DEFAULT_MAX_GAP_NS / NS_PER_S,
     window_s: float = 1.0,
     with_scale: bool = False,
     max_pairs: int = 3_000,
+    drift_max_rows: int | None = None,
 ) -> TimeOffsetEstimate:
     """Estimate the offset to add to the estimate's stamps, and check a given one.
+
+    With a drifting clock the offset is a line along the run, with steps
+    (:mod:`loceval.calibration.drift`): ``value_s`` is then the offset at the estimate's
+    first pose. The drift is checked whenever the run is long enough, and applied when
+    asked (``clock_drift_ppm`` None) or given.
 
     Args:
         reference: the ground truth (tracking losses longer than ``max_gap_s`` are masked).
         estimate: the system under evaluation.
         given_offset_s: the user's offset, applied as given (and checked); None estimates
             and applies the data's value. The candidate nearest it (0 when None) is chosen.
+        clock_drift_ppm: how fast the estimate's clock runs, ppm, applied as given (and
+            checked); None estimates it and applies it with any step when significant.
+        tolerance_s: the association's tolerance: a drift or step not applied that moves
+            the offset by more over the run is a warning.
         max_gap_s: longest interval between poses that is not a tracking loss, seconds.
         window_s: length of the relative motions in the least-squares stage, seconds.
         with_scale: position-only refinement aligns with Sim(3) (monocular estimates).
         max_pairs: most relative motions or poses used by the least squares (thinned
             evenly beyond it; the sigma accounts for what is used).
+        drift_max_rows: most relative motions (or poses) the drift's windows use (default:
+            DRIFT_MAX_ROWS when asked for, DRIFT_CHECK_MAX_ROWS for a check).
 
     Returns:
         The estimate, with the correlation curve and warnings.
 
     Raises:
-        InputError: too few poses, or too little motion to correlate (a constant signal).
+        InputError: too few poses, or too little motion to correlate (a constant signal),
+            or a drift asked for that these data cannot tell.
         AssociationError: the recordings cannot overlap, or their motions match nowhere.
+    """
+    _check_arguments(
+        reference,
+        estimate,
+        given_offset_s=given_offset_s,
+        clock_drift_ppm=clock_drift_ppm,
+        max_gap_s=max_gap_s,
+        window_s=window_s,
+    )
+    max_gap_ns = round(max_gap_s * NS_PER_S)
+    use_rotation = reference.has_orientation and estimate.has_orientation
+    signal = MotionSignal.ANGULAR_SPEED if use_rotation else MotionSignal.SPEED
+    epoch_ns = int(estimate.stamps_ns[0])
+    given_rate = ClockModel(0.0, epoch_ns, rate_ppm=clock_drift_ppm or 0.0)
+    raw, estimate = estimate, given_rate.restamped(estimate)  # the given rate removed
+    coarse = coarse_search(reference, estimate, signal, max_gap_ns=max_gap_ns)
+    notes = list(coarse.warnings)
+    target = 0.0 if given_offset_s is None else given_offset_s
+    chosen = int(np.argmin(np.abs(coarse.candidates_s - target)))
+    rotation = None
+    if use_rotation:
+        estimated_s, sigma_s, rotation = _refine_rotation(
+            reference,
+            estimate,
+            float(coarse.candidates_s[chosen]),
+            max_gap_ns=max_gap_ns,
+            window_s=window_s,
+            max_pairs=max_pairs,
+            step_s=coarse.grid_dt_s,
+        )
+    else:
+        estimated_s, sigma_s = _refine_positions(
+            reference,
+            estimate,
+            float(coarse.candidates_s[chosen]),
+            max_gap_ns=max_gap_ns,
+            with_scale=with_scale,
+            max_pairs=max_pairs,
+            step_s=coarse.grid_dt_s,
+        )
+    drift, verdict = check_clock_drift(
+        reference,
+        raw,
+        ClockModel(estimated_s, epoch_ns, rate_ppm=clock_drift_ppm or 0.0),
+        rotation,
+        given_rate_ppm=clock_drift_ppm,
+        tolerance_s=tolerance_s,
+        max_gap_ns=max_gap_ns,
+        with_scale=with_scale,
+        max_rows=drift_max_rows
+        or (DRIFT_MAX_ROWS if clock_drift_ppm is None else DRIFT_CHECK_MAX_ROWS),
+        signals=coarse.signals if clock_drift_ppm in (None, 0.0) else None,  # (else restamped)
+    )
+    notes.extend(verdict.warnings)
+    info = list(verdict.notes)
+    if verdict.offset_s is not None and verdict.sigma_offset_s is not None:
+        # The drift applied: the offset at the first pose, from the drift's line.
+        estimated_s, sigma_s = verdict.offset_s, verdict.sigma_offset_s
+    candidates = coarse.candidates_s.copy()
+    candidates[chosen] = estimated_s
+    words = _offset_words(
+        estimated_s,
+        sigma_s,
+        np.sort(candidates),
+        given_offset_s=given_offset_s,
+        quiet=clock_drift_ppm is not None,
+    )
+    notes.extend(words[0])
+    info.extend(words[1])
+    if given_offset_s is None:
+        value_s, source = estimated_s, OffsetSource.ESTIMATED
+    else:
+        value_s, source = given_offset_s, OffsetSource.GIVEN
+    return TimeOffsetEstimate(
+        value_s=float(value_s),
+        sigma_s=float(sigma_s),
+        source=source,
+        estimated_s=float(estimated_s),
+        candidates_s=tuple(float(c) for c in np.sort(candidates)),
+        signal=signal,
+        lags_s=coarse.lags_s,
+        scores=coarse.scores,
+        correlation=coarse.best,
+        warnings=tuple(notes),
+        epoch_ns=epoch_ns,
+        rate_ppm=verdict.rate_ppm,
+        rate_source=OffsetSource.ESTIMATED if clock_drift_ppm is None else OffsetSource.GIVEN,
+        drift=drift,
+        steps_applied=verdict.steps_applied,
+        notes=tuple(info),
+    )
+
+
+def _check_arguments(
+    reference: Trajectory,
+    estimate: Trajectory,
+    *,
+    given_offset_s: float | None,
+    clock_drift_ppm: float | None,
+    max_gap_s: float,
+    window_s: float,
+) -> None:
+    """Refuse what :func:`estimate_time_offset` cannot work with.
+
+    Raises:
+        InputError: a value out of range, or too few poses; the error names the option.
     """
     if given_offset_s is not None and not np.isfinite(given_offset_s):
         msg = f"The given time offset must be a finite number of seconds, got {given_offset_s!r}."
@@ -200,244 +365,64 @@ def estimate_time_offset(
     if not (np.isfinite(window_s) and window_s > 0):
         msg = f"The relative-motion window must be positive seconds, got {window_s!r}."
         raise InputError(msg, option="time_offset_s")
-    max_gap_ns = round(max_gap_s * NS_PER_S)
-    use_rotation = reference.has_orientation and estimate.has_orientation
-    signal = MotionSignal.ANGULAR_SPEED if use_rotation else MotionSignal.SPEED
-    coarse = _coarse_search(reference, estimate, signal, max_gap_ns=max_gap_ns)
-    notes = list(coarse.warnings)
-    target = 0.0 if given_offset_s is None else given_offset_s
-    chosen = int(np.argmin(np.abs(coarse.candidates_s - target)))
-    start_s = float(coarse.candidates_s[chosen])
-    if use_rotation:
-        estimated_s, sigma_s = _refine_rotation(
-            reference,
-            estimate,
-            start_s,
-            max_gap_ns=max_gap_ns,
-            window_s=window_s,
-            max_pairs=max_pairs,
-            step_s=coarse.grid_dt_s,
+    if clock_drift_ppm is not None and not abs(clock_drift_ppm) <= MAX_RATE_PPM:
+        msg = (
+            f"The clock drift must be a finite number of ppm within ±{MAX_RATE_PPM:g}, "
+            f"got {clock_drift_ppm!r}."
         )
-    else:
-        estimated_s, sigma_s = _refine_positions(
-            reference,
-            estimate,
-            start_s,
-            max_gap_ns=max_gap_ns,
-            with_scale=with_scale,
-            max_pairs=max_pairs,
-            step_s=coarse.grid_dt_s,
-        )
-    candidates = coarse.candidates_s.copy()
-    candidates[chosen] = estimated_s
-    if candidates.size > 1:
-        listed = ", ".join(f"{c:.3f} s" for c in np.sort(candidates))
-        basis = "0 s" if given_offset_s is None else f"the given {given_offset_s:g} s"
-        notes.append(
-            f"The motion repeats, so {candidates.size} time offsets fit almost equally well "
-            f"({listed}); the one nearest {basis} was chosen ({estimated_s:.3f} s); settle it "
-            "by giving the offset to within half the spacing of these, or by recording a "
-            "stretch of motion that does not repeat."
-        )
-    if given_offset_s is None:
-        value_s, source = estimated_s, OffsetSource.ESTIMATED
-        notes.append(f"Time offset estimated and applied: {describe_offset(estimated_s, sigma_s)}.")
-    else:
-        value_s, source = given_offset_s, OffsetSource.GIVEN
-        diff = abs(estimated_s - given_offset_s)
-        if diff > 3.0 * sigma_s and diff > DISAGREEMENT_MIN_S:
-            notes.append(
-                f"The data disagree with the given time offset: "
-                f"{describe_offset(estimated_s, sigma_s)} (time offset "
-                f"{estimated_s * 1e3:.1f} ms); you gave {given_offset_s * 1e3:.1f} ms."
-            )
-    return TimeOffsetEstimate(
-        value_s=float(value_s),
-        sigma_s=float(sigma_s),
-        source=source,
-        estimated_s=float(estimated_s),
-        candidates_s=tuple(float(c) for c in np.sort(candidates)),
-        signal=signal,
-        lags_s=coarse.lags_s,
-        scores=coarse.scores,
-        correlation=coarse.best,
-        warnings=tuple(notes),
-    )
+        raise InputError(msg, option="clock_drift_ppm")
 
 
-@dataclass(frozen=True, slots=True, eq=False)
-class _Coarse:
-    lags_s: FloatArray
-    scores: FloatArray
-    candidates_s: FloatArray
-    best: float
-    grid_dt_s: float
-    warnings: tuple[str, ...]
+def _offset_words(
+    estimated_s: float,
+    sigma_s: float,
+    candidates_s: FloatArray,
+    *,
+    given_offset_s: float | None,
+    quiet: bool,
+) -> tuple[list[str], list[str]]:
+    """The sentences about the offset: (warnings, notes).
 
-
-def _grid_dt_s(reference: Trajectory, estimate: Trajectory) -> float:
-    rate = min(reference.rate_hz, estimate.rate_hz)
-    dt = float(np.clip(1.0 / rate if rate > 0 else 0.05, 0.04, 0.1))
-    span = max(reference.duration_s, estimate.duration_s)
-    return max(dt, span / 2**19)  # bounds the FFT length on day-long recordings
-
-
-def motion_signal(
-    trajectory: Trajectory, signal: MotionSignal, *, dt_s: float, max_gap_ns: int
-) -> tuple[FloatArray, BoolArray]:
-    """Return a trajectory's motion signal on a grid of ``dt_s`` from its first pose.
-
-    The value at grid point k is the angular speed (rad/s) or speed (m/s) between grid
-    points k-1 and k+1; it is masked (False) where that stretch touches a gap.
-
-    Args:
-        trajectory: the poses.
-        signal: angular speed (needs orientations) or speed.
-        dt_s: the grid step, seconds.
-        max_gap_ns: longest interval between poses that is not a gap, nanoseconds.
-
-    Returns:
-        (G,) values and (G,) mask.
+    A motion that repeats leaves several offsets the data fit almost equally well: a
+    warning when the data chose one (``auto``), or when the given one is not among them;
+    when nothing was asked (``quiet``: neither the offset nor the drift estimated) and the
+    data agree with the given offset, it is a note: there is nothing to do.
     """
-    sampler = PoseSampler.from_start(trajectory, max_gap_ns=max_gap_ns)
-    g = int(np.floor(trajectory.duration_s / dt_s)) + 1
-    t = np.arange(g, dtype=np.float64) * np.float64(dt_s)
-    ok = sampler.valid(t)
-    values = np.zeros(g)
-    mask = np.zeros(g, dtype=bool)
-    if g < 3:
-        return values, mask
-    if signal is MotionSignal.ANGULAR_SPEED:
-        q = sampler.quat_at(t)
-        step = rotvec_of(compose_quat(conjugate_quat(q[:-2]), q[2:]))
-    else:
-        p = sampler.positions_at(t)
-        step = p[2:] - p[:-2]
-    values[1:-1] = np.linalg.norm(step, axis=1) / (2.0 * dt_s)
-    # Both ends valid and no gap between them (the sampler's gap count is per interval).
-    mask[1:-1] = sampler.valid(t[1:-1], margin_s=dt_s)
-    mask &= ok
-    return values, mask
-
-
-def _coarse_search(
-    reference: Trajectory, estimate: Trajectory, signal: MotionSignal, *, max_gap_ns: int
-) -> _Coarse:
-    dt_s = _grid_dt_s(reference, estimate)
-    f, mf = motion_signal(reference, signal, dt_s=dt_s, max_gap_ns=max_gap_ns)
-    g, mg = motion_signal(estimate, signal, dt_s=dt_s, max_gap_ns=max_gap_ns)
-    _check_signal(reference, f, mf, signal)
-    _check_signal(estimate, g, mg, signal)
-    # Centre and normalise first: the moment sums below then stay well conditioned.
-    f = np.where(mf, (f - f[mf].mean()) / f[mf].std(), 0.0)
-    g = np.where(mg, (g - g[mg].mean()) / g[mg].std(), 0.0)
-    mff, mgf = mf.astype(np.float64), mg.astype(np.float64)
-    nf, ng = f.shape[0], g.shape[0]
-    size = 1 << int(np.ceil(np.log2(nf + ng - 1)))
-
-    def corr(a: FloatArray, b: FloatArray) -> FloatArray:
-        # c[m] = sum_j a[j + m] b[j], m = -(ng - 1) .. nf - 1 (ordered ascending).
-        full = np.fft.irfft(np.fft.rfft(a, size) * np.conj(np.fft.rfft(b, size)), size)
-        out: FloatArray = np.concatenate((full[size - (ng - 1) :], full[:nf]))
-        return out
-
-    n = np.rint(corr(mff, mgf))
-    s_f = corr(f, mgf)
-    s_g = corr(mff, g)
-    s_ff = corr(f * f, mgf)
-    s_gg = corr(mff, g * g)
-    s_fg = corr(f, g)
-    min_overlap = max(_MIN_SAMPLES, MIN_OVERLAP_SHARE * min(mf.sum(), mg.sum()))
-    ok = n >= min_overlap
-    with np.errstate(divide="ignore", invalid="ignore"):
-        nn = np.where(ok, n, 1.0)
-        var_f = s_ff - s_f**2 / nn
-        var_g = s_gg - s_g**2 / nn
-        score = (s_fg - s_f * s_g / nn) / np.sqrt(var_f * var_g)
-    ok &= (var_f > 1e-9 * nn) & (var_g > 1e-9 * nn) & np.isfinite(score)
-    score = np.where(ok, score, np.nan)
-    m = np.arange(-(ng - 1), nf)
-    base_s = (int(reference.stamps_ns[0]) - int(estimate.stamps_ns[0])) / NS_PER_S
-    lags_s = base_s + m * dt_s
-    if not ok.any():
-        msg = (
-            f"{estimate.name!r} and {reference.name!r} cannot overlap in time by half of the "
-            "shorter recording at any time offset; check that both record the same run."
-        )
-        raise AssociationError(msg, option="time_offset_s")
-    best_i = int(np.nanargmax(score))
-    best = float(score[best_i])
-    if best < MIN_CORRELATION:
-        msg = (
-            f"The motions of {estimate.name!r} and {reference.name!r} match at no time "
-            f"offset (best correlation {best:.2f}); check that both record the same run, "
-            "or give the time offset."
-        )
-        raise AssociationError(msg, option="time_offset_s")
+    warnings: list[str] = []
     notes: list[str] = []
-    if best < WEAK_CORRELATION:
-        notes.append(
-            f"The motions correlate weakly (best {best:.2f}), so the estimated time offset "
-            "may be wrong; check it against the plot of the correlation curve."
+    agrees = given_offset_s is not None and _agrees(estimated_s, sigma_s, given_offset_s)
+    if candidates_s.size > 1:
+        listed = ", ".join(f"{c:.3f} s" for c in candidates_s)
+        repeats = f"The motion repeats, so {candidates_s.size} time offsets fit almost equally well"
+        if agrees and quiet:
+            notes.append(
+                f"{repeats} ({listed}); the given {given_offset_s:g} s is one of them, and "
+                "the data agree with it there."
+            )
+        else:
+            basis = "0 s" if given_offset_s is None else f"the given {given_offset_s:g} s"
+            warnings.append(
+                f"{repeats} ({listed}); the one nearest {basis} was chosen "
+                f"({estimated_s:.3f} s); settle it by giving the offset to within half the "
+                "spacing of these, or by recording a stretch of motion that does not repeat."
+            )
+    if given_offset_s is None:
+        warnings.append(
+            f"Time offset estimated and applied: {describe_offset(estimated_s, sigma_s)}."
         )
-    kept = _peaks_near_best(np.where(ok, score, -np.inf), best_i, dt_s)
-    sub = np.array([_parabolic(score, k) for k in kept])
-    candidates = base_s + (m[np.array(kept)] + sub) * dt_s
-    return _Coarse(lags_s, score, candidates, best, dt_s, tuple(notes))
-
-
-def _peaks_near_best(sc: FloatArray, best_i: int, dt_s: float) -> list[int]:
-    """Indices of the local maxima that fit almost as well as the best, one per peak."""
-    best = float(sc[best_i])
-    peak = np.zeros(sc.shape, dtype=bool)
-    peak[1:-1] = (sc[1:-1] >= sc[:-2]) & (sc[1:-1] >= sc[2:])
-    peak[best_i] = True
-    noise = AMBIGUITY_NOISE_SHARE * (1.0 - best) + 0.02
-    near = (sc >= CANDIDATE_SHARE * best) & (best - sc <= noise)
-    cand = np.flatnonzero(peak & near)
-    cand = cand[np.argsort(-sc[cand])]
-    kept: list[int] = []
-    sep = max(MIN_CANDIDATE_SEPARATION_S / dt_s, 2.0)
-    for c in cand:  # a loop over the few peaks near the best, not over samples
-        if all(abs(c - k) >= sep for k in kept):
-            kept.append(int(c))
-    return kept
-
-
-def _parabolic(score: FloatArray, k: int) -> float:
-    """Sub-sample shift of a peak from a parabola through it and its neighbours."""
-    if k == 0 or k == score.shape[0] - 1:
-        return 0.0
-    a, b, c = score[k - 1], score[k], score[k + 1]
-    den = a - 2.0 * b + c
-    if not (np.isfinite(den) and den < 0):
-        return 0.0
-    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
-
-
-def _check_signal(
-    trajectory: Trajectory, values: FloatArray, mask: BoolArray, signal: MotionSignal
-) -> None:
-    if mask.sum() < _MIN_SAMPLES:
-        msg = (
-            f"Trajectory {trajectory.name!r} has too few poses between its gaps to correlate "
-            "its motion; record a longer stretch without tracking loss or give the time offset."
+    elif not agrees:
+        warnings.append(
+            f"The data disagree with the given time offset: "
+            f"{describe_offset(estimated_s, sigma_s)} (time offset "
+            f"{estimated_s * 1e3:.1f} ms); you gave {given_offset_s * 1e3:.1f} ms."
         )
-        raise InputError(msg, option="time_offset_s")
-    std = float(values[mask].std())
-    floor, unit, what = (
-        (_MIN_ANGULAR_STD_RAD_S, "deg/s", "angular speed")
-        if signal is MotionSignal.ANGULAR_SPEED
-        else (_MIN_SPEED_STD_M_S, "m/s", "speed")
-    )
-    if std < floor:
-        shown = np.degrees(std) if signal is MotionSignal.ANGULAR_SPEED else std
-        msg = (
-            f"The {what} of {trajectory.name!r} is nearly constant (it varies by {shown:.3g} "
-            f"{unit}), too little motion to find the time offset; record a run that starts, "
-            "stops and turns, or give the time offset."
-        )
-        raise InputError(msg, option="time_offset_s")
+    return warnings, notes
+
+
+def _agrees(estimated_s: float, sigma_s: float, given_s: float) -> bool:
+    """Whether the data's offset is within 3 sigma (or a few ms) of the given one."""
+    diff = abs(estimated_s - given_s)
+    return not (diff > 3.0 * sigma_s and diff > DISAGREEMENT_MIN_S)
 
 
 def _refine_rotation(
@@ -449,8 +434,12 @@ def _refine_rotation(
     window_s: float,
     max_pairs: int,
     step_s: float,
-) -> tuple[float, float]:
-    """Least squares of the relative rotations with the device rotation; (offset, sigma)."""
+) -> tuple[float, float, FloatArray]:
+    """Least squares of the relative rotations with the device rotation.
+
+    Returns:
+        The offset, its sigma (seconds) and the (3, 3) device rotation.
+    """
     sampler = PoseSampler.from_start(reference, max_gap_ns=max_gap_ns)
     offset_ns = round(start_s * NS_PER_S)
     pairs = make_pairs(
@@ -492,7 +481,7 @@ def _refine_rotation(
         scale0=1.0,
         options=options,
     )
-    return offset_ns / NS_PER_S + fit.offset_s, float(np.sqrt(fit.cov[0, 0]))
+    return offset_ns / NS_PER_S + fit.offset_s, float(np.sqrt(fit.cov[0, 0])), fit.rotation
 
 
 def _check_pairs(count: int, estimate: Trajectory, reference: Trajectory) -> None:

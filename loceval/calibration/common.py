@@ -125,13 +125,20 @@ def hac_covariance(
     """
     p = jac.shape[1]
     scores = (jac * psi[:, None]).reshape(groups, -1, p).sum(axis=1)
-    meat = scores.T @ scores
-    for k in range(1, min(lag, groups - 1) + 1):  # a loop over lags, not over poses
-        c = scores[:-k].T @ scores[k:]
-        meat += c + c.T
+    lags = range(1, min(lag, groups - 1) + 1)
+    autocov = [scores[:-k].T @ scores[k:] for k in lags]  # a loop over lags, not over poses
+    meat = scores.T @ scores + sum((c + c.T for c in autocov), np.zeros((p, p)))
     curv = jac if dpsi is None else jac * dpsi[:, None]
-    # The uniform kernel can leave a slightly indefinite sum: keep its positive part.
     values, vectors = np.linalg.eigh(0.5 * (meat + meat.T))
+    if values.min() < -1e-9 * max(abs(values.max()), 1e-300):
+        # The uniform kernel left an indefinite sum (a long lag over few blocks, whose
+        # estimated autocovariances are noisy): its positive part could be 0, a sigma of
+        # 0. Bartlett's weights (Newey and West 1987) cannot make it indefinite.
+        weights = [1.0 - k / (len(autocov) + 1) for k in lags]
+        meat = scores.T @ scores + sum(
+            (w * (c + c.T) for w, c in zip(weights, autocov, strict=True)), np.zeros((p, p))
+        )
+        values, vectors = np.linalg.eigh(0.5 * (meat + meat.T))
     meat = (vectors * np.maximum(values, 0.0)) @ vectors.T
     bread = np.linalg.pinv(jac.T @ curv)
     cov: FloatArray = bread @ meat @ bread

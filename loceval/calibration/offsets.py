@@ -2,12 +2,16 @@
 
 :func:`check_offsets` is what :func:`loceval.evaluation.evaluate` runs for each estimate:
 
-- **Time offset**: always estimated (:func:`loceval.calibration.clock.estimate_time_offset`). Given
-  a
-  value (0 by default), the value is applied and the data only check it (a warning when they
-  disagree beyond 3 sigma and a few ms); ``auto`` applies the estimate (the candidate
-  nearest 0 when the motion repeats). A check that cannot run (too few poses, no motion)
-  becomes a warning, never a failure; an ``auto`` that cannot run fails with the reason.
+- **Time offset**: always estimated (:func:`loceval.calibration.clock.estimate_time_offset`).
+  Given a value (0 by default), the value is applied and the data only check it (a warning
+  when they disagree beyond 3 sigma and a few ms); ``auto`` applies the estimate (the
+  candidate nearest 0 when the motion repeats). A check that cannot run (too few poses, no
+  motion) becomes a warning, never a failure; an ``auto`` that cannot run fails with the
+  reason.
+- **Clock drift**: checked alike on runs long enough (:mod:`loceval.calibration.drift`); a
+  given rate (0 by default) is applied, ``auto`` applies the estimated rate and steps when
+  significant. The offset is then a line along the run (:attr:`OffsetCheck.clock`), whose
+  value at the estimate's first pose is ``time_offset_s``.
 - **Device offset**: ``auto`` estimates it
   (:func:`loceval.calibration.handeye.estimate_device_offset`)
   jointly with the time offset and applies it to the reference; a given one (``offset``,
@@ -34,6 +38,7 @@ from loceval.trajectory import MAX_OFFSET_M
 
 if TYPE_CHECKING:
     from loceval.calibration.clock import TimeOffsetEstimate
+    from loceval.calibration.drift import ClockModel
     from loceval.calibration.handeye import DeviceOffsetComparison, DeviceOffsetEstimate
     from loceval.trajectory import Trajectory
 
@@ -66,6 +71,8 @@ class OffsetCheck:
         device_applied: the estimated device offset is the one applied.
         comparison: how far the estimate is from the given one (both present).
         warnings: sentences for the user.
+        clock_drift_ppm: the clock rate applied when the clock was not checked (given).
+        notes: sentences for information (nothing to do).
     """
 
     time_offset_s: float
@@ -76,6 +83,35 @@ class OffsetCheck:
     device_applied: bool = False
     comparison: DeviceOffsetComparison | None = None
     warnings: tuple[str, ...] = ()
+    clock_drift_ppm: float = 0.0
+    notes: tuple[str, ...] = ()
+
+    def clocked(self, estimate: Trajectory, notes: list[str]) -> Trajectory:
+        """``estimate`` with the offset's change along the run added to its stamps.
+
+        The association then adds ``time_offset_s`` (the offset at the first pose) to all.
+        Poses that a step puts among those before it are dropped, with a note.
+        """
+        clocked = self.clock(estimate).restamped(estimate)
+        if len(clocked) < len(estimate):
+            notes.append(
+                f"{len(estimate) - len(clocked)} poses of the estimate were dropped: with the "
+                "clock's step applied, their stamps fall among those of the poses before it "
+                "(a clock set back, or a step whose time the motion tells only roughly)."
+            )
+        return clocked
+
+    def clock(self, estimate: Trajectory) -> ClockModel:
+        """The time offset applied along ``estimate``'s run (its first stamp the epoch)."""
+        from loceval.calibration.drift import ClockModel  # noqa: PLC0415
+
+        if self.time_offset is not None:
+            return dataclasses.replace(self.time_offset.model, offset_s=self.time_offset_s)
+        return ClockModel(
+            offset_s=self.time_offset_s,
+            epoch_ns=int(estimate.stamps_ns[0]),
+            rate_ppm=self.clock_drift_ppm,
+        )
 
     def time_offset_dict(self) -> dict[str, object]:
         """Return the contract's ``time_offset`` object."""
@@ -87,6 +123,11 @@ class OffsetCheck:
             "source": "given",
             "estimated_s": None,
             "candidates_s": [],
+            "rate_ppm": self.clock_drift_ppm,
+            "rate_source": "given",
+            "estimated_rate_ppm": None,
+            "sigma_rate_ppm": None,
+            "steps": [],
         }
 
     def device_offset_dict(self) -> dict[str, object] | None:
@@ -116,14 +157,23 @@ def _unstamped(
     time_offset_s: float | None,
     device: SimilarityTransform | None,
     device_source: DeviceSource,
+    clock_drift_ppm: float | None,
 ) -> OffsetCheck:
     """The check of a pair one of which has pose numbers for stamps: nothing to check.
 
     Raises:
-        InputError: the time offset was asked to be estimated (``auto``).
+        InputError: the time offset was asked to be estimated (``auto``), or a clock drift
+            given or asked for.
     """
     which = " and ".join(repr(n) for n in names)
     have = "has" if len(names) == 1 else "have"
+    if clock_drift_ppm is None or clock_drift_ppm != 0.0:
+        msg = (
+            f"{which} {have} no times (poses are numbered, as a KITTI file without its times "
+            "file), so no clock drift can be estimated or applied; give the times file "
+            "(kitti:PATH@times=TIMES) or a clock drift of 0."
+        )
+        raise InputError(msg, option="clock_drift_ppm")
     if time_offset_s is None:
         msg = (
             f"{which} {have} no times (poses are numbered, as a KITTI file without its times "
@@ -154,6 +204,8 @@ def check_offsets(
     auto_device: bool = False,
     max_gap_s: float,
     with_scale: bool = False,
+    clock_drift_ppm: float | None = 0.0,
+    tolerance_s: float = 0.01,
 ) -> OffsetCheck:
     """Estimate the time (and device) offset of one estimate; check or apply them.
 
@@ -166,6 +218,10 @@ def check_offsets(
         auto_device: estimate the device offset and apply it (``device`` must be None).
         max_gap_s: longest reference interval that is not a tracking loss, seconds.
         with_scale: the estimate has its own scale (monocular; Sim(3) alignment).
+        clock_drift_ppm: the given clock rate, ppm (applied and checked); None estimates it
+            and applies it (and its steps) when significant.
+        tolerance_s: the association's tolerance (a drift not applied that moves the offset
+            by more over the run is a warning).
 
     Returns:
         What was given, estimated and applied, with the warnings.
@@ -181,17 +237,19 @@ def check_offsets(
     pair = ((reference, "the reference"), (estimate, "the estimate"))
     numbered = [t.name or role for t, role in pair if t.indexed]
     if numbered:
-        return _unstamped(numbered, time_offset_s, device, device_source)
+        return _unstamped(numbered, time_offset_s, device, device_source, clock_drift_ppm)
     clock = _estimated(
         lambda: estimate_time_offset(
             reference,
             estimate,
             given_offset_s=time_offset_s,
+            clock_drift_ppm=clock_drift_ppm,
+            tolerance_s=tolerance_s,
             max_gap_s=max_gap_s,
             with_scale=with_scale,
             max_pairs=ESTIMATE_MAX_PAIRS if auto_time else CHECK_MAX_PAIRS,
         ),
-        applied=auto_time,
+        applied=auto_time or clock_drift_ppm is None,
         what="time offset",
         notes=notes,
     )
@@ -203,9 +261,23 @@ def check_offsets(
         time_offset=clock,
         device_given=device,
         device_source=device_source,
+        clock_drift_ppm=clock_drift_ppm or 0.0,
+        notes=() if clock is None else clock.notes,
     )
     if not (auto_device or device is not None):
         return dataclasses.replace(check, warnings=tuple(notes))
+    # The device offset is estimated on the clock the data show (their offset, drift and
+    # steps), whatever is applied: a given offset or a drift not applied that the data
+    # contradict would bend the relative motions, and with them the device offset, beyond
+    # its sigma (a ground robot's rotation about its only axis most). The offset is refined
+    # jointly; the refined one is applied only when it is the one applied (``auto``).
+    data_clock = _data_clock(clock) or check.clock(estimate)
+    applied_clock = check.clock(estimate)
+    same_shape = (data_clock.rate_ppm, data_clock.steps) == (
+        applied_clock.rate_ppm,
+        applied_clock.steps,
+    )
+    estimate = data_clock.restamped(estimate)
     if not (reference.has_orientation and estimate.has_orientation):
         if auto_device:
             side = reference.name if not reference.has_orientation else estimate.name
@@ -217,8 +289,7 @@ def check_offsets(
     found = _device(
         reference,
         estimate,
-        applied_s,
-        joint=auto_time and auto_device,
+        data_clock.offset_s,
         auto_device=auto_device,
         max_gap_s=max_gap_s,
         with_scale=with_scale,
@@ -242,7 +313,7 @@ def check_offsets(
         f"Device offset estimated from the motion and applied to the reference: ({t_mm}) mm "
         f"from the tracked body to the sensor, from {found.pairs} relative motions."
     )
-    if auto_time and clock is not None and found.sigma_time_offset_s is not None:
+    if auto_time and same_shape and clock is not None and found.sigma_time_offset_s is not None:
         # The joint fit refines the clock's estimate with the device offset: apply that.
         clock = _with_joint(clock, found.time_offset_s, found.sigma_time_offset_s)
         applied_s = clock.value_s
@@ -251,7 +322,8 @@ def check_offsets(
             f"{_APPLIED_NOTE} {describe_offset(applied_s, clock.sigma_s)} (jointly with the "
             "device offset)."
         )
-    return OffsetCheck(
+    return dataclasses.replace(
+        check,
         time_offset_s=applied_s,
         time_offset=clock,
         device=found,
@@ -265,13 +337,12 @@ def _device(
     estimate: Trajectory,
     time_offset_s: float,
     *,
-    joint: bool,
     auto_device: bool,
     max_gap_s: float,
     with_scale: bool,
     notes: list[str],
 ) -> DeviceOffsetEstimate | None:
-    """Estimate the device offset; None (and a note) when a mere check cannot run."""
+    """Estimate the device offset with the time offset; None (a note) if a check cannot run."""
     from loceval.calibration.handeye import estimate_device_offset  # noqa: PLC0415
 
     return _estimated(
@@ -279,7 +350,7 @@ def _device(
             reference,
             estimate,
             time_offset_s=time_offset_s,
-            fit_time_offset=joint,
+            fit_time_offset=True,
             with_scale=with_scale,
             max_gap_s=max_gap_s,
             max_pairs=ESTIMATE_MAX_PAIRS if auto_device else CHECK_MAX_PAIRS,
@@ -304,6 +375,16 @@ def _estimated(
             raise
         notes.append(f"The {what} could not be checked against the motion: {err}")
         return None
+
+
+def _data_clock(clock: TimeOffsetEstimate | None) -> ClockModel | None:
+    """The clock the data show: their offset, with the drift and steps when significant."""
+    if clock is None or clock.estimated_s is None:
+        return None
+    drift = clock.drift
+    if drift is not None and (drift.significant or drift.steps):
+        return drift.model(with_rate=True, with_steps=True, offset_s=drift.offset_s)
+    return dataclasses.replace(clock.model, offset_s=clock.estimated_s, rate_ppm=clock.rate_ppm)
 
 
 def _with_joint(clock: TimeOffsetEstimate, value_s: float, sigma_s: float) -> TimeOffsetEstimate:

@@ -61,6 +61,9 @@ def format_tables(result: EvaluationResult) -> str:
     ]
     if notes:
         lines += ["", "Inputs", *(f"  {who}: {n}" for who, n in notes)]
+    checked = [(e.name, n) for e in result.estimates for n in e.notes]
+    if checked:
+        lines += ["", "Notes", *(f"  {who}: {n}" for who, n in checked)]
     warnings = [
         *(("reference", w) for w in result.reference_warnings),
         *((e.name, w) for e in result.estimates for w in e.warnings),

@@ -131,7 +131,18 @@ def test_to_dict_is_the_contract(rng: np.random.Generator) -> None:
     """to_dict() holds exactly the issue's keys."""
     rec = make_recording(rng, duration_s=40.0)
     out = estimate_time_offset(rec.reference, rec.estimate).to_dict()
-    assert set(out) == {"value_s", "sigma_s", "source", "estimated_s", "candidates_s"}
+    assert set(out) == {
+        "value_s",
+        "sigma_s",
+        "source",
+        "estimated_s",
+        "candidates_s",
+        "rate_ppm",
+        "rate_source",
+        "estimated_rate_ppm",
+        "sigma_rate_ppm",
+        "steps",
+    }
     assert out["source"] == "estimated"
     assert isinstance(out["candidates_s"], list)
 

@@ -12,7 +12,18 @@ from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from tests.calibration_factory import Motion, Recording, make_recording
 from tests.factories import make_trajectory
 
-TIME_KEYS = {"value_s", "sigma_s", "source", "estimated_s", "candidates_s"}
+TIME_KEYS = {
+    "value_s",
+    "sigma_s",
+    "source",
+    "estimated_s",
+    "candidates_s",
+    "rate_ppm",
+    "rate_source",
+    "estimated_rate_ppm",
+    "sigma_rate_ppm",
+    "steps",
+}
 DEVICE_KEYS = {
     "translation_m",
     "rotation_xyzw",
@@ -173,6 +184,11 @@ def test_a_check_that_cannot_run_is_a_warning(rng: np.random.Generator) -> None:
         "source": "given",
         "estimated_s": None,
         "candidates_s": [],
+        "rate_ppm": 0.0,
+        "rate_source": "given",
+        "estimated_rate_ppm": None,
+        "sigma_rate_ppm": None,
+        "steps": [],
     }
     with pytest.raises(InputError, match=r"has 10 poses; .* give the offset instead") as err:
         evaluate(truth, [truth], EvaluationConfig(auto_time_offset=True))
