@@ -50,29 +50,30 @@ def format_tables(result: EvaluationResult) -> str:
     lines += _verdict_lines(result)
     lines += _excursion_lines(result)
     lines += _map_lines(result)
-    if result.comparisons:
-        lines += [
-            "",
-            "Comparisons (95 % intervals)",
-            *(f"  {c.summary}" for c in result.comparisons),
-        ]
-    notes = [("reference", n) for n in result.reference.notes] + [
-        (e.name, n) for e in result.estimates for n in e.estimate.notes
-    ]
-    if notes:
-        lines += ["", "Inputs", *(f"  {who}: {n}" for who, n in notes)]
-    checked = [(e.name, n) for e in result.estimates for n in e.notes]
-    if checked:
-        lines += ["", "Notes", *(f"  {who}: {n}" for who, n in checked)]
+    lines += _block(
+        "Comparisons (95 % intervals)", [("", c.summary) for c in result.comparisons or ()]
+    )
+    lines += _block(
+        "Inputs",
+        [("reference", n) for n in result.reference.notes]
+        + [(e.name, n) for e in result.estimates for n in e.estimate.notes],
+    )
+    lines += _block("Notes", [(e.name, n) for e in result.estimates for n in e.notes])
     warnings = [
         *(("reference", w) for w in result.reference_warnings),
         *((e.name, w) for e in result.estimates for w in e.warnings),
         *(("comparison", w) for w in result.comparison_notes),
         *(("building model", w) for w in (result.building.warnings if result.building else ())),
     ]
-    if warnings:
-        lines += ["", "Warnings", *(f"  {who}: {w}" for who, w in warnings)]
+    lines += _block("Warnings", warnings)
     return "\n".join(lines)
+
+
+def _block(title: str, items: Sequence[tuple[str, str]]) -> list[str]:
+    """Return a titled block of ``who: text`` lines (``text`` alone without a who), or none."""
+    if not items:
+        return []
+    return ["", title, *(f"  {who}: {text}" if who else f"  {text}" for who, text in items)]
 
 
 def format_checkpoint_tables(result: CheckpointEvaluation) -> str:
