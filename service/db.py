@@ -1,6 +1,6 @@
 """Metadata tables (SQLAlchemy 2) and the engine; the schema is owned by Alembic migrations.
 
-Blobs (uploads, artifacts) live in :mod:`service.storage`; rows here point at them by path
+Blobs (uploads, artifacts) live in :mod:`service.blobs.storage`; rows here point at them by path
 relative to the data directory, so the same rows work on every machine that mounts it.
 """
 
@@ -35,7 +35,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, sessionmaker
 
 from service.errors import NotFoundError
-from service.webhooks import new_secret
+from service.schedules.webhooks import new_secret
 
 __all__ = [
     "ACTIVE_STATUSES",
@@ -170,7 +170,7 @@ EvaluationStatus = JobStatus
 class JobState:
     """The columns of a queued job, shared by evaluations and schedule runs.
 
-    The job functions in :mod:`service.jobs` (claim, progress, heartbeat, finish, recovery)
+    The job functions in :mod:`service.jobs.executor` (claim, progress, heartbeat, finish, recovery)
     work on either table through these columns.
     """
 
@@ -221,7 +221,7 @@ class Schedule(Base):
     produce: Mapped[dict[str, Any]] = mapped_column()
     webhook_url: Mapped[str | None] = mapped_column(Text, default=None)
     webhook_secret: Mapped[str] = mapped_column(String(64), default=new_secret)
-    """The key of the webhook's HMAC signature (:mod:`service.webhooks`); never listed."""
+    """The key of the webhook's HMAC signature (:mod:`service.schedules.webhooks`); never listed."""
     next_fire_at: Mapped[dt.datetime | None] = mapped_column(default=None)
     last_fired_at: Mapped[dt.datetime | None] = mapped_column(default=None)
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)

@@ -174,7 +174,7 @@ class ServiceUnavailableError(LocevalError):
 class StoreUnavailableError(ServiceUnavailableError):
     """The object store cannot be reached or refuses to serve (an outage, not the input's fault).
 
-    A job that meets it is put back in the queue, not failed (:mod:`service.tracking`).
+    A job that meets it is put back in the queue, not failed (:mod:`service.jobs.tracking`).
     """
 
     code: ClassVar[str] = "service.unavailable"

@@ -159,7 +159,7 @@ def reset_logging() -> None:
         logging.getLogger(name).setLevel(logging.NOTSET)
 
 
-_JOBS: Final = logging.getLogger("service.jobs")
+_JOBS: Final = logging.getLogger("service.jobs.executor")
 
 
 def log_transition(

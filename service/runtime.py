@@ -1,9 +1,10 @@
 """What a service or worker process shares: settings, database, blobs, the queue, job kinds.
 
 This module knows no job kind by name: the kinds (evaluations, schedule runs) are given to
-:class:`Runtime` by :func:`service.jobs.create_runtime`, which wires them to the queue. Code that
-runs or queues a job does it through the runtime (``runtime.enqueue("evaluation", id)``), so no
-job module imports another job module to reach its executor.
+:class:`Runtime` by :func:`service.jobs.executor.create_runtime`, which wires them to the
+queue. Code that runs or queues a job does it through the runtime
+(``runtime.enqueue("evaluation", id)``), so no job module imports another job module to reach
+its executor.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from service.adapters import converted
 from service.blobs import Blobs
 from service.db import Evaluation, ScheduleRun
-from service.limits import warm_up
+from service.jobs.limits import warm_up
 from service.logs import log_transition
 from service.settings import Settings
 
@@ -74,9 +75,9 @@ class Runtime:
         kinds: the job kinds by name.
         tasks: the queue task of each job kind by kind name, and ``"webhook"``.
         release: queues again the jobs this process still runs when it stops
-            (:func:`service.tracking.release`; given by the wiring, which knows both).
+            (:func:`service.jobs.tracking.release`; given by the wiring, which knows both).
         watch: starts the re-queue check of a consumer process and returns what stops it
-            (:func:`service.watchdog.start_watchdog`; given by the wiring).
+            (:func:`service.jobs.watchdog.start_watchdog`; given by the wiring).
         active: the ids of the jobs this process is running now (never judged abandoned).
     """
 

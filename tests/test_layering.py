@@ -316,13 +316,13 @@ def test_core_and_exporters_know_no_http() -> None:
 
 
 RESOURCE_MODULES: Final = (
-    "service.datasets",
-    "service.evaluations",
-    "service.schedules",
-    "service.schedule_runs",
-    "service.recordings",
-    "service.jobs",
-    "service.runner",
+    "service.uploads.datasets",
+    "service.jobs.evaluations",
+    "service.schedules.resource",
+    "service.schedules.runs",
+    "service.uploads.recordings",
+    "service.jobs.executor",
+    "service.jobs.runner",
 )
 """The service's resource and job modules: below the routes, so they raise domain errors."""
 

@@ -9,15 +9,15 @@ from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import FileResponse
 
 from exporters import ARTIFACTS
-from service import evaluations, retention
 from service.api.deps import PathText, ProjectDep, RuntimeDep
+from service.api.links import api_url, public_base
+from service.api.metrics import count_upload
 from service.api.responses import problems
 from service.db import Evaluation, get_owned
-from service.links import api_url, public_base
-from service.metrics import count_upload
+from service.jobs import evaluations, retention
 from service.runtime import Runtime
-from service.schema_base import NO_NUL
-from service.schemas import (
+from service.schemas.base import NO_NUL
+from service.schemas.evaluations import (
     EvaluationCreate,
     EvaluationPublic,
     EvaluationsPublic,
@@ -25,7 +25,7 @@ from service.schemas import (
     RangingCreate,
     options_public,
 )
-from service.uploads import receive_multipart
+from service.uploads.multipart import receive_multipart
 
 __all__ = ["router"]
 

@@ -7,12 +7,18 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
 
-from service import schedules
 from service.api.deps import PathText, ProjectDep, RuntimeDep
+from service.api.links import api_url, public_base
 from service.api.responses import problems
 from service.db import Schedule, get_owned
-from service.links import api_url, public_base
-from service.schedule_schemas import (
+from service.schedules import resource as schedules
+from service.schedules.resource import (
+    SUMMARY_ARTIFACTS,
+    run_public,
+    schedule_public,
+    schedule_with_secret,
+)
+from service.schemas.schedules import (
     ScheduleCreate,
     SchedulePatch,
     SchedulePublic,
@@ -20,12 +26,6 @@ from service.schedule_schemas import (
     ScheduleRunsPublic,
     SchedulesPublic,
     ScheduleWithSecret,
-)
-from service.schedules import (
-    SUMMARY_ARTIFACTS,
-    run_public,
-    schedule_public,
-    schedule_with_secret,
 )
 
 __all__ = ["router"]

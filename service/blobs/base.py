@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Final
 
 from starlette.responses import Response
 
-from service.storage import Swept
+from service.blobs.storage import Swept
 
 if TYPE_CHECKING:
     from loceval.readers.rosbag import RemoteFile

@@ -1,4 +1,4 @@
-"""The local backend: the data directory's folders (:class:`service.storage.BlobStore`).
+"""The local backend: the data directory's folders (:class:`service.blobs.storage.BlobStore`).
 
 Its behaviour is the store's as it was before object storage: uploads land in
 ``incoming/<uuid>.part`` and are renamed into ``datasets/<id>/``, artifacts are staged
@@ -18,8 +18,8 @@ from typing import IO
 from starlette.responses import FileResponse, Response
 
 from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming
+from service.blobs.storage import BlobStore, Swept
 from service.errors import InsufficientStorageError
-from service.storage import BlobStore, Swept
 
 __all__ = ["STORAGE_FULL", "LocalBlobs", "LocalIncoming"]
 

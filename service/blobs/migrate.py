@@ -21,9 +21,9 @@ from typing import Final
 from sqlalchemy import select
 
 from service.blobs.s3 import S3Blobs, store_errors
+from service.blobs.storage import EVALUATIONS, RUNS
 from service.db import Dataset
 from service.runtime import Runtime
-from service.storage import EVALUATIONS, RUNS
 
 __all__ = ["MigrationCounts", "migrate_folder"]
 

@@ -49,9 +49,9 @@ from service.blobs.lease import LEASE_S, Lease, claim_slot
 from service.blobs.ranged import ObjectFile
 from service.blobs.s3client import make_client, store_errors, unless_missing
 from service.blobs.s3upload import PART_BYTES, S3Incoming, pending_key
+from service.blobs.storage import Swept
 from service.errors import StartupError, register_private_root
 from service.settings import Settings
-from service.storage import Swept
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client

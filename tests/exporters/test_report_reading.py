@@ -21,8 +21,8 @@ from exporters.report.render import DEFAULT_TEMPLATES_DIR
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from loceval.readers import parse_source, read_trajectory
 from loceval.trajectory import Trajectory
-from service.options import export_from_options
-from service.schemas import EvaluationOptions
+from service.jobs.options import export_from_options
+from service.schemas.evaluations import EvaluationOptions
 from tests import bagfactory as bf
 from tests.conftest import require_tool
 from tests.exporters.conftest import noisy, walk

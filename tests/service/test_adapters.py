@@ -10,9 +10,9 @@ from sqlalchemy import create_engine, select, text
 
 from loceval.errors import InputError
 from service.adapters import converted
+from service.blobs.storage import BlobStore
 from service.db import Evaluation
 from service.errors import ServiceUnavailableError, problem_for
-from service.storage import BlobStore
 from tests.factories import make_trajectory, write_tum
 from tests.service._api_fixtures import open_api
 from tests.service.conftest import free_port

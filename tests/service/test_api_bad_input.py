@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-import service.uploads
+import service.uploads.multipart
 from service.auth import revoke_key
 from service.db import EvaluationStatus
 from tests import bagfactory
@@ -784,13 +784,13 @@ class _FeedSpy:
 
     def __init__(self, monkeypatch: pytest.MonkeyPatch) -> None:
         self.calls: list[str | None] = []
-        original = service.uploads._feed
+        original = service.uploads.multipart._feed
 
         async def feed(request: Any, parser: Any) -> None:
             self.calls.append(request.headers.get("content-length"))
             await original(request, parser)
 
-        monkeypatch.setattr(service.uploads, "_feed", feed)
+        monkeypatch.setattr(service.uploads.multipart, "_feed", feed)
 
 
 @pytest.mark.parametrize("path", UPLOADS)

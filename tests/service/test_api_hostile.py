@@ -23,10 +23,10 @@ import pytest
 from pydantic import ValidationError
 from sqlalchemy import select
 
+from service.blobs.storage import MAX_FILENAME_BYTES, sanitize_filename
 from service.db import Dataset
-from service.schedules import select_datasets
+from service.schedules.resource import select_datasets
 from service.settings import Settings
-from service.storage import MAX_FILENAME_BYTES, sanitize_filename
 from tests.factories import make_trajectory, write_tum
 from tests.service._api_fixtures import Api, assert_problem, open_api, tum_pair
 from tests.service.test_e2e_scaleout import postgres_url  # noqa: F401  (a fixture)

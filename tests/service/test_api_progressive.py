@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from service import jobs
+from service.jobs import executor as jobs
 from tests.service import _job_hooks as hooks
 from tests.service._api_fixtures import Api, assert_problem, tum_pair
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from service.cli import main
-from service.demo import write_demo_recording
+from service.cli.demo import write_demo_recording
 
 
 @pytest.fixture(scope="module")

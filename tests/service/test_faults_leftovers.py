@@ -18,7 +18,7 @@ import uuid
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from service.storage import BlobStore
+from service.blobs.storage import BlobStore
 from tests.factories import make_trajectory, write_tum
 from tests.service._api_fixtures import open_api
 from tests.service.conftest import REPO, start_server
@@ -86,11 +86,11 @@ _CRASHING_UPLOAD = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    from service import datasets
+    from service.uploads import datasets
     from service.auth import create_key
-    from service.jobs import create_runtime
+    from service.jobs.executor import create_runtime
     from service.settings import Settings
-    from service.uploads import ReceivedFile
+    from service.uploads.multipart import ReceivedFile
 
     data_dir, source, sha256 = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3]
     ready = Path(sys.argv[4])
@@ -154,7 +154,7 @@ _OWNER = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    from service.storage import BlobStore
+    from service.blobs.storage import BlobStore
 
     store = BlobStore(Path(sys.argv[1]))
     part = store.new_incoming()

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from service.cli import main
-from service.schemas import EvaluationOptions
+from service.schemas.evaluations import EvaluationOptions
 from tests.factories import make_trajectory, write_tum
 
 

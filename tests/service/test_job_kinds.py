@@ -8,12 +8,12 @@ from pathlib import Path
 
 import pytest
 
+from service.blobs.storage import EVALUATIONS, RUNS
 from service.db import Evaluation, ScheduleRun, utcnow
-from service.jobs import JOB_KINDS, create_runtime
+from service.jobs.executor import JOB_KINDS, create_runtime
 from service.runtime import Runtime
-from service.schedule_runs import WEBHOOK
+from service.schedules.runs import WEBHOOK
 from service.settings import Settings
-from service.storage import EVALUATIONS, RUNS
 from tests.service._job_rows import add_schedule_run
 from tests.service.test_schedules_api import _Hook
 

@@ -4,7 +4,7 @@ A job past ``job_timeout_s`` is killed and fails with the reason, and its worker
 next job; a job past ``job_memory_mb`` fails with the reason; an error of the core in the
 child fails the job exactly as it would in-process; progress crosses the process boundary.
 The child runs stand-ins from :mod:`tests.service._job_hooks` (a child imports its work by
-name, so tests patch ``service.jobs.run_job`` with those module-level functions).
+name, so tests patch ``service.jobs.executor.run_job`` with those module-level functions).
 """
 
 from __future__ import annotations
@@ -24,14 +24,14 @@ import pytest
 from pydantic import ValidationError
 
 from loceval.errors import AssociationError, InputError, LocevalError
-from service import jobs
 from service.cli import OUT_OF_MEMORY
 from service.cli import main as cli_main
 from service.db import Evaluation, Project
 from service.errors import problem_for
-from service.jobs import Runtime, create_runtime, execute_evaluation
-from service.limits import JobMemoryError, JobProcessError, Limits, run_limited
-from service.runner import run_job
+from service.jobs import executor as jobs
+from service.jobs.executor import Runtime, create_runtime, execute_evaluation
+from service.jobs.limits import JobMemoryError, JobProcessError, Limits, run_limited
+from service.jobs.runner import run_job
 from service.settings import Settings
 from tests.factories import make_trajectory, write_tum
 from tests.service import _job_hooks as hooks
@@ -290,7 +290,7 @@ def test_a_child_ends_when_its_parent_dies(tmp_path: Path) -> None:
     """A worker killed hard leaves no job process behind (it would run on without limits)."""
     script = (
         "import sys, time\n"
-        "from service.limits import Limits, run_limited\n"
+        "from service.jobs.limits import Limits, run_limited\n"
         "from tests.service import _job_hooks as hooks\n"
         "def show(stage, fraction):\n"
         "    print(stage, flush=True)\n"

@@ -14,9 +14,9 @@ from sqlalchemy import inspect, select
 from sqlalchemy.exc import OperationalError
 from sqlalchemy.orm import Session
 
-from service import jobs
 from service.db import Base, Evaluation, Project, ScheduleRun, utcnow
-from service.jobs import Runtime, create_runtime, execute_evaluation, recover
+from service.jobs import executor as jobs
+from service.jobs.executor import Runtime, create_runtime, execute_evaluation, recover
 from service.settings import Settings
 from tests.factories import make_trajectory, write_tum
 from tests.service import _job_hooks as hooks
@@ -139,7 +139,7 @@ def test_a_bug_fails_the_job_with_an_error_id(
 ):
     """Any other exception is logged with its traceback; the job shows only an error id."""
     monkeypatch.setattr(jobs, "run_job", hooks.crash)  # raised in the job's process
-    with caplog.at_level(logging.ERROR, logger="service.jobs"):
+    with caplog.at_level(logging.ERROR, logger="service.jobs.executor"):
         execute_evaluation(runtime, evaluation_id)
     row = _row(runtime, evaluation_id)
     assert row.status == "failed"
@@ -214,7 +214,7 @@ def test_watchdog_finds_a_job_queued_just_before_a_queue_outage(
     the follow-up look covers them. (Before: the next look was 30 s away, which is what CI's
     Redis-restart fault test measured: the last job finished 30.6 s after the restart.)
     """
-    from service import tracking, watchdog
+    from service.jobs import tracking, watchdog
 
     clock = {"mono": 1000.0, "wall": utcnow()}
     with runtime.sessions() as session:  # queued now; its message is not in the queue

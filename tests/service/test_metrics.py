@@ -13,8 +13,8 @@ from prometheus_client.metrics_core import Metric
 from prometheus_client.parser import text_string_to_metric_families
 from sqlalchemy.exc import OperationalError
 
-from service import metrics as metrics_module
-from service.metrics import JOB_BUCKETS_S, UNMATCHED
+from service.api import metrics as metrics_module
+from service.api.metrics import JOB_BUCKETS_S, UNMATCHED
 from tests.service._api_fixtures import Api, open_api, tum_pair
 from tests.service.conftest import (
     running_server,

@@ -12,8 +12,8 @@ from scipy.spatial.transform import Rotation
 
 from loceval.errors import InputError
 from service.cli import main
-from service.evaluations import check_options
-from service.schemas import EvaluationOptions
+from service.jobs.evaluations import check_options
+from service.schemas.evaluations import EvaluationOptions
 from tests import bagfactory as bf
 from tests.calibration_factory import TRUE_DEVICE, Recording, make_recording
 from tests.factories import write_tum

@@ -53,7 +53,7 @@ _PROBE = textwrap.dedent(
 
     import loceval.options
     from pydantic import ValidationError
-    from service.schemas import EvaluationCreate
+    from service.schemas.evaluations import EvaluationCreate
     from tests.service._api_fixtures import open_api
 
     out = {"table": loceval.options.__file__}

@@ -21,7 +21,7 @@ from loceval.errors import InputError, LocevalError
 from loceval.options import OPTIONS, OptionKind, option
 from loceval.radio_evaluation import parse_tag_offset
 from loceval.registration.alignment import AlignWindow
-from service.options import check_pattern, offset_or_none
+from service.jobs.options import check_pattern, offset_or_none
 
 
 def _site(text: str) -> object:

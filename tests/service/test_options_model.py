@@ -18,13 +18,13 @@ from loceval.options import OPTIONS, OptionKind, OptionSpec, check_option, optio
 from service.cli import describe
 from service.cli.parser import RANGING_SKIPPED, build_parser
 from service.errors import problem_for
-from service.options import (
+from service.jobs.options import (
     config_from_options,
     export_from_options,
     ranging_from_options,
 )
-from service.schema_base import NO_NUL
-from service.schemas import EvaluationOptions, RangingOptions
+from service.schemas.base import NO_NUL
+from service.schemas.evaluations import EvaluationOptions, RangingOptions
 
 CLI_ONLY = {"help", "name", "reference_name", "format", "json", "out", "device_from", "device_to"}
 """The evaluate command's own arguments: how to run, not how to evaluate."""

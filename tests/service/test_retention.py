@@ -18,14 +18,14 @@ import pytest
 from pydantic import ValidationError
 from starlette.requests import Request
 
+from service.blobs.storage import BlobStore
 from service.cli import main
 from service.db import Evaluation, JobStatus, Schedule, ScheduleRun, new_id, utcnow
 from service.errors import InsufficientStorageError
-from service.retention import sweep
+from service.jobs.retention import sweep
 from service.runtime import Runtime
 from service.settings import Settings
-from service.storage import BlobStore
-from service.uploads import receive_multipart
+from service.uploads.multipart import receive_multipart
 from tests.service._api_fixtures import (
     Api,
     assert_no_server_paths,
@@ -260,7 +260,7 @@ def test_sweep_deletes_finished_evaluations_past_retention(
         project_id=api.project_id(api.other_key),
     )
     run_id = add_run(api, [{"dataset": "a", "evaluation_id": old_ok, "status": "succeeded"}])
-    with caplog.at_level(logging.INFO, logger="service.retention"):
+    with caplog.at_level(logging.INFO, logger="service.jobs.retention"):
         counts = sweep(runtime_of(api), now=NOW)
     assert counts.evaluations == 4
     assert remaining(api) == {recent, old_running, old_queued}
@@ -277,7 +277,7 @@ def test_sweep_deletes_finished_evaluations_past_retention(
 
 def test_sweep_deletes_in_batches(api: Api, monkeypatch: pytest.MonkeyPatch) -> None:
     """More expired evaluations than one batch: all go."""
-    monkeypatch.setattr("service.retention._BATCH", 3)
+    monkeypatch.setattr("service.jobs.retention._BATCH", 3)
     old = [
         insert(api, status=JobStatus.SUCCEEDED, finished_at=NOW - dt.timedelta(days=100))
         for _ in range(7)

@@ -9,7 +9,7 @@ import numpy as np
 from exporters.options import ExportOptions
 from loceval.evaluation import EvaluationConfig
 from loceval.readers import SourceSpec
-from service.runner import JobSource, TrajectoryJob, run_job
+from service.jobs.runner import JobSource, TrajectoryJob, run_job
 from tests.factories import make_trajectory, write_tum
 
 

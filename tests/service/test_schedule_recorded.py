@@ -17,7 +17,7 @@ from fastapi.testclient import TestClient
 
 from service.auth import create_key
 from service.main import create_app
-from service.schedule_runs import recording_start
+from service.schedules.runs import recording_start
 from service.settings import Settings
 from tests.bagfactory import NS, POSE, Poses, pose_records, random_poses, write_bag
 

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from service import schedule_runs
 from service.auth import create_key
 from service.main import create_app
+from service.schedules import runs as schedule_runs
 from service.settings import Settings
 from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
 from tests.service._api_fixtures import schedule_body

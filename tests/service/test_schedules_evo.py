@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from service.db import Schedule, ScheduleRun
-from service.schedule_runs import webhook_payload
+from service.schedules.runs import webhook_payload
 from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
 from tests.service._api_fixtures import Api, assert_no_server_paths, schedule_body
 

@@ -1,6 +1,6 @@
 """Schedules fire from the queue's tick: once per due time, never while paused, late once.
 
-The clock is frozen: :func:`service.schedules.tick` takes ``now``, and the tests walk it
+The clock is frozen: :func:`service.schedules.resource.tick` takes ``now``, and the tests walk it
 minute by minute. Two real processes ticking the same database stand for two consumers.
 """
 
@@ -19,8 +19,8 @@ from sqlalchemy import select
 
 from loceval.errors import InputError
 from service.db import Dataset, Project, Schedule, ScheduleRun
-from service.jobs import Runtime, create_runtime
-from service.schedules import check_cron, next_fire, select_datasets, tick
+from service.jobs.executor import Runtime, create_runtime
+from service.schedules.resource import check_cron, next_fire, select_datasets, tick
 from service.settings import Settings
 
 T0 = dt.datetime(2026, 11, 23, 6, 59, 30, tzinfo=dt.UTC)
@@ -132,8 +132,8 @@ def test_two_processes_ticking_fire_each_minute_once(runtime: Runtime, tmp_path:
     code = textwrap.dedent(
         f"""
         import datetime as dt, json, sys, time
-        from service.jobs import create_runtime
-        from service.schedules import tick
+        from service.jobs.executor import create_runtime
+        from service.schedules.resource import tick
         from service.settings import Settings
         rt = create_runtime(Settings(data_dir={str(tmp_path / "data")!r}))
         t0 = dt.datetime.fromisoformat({T0.isoformat()!r})

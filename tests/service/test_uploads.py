@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from starlette.requests import Request
 
+from service.blobs.storage import BlobStore
 from service.errors import UploadError, UploadTooLargeError
-from service.storage import BlobStore
-from service.uploads import ReceivedForm, receive_multipart
+from service.uploads.multipart import ReceivedForm, receive_multipart
 
 BOUNDARY = "loceval-test-boundary"
 CONTENT_TYPE = f"multipart/form-data; boundary={BOUNDARY}"

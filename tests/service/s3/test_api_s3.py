@@ -118,7 +118,7 @@ def test_an_mcap_upload_is_inspected_by_ranged_reads_never_downloaded(
     """A 40 MB camera bag: the API reads back only its summary from the bucket to inspect
     it, keeps no copy, and stores the same inspection a local file gets."""
     import tests.bagfactory as bf
-    from service.recordings import inspect_upload
+    from service.uploads.recordings import inspect_upload
 
     poses = bf.random_poses(rng, 200, dt_ns=50_000_000)
     records = bf.tf_records(bf.link_transforms("map", "base_link", poses))

@@ -17,7 +17,7 @@ from starlette.requests import Request
 from service.blobs import artifact_key
 from service.blobs.s3 import PART_BYTES, S3Blobs
 from service.errors import InsufficientStorageError, UploadError
-from service.uploads import receive_multipart
+from service.uploads.multipart import receive_multipart
 from tests.service.s3.conftest import SeaweedFS, object_keys, open_multipart_uploads
 
 BOUNDARY = "loceval-s3-boundary"

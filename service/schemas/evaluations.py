@@ -1,6 +1,6 @@
 """The HTTP contract: request and response bodies (``XCreate`` / ``XPublic`` / ``XsPublic``).
 
-The schedules' bodies are in :mod:`service.schedule_schemas`.
+The schedules' bodies are in :mod:`service.schemas.schedules`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from pydantic_core import core_schema
 from exporters import ARTIFACT_ALIASES, ARTIFACTS, artifact_name
 from exporters.errors import ExportOptionsError
 from loceval.options import AUTO, OPTIONS, OptionKind, OptionSpec, option
-from service.schema_base import Declared, Id, Printable, Strict, strict_schema
+from service.schemas.base import Declared, Id, Printable, Strict, strict_schema
 
 __all__ = [
     "ArtifactPublic",

@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session, defer
 from exporters import ARTIFACTS
 from loceval.errors import InputError
 from service.blobs import artifact_key
-from service.datasets import store_upload
+from service.blobs.storage import EVALUATIONS
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, JobStatus, get_owned, utcnow
 from service.errors import (
     InvalidFieldsError,
@@ -27,7 +27,7 @@ from service.errors import (
     UploadError,
     problem_for,
 )
-from service.options import (
+from service.jobs.options import (
     check_pattern,
     config_from_options,
     export_from_options,
@@ -35,7 +35,7 @@ from service.options import (
     ranging_from_options,
 )
 from service.runtime import Runtime
-from service.schemas import (
+from service.schemas.evaluations import (
     ArtifactPublic,
     DeviceOffset,
     EvaluationCreate,
@@ -46,8 +46,8 @@ from service.schemas import (
     RangingOptions,
     SourceRef,
 )
-from service.storage import EVALUATIONS
-from service.uploads import ReceivedForm
+from service.uploads.datasets import store_upload
+from service.uploads.multipart import ReceivedForm
 
 __all__ = [
     "EVALUATION",
@@ -64,7 +64,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 EVALUATION: Final = "evaluation"
-"""The job kind of evaluations (see :data:`service.jobs.JOB_KINDS`)."""
+"""The job kind of evaluations (see :data:`service.jobs.executor.JOB_KINDS`)."""
 
 
 def create_evaluation(
@@ -120,7 +120,7 @@ def create_ranging(runtime: Runtime, project_id: str, body: RangingCreate) -> Ev
     The record is an evaluation whose request holds the ranging body and, as its estimates,
     the solvers' outputs (named ``nlls`` / ``minmax``, from the ranges dataset); the job
     runs :func:`loceval.radio_evaluation.evaluate_radio` (see
-    :func:`service.jobs.execute_evaluation`).
+    :func:`service.jobs.executor.execute_evaluation`).
 
     Raises:
         NotFoundError: a dataset is not in the project.

@@ -22,13 +22,13 @@ from sqlalchemy import ColumnElement, cast, column, exists, func, literal, selec
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.exc import IntegrityError
 
+from service.blobs.storage import sanitize_filename
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, get_owned, new_id
 from service.errors import ConflictError, InvalidFieldsError, UploadError
-from service.recordings import inspect_remote_upload, inspect_upload
 from service.runtime import Runtime
-from service.schemas import MAX_TAGS, DatasetFields, UploadPublic
-from service.storage import sanitize_filename
-from service.uploads import ReceivedFile, ReceivedForm
+from service.schemas.evaluations import MAX_TAGS, DatasetFields, UploadPublic
+from service.uploads.multipart import ReceivedFile, ReceivedForm
+from service.uploads.recordings import inspect_remote_upload, inspect_upload
 
 __all__ = ["delete_dataset", "list_datasets", "parse_tags", "store_form", "store_upload"]
 

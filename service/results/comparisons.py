@@ -18,18 +18,18 @@ from typing import Any, Final
 from loceval.core.arrays import FloatArray, StampsNs
 from loceval.errors import InputError, LocevalError
 from service.blobs import artifact_key
-from service.comparison_schemas import (
+from service.blobs.storage import EVALUATIONS
+from service.db import Dataset, Evaluation, JobStatus, get_owned
+from service.errors import NotReadyError
+from service.runtime import Runtime
+from service.schemas.comparisons import (
     ComparedItem,
     ComparedResultPublic,
     ComparisonCreate,
     ComparisonPairPublic,
     ComparisonPublic,
 )
-from service.db import Dataset, Evaluation, JobStatus, get_owned
-from service.errors import NotReadyError
-from service.evo_datasets import is_evo_result, read_evo_dataset
-from service.runtime import Runtime
-from service.storage import EVALUATIONS
+from service.uploads.evo_results import is_evo_result, read_evo_dataset
 
 __all__ = ["compare_items"]
 

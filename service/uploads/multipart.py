@@ -32,8 +32,8 @@ from starlette.requests import ClientDisconnect, Request
 
 from service.blobs import Blobs, Incoming
 from service.blobs.local import STORAGE_FULL, LocalBlobs, LocalIncoming
+from service.blobs.storage import BlobStore
 from service.errors import InsufficientStorageError, UploadError, UploadTooLargeError
-from service.storage import BlobStore
 
 if TYPE_CHECKING:
     from loceval.readers.rosbag import HeldMessages, McapScan

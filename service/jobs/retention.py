@@ -31,12 +31,12 @@ from typing import Any, Final
 from sqlalchemy import and_, delete, or_, select, update
 from sqlalchemy.orm import Session
 
+from service.blobs.storage import EVALUATIONS, RUNS, Swept
 from service.db import Dataset, Evaluation, JobStatus, ScheduleRun, get_owned, utcnow
 from service.errors import ConflictError, NotFoundError
-from service.evaluations import EVALUATION
+from service.jobs.evaluations import EVALUATION
 from service.logs import log_transition
 from service.runtime import JobModel, Runtime
-from service.storage import EVALUATIONS, RUNS, Swept
 
 __all__ = [
     "FINISHED_STATUSES",
@@ -167,7 +167,7 @@ def sweep_leftovers(runtime: Runtime, *, startup: bool = False) -> Swept:
     """Remove what upload processes that are gone left: partial uploads, unrecorded datasets.
 
     Runs on every start, once a minute in the workers and in the hourly sweep; an owner
-    still running (its lock held) keeps everything (:meth:`service.storage.BlobStore.sweep`).
+    still running (its lock held) keeps everything (:meth:`service.blobs.storage.BlobStore.sweep`).
     """
     swept = runtime.store.sweep(lambda ids: _existing(runtime, Dataset, ids), startup=startup)
     if swept.partial_uploads or swept.datasets:

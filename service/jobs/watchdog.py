@@ -1,20 +1,20 @@
 """The re-queue check of a consumer process: abandoned jobs and lost queue messages, in seconds.
 
 Every process that consumes the queue (``loceval serve``, ``loceval worker``) runs one
-:class:`Watchdog` thread. Every :func:`~service.tracking.beat_interval` (2 s by default) it
-calls :func:`~service.tracking.recover`, which is cheap: one indexed query per job kind for
+:class:`Watchdog` thread. Every :func:`~service.jobs.tracking.beat_interval` (2 s by default) it
+calls :func:`~service.jobs.tracking.recover`, which is cheap: one indexed query per job kind for
 running jobs whose heartbeat is older than the lease. How the numbers were chosen:
 
 * **heartbeat every 2 s, lease 10 s** (``LOCEVAL_JOB_LEASE_S``; the beat is a fifth of it).
   A beat is one small UPDATE from a thread of the worker process, whose heavy work runs in
-  child processes (:mod:`service.limits`), so five beats in a row go missing only when the
+  child processes (:mod:`service.jobs.limits`), so five beats in a row go missing only when the
   process is gone or frozen. A worker killed mid-job is noticed within lease + one check
   (12 s), and its job starts again at once on another worker.
 * **a missed beat is not a dead worker when nobody could beat**: while the database is away
   no heartbeat is written, so after an outage (or when this thread itself was held up, the
   sign of a machine too busy to run its threads) the check trusts no heartbeat until the
   database has answered for a whole lease again. A job this process runs is never judged
-  by its heartbeat (:func:`~service.tracking.recover` skips it).
+  by its heartbeat (:func:`~service.jobs.tracking.recover` skips it).
 * **lost queue messages**: the queue holds only job ids; the rows are the truth. A Redis
   without persistence that restarts comes back empty: the check reads Redis's ``run_id``
   (a new one at every start) and, when it changed or Redis or the database failed since
@@ -36,8 +36,8 @@ from typing import Final
 from huey import RedisHuey
 
 from service.adapters import DATABASE_ERRORS, QUEUE_ERRORS
+from service.jobs.tracking import beat_interval, recover
 from service.runtime import Runtime
-from service.tracking import beat_interval, recover
 
 __all__ = ["LOST_CHECK_S", "Watchdog", "start_watchdog"]
 
@@ -52,7 +52,7 @@ _STALLED: Final = 3
 
 
 class Watchdog:
-    """A thread that runs :func:`~service.tracking.recover` every few seconds."""
+    """A thread that runs :func:`~service.jobs.tracking.recover` every few seconds."""
 
     def __init__(self, runtime: Runtime) -> None:
         """Watch the jobs of ``runtime``'s database and queue (start it with :meth:`start`)."""

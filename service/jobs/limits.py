@@ -67,8 +67,8 @@ logger = logging.getLogger(__name__)
 _MIB: Final = 1 << 20
 _PROGRESS_INTERVAL_S: Final = 0.1
 _EXIT_GRACE_S: Final = 5.0
-_PRELOAD: Final = ("service.limits", "service.job_preload")
-"""What the forkserver imports once (:mod:`service.job_preload` names the heavy modules)."""
+_PRELOAD: Final = ("service.jobs.limits", "service.jobs.preload")
+"""What the forkserver imports once (:mod:`service.jobs.preload` names the heavy modules)."""
 _CRASH_SIGNALS: Final = frozenset({signal.SIGSEGV, signal.SIGABRT, signal.SIGBUS})
 """How a C library that does not check its allocations dies when the address space is full."""
 _ADVICE: Final = (

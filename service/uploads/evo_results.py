@@ -20,7 +20,7 @@ from service.errors import NotFoundError, is_storage_full
 
 if TYPE_CHECKING:
     from service.runtime import Runtime
-    from service.schedule_schemas import EvoResultRef
+    from service.schemas.schedules import EvoResultRef
 
 __all__ = [
     "EVO_RESULT_KIND",

@@ -4,7 +4,7 @@ Job state lives in the database, not in the queue or in process memory: the queu
 only job ids. A worker claims a job with a conditional update (``queued -> running``), so a
 job enqueued twice runs once; while it runs it beats a heartbeat. A job whose heartbeat stops
 (the worker crashed or the service restarted) is found by :func:`recover`, on start and every
-few seconds (:mod:`service.watchdog`), and is queued again (the work is idempotent: artifacts
+few seconds (:mod:`service.jobs.watchdog`), and is queued again (the work is idempotent: artifacts
 are rebuilt from the inputs) or, after ``job_attempts`` starts, marked failed with the reason.
 
 The database may be away for a moment (a restart, a failover). Nothing is lost then: a claim,
@@ -75,7 +75,7 @@ class JobDeferred(Exception):  # noqa: N818  (not an error of the job: it is put
     """The job could not be claimed or run because the database was away; queue it again.
 
     Not a :class:`LocevalError`: the job has not failed. The queue task turns it into a
-    retry of the message after a delay (:func:`service.jobs.create_runtime`).
+    retry of the message after a delay (:func:`service.jobs.executor.create_runtime`).
     """
 
 

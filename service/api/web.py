@@ -21,7 +21,7 @@ from exporters.report import pdf_available
 from loceval import __version__
 from loceval.core.display import shown_text
 from loceval.options import option
-from service.schemas import options_public
+from service.schemas.evaluations import options_public
 
 __all__ = ["router"]
 

@@ -1,10 +1,10 @@
 """What one schedule run does: evaluate the selected recordings, render the summary, notify.
 
-A run is a tracked job (:func:`service.tracking.tracked_job`) of the kind ``run``. It
+A run is a tracked job (:func:`service.jobs.tracking.tracked_job`) of the kind ``run``. It
 evaluates every selected recording with the schedule's template (as evaluation jobs, listed
 with the others, run in this thread), renders one summary report and, if the schedule has a
 webhook, queues its delivery: a queue task of its own, retried by the queue
-(:func:`service.jobs.create_runtime` gives it ``retries`` and ``retry_delay``), so no
+(:func:`service.jobs.executor.create_runtime` gives it ``retries`` and ``retry_delay``), so no
 consumer thread sleeps between attempts. Every attempt is recorded with the run.
 """
 
@@ -26,21 +26,12 @@ from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
 from service.db import Dataset, Evaluation, JobStatus, Schedule, ScheduleRun, utcnow
 from service.errors import ServiceUnavailableError, problem_for
-from service.evaluations import EVALUATION, create_evaluation
-from service.evo_datasets import is_evo_result, read_evo_dataset
+from service.jobs.evaluations import EVALUATION, create_evaluation
+from service.jobs.tracking import ProgressWriter, tracked_job
 from service.runtime import Runtime
-from service.schedule_schemas import (
-    EvaluationTemplate,
-    EvoResultRef,
-    Produce,
-    Selection,
-    TemplateSource,
-)
-from service.schedules import RUN, SUMMARY_ARTIFACTS, describe_selection, select_datasets
-from service.schemas import EvaluationCreate, SourceRef
-from service.summaries import summary_files
-from service.tracking import ProgressWriter, tracked_job
-from service.webhooks import (
+from service.schedules.resource import RUN, SUMMARY_ARTIFACTS, describe_selection, select_datasets
+from service.schedules.summaries import summary_files
+from service.schedules.webhooks import (
     AllowList,
     WebhookRefusedError,
     WebhookUnresolvedError,
@@ -48,6 +39,15 @@ from service.webhooks import (
     post,
     signature_headers,
 )
+from service.schemas.evaluations import EvaluationCreate, SourceRef
+from service.schemas.schedules import (
+    EvaluationTemplate,
+    EvoResultRef,
+    Produce,
+    Selection,
+    TemplateSource,
+)
+from service.uploads.evo_results import is_evo_result, read_evo_dataset
 
 __all__ = [
     "WEBHOOK",
@@ -415,8 +415,8 @@ def webhook_payload(runtime: Runtime, run: ScheduleRun, schedule: Schedule) -> d
 def deliver_webhook(runtime: Runtime, run_id: str, *, attempt: int) -> None:
     """Post a finished run's summary to its schedule's webhook once and record the attempt.
 
-    The URL is checked again first (:func:`service.webhooks.check_webhook_url`: the name may
-    resolve elsewhere now, or the allow-list changed); a refused target is recorded with
+    The URL is checked again first (:func:`service.schedules.webhooks.check_webhook_url`: the
+    name may resolve elsewhere now, or the allow-list changed); a refused target is recorded with
     ``"refused": true`` and not retried, and neither is a redirect (3xx), which is never
     followed. The body is signed with the schedule's secret (``X-Loceval-Signature``).
 

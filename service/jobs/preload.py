@@ -1,6 +1,6 @@
 """Imported once by the jobs' forkserver: what every job's process starts with.
 
-:mod:`service.limits` runs each job in a process forked from a server process that imported
+:mod:`service.jobs.limits` runs each job in a process forked from a server process that imported
 this module, so a job does not import NumPy, SciPy, Matplotlib, WeasyPrint and the CAD
 libraries anew (seconds per job), nor compile the report templates. A module that fails to
 import is left out here (the job that needs it reports the failure itself); the server must
@@ -16,7 +16,7 @@ from typing import Final
 __all__ = ["MODULES"]
 
 MODULES: Final = (
-    "service.runner",
+    "service.jobs.runner",
     "loceval.evaluation",
     "loceval.readers",
     "loceval.checkpoint_evaluation",

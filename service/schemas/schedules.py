@@ -10,8 +10,8 @@ from pydantic import BaseModel, Field, field_validator
 from pydantic.json_schema import SkipJsonSchema
 from pydantic_core import PydanticCustomError
 
-from service.schema_base import Declared, Id, Printable, Strict
-from service.schemas import (
+from service.schemas.base import Declared, Id, Printable, Strict
+from service.schemas.evaluations import (
     ArtifactPublic,
     EvaluationOptions,
     Problem,
@@ -81,7 +81,8 @@ CRON_PATTERN: Final = (
 )
 """The cron lines a schedule takes: five fields (minute hour day month weekday) of numbers in
 range, month and day names, ``*``, ranges, lists and steps; croniter's extensions (``L``,
-``#``, ``?``, seconds) are not taken. :func:`service.schedules.check_cron` holds requests to it.
+``#``, ``?``, seconds) are not taken. :func:`service.schedules.resource.check_cron` holds
+requests to it.
 """
 
 TIME_ZONES: Final = tuple(sorted(zoneinfo.available_timezones()))
@@ -97,14 +98,14 @@ Cron = Annotated[
         "February only) never fires and is refused",
     ),
 ]
-"""A cron line (checked by :func:`service.schedules.check_cron`, with its message)."""
+"""A cron line (checked by :func:`service.schedules.resource.check_cron`, with its message)."""
 
 TimeZone = Annotated[
     str,
     Field(min_length=1, max_length=64, examples=["Europe/Berlin"]),
     Declared(enum=list(TIME_ZONES)),
 ]
-"""An IANA time zone name (checked by :func:`service.schedules.check_cron`)."""
+"""An IANA time zone name (checked by :func:`service.schedules.resource.check_cron`)."""
 
 
 class TemplateSource(Strict):

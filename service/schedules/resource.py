@@ -5,7 +5,7 @@ and once on start). :func:`tick` moves a due schedule's ``next_fire_at`` forward
 conditional update, so of several processes ticking at once exactly one wins and records the
 run (a unique ``(schedule, due time)`` backs this up). A fire missed while the service was
 down is run once, late, and the run says so. What a run does is in
-:mod:`service.schedule_runs`; the routes in :mod:`service.api.schedules` call the functions
+:mod:`service.schedules.runs`; the routes in :mod:`service.api.schedules` call the functions
 here.
 """
 
@@ -25,6 +25,7 @@ from sqlalchemy.exc import IntegrityError
 
 from loceval.errors import InputError
 from service.blobs import artifact_key
+from service.blobs.storage import RUNS
 from service.db import (
     ACTIVE_STATUSES,
     Dataset,
@@ -36,10 +37,11 @@ from service.db import (
     utcnow,
 )
 from service.errors import NotFoundError, NotReadyError
-from service.evaluations import check_options
-from service.evo_datasets import check_evo_results
+from service.jobs.evaluations import check_options
 from service.runtime import Runtime
-from service.schedule_schemas import (
+from service.schedules.webhooks import AllowList, check_webhook_url, new_secret
+from service.schemas.evaluations import ArtifactPublic, ProgressPublic
+from service.schemas.schedules import (
     CRON_PATTERN,
     TIME_ZONES,
     ScheduleCreate,
@@ -49,9 +51,7 @@ from service.schedule_schemas import (
     ScheduleWithSecret,
     Selection,
 )
-from service.schemas import ArtifactPublic, ProgressPublic
-from service.storage import RUNS
-from service.webhooks import AllowList, check_webhook_url, new_secret
+from service.uploads.evo_results import check_evo_results
 
 __all__ = [
     "RUN",
@@ -78,7 +78,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 RUN: Final = "run"
-"""The job kind of schedule runs (see :data:`service.jobs.JOB_KINDS`)."""
+"""The job kind of schedule runs (see :data:`service.jobs.executor.JOB_KINDS`)."""
 _LATE: Final = dt.timedelta(seconds=90)  # a fire found later than this was missed
 _MAX_COUNTED_MISSES: Final = 10_000
 SUMMARY_ARTIFACTS: Final = {"summary.html": "text/html", "summary.pdf": "application/pdf"}
@@ -236,7 +236,7 @@ def select_datasets(
     ``uploaded_within_days`` (counted back from ``as_of``); a missing key selects all.
     Recordings uploaded after ``as_of`` are not included. Uploaded evo result zips the
     conditions match are picked like recordings (a run takes their figures); the zips named
-    in ``evo_results`` are added by the run (:mod:`service.schedule_runs`).
+    in ``evo_results`` are added by the run (:mod:`service.schedules.runs`).
     """
     chosen = _selection(selection)
     tags = set(chosen.tags)

@@ -6,7 +6,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from service.schema_base import Id, Printable, Strict, strict_schema
+from service.schemas.base import Id, Printable, Strict, strict_schema
 
 __all__ = [
     "ComparedItem",

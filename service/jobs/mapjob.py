@@ -1,6 +1,6 @@
 """The map step of an evaluation job: the robot's map against the building plan.
 
-Run by :func:`service.runner.run_job` after the trajectories are evaluated, the same way for
+Run by :func:`service.jobs.runner.run_job` after the trajectories are evaluated, the same way for
 the CLI (``--map SOURCE --building PLAN``) and the API (``options.map``): the plan is the
 building model cut at the reference's median height (:mod:`exporters.plots.underlay`,
 placed by the site transform), the map is placed by the chosen estimate's alignment; a bag

@@ -46,7 +46,7 @@ def inspect_upload(path: Path, filename: str) -> dict[str, Any]:
     if Path(filename).suffix.lower() == ".zip" and _holds_map_yaml(path):
         return _inspect_map(path)
     if Path(filename).suffix.lower() == ".zip":
-        from service.evo_datasets import inspect_result_zip  # noqa: PLC0415
+        from service.uploads.evo_results import inspect_result_zip  # noqa: PLC0415
 
         found = inspect_result_zip(path, filename)
         if found is not None:

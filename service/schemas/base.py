@@ -1,7 +1,7 @@
 """What every request body shares: the strict base model, the id type and the printable check.
 
-:mod:`service.schemas` and :mod:`service.schedule_schemas` build their request bodies on
-these.
+:mod:`service.schemas.evaluations` and :mod:`service.schemas.schedules` build their request
+bodies on these.
 """
 
 from __future__ import annotations

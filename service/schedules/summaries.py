@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 from loceval.evaluation import Tolerance
 
 if TYPE_CHECKING:
-    from service.schedule_schemas import EvaluationTemplate
+    from service.schemas.schedules import EvaluationTemplate
 
 __all__ = ["summary_files", "template_tolerance"]
 

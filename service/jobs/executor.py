@@ -3,11 +3,11 @@
 :data:`JOB_KINDS` is the registry (model, storage folder, executor, interrupted text) and
 :func:`create_runtime` opens a process's :class:`~service.runtime.Runtime` and turns each
 kind into a huey task, together with the webhook task and the once-a-minute tick. The
-evaluation job itself is here too; schedule runs are in :mod:`service.schedule_runs`. Every
-executor runs inside :func:`service.tracking.tracked_job` (claim, heartbeat, finish,
+evaluation job itself is here too; schedule runs are in :mod:`service.schedules.runs`. Every
+executor runs inside :func:`service.jobs.tracking.tracked_job` (claim, heartbeat, finish,
 cleanup), so a kind is only what differs: what it reads and what it stores. An evaluation's
 computation runs in a child process within the settings' wall-time and memory limits
-(:func:`service.limits.run_limited`), so a runaway one fails with the reason and frees its
+(:func:`service.jobs.limits.run_limited`), so a runaway one fails with the reason and frees its
 worker.
 """
 
@@ -32,6 +32,7 @@ from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec, TrajectoryFormat
 from service.adapters import DATABASE_ERRORS
 from service.blobs import open_blobs
+from service.blobs.storage import EVALUATIONS, RUNS
 from service.db import (
     Dataset,
     Evaluation,
@@ -40,19 +41,18 @@ from service.db import (
     create_db_engine,
     make_session_factory,
 )
-from service.evaluations import EVALUATION, visits_dataset_id
-from service.limits import Limits, run_limited
-from service.mapjob import map_source
-from service.options import (
+from service.jobs.evaluations import EVALUATION, visits_dataset_id
+from service.jobs.limits import Limits, run_limited
+from service.jobs.mapjob import map_source
+from service.jobs.options import (
     checkpoints_from_options,
     config_from_options,
     device_offset,
     export_from_options,
     ranging_from_options,
 )
-from service.preflight import check_data_dir, prepare_schema
-from service.retention import sweep, sweep_leftovers
-from service.runner import (
+from service.jobs.retention import sweep, sweep_leftovers
+from service.jobs.runner import (
     Job,
     JobSource,
     RangingJob,
@@ -61,14 +61,14 @@ from service.runner import (
     file_provenance,
     run_job,
 )
+from service.jobs.tracking import JobDeferred, recover, release, tracked_job
+from service.jobs.watchdog import start_watchdog
+from service.preflight import check_data_dir, prepare_schema
 from service.runtime import JobKind, Runtime, create_huey
-from service.schedule_runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run
-from service.schedules import RUN, tick
-from service.schemas import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
+from service.schedules.resource import RUN, tick
+from service.schedules.runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run
+from service.schemas.evaluations import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
 from service.settings import Settings
-from service.storage import EVALUATIONS, RUNS
-from service.tracking import JobDeferred, recover, release, tracked_job
-from service.watchdog import start_watchdog
 
 __all__ = [
     "JOB_KINDS",
@@ -140,7 +140,7 @@ def artifact_entry(name: str, path: Path) -> dict[str, Any]:
 class ReadyArtifacts:
     """Publishes each artifact of a running evaluation the moment its process writes it.
 
-    Called (in the worker, through :func:`service.limits.run_limited`) with an artifact's
+    Called (in the worker, through :func:`service.jobs.limits.run_limited`) with an artifact's
     name and its file in the job's staging folder: the file is published to the store
     and the evaluation's row lists it, so ``GET /evaluations/{id}`` shows it and it can
     be downloaded while the others are still being made. ``result.json`` comes first;
@@ -429,7 +429,7 @@ def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runt
     Each job kind becomes a queue task named ``run_<kind>`` whose only argument is the job
     id; webhooks of finished runs are the task ``deliver_webhook`` (retried by the queue);
     ``every_minute`` recovers abandoned jobs and fires due schedules; ``retention_sweep``
-    (hourly) deletes expired evaluations and orphaned files (:mod:`service.retention`).
+    (hourly) deletes expired evaluations and orphaned files (:mod:`service.jobs.retention`).
 
     Raises:
         StartupError: the data directory is not writable, or the database is at a migration

@@ -54,7 +54,7 @@ from service.adapters import DATABASE_ERRORS, QUEUE_ERRORS
 from service.db import JobStatus
 from service.errors import ServiceUnavailableError
 from service.runtime import JobModel, Runtime
-from service.uploads import ReceivedForm
+from service.uploads.multipart import ReceivedForm
 
 __all__ = [
     "CONTENT_TYPE",

@@ -6,7 +6,7 @@ reference trajectory), :class:`ControlPointJob` (estimates scored at surveyed po
 picks the kind of ``loceval evaluate`` and ``POST /evaluations`` from the reference, once;
 ``loceval ranging`` and ``POST /ranging`` build a :class:`RangingJob`. :func:`run_job` reads
 the sources, evaluates and writes the artifacts. The options a job runs with are built from
-the front doors' options by :mod:`service.options`.
+the front doors' options by :mod:`service.jobs.options`.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     from loceval.radio_evaluation import RangingConfig
     from loceval.readers.radio import Ranges
     from loceval.readers.rosbag import RemoteFile
-    from service.mapjob import MapSource
+    from service.jobs.mapjob import MapSource
 
 __all__ = [
     "ControlPointJob",
@@ -360,7 +360,7 @@ def _run_trajectories(job: TrajectoryJob, report: ProgressCallback) -> Evaluatio
         progress=_evaluating(report),
     )
     if job.map is not None:
-        from service.mapjob import measure_map  # noqa: PLC0415  (CAD libraries)
+        from service.jobs.mapjob import measure_map  # noqa: PLC0415  (CAD libraries)
 
         report("measuring the map", _EVALUATE)
         result = replace(result, map=measure_map(result, job.map))

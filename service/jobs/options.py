@@ -2,7 +2,7 @@
 
 Both front doors hold the options of :data:`loceval.options.OPTIONS` under the same keys:
 the CLI in its parsed arguments (``args.max_dt_s``), the HTTP API in
-:class:`service.schemas.EvaluationOptions`; both are made from the table, and
+:class:`service.schemas.evaluations.EvaluationOptions`; both are made from the table, and
 :func:`option_values` reads either by key. :func:`config_from_options` and
 :func:`export_from_options` parse each value once into its typed value (``Tolerance``,
 ``AlignWindow``, the enums, a transform), so a value means the same thing, and fails with
