@@ -35,7 +35,7 @@ from sqlalchemy import (
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column, sessionmaker
 
 from service.errors import NotFoundError
-from service.schedules.webhooks import new_secret
+from service.webhooks import new_secret
 
 __all__ = [
     "ACTIVE_STATUSES",
@@ -221,7 +221,7 @@ class Schedule(Base):
     produce: Mapped[dict[str, Any]] = mapped_column()
     webhook_url: Mapped[str | None] = mapped_column(Text, default=None)
     webhook_secret: Mapped[str] = mapped_column(String(64), default=new_secret)
-    """The key of the webhook's HMAC signature (:mod:`service.schedules.webhooks`); never listed."""
+    """The key of the webhook's HMAC signature (:mod:`service.webhooks`); never listed."""
     next_fire_at: Mapped[dt.datetime | None] = mapped_column(default=None)
     last_fired_at: Mapped[dt.datetime | None] = mapped_column(default=None)
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)

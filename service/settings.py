@@ -44,7 +44,7 @@ class Settings(BaseSettings):
         webhook_allow: internal webhook targets let through anyway, comma-separated host
             names (``.internal`` for every name under it), addresses and CIDR networks;
             webhooks to loopback, link-local, private and similar addresses are refused
-            otherwise (:mod:`service.schedules.webhooks`).
+            otherwise (:mod:`service.webhooks`).
         retention_days: finished evaluations (and their artifacts) older than this many days
             are deleted by an hourly sweep; 0 keeps them forever. Datasets are never swept.
         min_free_bytes: free space the data directory keeps: an upload that would leave less
@@ -112,7 +112,7 @@ class Settings(BaseSettings):
     @field_validator("webhook_allow")
     @classmethod
     def _known_webhook_targets(cls, value: str) -> str:
-        from service.schedules.webhooks import AllowList  # noqa: PLC0415  (it imports fastapi's errors)
+        from service.webhooks import AllowList  # noqa: PLC0415  (it imports fastapi's errors)
 
         AllowList.parse(value)  # ValueError names the entry
         return value

@@ -39,7 +39,6 @@ from service.db import (
 from service.errors import NotFoundError, NotReadyError
 from service.jobs.evaluations import check_options
 from service.runtime import Runtime
-from service.schedules.webhooks import AllowList, check_webhook_url, new_secret
 from service.schemas.evaluations import ArtifactPublic, ProgressPublic
 from service.schemas.schedules import (
     CRON_PATTERN,
@@ -52,6 +51,7 @@ from service.schemas.schedules import (
     Selection,
 )
 from service.uploads.evo_results import check_evo_results
+from service.webhooks import AllowList, check_webhook_url, new_secret
 
 __all__ = [
     "RUN",

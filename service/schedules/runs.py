@@ -31,14 +31,6 @@ from service.jobs.tracking import ProgressWriter, tracked_job
 from service.runtime import Runtime
 from service.schedules.resource import RUN, SUMMARY_ARTIFACTS, describe_selection, select_datasets
 from service.schedules.summaries import summary_files
-from service.schedules.webhooks import (
-    AllowList,
-    WebhookRefusedError,
-    WebhookUnresolvedError,
-    check_webhook_url,
-    post,
-    signature_headers,
-)
 from service.schemas.evaluations import EvaluationCreate, SourceRef
 from service.schemas.schedules import (
     EvaluationTemplate,
@@ -48,6 +40,14 @@ from service.schemas.schedules import (
     TemplateSource,
 )
 from service.uploads.evo_results import is_evo_result, read_evo_dataset
+from service.webhooks import (
+    AllowList,
+    WebhookRefusedError,
+    WebhookUnresolvedError,
+    check_webhook_url,
+    post,
+    signature_headers,
+)
 
 __all__ = [
     "WEBHOOK",
@@ -415,7 +415,7 @@ def webhook_payload(runtime: Runtime, run: ScheduleRun, schedule: Schedule) -> d
 def deliver_webhook(runtime: Runtime, run_id: str, *, attempt: int) -> None:
     """Post a finished run's summary to its schedule's webhook once and record the attempt.
 
-    The URL is checked again first (:func:`service.schedules.webhooks.check_webhook_url`: the
+    The URL is checked again first (:func:`service.webhooks.check_webhook_url`: the
     name may resolve elsewhere now, or the allow-list changed); a refused target is recorded with
     ``"refused": true`` and not retried, and neither is a redirect (3xx), which is never
     followed. The body is signed with the schedule's secret (``X-Loceval-Signature``).

@@ -26,13 +26,12 @@ from alembic.config import Config
 from fastapi.testclient import TestClient
 from pydantic import ValidationError
 
-from service import db
+from service import db, webhooks
 from service.auth import create_key
 from service.db import create_db_engine, migrate
 from service.main import create_app
-from service.schedules import webhooks
-from service.schedules.webhooks import SIGNATURE_HEADER, TIMESTAMP_HEADER, verify_signature
 from service.settings import Settings
+from service.webhooks import SIGNATURE_HEADER, TIMESTAMP_HEADER, verify_signature
 
 BAD_URLS = [
     "http://169.254.169.254/latest/meta-data/",
