@@ -170,7 +170,7 @@ EvaluationStatus = JobStatus
 class JobState:
     """The columns of a queued job, shared by evaluations and schedule runs.
 
-    The job functions in :mod:`service.jobs.executor` (claim, progress, heartbeat, finish, recovery)
+    The job functions in :mod:`service.jobs.tracking` (claim, progress, heartbeat, finish, recovery)
     work on either table through these columns.
     """
 

@@ -159,7 +159,7 @@ def reset_logging() -> None:
         logging.getLogger(name).setLevel(logging.NOTSET)
 
 
-_JOBS: Final = logging.getLogger("service.jobs.executor")
+_JOBS: Final = logging.getLogger("service.jobs")
 
 
 def log_transition(

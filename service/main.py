@@ -19,7 +19,7 @@ from service.api.metrics import MetricsMiddleware, create_metrics
 from service.api.metrics import router as metrics_router
 from service.api.middleware import ApiKeyMiddleware
 from service.errors import StartupError, install_error_handlers
-from service.jobs.executor import create_runtime
+from service.jobs.queue import create_runtime
 from service.jobs.retention import sweep_leftovers
 from service.jobs.tracking import recover
 from service.logs import RequestLogMiddleware, configure_logging

@@ -110,6 +110,32 @@ folder or of a lower stage (readers never import metrics, metrics never import c
 the core never imports the exporters, ...). Stages on one row are siblings that import
 neither each other nor anything above them."""
 
+SERVICE_STAGES: Final[tuple[tuple[str, ...], ...]] = (
+    ("service.redact",),
+    ("service.errors",),
+    ("service.webhooks",),
+    ("service.settings", "service.logs", "service.schemas"),
+    ("service.db",),
+    ("service.migrations", "service.adapters"),
+    ("service.auth", "service.preflight"),
+    ("service.blobs",),
+    ("service.runtime",),
+    ("service.uploads",),
+    ("service.jobs",),
+    ("service.schedules", "service.results"),
+    ("service.api",),
+    ("service.main",),
+    ("service.cli",),
+    ("service",),
+)
+"""The service's rooms, lowest first, above the core's and the exporters' stages: what every
+process shares at the top of ``service/`` (errors, settings, logging, the database, the
+runtime), then the blob stores, the uploads, the jobs (the registry names the schedules'
+executors as ``"module:function"`` and imports none), the schedules and finished results,
+the routes, the app and the command line."""
+MAX_SERVICE_TOP_MODULES = 12
+"""``service/`` keeps what every process shares at its top; each concern is a folder."""
+
 HTTP_MODULES: Final = ("fastapi", "starlette", "uvicorn", "pydantic", "httpx")
 HTTP_ERROR_NAMES: Final = frozenset(
     {"HTTPException", "RequestValidationError", "WebSocketException"}
@@ -302,6 +328,17 @@ def http_leaks(
 def test_stages_import_only_downward() -> None:
     """Each stage folder imports only its own modules and lower stages (see STAGES)."""
     assert upward_imports(ROOT, CORE_PACKAGES, STAGES) == []
+
+
+def test_service_stages_import_only_downward() -> None:
+    """Each room of the service imports only its own modules, lower rooms and the core."""
+    assert upward_imports(ROOT, PACKAGES, STAGES + SERVICE_STAGES) == []
+
+
+def test_service_keeps_a_dozen_modules_at_its_top() -> None:
+    """A newcomer finds each concern of the service (api, jobs, blobs, ...) as one folder."""
+    top = top_modules(ROOT, "service")
+    assert len(top) <= MAX_SERVICE_TOP_MODULES, top
 
 
 def test_core_keeps_few_modules_at_its_top() -> None:

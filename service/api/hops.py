@@ -42,7 +42,7 @@ from service.blobs import artifact_key
 from service.blobs.storage import EVALUATIONS
 from service.db import Evaluation, EvaluationStatus, get_owned
 from service.errors import AuthenticationError, NotFoundError, NotReadyError, status_for
-from service.jobs.executor import Runtime
+from service.runtime import Runtime
 
 __all__ = ["COMPONENTS", "router"]
 

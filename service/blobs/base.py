@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import abc
 import contextlib
-import re
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
@@ -34,7 +33,6 @@ __all__ = [
     "Blobs",
     "Incoming",
     "artifact_key",
-    "parse_blob_url",
 ]
 
 STALE_UPLOAD_S: Final = 3600.0
@@ -42,25 +40,6 @@ STALE_UPLOAD_S: Final = 3600.0
 
 HEAD_BYTES: Final = 64
 """How many leading bytes of an upload are kept for sniffing its kind."""
-
-_BUCKET: Final = re.compile(r"[a-z0-9][a-z0-9.\-]{1,61}[a-z0-9]")
-
-
-def parse_blob_url(url: str) -> tuple[str, str]:
-    """Return the bucket and the key prefix (``""`` or ending in ``/``) of an ``s3://`` URL.
-
-    Raises:
-        ValueError: not ``s3://BUCKET[/PREFIX]``, or not a valid bucket name.
-    """
-    match = re.fullmatch(r"s3://([^/]+)(/.*)?", url.strip())
-    if match is None or not _BUCKET.fullmatch(match.group(1)):
-        msg = (
-            "LOCEVAL_BLOB_URL must be s3://BUCKET[/PREFIX] (a bucket name of 3 to 63 "
-            f"lower-case letters, digits, '.' and '-'), or empty for the data folder, not {url!r}"
-        )
-        raise ValueError(msg)
-    prefix = (match.group(2) or "").strip("/")
-    return match.group(1), f"{prefix}/" if prefix else ""
 
 
 def artifact_key(folder: str, job_id: str, name: str) -> str:

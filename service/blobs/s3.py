@@ -43,7 +43,7 @@ from boto3.s3.transfer import TransferConfig
 from botocore.exceptions import BotoCoreError, ClientError
 from starlette.responses import RedirectResponse, Response, StreamingResponse
 
-from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming, artifact_key, parse_blob_url
+from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming, artifact_key
 from service.blobs.cache import InputCache
 from service.blobs.lease import LEASE_S, Lease, claim_slot
 from service.blobs.ranged import ObjectFile
@@ -51,7 +51,7 @@ from service.blobs.s3client import make_client, store_errors, unless_missing
 from service.blobs.s3upload import PART_BYTES, S3Incoming, pending_key
 from service.blobs.storage import Swept
 from service.errors import StartupError, register_private_root
-from service.settings import Settings
+from service.settings import Settings, parse_blob_url
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client

@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Sequence
-from typing import Any, Final
+from typing import Any
 
 from pydantic import ValidationError
 from sqlalchemy import func, select
@@ -27,6 +27,7 @@ from service.errors import (
     UploadError,
     problem_for,
 )
+from service.jobs.kinds import EVALUATION
 from service.jobs.options import (
     check_pattern,
     config_from_options,
@@ -50,7 +51,6 @@ from service.uploads.datasets import store_upload
 from service.uploads.multipart import ReceivedForm
 
 __all__ = [
-    "EVALUATION",
     "artifact_path",
     "check_options",
     "create_evaluation",
@@ -62,9 +62,6 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
-
-EVALUATION: Final = "evaluation"
-"""The job kind of evaluations (see :data:`service.jobs.executor.JOB_KINDS`)."""
 
 
 def create_evaluation(

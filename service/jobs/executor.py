@@ -1,11 +1,8 @@
-"""The job kinds and the queue wiring: the one module that knows every kind of job.
+"""The evaluation job: a stored evaluation's inputs read, run within limits, published.
 
-:data:`JOB_KINDS` is the registry (model, storage folder, executor, interrupted text) and
-:func:`create_runtime` opens a process's :class:`~service.runtime.Runtime` and turns each
-kind into a huey task, together with the webhook task and the once-a-minute tick. The
-evaluation job itself is here too; schedule runs are in :mod:`service.schedules.runs`. Every
-executor runs inside :func:`service.jobs.tracking.tracked_job` (claim, heartbeat, finish,
-cleanup), so a kind is only what differs: what it reads and what it stores. An evaluation's
+:func:`execute_evaluation` is the executor of the ``evaluation`` kind
+(:data:`service.jobs.kinds.JOB_KINDS`). It runs inside
+:func:`service.jobs.tracking.tracked_job` (claim, heartbeat, finish, cleanup); the
 computation runs in a child process within the settings' wall-time and memory limits
 (:func:`service.jobs.limits.run_limited`), so a runaway one fails with the reason and frees its
 worker.
@@ -15,15 +12,10 @@ from __future__ import annotations
 
 import json
 import logging
-import os
-import socket
-import uuid
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Final
+from typing import Any
 
-from huey import crontab
-from huey.exceptions import RetryTask
 from sqlalchemy import update
 from sqlalchemy.orm import Session
 
@@ -31,17 +23,10 @@ from exporters import ARTIFACTS
 from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec, TrajectoryFormat
 from service.adapters import DATABASE_ERRORS
-from service.blobs import open_blobs
-from service.blobs.storage import EVALUATIONS, RUNS
-from service.db import (
-    Dataset,
-    Evaluation,
-    JobStatus,
-    ScheduleRun,
-    create_db_engine,
-    make_session_factory,
-)
-from service.jobs.evaluations import EVALUATION, visits_dataset_id
+from service.blobs.storage import EVALUATIONS
+from service.db import Dataset, Evaluation, JobStatus
+from service.jobs.evaluations import visits_dataset_id
+from service.jobs.kinds import EVALUATION
 from service.jobs.limits import Limits, run_limited
 from service.jobs.mapjob import map_source
 from service.jobs.options import (
@@ -51,7 +36,6 @@ from service.jobs.options import (
     export_from_options,
     ranging_from_options,
 )
-from service.jobs.retention import sweep, sweep_leftovers
 from service.jobs.runner import (
     Job,
     JobSource,
@@ -61,33 +45,19 @@ from service.jobs.runner import (
     file_provenance,
     run_job,
 )
-from service.jobs.tracking import JobDeferred, recover, release, tracked_job
-from service.jobs.watchdog import start_watchdog
-from service.preflight import check_data_dir, prepare_schema
-from service.runtime import JobKind, Runtime, create_huey
-from service.schedules.resource import RUN, tick
-from service.schedules.runs import WEBHOOK, WEBHOOK_ATTEMPTS, deliver_webhook, execute_schedule_run
+from service.jobs.tracking import tracked_job
+from service.runtime import Runtime
 from service.schemas.evaluations import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
-from service.settings import Settings
 
 __all__ = [
-    "JOB_KINDS",
     "ReadyArtifacts",
-    "Runtime",
     "artifact_entry",
-    "create_runtime",
     "evaluation_summary",
     "execute_evaluation",
-    "recover",
-    "release",
     "stored_request",
 ]
 
 logger = logging.getLogger(__name__)
-
-_DEFERRED_DELAY_S: Final = 2.0
-"""When a job put off by a database outage is tried again (its thread waited 30 s already)."""
-_WEBHOOK_RETRY_DELAY_S: Final = 2.0  # then 4 s (retry_backoff=2), as before the queue did it
 
 
 def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
@@ -386,110 +356,3 @@ def _source(
     provenance.update(path=dataset.filename, dataset_id=dataset.id)
     name = ref.name or ref.selector or Path(dataset.filename).stem
     return JobSource(spec, str(name), provenance, display_path=dataset.filename, remote=remote)
-
-
-JOB_KINDS: Final = (
-    JobKind(
-        name=EVALUATION,
-        task_name="run_evaluation",
-        model=Evaluation,
-        folder=EVALUATIONS,
-        execute=execute_evaluation,
-        interrupted_code="evaluation.interrupted",
-        interrupted_title="JobInterrupted",
-        interrupted_detail=(
-            "The evaluation was interrupted {n} times (its worker stopped: a crash, a restart "
-            "or running out of memory) and is not retried again; check the server log, and "
-            "give the server more memory for very large recordings."
-        ),
-    ),
-    JobKind(
-        name=RUN,
-        task_name="run_schedule",
-        model=ScheduleRun,
-        folder=RUNS,
-        execute=execute_schedule_run,
-        interrupted_code="run.interrupted",
-        interrupted_title="RunInterrupted",
-        interrupted_detail=(
-            "The run was interrupted {n} times (its worker stopped) and is not retried again; "
-            "check the server log."
-        ),
-    ),
-)
-"""Every kind of tracked job."""
-
-
-def create_runtime(settings: Settings, *, apply_migrations: bool = True) -> Runtime:
-    """Open the database (migrated to the newest schema), the blob store and the queue.
-
-    The start-up checks run first (:mod:`service.preflight`): the data directory must be
-    writable and the database not newer than this code.
-
-    Each job kind becomes a queue task named ``run_<kind>`` whose only argument is the job
-    id; webhooks of finished runs are the task ``deliver_webhook`` (retried by the queue);
-    ``every_minute`` recovers abandoned jobs and fires due schedules; ``retention_sweep``
-    (hourly) deletes expired evaluations and orphaned files (:mod:`service.jobs.retention`).
-
-    Raises:
-        StartupError: the data directory is not writable, or the database is at a migration
-            this code does not know.
-    """
-    check_data_dir(settings)  # raises when unusable; the low-space warning is the callers'
-    engine = create_db_engine(settings.resolved_database_url)
-    try:
-        prepare_schema(engine, apply_migrations=apply_migrations)
-    except BaseException:
-        engine.dispose()
-        raise
-    huey = create_huey(settings)
-    runtime = Runtime(
-        settings=settings,
-        engine=engine,
-        sessions=make_session_factory(engine),
-        store=open_blobs(settings),
-        huey=huey,
-        worker_id=f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}",
-        kinds={kind.name: kind for kind in JOB_KINDS},
-        release=release,
-        watch=lambda r: start_watchdog(r).stop,
-    )
-    for kind in JOB_KINDS:
-        runtime.tasks[kind.name] = _job_task(runtime, kind)
-
-    # Immediate mode runs a retry at once (the queue has no consumer to wait for the delay).
-    @huey.task(  # type: ignore[untyped-decorator]
-        name="deliver_webhook",
-        retries=WEBHOOK_ATTEMPTS - 1,
-        retry_delay=0 if huey.immediate else _WEBHOOK_RETRY_DELAY_S,
-        retry_backoff=2,
-        context=True,
-    )
-    def deliver(run_id: str, task: Any = None) -> None:  # noqa: ANN401  (huey's Task)
-        deliver_webhook(runtime, run_id, attempt=WEBHOOK_ATTEMPTS - int(task.retries))
-
-    @huey.periodic_task(crontab(minute="*"), name="every_minute")  # type: ignore[untyped-decorator]
-    def every_minute() -> None:
-        recover(runtime)
-        tick(runtime)
-        sweep_leftovers(runtime)
-
-    @huey.periodic_task(crontab(minute="17"), name="retention_sweep")  # type: ignore[untyped-decorator]
-    def hourly_sweep() -> None:
-        sweep(runtime)
-
-    runtime.tasks[WEBHOOK] = deliver
-    return runtime
-
-
-def _job_task(runtime: Runtime, kind: JobKind) -> Any:  # noqa: ANN401  (huey's TaskWrapper)
-    """Return the queue task that runs jobs of ``kind`` in ``runtime``."""
-
-    @runtime.huey.task(name=kind.task_name)  # type: ignore[untyped-decorator]
-    def run(job_id: str) -> None:
-        try:
-            kind.execute(runtime, job_id)
-        except JobDeferred as err:  # the database was away: the row is queued, so is this
-            raise RetryTask(str(err), delay=_DEFERRED_DELAY_S) from err
-
-    return run

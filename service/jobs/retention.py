@@ -34,7 +34,7 @@ from sqlalchemy.orm import Session
 from service.blobs.storage import EVALUATIONS, RUNS, Swept
 from service.db import Dataset, Evaluation, JobStatus, ScheduleRun, get_owned, utcnow
 from service.errors import ConflictError, NotFoundError
-from service.jobs.evaluations import EVALUATION
+from service.jobs.kinds import EVALUATION
 from service.logs import log_transition
 from service.runtime import JobModel, Runtime
 

@@ -75,7 +75,7 @@ class JobDeferred(Exception):  # noqa: N818  (not an error of the job: it is put
     """The job could not be claimed or run because the database was away; queue it again.
 
     Not a :class:`LocevalError`: the job has not failed. The queue task turns it into a
-    retry of the message after a delay (:func:`service.jobs.executor.create_runtime`).
+    retry of the message after a delay (:func:`service.jobs.queue.create_runtime`).
     """
 
 

@@ -38,6 +38,7 @@ from service.db import (
 )
 from service.errors import NotFoundError, NotReadyError
 from service.jobs.evaluations import check_options
+from service.jobs.kinds import RUN
 from service.runtime import Runtime
 from service.schemas.evaluations import ArtifactPublic, ProgressPublic
 from service.schemas.schedules import (
@@ -54,7 +55,6 @@ from service.uploads.evo_results import check_evo_results
 from service.webhooks import AllowList, check_webhook_url, new_secret
 
 __all__ = [
-    "RUN",
     "SUMMARY_ARTIFACTS",
     "check_cron",
     "create_schedule",
@@ -77,8 +77,6 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-RUN: Final = "run"
-"""The job kind of schedule runs (see :data:`service.jobs.executor.JOB_KINDS`)."""
 _LATE: Final = dt.timedelta(seconds=90)  # a fire found later than this was missed
 _MAX_COUNTED_MISSES: Final = 10_000
 SUMMARY_ARTIFACTS: Final = {"summary.html": "text/html", "summary.pdf": "application/pdf"}

@@ -4,7 +4,7 @@ A run is a tracked job (:func:`service.jobs.tracking.tracked_job`) of the kind `
 evaluates every selected recording with the schedule's template (as evaluation jobs, listed
 with the others, run in this thread), renders one summary report and, if the schedule has a
 webhook, queues its delivery: a queue task of its own, retried by the queue
-(:func:`service.jobs.executor.create_runtime` gives it ``retries`` and ``retry_delay``), so no
+(:func:`service.jobs.queue.create_runtime` gives it ``retries`` and ``retry_delay``), so no
 consumer thread sleeps between attempts. Every attempt is recorded with the run.
 """
 
@@ -26,10 +26,12 @@ from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec, TrajectoryFormat, read_trajectory
 from service.db import Dataset, Evaluation, JobStatus, Schedule, ScheduleRun, utcnow
 from service.errors import ServiceUnavailableError, problem_for
-from service.jobs.evaluations import EVALUATION, create_evaluation
+from service.jobs.evaluations import create_evaluation
+from service.jobs.kinds import EVALUATION, RUN
+from service.jobs.kinds import WEBHOOK as WEBHOOK_TASK
 from service.jobs.tracking import ProgressWriter, tracked_job
 from service.runtime import Runtime
-from service.schedules.resource import RUN, SUMMARY_ARTIFACTS, describe_selection, select_datasets
+from service.schedules.resource import SUMMARY_ARTIFACTS, describe_selection, select_datasets
 from service.schedules.summaries import summary_files
 from service.schemas.evaluations import EvaluationCreate, SourceRef
 from service.schemas.schedules import (
@@ -61,9 +63,9 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-WEBHOOK: Final = "webhook"
+WEBHOOK: Final = WEBHOOK_TASK.name
 """The queue task that delivers a run's webhook (one attempt per execution)."""
-WEBHOOK_ATTEMPTS: Final = 3
+WEBHOOK_ATTEMPTS: Final = WEBHOOK_TASK.attempts
 """How often a webhook is posted before the run records it as undelivered."""
 _WEBHOOK_TIMEOUT_S: Final = 10.0
 _EARLIEST_RECORDING: Final = dt.datetime(2000, 1, 1, tzinfo=dt.UTC)

@@ -1,7 +1,7 @@
 """Rows the job tests put straight into a runtime's database: datasets and schedule runs.
 
 The job tests (test_jobs.py, test_job_limits.py, test_job_kinds.py) drive
-:mod:`service.jobs.executor` without the HTTP API, so they store what an upload or a schedule would
+:mod:`service.jobs` without the HTTP API, so they store what an upload or a schedule would
 have stored themselves.
 """
 

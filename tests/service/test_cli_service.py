@@ -8,7 +8,7 @@ import pytest
 
 from service.auth import authenticate
 from service.cli import main
-from service.jobs.executor import create_runtime
+from service.jobs.queue import create_runtime
 from service.settings import Settings, get_settings
 
 

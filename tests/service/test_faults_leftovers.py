@@ -88,7 +88,7 @@ _CRASHING_UPLOAD = textwrap.dedent(
     from pathlib import Path
     from service.uploads import datasets
     from service.auth import create_key
-    from service.jobs.executor import create_runtime
+    from service.jobs.queue import create_runtime
     from service.settings import Settings
     from service.uploads.multipart import ReceivedFile
 

@@ -10,8 +10,10 @@ import pytest
 
 from service.blobs.storage import EVALUATIONS, RUNS
 from service.db import Evaluation, ScheduleRun, utcnow
-from service.jobs.executor import JOB_KINDS, create_runtime
-from service.runtime import Runtime
+from service.jobs.kinds import JOB_KINDS, PERIODIC_TASKS
+from service.jobs.kinds import WEBHOOK as WEBHOOK_TASK
+from service.jobs.queue import create_runtime
+from service.runtime import Runtime, load_target
 from service.schedules.runs import WEBHOOK
 from service.settings import Settings
 from tests.service._job_rows import add_schedule_run
@@ -34,6 +36,19 @@ def test_each_kind_has_its_table_folder_and_a_stable_task_name() -> None:
         "run": (ScheduleRun, RUNS, "run_schedule"),
     }
     assert all("{n}" in k.interrupted_detail for k in JOB_KINDS)
+
+
+def test_every_target_of_the_registry_imports() -> None:
+    """Each executor and task step the registry names is a function that imports."""
+    targets = [
+        *(k.executor for k in JOB_KINDS),
+        WEBHOOK_TASK.target,
+        *(step for task in PERIODIC_TASKS for step in task.targets),
+    ]
+    assert all(callable(load_target(target)) for target in targets)
+    assert WEBHOOK_TASK.name == WEBHOOK
+    with pytest.raises(AttributeError):
+        load_target("service.jobs.executor:no_such_executor")
 
 
 def _finished_run(rt: Runtime, webhook_url: str) -> str:

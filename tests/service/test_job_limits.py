@@ -29,9 +29,11 @@ from service.cli import main as cli_main
 from service.db import Evaluation, Project
 from service.errors import problem_for
 from service.jobs import executor as jobs
-from service.jobs.executor import Runtime, create_runtime, execute_evaluation
+from service.jobs.executor import execute_evaluation
 from service.jobs.limits import JobMemoryError, JobProcessError, Limits, run_limited
+from service.jobs.queue import create_runtime
 from service.jobs.runner import run_job
+from service.runtime import Runtime
 from service.settings import Settings
 from tests.factories import make_trajectory, write_tum
 from tests.service import _job_hooks as hooks

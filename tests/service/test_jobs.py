@@ -16,7 +16,10 @@ from sqlalchemy.orm import Session
 
 from service.db import Base, Evaluation, Project, ScheduleRun, utcnow
 from service.jobs import executor as jobs
-from service.jobs.executor import Runtime, create_runtime, execute_evaluation, recover
+from service.jobs.executor import execute_evaluation
+from service.jobs.queue import create_runtime
+from service.jobs.tracking import recover, release
+from service.runtime import Runtime
 from service.settings import Settings
 from tests.factories import make_trajectory, write_tum
 from tests.service import _job_hooks as hooks
@@ -139,7 +142,7 @@ def test_a_bug_fails_the_job_with_an_error_id(
 ):
     """Any other exception is logged with its traceback; the job shows only an error id."""
     monkeypatch.setattr(jobs, "run_job", hooks.crash)  # raised in the job's process
-    with caplog.at_level(logging.ERROR, logger="service.jobs.executor"):
+    with caplog.at_level(logging.ERROR, logger="service.jobs"):
         execute_evaluation(runtime, evaluation_id)
     row = _row(runtime, evaluation_id)
     assert row.status == "failed"
@@ -251,7 +254,7 @@ def test_release_requeues_the_jobs_of_a_stopping_worker(runtime: Runtime, evalua
         row = session.get_one(Evaluation, evaluation_id)
         row.status, row.worker, row.attempts = "running", runtime.worker_id, 1
         session.commit()
-    assert jobs.release(runtime) == 1
+    assert release(runtime) == 1
     row = _row(runtime, evaluation_id)
     assert (row.status, row.worker) == ("queued", None)
     assert [t.args for t in runtime.huey.pending()] == [(evaluation_id,)]
@@ -260,7 +263,7 @@ def test_release_requeues_the_jobs_of_a_stopping_worker(runtime: Runtime, evalua
 def test_release_leaves_other_workers_jobs(runtime: Runtime, evaluation_id: str):
     """Only this process's jobs are released; another worker's run on."""
     _abandon(runtime, evaluation_id, attempts=1, beat_age_s=0)
-    assert jobs.release(runtime) == 0
+    assert release(runtime) == 0
     assert _row(runtime, evaluation_id).status == "running"
 
 
@@ -294,6 +297,6 @@ def test_recover_handles_schedule_runs_like_evaluations(runtime: Runtime):
 def test_release_requeues_this_workers_schedule_runs(runtime: Runtime):
     """A stopping service queues its unfinished schedule runs again too."""
     run_id = _running_run(runtime, worker=runtime.worker_id, attempts=1, beat_age_s=0)
-    assert jobs.release(runtime) == 1
+    assert release(runtime) == 1
     with runtime.sessions() as session:
         assert session.get_one(ScheduleRun, run_id).status == "queued"

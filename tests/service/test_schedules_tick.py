@@ -19,7 +19,8 @@ from sqlalchemy import select
 
 from loceval.errors import InputError
 from service.db import Dataset, Project, Schedule, ScheduleRun
-from service.jobs.executor import Runtime, create_runtime
+from service.jobs.queue import create_runtime
+from service.runtime import Runtime
 from service.schedules.resource import check_cron, next_fire, select_datasets, tick
 from service.settings import Settings
 
@@ -132,7 +133,7 @@ def test_two_processes_ticking_fire_each_minute_once(runtime: Runtime, tmp_path:
     code = textwrap.dedent(
         f"""
         import datetime as dt, json, sys, time
-        from service.jobs.executor import create_runtime
+        from service.jobs.queue import create_runtime
         from service.schedules.resource import tick
         from service.settings import Settings
         rt = create_runtime(Settings(data_dir={str(tmp_path / "data")!r}))
