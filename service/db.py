@@ -1,6 +1,6 @@
 """Metadata tables (SQLAlchemy 2) and the engine; the schema is owned by Alembic migrations.
 
-Blobs (uploads, artifacts) live in :mod:`service.blobs.storage`; rows here point at them by path
+Blobs (uploads, artifacts) live in :mod:`service.blobs`; rows here point at them by path
 relative to the data directory, so the same rows work on every machine that mounts it.
 """
 

@@ -18,11 +18,13 @@ from service.api import comparisons, datasets, docs, evaluations, health, hops, 
 from service.api.metrics import MetricsMiddleware, create_metrics
 from service.api.metrics import router as metrics_router
 from service.api.middleware import ApiKeyMiddleware
-from service.errors import StartupError, install_error_handlers
+from service.api.problems import install_error_handlers
+from service.api.requestlog import RequestLogMiddleware
+from service.errors import StartupError
 from service.jobs.queue import create_runtime
 from service.jobs.retention import sweep_leftovers
 from service.jobs.tracking import recover
-from service.logs import RequestLogMiddleware, configure_logging
+from service.logs import configure_logging
 from service.preflight import check_data_dir
 from service.runtime import Runtime
 from service.schedules.resource import tick

@@ -13,6 +13,7 @@ import importlib
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Final
 
 from huey import Huey, MemoryHuey, RedisHuey, SqliteHuey
@@ -115,6 +116,15 @@ class Runtime:
     warm_up: Callable[[], None] = lambda: None
     active: set[str] = field(default_factory=set)
     _unwatch: Callable[[], None] | None = None
+
+    @property
+    def private_roots(self) -> tuple[Path, ...]:
+        """The server's folders no message to a client may show: the blob store's data folder.
+
+        Every problem built for a client or stored with a job is scrubbed of them
+        (:func:`service.errors.problem_for`); they belong to this runtime, not the process.
+        """
+        return self.store.private_roots
 
     def enqueue(self, kind: str, job_id: str, *, requeued: str | None = None) -> None:
         """Queue a job of a kind (in immediate mode: run it now).

@@ -376,6 +376,24 @@ def test_resource_modules_raise_no_http_types() -> None:
     assert leaks == []
 
 
+HTTP_FREE_ROOMS: Final = ("service.blobs", "service.uploads", "service.jobs", "service.errors")
+"""Below the routes: the blob stores return what to send, the uploads read any body, the jobs
+and the errors are plain; only ``service/api/`` (and the app) make responses."""
+
+
+def test_storage_uploads_jobs_and_errors_import_no_web_framework() -> None:
+    """No module under blobs/, uploads/, jobs/ or the errors imports FastAPI or Starlette."""
+    files = module_files(ROOT, ("service",))
+    rooms = [m for m in files if any(m == r or m.startswith(r + ".") for r in HTTP_FREE_ROOMS)]
+    leaks = [
+        hit
+        for hit in http_leaks(ROOT, ("service",), ("fastapi", "starlette"))
+        if hit.split(":")[0] in rooms
+    ]
+    assert len(rooms) > 20  # the rooms are there (a renamed folder would pass unchecked)
+    assert leaks == []
+
+
 def test_no_import_cycle() -> None:
     """No module of loceval, exporters or service reaches itself through its imports."""
     cycles = import_cycles(ROOT, PACKAGES)

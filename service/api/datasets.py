@@ -10,8 +10,9 @@ from fastapi import APIRouter, Query, Request, Response, status
 from service.api.deps import PathText, ProjectDep, RuntimeDep
 from service.api.links import api_url
 from service.api.metrics import count_upload
+from service.api.multipart import receive_multipart
 from service.api.responses import problems
-from service.blobs.storage import MAX_FILENAME_BYTES
+from service.blobs.base import MAX_FILENAME_BYTES
 from service.db import Dataset, get_owned
 from service.schemas.base import NO_NUL
 from service.schemas.evaluations import (
@@ -23,7 +24,6 @@ from service.schemas.evaluations import (
     DatasetUploaded,
 )
 from service.uploads import datasets
-from service.uploads.multipart import receive_multipart
 
 __all__ = ["router"]
 

@@ -39,7 +39,7 @@ from service.api.deps import RuntimeDep
 from service.api.responses import problems
 from service.auth import authenticate
 from service.blobs import artifact_key
-from service.blobs.storage import EVALUATIONS
+from service.blobs.base import EVALUATIONS
 from service.db import Evaluation, EvaluationStatus, get_owned
 from service.errors import AuthenticationError, NotFoundError, NotReadyError, status_for
 from service.runtime import Runtime

@@ -8,6 +8,7 @@ from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
 
 from service.api.deps import PathText, ProjectDep, RuntimeDep
+from service.api.downloads import download_response
 from service.api.links import api_url, public_base
 from service.api.responses import problems
 from service.db import Schedule, get_owned
@@ -159,7 +160,8 @@ def read_run_artifact(
 ) -> Response:
     """Download the summary report: summary.html or summary.pdf."""
     key = schedules.run_artifact_path(runtime, project_id, schedule_id, run_id, name)
-    return runtime.store.response(
+    return download_response(
+        runtime.store,
         key,
         media_type=SUMMARY_ARTIFACTS[name],
         filename=f"loceval-run-{run_id[:8]}-{name}",

@@ -21,9 +21,8 @@ from typing import Final, Protocol
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from service.blobs.base import Blobs
+from service.blobs.base import EVALUATIONS, RUNS, Blobs
 from service.blobs.s3 import S3Blobs, store_errors
-from service.blobs.storage import EVALUATIONS, RUNS
 from service.db import Dataset
 
 __all__ = ["MigrationCounts", "migrate_folder"]

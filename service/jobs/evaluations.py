@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session, defer
 from exporters import ARTIFACTS
 from loceval.errors import InputError
 from service.blobs import artifact_key
-from service.blobs.storage import EVALUATIONS
+from service.blobs.base import EVALUATIONS
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, JobStatus, get_owned, utcnow
 from service.errors import (
     InvalidFieldsError,
@@ -234,7 +234,8 @@ def _queued(
                 row.error = problem_for(
                     ServiceUnavailableError(
                         "The job queue could not be reached; start the evaluation again."
-                    )
+                    ),
+                    private=runtime.private_roots,
                 )
                 session.commit()
         raise

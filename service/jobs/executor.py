@@ -23,7 +23,7 @@ from exporters import ARTIFACTS
 from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec, TrajectoryFormat
 from service.adapters import DATABASE_ERRORS
-from service.blobs.storage import EVALUATIONS
+from service.blobs.base import EVALUATIONS
 from service.db import Dataset, Evaluation, JobStatus
 from service.jobs.evaluations import visits_dataset_id
 from service.jobs.kinds import EVALUATION

@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Final
 
-from service.blobs.storage import EVALUATIONS, RUNS
+from service.blobs.base import EVALUATIONS, RUNS
 from service.db import Evaluation, ScheduleRun
 from service.runtime import JobKind
 

@@ -31,7 +31,7 @@ from typing import Any, Final
 from sqlalchemy import and_, delete, or_, select, update
 from sqlalchemy.orm import Session
 
-from service.blobs.storage import EVALUATIONS, RUNS, Swept
+from service.blobs.base import EVALUATIONS, RUNS, Swept
 from service.db import Dataset, Evaluation, JobStatus, ScheduleRun, get_owned, utcnow
 from service.errors import ConflictError, NotFoundError
 from service.jobs.kinds import EVALUATION
@@ -167,7 +167,7 @@ def sweep_leftovers(runtime: Runtime, *, startup: bool = False) -> Swept:
     """Remove what upload processes that are gone left: partial uploads, unrecorded datasets.
 
     Runs on every start, once a minute in the workers and in the hourly sweep; an owner
-    still running (its lock held) keeps everything (:meth:`service.blobs.storage.BlobStore.sweep`).
+    still running (its lock held) keeps everything (:meth:`service.blobs.local.LocalBlobs.sweep`).
     """
     swept = runtime.store.sweep(lambda ids: _existing(runtime, Dataset, ids), startup=startup)
     if swept.partial_uploads or swept.datasets:

@@ -195,7 +195,10 @@ def tracked_job(
                 msg = f"{kind} {job_id} was put back: {_unreachable(err)} cannot be reached"
                 raise JobDeferred(msg) from err
             except LocevalError as err:
-                status, values = JobStatus.FAILED, {"error": problem_for(err)}
+                status, values = (
+                    JobStatus.FAILED,
+                    {"error": problem_for(err, private=runtime.private_roots)},
+                )
             except Exception:  # a bug in the job: it must not kill the consumer thread
                 error_id = uuid.uuid4().hex[:12]
                 logger.exception("%s %s failed with a bug (error_id=%s)", kind, job_id, error_id)

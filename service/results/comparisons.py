@@ -18,7 +18,7 @@ from typing import Any, Final
 from loceval.core.arrays import FloatArray, StampsNs
 from loceval.errors import InputError, LocevalError
 from service.blobs import artifact_key
-from service.blobs.storage import EVALUATIONS
+from service.blobs.base import EVALUATIONS
 from service.db import Dataset, Evaluation, JobStatus, get_owned
 from service.errors import NotReadyError
 from service.runtime import Runtime

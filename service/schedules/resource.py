@@ -25,7 +25,7 @@ from sqlalchemy.exc import IntegrityError
 
 from loceval.errors import InputError
 from service.blobs import artifact_key
-from service.blobs.storage import RUNS
+from service.blobs.base import RUNS
 from service.db import (
     ACTIVE_STATUSES,
     Dataset,

@@ -165,7 +165,7 @@ def _evo_entry(runtime: Runtime, run: ScheduleRun, entry: _Entry) -> tuple[dict[
     try:
         result = read_evo_dataset(runtime, dataset)
     except LocevalError as err:
-        reason = problem_for(err)["detail"]
+        reason = problem_for(err, private=runtime.private_roots)["detail"]
         failed_run = _failed_run(dataset, reason)
         return {**row, "status": "failed", "error": reason, "evaluation_id": None}, failed_run
     first_s = result.first_stamp_s
@@ -240,7 +240,7 @@ def _evaluate_all(
         try:
             evaluation = create_evaluation(runtime, run.project_id, body, enqueue=False)
         except LocevalError as err:
-            reason = problem_for(err)["detail"]
+            reason = problem_for(err, private=runtime.private_roots)["detail"]
             rows.append({**row, "status": "failed", "error": reason, "evaluation_id": None})
             summary_runs.append(_failed_run(dataset, reason))
             continue

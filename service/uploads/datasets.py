@@ -22,7 +22,7 @@ from sqlalchemy import ColumnElement, cast, column, exists, func, literal, selec
 from sqlalchemy.dialects.postgresql import JSONB
 from sqlalchemy.exc import IntegrityError
 
-from service.blobs.storage import sanitize_filename
+from service.blobs.base import sanitize_filename
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, get_owned, new_id
 from service.errors import ConflictError, InvalidFieldsError, UploadError
 from service.runtime import Runtime

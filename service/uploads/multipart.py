@@ -19,26 +19,31 @@ from __future__ import annotations
 
 import hashlib
 import re
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING, Final, Protocol
 from urllib.parse import unquote_to_bytes
 
 import anyio.to_thread
 from python_multipart.exceptions import FormParserError
 from python_multipart.multipart import MultipartParser, parse_options_header
-from starlette.requests import ClientDisconnect, Request
 
 from service.blobs import Blobs, Incoming
-from service.blobs.local import STORAGE_FULL, LocalBlobs, LocalIncoming
-from service.blobs.storage import BlobStore
+from service.blobs.local import STORAGE_FULL, LocalIncoming
 from service.errors import InsufficientStorageError, UploadError, UploadTooLargeError
 
 if TYPE_CHECKING:
     from loceval.readers.rosbag import HeldMessages, McapScan
 
-__all__ = ["ReceivedFile", "ReceivedForm", "check_free_space", "receive_multipart"]
+__all__ = [
+    "INTERRUPTED",
+    "ReceivedFile",
+    "ReceivedForm",
+    "UploadBody",
+    "check_free_space",
+    "receive_multipart",
+]
 
 _MAX_FIELD_BYTES: Final = 64 * 1024
 _MAX_FIELDS: Final = 200
@@ -51,6 +56,25 @@ _BOUNDARY: Final = re.compile(r"[0-9A-Za-z'()+_,\-./:=? ]{0,69}[0-9A-Za-z'()+_,\
 """RFC 2046's boundary: 1 to 70 characters of ``bchars``, not ending in a space."""
 _EXTENDED_FILENAME: Final = re.compile(rb"(?:^|;)\s*filename\*\s*=\s*([^;]*)", re.IGNORECASE)
 _EXTENDED_VALUE: Final = re.compile(rb"([A-Za-z0-9!#$&+^_`{}~-]+)'[A-Za-z0-9-]*'(.*)")
+INTERRUPTED: Final = "The upload was interrupted before it was complete; send it again."
+"""What a client that went away mid-body is told (the routes raise it as an UploadError)."""
+
+
+class UploadBody(Protocol):
+    """A request's body as it arrives, with its headers (Starlette's ``Request`` is one).
+
+    A body whose client goes away raises from :meth:`stream`; whatever was received is
+    deleted before that error goes on (the HTTP side names it: :mod:`service.api.multipart`).
+    """
+
+    @property
+    def headers(self) -> Mapping[str, str]:
+        """The request's headers (``content-type``, ``content-length``), case-insensitive."""
+        ...
+
+    def stream(self) -> AsyncIterator[bytes]:
+        """The body's bytes, in the chunks they arrive in."""
+        ...
 
 
 @dataclass(slots=True)
@@ -369,14 +393,7 @@ def _too_large(max_bytes: int) -> str:
     )
 
 
-def _blobs(store: Blobs | BlobStore) -> Blobs:
-    """Return the blob store to receive into (a bare data folder's store is the local one)."""
-    return store if isinstance(store, Blobs) else LocalBlobs(store.root)
-
-
-def check_free_space(
-    store: Blobs | BlobStore, min_free_bytes: int, *, incoming_bytes: int = 0
-) -> None:
+def check_free_space(store: Blobs, min_free_bytes: int, *, incoming_bytes: int = 0) -> None:
     """Refuse an upload that would leave less than ``min_free_bytes`` free in the store.
 
     With a bucket an upload touches no local disk and is not refused here (the workers'
@@ -390,11 +407,11 @@ def check_free_space(
     Raises:
         InsufficientStorageError: the free space minus ``incoming_bytes`` is below the reserve.
     """
-    if not _blobs(store).check_free_space(min_free_bytes, incoming_bytes=incoming_bytes):
+    if not store.check_free_space(min_free_bytes, incoming_bytes=incoming_bytes):
         raise InsufficientStorageError(STORAGE_FULL)
 
 
-async def _feed(request: Request, parser: MultipartParser) -> None:
+async def _feed(request: UploadBody, parser: MultipartParser) -> None:
     """Push the body through the parser in 1 MB batches, in a thread (file writes block)."""
     batch = bytearray()
     async for chunk in request.stream():
@@ -408,8 +425,8 @@ async def _feed(request: Request, parser: MultipartParser) -> None:
 
 
 async def receive_multipart(
-    request: Request,
-    store: Blobs | BlobStore,
+    request: UploadBody,
+    store: Blobs,
     *,
     max_bytes: int,
     file_fields: frozenset[str],
@@ -420,8 +437,10 @@ async def receive_multipart(
     """Stream a ``multipart/form-data`` request into the blob store.
 
     Args:
-        request: the request, body not yet read.
-        store: where the files go (``incoming/``).
+        request: the request, body not yet read (the HTTP side's own receiver,
+            :func:`service.api.multipart.receive_multipart`, also names a client that went
+            away).
+        store: where the files go (``incoming/`` of a folder, or the bucket).
         max_bytes: the limit on the sum of the file sizes.
         file_fields: the field names that take files; files in other fields are refused.
         text_fields: the text fields the route reads; others are refused, so a misspelt
@@ -439,7 +458,6 @@ async def receive_multipart(
         InsufficientStorageError: the upload would leave less than ``min_free_bytes`` free
             (checked on Content-Length first, then while receiving); nothing is kept.
     """
-    store = _blobs(store)
     content_type, params = parse_options_header(request.headers.get("content-type"))
     if content_type.lower() != b"multipart/form-data" or not params.get(b"boundary"):
         fields = " or ".join(repr(f) for f in sorted(file_fields))
@@ -471,10 +489,6 @@ async def receive_multipart(
     parser = MultipartParser(boundary, receiver.callbacks())  # type: ignore[arg-type]
     try:
         await _feed(request, parser)
-    except ClientDisconnect:
-        receiver.abort()
-        msg = "The upload was interrupted before it was complete; send it again."
-        raise UploadError(msg) from None
     except FormParserError as err:
         receiver.abort()
         msg = f"The multipart body is malformed ({err}); send a normal multipart/form-data form."

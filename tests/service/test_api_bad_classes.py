@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from loceval.errors import ReaderError
-from service.errors import problem_for, register_private_root
+from service.errors import problem_for
 from tests.factories import make_trajectory, perturb, write_tum
 from tests.service._api_fixtures import Api, assert_no_server_paths, assert_problem, open_api
 from tests.service.test_cli_bad_classes import EUROC_HEADER, ZIP_CASES, hostile_zips
@@ -81,14 +81,13 @@ def test_problem_for_scrubs_every_server_folder(tmp_path: Path) -> None:
     """The one scrubbing function removes extraction folders, other temp folders, the data dir."""
     data = tmp_path / "data"
     data.mkdir()
-    register_private_root(data)
     temp = Path(tempfile.gettempdir())
     message = (
         f"Bag 'rec.zip' cannot be read ({temp}/loceval-zip-ab12cd/bag/metadata.yaml, "
         f"{temp}/other-1234/run.db3, {data}/datasets/0b7c1c7e-8e1f-4c55-9d5e-3c1c9b1a2f00/"
         "run.mcap) \x1b[31mred\u202e; re-copy it."
     )
-    detail = problem_for(ReaderError(message))["detail"]
+    detail = problem_for(ReaderError(message), private=[data])["detail"]
     assert detail == (
         "Bag 'rec.zip' cannot be read (bag/metadata.yaml, run.db3, run.mcap) "
         "\ufffd[31mred\ufffd; re-copy it."

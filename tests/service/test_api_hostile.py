@@ -23,7 +23,7 @@ import pytest
 from pydantic import ValidationError
 from sqlalchemy import select
 
-from service.blobs.storage import MAX_FILENAME_BYTES, sanitize_filename
+from service.blobs.base import MAX_FILENAME_BYTES, sanitize_filename
 from service.db import Dataset
 from service.schedules.resource import select_datasets
 from service.settings import Settings

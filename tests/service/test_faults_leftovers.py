@@ -18,7 +18,7 @@ import uuid
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from service.blobs.storage import BlobStore
+from service.blobs.local import LocalBlobs
 from tests.factories import make_trajectory, write_tum
 from tests.service._api_fixtures import open_api
 from tests.service.conftest import REPO, start_server
@@ -154,9 +154,9 @@ _OWNER = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    from service.blobs.storage import BlobStore
+    from service.blobs.local import LocalBlobs
 
-    store = BlobStore(Path(sys.argv[1]))
+    store = LocalBlobs(Path(sys.argv[1]))
     part = store.new_incoming()
     part.write_bytes(b"half an upload")
     with store.publishing(sys.argv[2]):
@@ -172,7 +172,7 @@ _OWNER = textwrap.dedent(
 def test_a_dead_owners_leftovers_go_at_once_a_live_ones_stay(tmp_path: Path) -> None:
     """Several processes share a folder: a sweep removes what a killed one left, not more."""
     data_dir = tmp_path / "data"
-    store = BlobStore(data_dir)
+    store = LocalBlobs(data_dir)
     mine = store.new_incoming()
     mine.write_bytes(b"mine, still arriving")
     legacy = data_dir / "incoming" / f"{uuid.uuid4().hex}.part"  # an older version's name
@@ -232,7 +232,7 @@ def test_a_recorded_dataset_is_kept_when_its_publisher_dies_after_the_row(tmp_pa
     finally:
         if child.poll() is None:
             child.kill()
-    store = BlobStore(data_dir)
+    store = LocalBlobs(data_dir)
     try:
         asked: list[list[str]] = []
         swept = store.sweep(lambda ids: asked.append(ids) or ids)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from service.blobs.storage import EVALUATIONS, RUNS
+from service.blobs.base import EVALUATIONS, RUNS
 from service.db import Evaluation, ScheduleRun, utcnow
 from service.jobs.kinds import JOB_KINDS, PERIODIC_TASKS
 from service.jobs.kinds import WEBHOOK as WEBHOOK_TASK

@@ -18,14 +18,14 @@ import pytest
 from pydantic import ValidationError
 from starlette.requests import Request
 
-from service.blobs.storage import BlobStore
+from service.api.multipart import receive_multipart
+from service.blobs.local import LocalBlobs
 from service.cli import main
 from service.db import Evaluation, JobStatus, Schedule, ScheduleRun, new_id, utcnow
 from service.errors import InsufficientStorageError
 from service.jobs.retention import sweep
 from service.runtime import Runtime
 from service.settings import Settings
-from service.uploads.multipart import receive_multipart
 from tests.service._api_fixtures import (
     Api,
     assert_no_server_paths,
@@ -454,7 +454,7 @@ def multipart(content: bytes) -> bytes:
     )
 
 
-def receive(store: BlobStore, body: _Body, *, length: int | None, min_free: int) -> Any:
+def receive(store: LocalBlobs, body: _Body, *, length: int | None, min_free: int) -> Any:
     """Run receive_multipart on a synthetic request."""
     headers = [(b"content-type", f"multipart/form-data; boundary={BOUNDARY}".encode())]
     if length is not None:
@@ -474,7 +474,7 @@ def receive(store: BlobStore, body: _Body, *, length: int | None, min_free: int)
     return anyio.run(go)
 
 
-def incoming(store: BlobStore) -> list[Path]:
+def incoming(store: LocalBlobs) -> list[Path]:
     """Return the files left in incoming/."""
     return sorted(store.incoming.iterdir())
 
@@ -483,7 +483,7 @@ def test_announced_size_checked_before_reading(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Content-Length larger than free space minus the reserve: 507 before a byte is read."""
-    store = BlobStore(tmp_path / "data")
+    store = LocalBlobs(tmp_path / "data")
     fake_free(monkeypatch, 5_000_000)
     data = multipart(b"x" * 100)
     body = _Body([data])
@@ -497,7 +497,7 @@ def test_space_running_out_midstream_removes_the_partial_file(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, rng: np.random.Generator
 ) -> None:
     """Without Content-Length the free space is checked while receiving; the .part goes."""
-    store = BlobStore(tmp_path / "data")
+    store = LocalBlobs(tmp_path / "data")
     calls = fake_free(monkeypatch, 1 << 40, 1 << 40, 500_000)  # free falls as the file arrives
     content = rng.integers(0, 256, 40 << 20, dtype=np.uint8).tobytes()
     data = multipart(content)
@@ -512,7 +512,7 @@ def test_disk_full_on_write_is_507_and_leaves_nothing(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A write that fails with ENOSPC (space taken by someone else): 507, no .part left."""
-    store = BlobStore(tmp_path / "data")
+    store = LocalBlobs(tmp_path / "data")
 
     def full(_fd: int) -> None:
         raise OSError(errno.ENOSPC, "No space left on device")

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 from starlette.requests import Request
 
-from service.blobs.storage import BlobStore
+from service.api.multipart import receive_multipart
+from service.blobs.local import LocalBlobs
 from service.errors import UploadError, UploadTooLargeError
-from service.uploads.multipart import ReceivedForm, receive_multipart
+from service.uploads.multipart import ReceivedForm
 
 BOUNDARY = "loceval-test-boundary"
 CONTENT_TYPE = f"multipart/form-data; boundary={BOUNDARY}"
@@ -80,7 +81,7 @@ def request(
 
 def receive(
     body: _Body,
-    store: BlobStore,
+    store: LocalBlobs,
     *,
     max_bytes: int = 10**9,
     file_fields: Iterable[str] = ("file",),
@@ -103,17 +104,17 @@ def receive(
 
 
 @pytest.fixture
-def store(tmp_path: Path) -> BlobStore:
+def store(tmp_path: Path) -> LocalBlobs:
     """A blob store in an empty data folder."""
-    return BlobStore(tmp_path / "data")
+    return LocalBlobs(tmp_path / "data")
 
 
-def incoming(store: BlobStore) -> list[Path]:
+def incoming(store: LocalBlobs) -> list[Path]:
     """Return what lies in incoming/."""
     return sorted(store.incoming.iterdir())
 
 
-def test_multi_chunk_file_hash_and_size(store: BlobStore, rng: np.random.Generator) -> None:
+def test_multi_chunk_file_hash_and_size(store: LocalBlobs, rng: np.random.Generator) -> None:
     """A 2.5 MB file sent in 64 KiB chunks lands whole, with the right SHA-256 and size."""
     payload = rng.bytes(2_500_000) + b"\r\n--not-the-boundary\r\n" + rng.bytes(1000)
     data = form(
@@ -136,7 +137,7 @@ def test_multi_chunk_file_hash_and_size(store: BlobStore, rng: np.random.Generat
 
 
 @pytest.mark.parametrize("size", [1, 7, 100])
-def test_boundaries_split_across_chunks(store: BlobStore, size: int) -> None:
+def test_boundaries_split_across_chunks(store: LocalBlobs, size: int) -> None:
     """Tiny chunks split the boundary and headers anywhere; the parts come out intact."""
     payload = b"1700000000.0 0 0 0\r\n" * 20
     data = form(part("file", payload, filename="a.txt"), part("name", b"n\xc3\xa4me"))
@@ -146,7 +147,7 @@ def test_boundaries_split_across_chunks(store: BlobStore, size: int) -> None:
     received.discard()
 
 
-def test_oversize_file_removed_midstream(store: BlobStore, rng: np.random.Generator) -> None:
+def test_oversize_file_removed_midstream(store: LocalBlobs, rng: np.random.Generator) -> None:
     """Passing the limit while receiving raises 413's error and leaves no partial file."""
     data = form(part("file", rng.bytes(3_000_000), filename="big.bag"))
     body = _Body(chunked(data, 65_536))
@@ -156,7 +157,7 @@ def test_oversize_file_removed_midstream(store: BlobStore, rng: np.random.Genera
     assert body.messages  # refused at the first 1 MB batch, not after reading everything
 
 
-def test_announced_oversize_refused_before_reading(store: BlobStore) -> None:
+def test_announced_oversize_refused_before_reading(store: LocalBlobs) -> None:
     """A Content-Length far over the limit is refused without reading the body."""
     body = _Body([b"x" * 10])
     with pytest.raises(UploadTooLargeError, match=r"LOCEVAL_MAX_UPLOAD_BYTES"):
@@ -165,7 +166,7 @@ def test_announced_oversize_refused_before_reading(store: BlobStore) -> None:
     assert incoming(store) == []
 
 
-def test_limit_counts_all_files(store: BlobStore) -> None:
+def test_limit_counts_all_files(store: LocalBlobs) -> None:
     """The limit is on the sum of the files: two of 600 bytes exceed 1000."""
     data = form(
         part("reference", b"r" * 600, filename="r.txt"),
@@ -178,7 +179,7 @@ def test_limit_counts_all_files(store: BlobStore) -> None:
     assert incoming(store) == []
 
 
-def test_disconnect_removes_partial_file(store: BlobStore) -> None:
+def test_disconnect_removes_partial_file(store: LocalBlobs) -> None:
     """A client that goes away mid-file leaves nothing behind."""
     head = part("file", b"1 2 3 4\n" * 1000, filename="a.txt")[:-10]
     with pytest.raises(UploadError, match=r"interrupted before it was complete"):
@@ -186,7 +187,7 @@ def test_disconnect_removes_partial_file(store: BlobStore) -> None:
     assert incoming(store) == []
 
 
-def test_truncated_body_removes_files(store: BlobStore) -> None:
+def test_truncated_body_removes_files(store: LocalBlobs) -> None:
     """A body without its closing boundary is refused, and the complete parts go too."""
     data = part("file", b"complete file", filename="a.txt") + part("name", b"x")[:-5]
     with pytest.raises(UploadError, match=r"ended before its closing boundary"):
@@ -194,7 +195,7 @@ def test_truncated_body_removes_files(store: BlobStore) -> None:
     assert incoming(store) == []
 
 
-def test_error_in_second_file_removes_first(store: BlobStore) -> None:
+def test_error_in_second_file_removes_first(store: LocalBlobs) -> None:
     """A failure after one file was complete removes that file as well."""
     data = form(
         part("reference", b"first" * 100, filename="r.txt"),
@@ -227,7 +228,7 @@ def test_error_in_second_file_removes_first(store: BlobStore) -> None:
         (b"", r"ended before its closing boundary"),
     ],
 )
-def test_malformed_bodies(store: BlobStore, data: bytes, match: str) -> None:
+def test_malformed_bodies(store: LocalBlobs, data: bytes, match: str) -> None:
     """Bodies that are not a normal form are refused with what to send instead."""
     with pytest.raises(UploadError, match=match):
         receive(_Body([data]), store)
@@ -238,7 +239,7 @@ def test_malformed_bodies(store: BlobStore, data: bytes, match: str) -> None:
     "content_type",
     ["application/json", "multipart/form-data", "text/plain; boundary=x", ""],
 )
-def test_not_multipart(store: BlobStore, content_type: str) -> None:
+def test_not_multipart(store: LocalBlobs, content_type: str) -> None:
     """A content type other than multipart/form-data with a boundary is refused unread."""
     body = _Body([form(part("file", b"x", filename="a.txt"))])
     with pytest.raises(UploadError, match=r"multipart/form-data with the file in the field 'file'"):
@@ -246,7 +247,7 @@ def test_not_multipart(store: BlobStore, content_type: str) -> None:
     assert body.received == 0
 
 
-def test_text_field_count_limit(store: BlobStore) -> None:
+def test_text_field_count_limit(store: LocalBlobs) -> None:
     """200 text fields are accepted; the 201st is refused."""
     fields = [part(f"f{i}", b"v") for i in range(200)]
     received = receive(_Body([form(*fields)]), store)
@@ -255,13 +256,13 @@ def test_text_field_count_limit(store: BlobStore) -> None:
         receive(_Body([form(*fields, part("one_more", b"v"))]), store)
 
 
-def test_text_field_length_limit(store: BlobStore) -> None:
+def test_text_field_length_limit(store: LocalBlobs) -> None:
     """A text field over 64 KiB is refused (files belong in file fields)."""
     with pytest.raises(UploadError, match=r"'name' is longer than 65536 bytes"):
         receive(_Body([form(part("name", b"n" * 70_000))]), store)
 
 
-def test_file_in_non_file_field(store: BlobStore) -> None:
+def test_file_in_non_file_field(store: LocalBlobs) -> None:
     """A file sent in a text field (curl -F name=@file) is refused, not read as text."""
     data = form(part("file", b"1 0 0 0\n", filename="a.txt"), part("tags", b"x", filename="t.txt"))
     with pytest.raises(UploadError, match=r"'tags' holds a file; send files only in 'file'"):
@@ -269,7 +270,7 @@ def test_file_in_non_file_field(store: BlobStore) -> None:
     assert incoming(store) == []
 
 
-def test_too_many_files(store: BlobStore) -> None:
+def test_too_many_files(store: LocalBlobs) -> None:
     """A second file where one is allowed is refused, and the first is removed."""
     data = form(part("file", b"a" * 100, filename="a.txt"), part("file", b"b", filename="b.txt"))
     with pytest.raises(UploadError, match=r"Too many files in one request \(at most 1\)"):
@@ -277,7 +278,7 @@ def test_too_many_files(store: BlobStore) -> None:
     assert incoming(store) == []
 
 
-def test_browser_empty_file_input_is_dropped(store: BlobStore) -> None:
+def test_browser_empty_file_input_is_dropped(store: LocalBlobs) -> None:
     """An empty file part without a name (a browser's unused file input) is no file."""
     received = receive(_Body([form(part("file", b"", filename=""), part("name", b"x"))]), store)
     assert received.files == []
@@ -285,7 +286,7 @@ def test_browser_empty_file_input_is_dropped(store: BlobStore) -> None:
     assert incoming(store) == []
 
 
-def test_empty_named_file_is_kept(store: BlobStore) -> None:
+def test_empty_named_file_is_kept(store: LocalBlobs) -> None:
     """An empty file with a name is a file (the dataset layer refuses it as empty)."""
     received = receive(_Body([form(part("file", b"", filename="empty.txt"))]), store)
     assert [(f.filename, f.size) for f in received.files] == [("empty.txt", 0)]
@@ -294,7 +295,7 @@ def test_empty_named_file_is_kept(store: BlobStore) -> None:
     assert incoming(store) == []
 
 
-def test_repeated_fields_and_values(store: BlobStore) -> None:
+def test_repeated_fields_and_values(store: LocalBlobs) -> None:
     """Repeated fields keep their order; value() takes the last non-blank one."""
     data = form(
         part("estimate_selector", b" /a "),

@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 from starlette.requests import Request
 
+from service.api.downloads import download_response
+from service.api.multipart import receive_multipart
 from service.blobs import artifact_key
 from service.blobs.s3 import PART_BYTES, S3Blobs
 from service.errors import InsufficientStorageError, UploadError
-from service.uploads.multipart import receive_multipart
 from tests.service.s3.conftest import SeaweedFS, object_keys, open_multipart_uploads
 
 BOUNDARY = "loceval-s3-boundary"
@@ -233,10 +234,12 @@ def test_download_streams_or_redirects(bucket: str, s3_env: dict[str, str], tmp_
     (staging / "summary.html").write_text("<p>hi</p>")
     store.publish_job_artifacts("runs", "r1", staging)
     key = artifact_key("runs", "r1", "summary.html")
-    streamed = store.response(key, media_type="text/html", filename="s.html", inline=True)
+    streamed = download_response(store, key, media_type="text/html", filename="s.html", inline=True)
     assert streamed.headers["content-length"] == "9"
     redirecting = _store(bucket, tmp_path / "b", redirect_s=60)
-    moved = redirecting.response(key, media_type="text/html", filename="s.html", inline=True)
+    moved = download_response(
+        redirecting, key, media_type="text/html", filename="s.html", inline=True
+    )
     assert moved.status_code == 307
     fetched = httpx2.get(moved.headers["location"])
     assert fetched.status_code == 200
