@@ -95,6 +95,7 @@ STAGES: Final[tuple[tuple[str, ...], ...]] = (
     ("loceval.checkpoints", "loceval.radio", "loceval.maps"),
     ("loceval.evaluation",),
     ("loceval.checkpoint_evaluation", "loceval.radio_evaluation"),
+    ("loceval.results",),
     ("loceval",),
     ("exporters.errors",),
     ("exporters.options",),
@@ -394,6 +395,59 @@ def test_storage_uploads_jobs_and_errors_import_no_web_framework() -> None:
     assert leaks == []
 
 
+RESULT_READER: Final = "loceval.results.document"
+"""The one reader of the result document (``result.json``)."""
+RESULT_KEYS: Final = frozenset({"ate", "rpe", "verdict", "estimates"})
+"""Keys of the result document that only its reader reads."""
+READ_KEYS: Final = RESULT_KEYS - {"estimates"}
+"""Keys whose subscript read is a dig (a stored request's ``["estimates"]`` is no result)."""
+NOT_RESULTS: Final = {"exporters.grasshopper.loceval_paths": "ate"}
+"""Modules that read such a key of another document: the Grasshopper script reads the ATE
+runs of ``paths.3dm.json``'s paths, not the result document."""
+
+
+def result_digs(root: Path, packages: Sequence[str]) -> list[str]:
+    """Return ``module:line: how`` for every dict-digging read of a result key.
+
+    ``x.get("ate")`` (any key of :data:`RESULT_KEYS`), ``x["ate"]`` read (not written) and
+    any use of a helper named ``_dig``.
+    """
+    hits: list[str] = []
+    for name, path in module_files(root, packages).items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            how = ""
+            if (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "get"
+                and node.args
+                and isinstance(node.args[0], ast.Constant)
+                and node.args[0].value in RESULT_KEYS
+            ):
+                how = f".get({node.args[0].value!r})"
+            elif (
+                isinstance(node, ast.Subscript)
+                and isinstance(node.ctx, ast.Load)
+                and isinstance(node.slice, ast.Constant)
+                and node.slice.value in READ_KEYS
+                and NOT_RESULTS.get(name) != node.slice.value
+            ):
+                how = f"[{node.slice.value!r}]"
+            elif isinstance(node, ast.Name | ast.FunctionDef) and "_dig" in {
+                getattr(node, "id", None),
+                getattr(node, "name", None),
+            }:
+                how = "_dig"
+            if how and name != RESULT_READER:
+                hits.append(f"{name}:{node.lineno}: {how}")
+    return hits
+
+
+def test_the_result_document_is_read_only_through_its_reader() -> None:
+    """No module digs the result document as a dict: loceval.results.document reads it."""
+    assert result_digs(ROOT, ("service", "exporters")) == []
+
+
 def test_no_import_cycle() -> None:
     """No module of loceval, exporters or service reaches itself through its imports."""
     cycles = import_cycles(ROOT, PACKAGES)
@@ -498,6 +552,20 @@ class TestLayeringChecksOnFakeTrees:
         }
         root = _write_tree(tmp_path, tree)
         assert http_leaks(root, ("core",)) == ["core.a:1", "core.b:4"]
+
+    def test_result_digs_are_found(self, tmp_path: Path) -> None:
+        """``.get("ate")``, a read of ``["verdict"]`` and ``_dig`` are found; a write is not."""
+        tree = {
+            **_CLEAN_TREE,
+            "core/a.py": "def f(d):\n    return d.get('ate'), d['verdict']\n",
+            "core/b.py": "def _dig(d):\n    d['rpe'] = 1\n    return d.get('other')\n",
+        }
+        root = _write_tree(tmp_path, tree)
+        assert result_digs(root, ("core",)) == [
+            "core.a:2: .get('ate')",
+            "core.a:2: ['verdict']",
+            "core.b:1: _dig",
+        ]
 
     def test_long_module_is_found(self, tmp_path: Path) -> None:
         """601 lines is too long; 600 is not."""

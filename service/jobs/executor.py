@@ -22,6 +22,7 @@ from sqlalchemy.orm import Session
 from exporters import ARTIFACTS
 from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec, TrajectoryFormat
+from loceval.results.document import read_result
 from service.adapters import DATABASE_ERRORS
 from service.blobs.base import EVALUATIONS
 from service.db import Dataset, Evaluation, JobStatus
@@ -164,29 +165,18 @@ class ReadyArtifacts:
             logger.warning("Artifacts of %s not listed early (%s)", self.evaluation_id, err)
 
 
-def _outcome(verdict: dict[str, Any]) -> str:
-    """Return pass, fail or undecided (documents before intervals carry only ``passed``)."""
-    outcome = verdict.get("outcome")
-    if outcome in {"pass", "fail", "undecided"}:
-        return str(outcome)
-    return "pass" if verdict.get("passed") else "fail"
-
-
-def evaluation_summary(document: dict[str, Any]) -> list[dict[str, Any]]:
+def evaluation_summary(document: Mapping[str, Any]) -> list[dict[str, Any]]:
     """Return the headline figures per estimate from a result document."""
-    rows = []
-    for estimate in document.get("estimates", []):
-        verdict = estimate.get("verdict")
-        rows.append(
-            {
-                "name": estimate.get("name"),
-                "ate_rmse_m": (estimate.get("ate") or {}).get("translation_m", {}).get("rmse"),
-                "rpe_rmse_m": (estimate.get("rpe") or {}).get("translation_m", {}).get("rmse"),
-                "matched": estimate.get("matched"),
-                "verdict": None if not verdict else _outcome(verdict),
-            }
-        )
-    return rows
+    return [
+        {
+            "name": estimate.name,
+            "ate_rmse_m": estimate.rmse_m("ate"),
+            "rpe_rmse_m": estimate.rmse_m("rpe"),
+            "matched": estimate.matched,
+            "verdict": None if estimate.verdict is None else estimate.verdict.outcome,
+        }
+        for estimate in read_result(document).estimates
+    ]
 
 
 def stored_request(request: Mapping[str, Any]) -> EvaluationCreate | RangingCreate:

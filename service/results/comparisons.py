@@ -13,10 +13,11 @@ with the reason.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 from loceval.core.arrays import FloatArray, StampsNs
 from loceval.errors import InputError, LocevalError
+from loceval.results.document import STAT_NAMES, EstimateRead, read_result
 from service.blobs import artifact_key
 from service.blobs.base import EVALUATIONS
 from service.db import Dataset, Evaluation, JobStatus, get_owned
@@ -33,7 +34,8 @@ from service.uploads.evo_results import is_evo_result, read_evo_dataset
 
 __all__ = ["compare_items"]
 
-_STATS: Final = ("rmse", "mean", "median", "std", "min", "max", "sse")
+_STATS: Final = tuple(name for name in STAT_NAMES if name not in {"var", "n"})
+"""The statistics shown of each item, as evo's result zips hold them (no variance, no count)."""
 _EVO_INTERVALS: Final = "evo gives no confidence interval; none is shown (none is made up)."
 
 
@@ -128,15 +130,14 @@ def _evo_system(
     return _System(public, series, why)
 
 
-def _estimate(document: dict[str, Any], k: int, item: ComparedItem) -> tuple[int, dict[str, Any]]:
-    """Return the index and the result of the item's estimate in an evaluation's result."""
-    estimates = [e for e in document.get("estimates", []) if isinstance(e, dict)]
-    names = [str(e.get("name") or f"estimate {n + 1}") for n, e in enumerate(estimates)]
+def _estimate(document: dict[str, Any], k: int, item: ComparedItem) -> EstimateRead:
+    """Return the item's estimate in an evaluation's result."""
+    estimates = read_result(document).estimates
+    names = [e.label for e in estimates]
     if item.estimate is None and len(estimates) == 1:
-        return 0, estimates[0]
+        return estimates[0]
     if item.estimate in names:
-        index = names.index(item.estimate)
-        return index, estimates[index]
+        return estimates[names.index(item.estimate)]
     given = "names none" if item.estimate is None else f"names {item.estimate!r}"
     msg = (
         f"items[{k}].estimate {given}; evaluation {item.evaluation_id!r} has the estimates "
@@ -154,35 +155,31 @@ def _evaluation_system(
             "compare it once it has succeeded."
         )
         raise NotReadyError(msg)
-    _, estimate = _estimate(evaluation.result, k, item)
-    name = str(estimate.get("name") or item.estimate or "estimate 1")
-    block = (estimate.get(metric.removesuffix("_rmse")) or {}).get("translation_m")
-    if not isinstance(block, dict):
+    estimate = _estimate(evaluation.result, k, item)
+    name = estimate.name or item.estimate or "estimate 1"
+    measured: Literal["ate", "rpe"] = "ate" if metric == "ate_rmse" else "rpe"
+    block = estimate.block(measured)
+    if block is None:
         msg = (
             f"items[{k}]: the estimate {name!r} of evaluation {evaluation.id!r} has no "
-            f"{metric.removesuffix('_rmse').upper()} in metres; compare another metric."
+            f"{measured.upper()} in metres; compare another metric."
         )
         raise InputError(msg)
-    ci95 = block.get("ci95")
     public = ComparedResultPublic(
         label=item.label or name,
         source="loceval",
         evaluation_id=evaluation.id,
         dataset_id=None,
-        title=f"{metric.removesuffix('_rmse').upper()} w.r.t. translation part (m), loceval",
-        stats={key: _number(block.get(key)) for key in _STATS},
-        n=block.get("n") if isinstance(block.get("n"), int) else None,
-        ci95=ci95 if isinstance(ci95, dict) else None,
+        title=f"{measured.upper()} w.r.t. translation part (m), loceval",
+        stats={key: block.value(key) for key in _STATS},
+        n=block.n,
+        ci95=None if block.ci95 is None else dict(block.ci95),
         intervals="loceval's 95 % moving-block bootstrap intervals"
-        if isinstance(ci95, dict)
+        if block.ci95 is not None
         else "the evaluation was made without intervals (no_ci).",
     )
     series, why = _evaluation_series(runtime, evaluation, name, metric)
     return _System(public, series, why)
-
-
-def _number(value: object) -> float | None:
-    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else None
 
 
 def _evaluation_series(
