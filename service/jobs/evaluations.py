@@ -29,10 +29,8 @@ from service.errors import (
 )
 from service.jobs.kinds import EVALUATION
 from service.jobs.options import (
-    check_pattern,
     config_from_options,
     export_from_options,
-    option_values,
     ranging_from_options,
 )
 from service.runtime import Runtime
@@ -279,13 +277,10 @@ def check_options(options: EvaluationOptions) -> None:
     Raises:
         InputError: an option's value cannot be used.
     """
-    config_from_options(options)
+    config_from_options(options)  # each text option by its one grammar (parse_text)
     export_from_options(options, front_door="service")
     if isinstance(options, RangingOptions):
         ranging_from_options(options)
-    for key, value in option_values(options).items():
-        if isinstance(value, str):
-            check_pattern(key, value)
 
 
 def visits_dataset_id(visits: str) -> str | None:

@@ -3,28 +3,31 @@
 Both front doors hold the options of :data:`loceval.options.OPTIONS` under the same keys:
 the CLI in its parsed arguments (``args.max_dt_s``), the HTTP API in
 :class:`service.schemas.evaluations.EvaluationOptions`; both are made from the table, and
-:func:`option_values` reads either by key. :func:`config_from_options` and
-:func:`export_from_options` parse each value once into its typed value (``Tolerance``,
-``AlignWindow``, the enums, a transform), so a value means the same thing, and fails with
-the same message, on both. Nothing here supplies a default: the table does, and nothing
+:func:`option_values` reads either by key. :func:`config_from_options` builds the core's
+:class:`~loceval.evaluation.EvaluationConfig` from the table (each of its fields that is an
+option, by :func:`typed_value`) and :func:`export_from_options` the exporters' options, so a
+value means the same thing, and fails with the same message, on both, and again when a
+stored request is read for its job. A text option has one grammar (:func:`parse_text`): its
+parser's (the form, the bounds), then the pattern the API's schema declares (plain decimals:
+a pattern cannot bound ``1e3``); the CLI, the API and a stored request all take exactly
+the texts the schema says. Nothing here supplies a default: the table does, and nothing
 here restates the options: a new one is read by key where it is used.
 """
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from loceval.checkpoints.config import CheckpointConfig
 from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, Tolerance, parse_offset
-from loceval.metrics.pose_errors import RPEUnit
-from loceval.options import AUTO, check_option, option
-from loceval.registration.alignment import AlignMethod, AlignWindow
-from loceval.registration.association import AssociationMethod
+from loceval.options import AUTO, OPTIONS, OptionKind, check_option, option
+from loceval.registration.alignment import AlignWindow
 
 if TYPE_CHECKING:
     from exporters.options import ExportOptions
@@ -42,7 +45,9 @@ __all__ = [
     "is_auto",
     "offset_or_none",
     "option_values",
+    "parse_text",
     "ranging_from_options",
+    "typed_value",
 ]
 
 
@@ -67,13 +72,85 @@ def option_values(options: object) -> OptionValues:
     raise TypeError(msg)
 
 
+def _site(text: str) -> object:
+    from exporters.cad.site import parse_site  # noqa: PLC0415  (the exporters load on use)
+
+    return parse_site(text)
+
+
+def _crs(text: str) -> str:
+    from exporters.options import ExportOptions  # noqa: PLC0415
+
+    return str(ExportOptions(crs=text).crs)
+
+
+def _tag_offset(text: str) -> object:
+    from loceval.radio_evaluation import parse_tag_offset  # noqa: PLC0415  (the radio stack)
+
+    return parse_tag_offset(text)
+
+
+TEXT_PARSERS: Final[Mapping[str, Callable[[str], Any]]] = {
+    "align_first": AlignWindow.parse,
+    "offset": parse_offset,
+    "tolerance": Tolerance.parse,
+    "site": _site,
+    "crs": _crs,
+    "tag_offset_xyz": _tag_offset,
+}
+"""The parser of each text option that has a grammar (a pattern in the table)."""
+
+
+def parse_text(key: str, text: str) -> Any:  # noqa: ANN401  (the option's own type)
+    """Parse a text option by its one grammar, the same at every front door.
+
+    Its parser runs first, so a text of the wrong form or out of bounds gets the parser's
+    message (which says more); then the text must match the option's pattern, the grammar the
+    API's schema declares: plain decimal numbers, no exponent (``1e-1@95`` is refused, and
+    ``0.1@95`` taken, by the CLI, the API and a stored request alike).
+
+    Raises:
+        InputError: the text is not of the option's grammar; the error carries ``key``.
+    """
+    value = TEXT_PARSERS[key](text)
+    check_pattern(key, text)
+    return value
+
+
+def typed_value(key: str, raw: Any) -> Any:  # noqa: ANN401  (the option's own type)
+    """Return a front door's value of an option as the core takes it, by the option's kind.
+
+    A choice becomes its enum member, a list of numbers a tuple, a text with a grammar its
+    parsed value (:func:`parse_text`; None when not given, or empty where its grammar allows
+    that); other kinds are taken as they are (bounds are checked where the value is used).
+
+    Raises:
+        InputError: the value cannot be used; the error carries ``key``.
+    """
+    spec = option(key)
+    if spec.kind is OptionKind.CHOICE and spec.choices:
+        return type(spec.choices[0])(raw)  # the choices' StrEnum (or str)
+    if spec.kind is OptionKind.NUMBERS and raw is not None:
+        return tuple(raw)
+    if spec.kind is OptionKind.TEXT and key in TEXT_PARSERS:
+        if raw is None or (not raw.strip() and not spec.pattern_problem(raw)):
+            return None  # not given (an empty text where the grammar allows one)
+        return parse_text(key, raw)
+    return raw
+
+
+_CONFIG_OPTIONS: Final = frozenset(s.key for s in OPTIONS if s.group == "evaluation")
+"""The options of the core's evaluation (those of :class:`EvaluationConfig`'s fields are
+taken from the table by name)."""
+
+
 def ranging_from_options(options: object) -> RangingConfig:
     """Return the core's ranging options.
 
     Raises:
         InputError: a value cannot be used (the error carries the option's key).
     """
-    from loceval.radio_evaluation import RangingConfig, parse_solvers, parse_tag_offset  # noqa: PLC0415
+    from loceval.radio_evaluation import RangingConfig, parse_solvers  # noqa: PLC0415
 
     values = option_values(options)
     if str(values["dims"]) not in {"2", "3"}:
@@ -84,7 +161,7 @@ def ranging_from_options(options: object) -> RangingConfig:
         dims=int(values["dims"]),
         epoch_s=values["epoch_s"],
         tag_height_m=values["tag_height_m"],
-        tag_offset_xyz=parse_tag_offset(values["tag_offset_xyz"]),
+        tag_offset_xyz=typed_value("tag_offset_xyz", values["tag_offset_xyz"]),
         outlier_threshold_m=values["outlier_threshold_m"],
         distance_bin_m=values["distance_bin_m"],
     )
@@ -112,30 +189,24 @@ def config_from_options(
     auto_time = is_auto(values["time_offset_s"])
     check_option("clutter_m", values["clutter_m"], unit="metres")  # the map's, checked as early
     checkpoints_from_options(values)  # control-point options fail as fast as the others
-    tolerance = values["tolerance"]
-    return EvaluationConfig(
-        association=AssociationMethod(values["association"]),
-        max_dt_s=values["max_dt_s"],
-        max_gap_s=values["max_gap_s"],
-        time_offset_s=0.0 if auto_time else float(values["time_offset_s"]),
-        align=AlignMethod(values["align"]),
-        align_first=AlignWindow.parse(values["align_first"]),
-        calibrate_at_s=values["calibrate_at_s"],
-        reference_offset=device_transform or offset_or_none(values["offset"]),
-        rpe_delta=values["rpe_delta"],
-        rpe_unit=RPEUnit(values["rpe_unit"]),
-        rpe_all_pairs=values["rpe_all_pairs"],
-        thresholds_m=tuple(values["thresholds_m"]),
-        tolerance=Tolerance.parse(tolerance) if tolerance else None,
-        worst_count=values["worst"],
-        no_ci=values["no_ci"],
-        reference_sigma_m=values["reference_sigma_m"],
-        auto_time_offset=auto_time,
-        auto_device=is_auto(values["device"]),
-        reference_offset_source="given" if device_transform is None else "urdf",
-        planar=values["planar"],
-        min_excursion_s=values["min_excursion_s"],
-    )
+    # The options that are not one field each: auto values, the offset's two sources, a name.
+    special: dict[str, Callable[[], Any]] = {
+        "time_offset_s": lambda: 0.0 if auto_time else float(values["time_offset_s"]),
+        "reference_offset": lambda: device_transform or typed_value("offset", values["offset"]),
+        "worst_count": lambda: values["worst"],
+        "auto_time_offset": lambda: auto_time,
+        "auto_device": lambda: is_auto(values["device"]),
+        "reference_offset_source": lambda: "given" if device_transform is None else "urdf",
+    }
+    given: dict[str, Any] = {}
+    for entry in fields(EvaluationConfig):  # in the fields' order: errors come as before
+        if entry.name in special:
+            given[entry.name] = special[entry.name]()
+        elif entry.name in _CONFIG_OPTIONS:
+            value = typed_value(entry.name, values[entry.name])
+            if value is not None or entry.default is None:  # not given: the field's default
+                given[entry.name] = value
+    return EvaluationConfig(**given)
 
 
 def check_device_choice(values: OptionValues, *, front_door: str) -> None:
@@ -213,7 +284,6 @@ def export_from_options(
     from exporters import ExportOptions  # noqa: PLC0415
     from exporters.cad.placement import (  # noqa: PLC0415
         check_options,
-        parse_site,
         parse_units,
         read_site_matrix,
         site_from_values,
@@ -228,7 +298,7 @@ def export_from_options(
         raise InputError(msg, option="site_matrix")
     transform = SimilarityTransform.identity()
     if site:
-        transform = parse_site(site)
+        transform = parse_text("site", site)
     elif isinstance(matrix, Path):
         transform = read_site_matrix(matrix)
     elif matrix is not None:
@@ -241,7 +311,7 @@ def export_from_options(
         simplify_m=values["simplify_m"],
         building=building,
         evaluation_id=evaluation_id,
-        crs=values["crs"],
+        crs=typed_value("crs", values["crs"]),
         building_up=UpAxis(values["building_up"]),
         front_door=FrontDoor(front_door),
     )
@@ -272,17 +342,16 @@ def device_offset(path: Path, *, from_link: str, to_link: str) -> SimilarityTran
 
 
 def offset_or_none(offset: str | None) -> SimilarityTransform | None:
-    """Parse an ``"x y z qx qy qz qw"`` offset; None when not given."""
+    """Parse an ``"x y z qx qy qz qw"`` offset (the core's parser); None when not given."""
     return parse_offset(offset) if offset else None
 
 
 def check_pattern(key: str, value: str | None) -> None:
-    """Check a text option against its pattern: the HTTP API's grammar of the option.
+    """Check a text option against its pattern, the grammar the API's schema declares.
 
-    The API's schema declares the pattern and the service holds requests to it, so that
-    schema and server take the same texts. Call this after the option's parser, whose
-    message says more about a text of the wrong form; what is left for the pattern is what
-    the parser forgives (exponents, other digits and spaces). The CLI keeps the parsers'.
+    :func:`parse_text` calls it after the option's parser, whose message says more about a
+    text of the wrong form; what is left for the pattern is what the parser forgives
+    (exponents, other digits and spaces), refused at every front door alike.
 
     Raises:
         InputError: the text does not match; the error carries ``key``.
