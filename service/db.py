@@ -198,6 +198,8 @@ class Evaluation(JobState, Base):
 
     id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
     project_id: Mapped[str] = mapped_column(ForeignKey("projects.id", ondelete="CASCADE"))
+    kind: Mapped[str] = mapped_column(String(32), default="trajectory")
+    """The kind of its request (:data:`service.jobs.kinds.REQUEST_KINDS`), read with it."""
     request: Mapped[dict[str, Any]] = mapped_column()
     dataset_ids: Mapped[list[Any]] = mapped_column(default=list)
     result: Mapped[dict[str, Any] | None] = mapped_column(default=None)

@@ -27,7 +27,7 @@ from service.errors import (
     UploadError,
     problem_for,
 )
-from service.jobs.kinds import EVALUATION
+from service.jobs.kinds import EVALUATION, RANGING, TRAJECTORY
 from service.jobs.options import (
     config_from_options,
     export_from_options,
@@ -100,6 +100,7 @@ def create_evaluation(
         check_options(options)
         evaluation = Evaluation(
             project_id=project_id,
+            kind=TRAJECTORY,
             request=body.model_dump(mode="json"),
             dataset_ids=sorted(wanted),
             created_at=utcnow(),
@@ -140,6 +141,7 @@ def create_ranging(runtime: Runtime, project_id: str, body: RangingCreate) -> Ev
         ]
         evaluation = Evaluation(
             project_id=project_id,
+            kind=RANGING,
             request=request,
             dataset_ids=sorted(wanted),
             created_at=utcnow(),

@@ -27,7 +27,7 @@ from service.adapters import DATABASE_ERRORS
 from service.blobs.base import EVALUATIONS
 from service.db import Dataset, Evaluation, JobStatus
 from service.jobs.evaluations import visits_dataset_id
-from service.jobs.kinds import EVALUATION
+from service.jobs.kinds import EVALUATION, request_kind
 from service.jobs.limits import Limits, run_limited
 from service.jobs.mapjob import map_source
 from service.jobs.options import (
@@ -47,7 +47,7 @@ from service.jobs.runner import (
     run_job,
 )
 from service.jobs.tracking import tracked_job
-from service.runtime import Runtime
+from service.runtime import Runtime, load_target
 from service.schemas.evaluations import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
 
 __all__ = [
@@ -55,7 +55,9 @@ __all__ = [
     "artifact_entry",
     "evaluation_summary",
     "execute_evaluation",
+    "ranging_job",
     "stored_request",
+    "trajectory_job",
 ]
 
 logger = logging.getLogger(__name__)
@@ -179,25 +181,30 @@ def evaluation_summary(document: Mapping[str, Any]) -> list[dict[str, Any]]:
     ]
 
 
-def stored_request(request: Mapping[str, Any]) -> EvaluationCreate | RangingCreate:
-    """Read a stored request as the model of its kind, checked as when it was made.
+def stored_request(evaluation: Evaluation) -> EvaluationCreate | RangingCreate:
+    """Read an evaluation's stored request as the model of its recorded kind.
 
-    A ``POST /ranging`` request names its anchors; its stored copy also lists the solvers
-    as its estimates (for the evaluations list), which the model does not take.
+    The kind is the one the evaluation was made as (``evaluations.kind``), looked up in
+    :data:`service.jobs.kinds.REQUEST_KINDS`; the request is checked as when it was made.
 
     Raises:
+        LocevalError: a kind this version does not know.
         pydantic.ValidationError: the stored request no longer fits its model.
     """
-    if "anchors" in request:
-        return RangingCreate.model_validate({k: v for k, v in request.items() if k != "estimates"})
-    return EvaluationCreate.model_validate(request)
+    return request_kind(evaluation.kind).read(evaluation.request)
 
 
 def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
-    """Return the job of a stored evaluation, of its request's kind."""
-    request = stored_request(evaluation.request)
-    if isinstance(request, RangingCreate):
-        return _ranging_job_for(session, runtime, evaluation, request)
+    """Return the job of a stored evaluation, made as its request's kind says."""
+    kind = request_kind(evaluation.kind)
+    job: Job = load_target(kind.job)(session, runtime, evaluation, kind.read(evaluation.request))
+    return job
+
+
+def trajectory_job(
+    session: Session, runtime: Runtime, evaluation: Evaluation, request: EvaluationCreate
+) -> Job:
+    """Return the job of a stored trajectory (or control-point) evaluation."""
     options = request.options
     project_id = evaluation.project_id
     reference = _source(session, runtime, project_id, request.reference, "reference")
@@ -256,9 +263,10 @@ def _job_for(session: Session, runtime: Runtime, evaluation: Evaluation) -> Job:
     )
 
 
-def _ranging_job_for(
+def ranging_job(
     session: Session, runtime: Runtime, evaluation: Evaluation, request: RangingCreate
 ) -> RangingJob:
+    """Return the job of a stored ranging evaluation."""
     options = request.options
     project_id = evaluation.project_id
     reference = _source(session, runtime, project_id, request.reference, "reference")

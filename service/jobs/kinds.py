@@ -1,4 +1,9 @@
-"""Every task of the queue, by name: the kinds of tracked job, the retried and periodic tasks.
+"""Every task of the queue and every kind of request, by name: one typed registry.
+
+:data:`JOB_KINDS` holds the kinds of tracked job (their table, artifact folder and
+executor), :data:`REQUEST_KINDS` the kinds of an evaluation's request (its model and the job
+made from it; a row records its request's kind, which is read here, never guessed from the
+request), :data:`WEBHOOK` and :data:`PERIODIC_TASKS` the queue's other tasks.
 
 One typed registry, in the shape of :data:`exporters.ARTIFACTS`: each entry names the function
 that runs it as ``"module:function"``, imported when a task of it first runs. So the registry
@@ -12,21 +17,29 @@ The ``task_name`` of an entry is stored in queued messages: never rename one.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
+from loceval.errors import LocevalError
 from service.blobs.base import EVALUATIONS, RUNS
 from service.db import Evaluation, ScheduleRun
 from service.runtime import JobKind
+from service.schemas.evaluations import EvaluationCreate, RangingCreate
 
 __all__ = [
     "EVALUATION",
     "JOB_KINDS",
     "PERIODIC_TASKS",
+    "RANGING",
+    "REQUEST_KINDS",
     "RUN",
+    "TRAJECTORY",
     "WEBHOOK",
     "PeriodicTask",
+    "RequestKind",
     "RetriedTask",
+    "request_kind",
 ]
 
 EVALUATION: Final = "evaluation"
@@ -64,6 +77,72 @@ JOB_KINDS: Final = (
     ),
 )
 """Every kind of tracked job."""
+
+
+TRAJECTORY: Final = "trajectory"
+"""An evaluation of trajectories (or of control points) against a reference."""
+RANGING: Final = "ranging"
+"""An evaluation of radio ranges and of the positions solved from them."""
+
+
+@dataclass(frozen=True, slots=True)
+class RequestKind:
+    """One kind of an evaluation's request: what it is read as, and what job it makes.
+
+    Attributes:
+        name: its key, stored with each evaluation (``evaluations.kind``).
+        model: the request body; a stored request is read again as it, checked as when made.
+        job: ``"module:function"`` making the job from the stored evaluation, called as
+            ``function(session, runtime, evaluation, request)``.
+        job_kind: the kind of tracked job that runs it (its table, artifact folder and
+            executor: :data:`JOB_KINDS`).
+        listed: keys the stored copy adds for the evaluations list, which the model does not
+            take (a ranging request lists its solvers as its estimates).
+    """
+
+    name: str
+    model: type[EvaluationCreate | RangingCreate]
+    job: str
+    job_kind: str = EVALUATION
+    listed: tuple[str, ...] = ()
+
+    def read(self, request: Mapping[str, Any]) -> EvaluationCreate | RangingCreate:
+        """Read a stored request as this kind's model.
+
+        Raises:
+            pydantic.ValidationError: the stored request no longer fits its model.
+        """
+        return self.model.model_validate(
+            {key: value for key, value in request.items() if key not in self.listed}
+        )
+
+
+REQUEST_KINDS: Final[Mapping[str, RequestKind]] = {
+    kind.name: kind
+    for kind in (
+        RequestKind(TRAJECTORY, EvaluationCreate, "service.jobs.executor:trajectory_job"),
+        RequestKind(
+            RANGING, RangingCreate, "service.jobs.executor:ranging_job", listed=("estimates",)
+        ),
+    )
+}
+"""Every kind of request an evaluation can have, by name."""
+
+
+def request_kind(name: str) -> RequestKind:
+    """Return the request kind an evaluation records.
+
+    Raises:
+        LocevalError: no such kind (a row written by a newer version of the service).
+    """
+    kind = REQUEST_KINDS.get(name)
+    if kind is None:
+        msg = (
+            f"The evaluation's request is of the kind {name!r}, which this version of the "
+            f"service does not know ({', '.join(REQUEST_KINDS)}); run it on a newer one."
+        )
+        raise LocevalError(msg)
+    return kind
 
 
 @dataclass(frozen=True, slots=True)

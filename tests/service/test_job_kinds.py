@@ -3,18 +3,27 @@
 from __future__ import annotations
 
 import datetime as dt
+import json
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import sqlalchemy as sa
+from alembic import command
+from alembic.config import Config
+from pydantic import ValidationError
 
+from loceval.errors import LocevalError
+from service import db
 from service.blobs.base import EVALUATIONS, RUNS
-from service.db import Evaluation, ScheduleRun, utcnow
-from service.jobs.kinds import JOB_KINDS, PERIODIC_TASKS
+from service.db import Evaluation, Project, ScheduleRun, create_db_engine, migrate, utcnow
+from service.jobs.executor import stored_request
+from service.jobs.kinds import JOB_KINDS, PERIODIC_TASKS, REQUEST_KINDS
 from service.jobs.kinds import WEBHOOK as WEBHOOK_TASK
 from service.jobs.queue import create_runtime
 from service.runtime import Runtime, load_target
 from service.schedules.runs import WEBHOOK
+from service.schemas.evaluations import EvaluationCreate, RangingCreate
 from service.settings import Settings
 from tests.service._job_rows import add_schedule_run
 from tests.service.test_schedules_api import _Hook
@@ -49,6 +58,71 @@ def test_every_target_of_the_registry_imports() -> None:
     assert WEBHOOK_TASK.name == WEBHOOK
     with pytest.raises(AttributeError):
         load_target("service.jobs.executor:no_such_executor")
+
+
+def test_a_stored_request_is_read_as_its_recorded_kind(tmp_path: Path) -> None:
+    """The row says its kind; the registry reads the request as that kind's model."""
+    runtime = create_runtime(Settings(data_dir=tmp_path / "data", queue_url="immediate"))
+    ranging = {
+        "reference": {"dataset_id": "r"},
+        "anchors": "a",
+        "ranges": {"dataset_id": "g"},
+        "options": {},
+        "estimates": [{"dataset_id": "g", "selector": None, "name": "nlls"}],
+    }
+    trajectory = {"reference": {"dataset_id": "r"}, "estimates": [{"dataset_id": "e"}]}
+    try:
+        with runtime.sessions() as session:
+            project = Project(name="site")
+            session.add(project)
+            session.flush()
+            rows = [
+                Evaluation(project_id=project.id, kind=kind, request=request)
+                for kind, request in (("ranging", ranging), ("trajectory", trajectory))
+            ]
+            session.add_all(rows)
+            session.commit()
+            assert isinstance(stored_request(rows[0]), RangingCreate)
+            assert isinstance(stored_request(rows[1]), EvaluationCreate)
+            rows[1].kind = "ranging"  # the kind decides, not the request's keys
+            with pytest.raises(ValidationError, match="anchors"):
+                stored_request(rows[1])
+            rows[1].kind = "teleport"
+            with pytest.raises(LocevalError, match=r"kind 'teleport'.*does not know"):
+                stored_request(rows[1])
+    finally:
+        runtime.close()
+    assert {k.job_kind for k in REQUEST_KINDS.values()} <= {k.name for k in JOB_KINDS}
+    assert all(callable(load_target(k.job)) for k in REQUEST_KINDS.values())
+
+
+def test_the_migration_records_the_kind_of_earlier_evaluations(tmp_path: Path) -> None:
+    """Evaluations stored before 0004 get their kind: ranging where the request names anchors."""
+    engine = create_db_engine(f"sqlite:///{tmp_path / 'old.db'}")
+    config = Config()
+    config.set_main_option("script_location", str(Path(db.__file__).parent / "migrations"))
+    now = "2026-01-01 00:00:00.000000"
+    with engine.begin() as connection:
+        config.attributes["connection"] = connection
+        command.upgrade(config, "0003")
+        connection.execute(
+            sa.text("INSERT INTO projects (id, name, created_at) VALUES ('p', 'site', :now)"),
+            {"now": now},
+        )
+        for evaluation_id, request in (("e1", {"reference": {}}), ("e2", {"anchors": "a"})):
+            connection.execute(
+                sa.text(
+                    "INSERT INTO evaluations (id, project_id, request, dataset_ids, status, "
+                    "stage, fraction, attempts, created_at) VALUES "
+                    "(:id, 'p', :request, '[]', 'succeeded', 'done', 1.0, 1, :now)"
+                ),
+                {"id": evaluation_id, "request": json.dumps(request), "now": now},
+            )
+    migrate(engine)
+    with engine.connect() as connection:
+        kinds = dict(connection.execute(sa.text("SELECT id, kind FROM evaluations")).all())
+    engine.dispose()
+    assert kinds == {"e1": "trajectory", "e2": "ranging"}
 
 
 def _finished_run(rt: Runtime, webhook_url: str) -> str:

@@ -24,6 +24,7 @@ from service.cli import main
 from service.db import Evaluation, utcnow
 from service.errors import problem_for
 from service.jobs.executor import _job_for
+from service.jobs.kinds import RANGING, TRAJECTORY
 from service.jobs.options import TEXT_PARSERS
 from tests.factories import make_trajectory, perturb, write_tum
 from tests.radio_factory import (
@@ -169,12 +170,14 @@ def _stored(case: Case, api: Api, ids: dict[str, str]) -> Answer:
     """Store the request as it would have been stored, then read it for its job."""
     _, body = _body(case, ids)
     request = dict(body)
+    kind = RANGING if case.ranging else TRAJECTORY
     if case.ranging:
         request["estimates"] = [{"dataset_id": ids["ranges"], "selector": None, "name": "nlls"}]
     runtime = api.app.state.runtime
     with runtime.sessions() as session:
         row = Evaluation(
             project_id=api.project_id(),
+            kind=kind,
             request=request,
             dataset_ids=sorted(ids.values()),
             created_at=utcnow(),
