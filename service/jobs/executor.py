@@ -55,6 +55,7 @@ __all__ = [
     "artifact_entry",
     "evaluation_summary",
     "execute_evaluation",
+    "log_warnings",
     "ranging_job",
     "stored_request",
     "trajectory_job",
@@ -99,6 +100,19 @@ def execute_evaluation(runtime: Runtime, evaluation_id: str) -> None:
                 artifact_entry(name, final / name) for name in ARTIFACTS if (final / name).is_file()
             ],
         )
+        log_warnings(document)
+
+
+def log_warnings(document: Mapping[str, Any]) -> None:
+    """Write each warning of a job's result to the log, at warning level, one line each.
+
+    An operator reading the log of an odd job sees what the result warns of (a clock that
+    disagrees with the given offset, duplicate stamps dropped), not only its transitions;
+    the job's context (``job_id``, ``kind``, ``project``) is on every line, and
+    ``warning_in`` says where in the result it is (``reference``, an estimate, ``map``).
+    """
+    for where, text in read_result(document).warnings():
+        logger.warning("%s", text, extra={"warning_in": where})
 
 
 def artifact_entry(name: str, path: Path) -> dict[str, Any]:
