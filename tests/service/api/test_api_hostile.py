@@ -29,7 +29,6 @@ from service.schedules.resource import select_datasets
 from service.settings import Settings
 from tests.factories import make_trajectory, write_tum
 from tests.service._api_fixtures import Api, assert_problem, open_api, tum_pair
-from tests.service.test_e2e_scaleout import postgres_url  # noqa: F401  (a fixture)
 
 CHEAP = {"formats": ["result.json"]}
 PUBLIC = "https://loceval.example.org/site/"

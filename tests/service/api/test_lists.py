@@ -13,7 +13,6 @@ from sqlalchemy import event, update
 
 from service.db import Evaluation
 from tests.service._api_fixtures import Api, open_api
-from tests.service.test_e2e_scaleout import postgres_url  # noqa: F401  (a fixture)
 
 _TUM = b"0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n2 2 0 0 0 0 0 1\n"
 

@@ -23,7 +23,6 @@ from tests.service.conftest import (
     upload,
     wait_for_evaluation,
 )
-from tests.service.test_e2e_scaleout import postgres_url  # noqa: F401  (a fixture)
 
 CHEAP = {"formats": ["result.json"]}
 CONTENT_TYPE = "text/plain; version=0.0.4; charset=utf-8"
@@ -234,7 +233,7 @@ def test_durations_read_without_sql_arithmetic_agree(
 def test_durations_on_postgresql(
     tmp_path: Path,
     tum: tuple[bytes, bytes],
-    postgres_url: str,  # noqa: F811
+    postgres_url: str,
 ) -> None:
     """PostgreSQL computes the durations with its own SQL (epoch seconds)."""
     with open_api(tmp_path, database_url=postgres_url) as api:

@@ -15,11 +15,9 @@ only this test's keys are deleted) and SeaweedFS; each is skipped without (faile
 from __future__ import annotations
 
 import json
-import secrets
 import signal
 import socket
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +25,6 @@ import numpy as np
 import pytest
 
 from tests.bagfactory import POSE, Poses, pose_records, random_poses, write_bag
-from tests.conftest import skip_or_fail
 from tests.factories import make_trajectory, perturb, write_tum
 from tests.service._api_fixtures import schedule_body
 from tests.service.blobs.conftest import Gate, SeaweedFS, object_keys, open_multipart_uploads
@@ -45,59 +42,6 @@ from tests.service.conftest import (
 )
 
 pytestmark = [pytest.mark.slow]
-
-POSTGRES = "host=127.0.0.1 port=5432 user=postgres dbname=test connect_timeout=5"
-REDIS = "redis://127.0.0.1:6379"
-
-
-@pytest.fixture
-def postgres_url() -> Iterator[str]:
-    """A fresh PostgreSQL database for this test, dropped afterwards; its SQLAlchemy URL."""
-    import psycopg
-    from psycopg import sql
-
-    try:
-        admin = psycopg.connect(POSTGRES, autocommit=True)
-    except psycopg.OperationalError as err:
-        skip_or_fail(f"PostgreSQL is not reachable at 127.0.0.1:5432 as postgres/test ({err})")
-    name = f"loceval_s3_{secrets.token_hex(6)}"
-    with admin:
-        admin.execute(sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
-    try:
-        yield f"postgresql+psycopg://postgres@127.0.0.1:5432/{name}"
-    finally:
-        with psycopg.connect(POSTGRES, autocommit=True) as admin:
-            admin.execute(
-                sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name))
-            )
-
-
-@pytest.fixture
-def redis_url() -> Iterator[str]:
-    """An empty Redis database number for this test; only its huey keys are deleted after."""
-    import redis
-
-    client = redis.Redis.from_url(f"{REDIS}/0", socket_timeout=5, socket_connect_timeout=5)
-    try:
-        client.ping()
-    except redis.RedisError as err:
-        client.close()
-        skip_or_fail(f"Redis is not reachable at 127.0.0.1:6379 ({err})")
-    client.close()
-    for number in secrets.SystemRandom().sample(range(1, 16), 15):
-        candidate = redis.Redis.from_url(f"{REDIS}/{number}")
-        if candidate.dbsize() == 0:
-            break
-        candidate.close()
-    else:
-        skip_or_fail("every Redis database number 1..15 holds keys; none is free for this test")
-    try:
-        yield f"{REDIS}/{number}"
-    finally:
-        keys = list(candidate.scan_iter(match="*loceval*"))
-        if keys:
-            candidate.delete(*keys)
-        candidate.close()
 
 
 def _bag(path: Path, rng: np.random.Generator, *, noise: float) -> Path:

@@ -1,28 +1,49 @@
-"""A PostgreSQL and a Redis server of the test's own, on free ports, to stop and start at will.
+"""Databases for the service under test: on the machine's servers, or servers of one's own.
 
-The outage tests must not touch the machine's shared servers, so they start their own: a
-PostgreSQL cluster made by ``initdb`` in a temporary folder and run by ``pg_ctl`` (as the
-``postgres`` user when the tests run as root, which ``initdb`` refuses), and a
-``redis-server --save ''`` (no persistence: a restart comes back empty). Without the
-binaries the tests are skipped with the reason (a failure when CI is set).
+- :func:`fresh_database`: a new PostgreSQL database on the machine's server (127.0.0.1:5432),
+  dropped afterwards; :func:`empty_redis_database`: a Redis database number nobody uses on the
+  machine's server (127.0.0.1:6379), whose loceval keys are deleted afterwards. Neither stops,
+  flushes or restarts the shared servers, which other work uses at the same time.
+- :class:`OwnPostgres` and :class:`OwnRedis`: servers of one's own on free ports, to stop and
+  start at will (the outage tests): a PostgreSQL cluster made by ``initdb`` in a temporary
+  folder and run by ``pg_ctl`` (as the ``postgres`` user when run as root, which ``initdb``
+  refuses), and a ``redis-server --save ''`` (no persistence: a restart comes back empty).
+
+What the machine lacks raises :class:`~tests.harness.HarnessUnavailableError`.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pwd
+import secrets
 import shutil
 import subprocess
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Final
 
-from tests.conftest import skip_or_fail
-from tests.service.conftest import free_port
+from tests.harness import HarnessUnavailableError
+from tests.harness.ports import free_port
 
-__all__ = ["OwnPostgres", "OwnRedis", "postgres_binaries"]
+__all__ = [
+    "SHARED_POSTGRES",
+    "SHARED_REDIS",
+    "OwnPostgres",
+    "OwnRedis",
+    "empty_redis_database",
+    "fresh_database",
+    "postgres_binaries",
+]
+
+SHARED_POSTGRES: Final = "host=127.0.0.1 port=5432 user=postgres dbname=test connect_timeout=5"
+"""The machine's PostgreSQL, as an administrator connects (trust auth on loopback)."""
+SHARED_REDIS: Final = "redis://127.0.0.1:6379"
+"""The machine's Redis."""
 
 
 def _newest_pg_bin() -> Path:
@@ -39,14 +60,20 @@ _START_TIMEOUT_S: Final = 60.0
 
 
 def postgres_binaries() -> Path:
-    """Return the folder of ``initdb`` and ``pg_ctl``, or skip (fail in CI) without them."""
+    """Return the folder of ``initdb`` and ``pg_ctl``.
+
+    Raises:
+        HarnessUnavailableError: they (or ``redis-server``, needed beside them) are missing.
+    """
     if not (PG_BIN / "initdb").is_file() or not (PG_BIN / "pg_ctl").is_file():
-        skip_or_fail(
+        msg = (
             f"PostgreSQL's initdb and pg_ctl are not in {PG_BIN} (install postgresql, or "
             "set LOCEVAL_PG_BIN to their folder)"
         )
+        raise HarnessUnavailableError(msg)
     if shutil.which("redis-server") is None:
-        skip_or_fail("redis-server is not installed (Debian: redis-server)")
+        msg = "redis-server is not installed (Debian: redis-server)"
+        raise HarnessUnavailableError(msg)
     return PG_BIN
 
 
@@ -57,10 +84,12 @@ def _as_owner() -> list[str]:
     try:
         pwd.getpwnam("postgres")
     except KeyError:
-        skip_or_fail("running as root and there is no 'postgres' user to run initdb as")
+        msg = "running as root and there is no 'postgres' user to run initdb as"
+        raise HarnessUnavailableError(msg) from None
     runuser = shutil.which("runuser")
     if runuser is None:
-        skip_or_fail("running as root and runuser is missing (initdb refuses root)")
+        msg = "running as root and runuser is missing (initdb refuses root)"
+        raise HarnessUnavailableError(msg)
     return [runuser, "-u", "postgres", "--"]
 
 
@@ -250,3 +279,73 @@ def _run(argv: list[str]) -> None:
     if done.returncode != 0:
         msg = f"{' '.join(argv)} exited {done.returncode}:\n{done.stdout}\n{done.stderr}"
         raise RuntimeError(msg)
+
+
+@contextlib.contextmanager
+def fresh_database(admin: str = SHARED_POSTGRES, *, prefix: str = "loceval_test") -> Iterator[str]:
+    """Create a new database on a PostgreSQL server; yield its SQLAlchemy URL; drop it after.
+
+    Args:
+        admin: how to connect as an administrator (libpq keywords: host, port, user, dbname).
+        prefix: the start of the database's name (a random suffix follows).
+
+    Raises:
+        HarnessUnavailableError: the server cannot be reached.
+    """
+    import psycopg
+    from psycopg import sql
+
+    try:
+        connection = psycopg.connect(admin, autocommit=True)
+    except psycopg.OperationalError as err:
+        msg = f"PostgreSQL is not reachable ({admin}): {err}"
+        raise HarnessUnavailableError(msg) from None
+    name = f"{prefix}_{secrets.token_hex(6)}"
+    with connection:
+        connection.execute(sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
+        info = connection.info
+        url = f"postgresql+psycopg://{info.user}@{info.host}:{info.port}/{name}"
+    try:
+        yield url
+    finally:
+        with psycopg.connect(admin, autocommit=True) as connection:
+            connection.execute(
+                sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name))
+            )
+
+
+@contextlib.contextmanager
+def empty_redis_database(server: str = SHARED_REDIS) -> Iterator[str]:
+    """Yield the URL of a Redis database number (1..15) that holds no key; clean it after.
+
+    Only the keys loceval's queue made are deleted afterwards: the shared server is neither
+    flushed nor stopped.
+
+    Raises:
+        HarnessUnavailableError: the server cannot be reached, or no number is free.
+    """
+    import redis
+
+    probe = redis.Redis.from_url(f"{server}/0", socket_timeout=5, socket_connect_timeout=5)
+    try:
+        probe.ping()
+    except redis.RedisError as err:
+        msg = f"Redis is not reachable at {server} ({err})"
+        raise HarnessUnavailableError(msg) from None
+    finally:
+        probe.close()
+    for number in secrets.SystemRandom().sample(range(1, 16), 15):
+        client = redis.Redis.from_url(f"{server}/{number}")
+        if client.dbsize() == 0:
+            break
+        client.close()
+    else:
+        msg = "every Redis database number 1..15 holds keys; none is free"
+        raise HarnessUnavailableError(msg)
+    try:
+        yield f"{server}/{number}"
+    finally:
+        keys = list(client.scan_iter(match="*loceval*"))
+        if keys:
+            client.delete(*keys)
+        client.close()
