@@ -20,7 +20,7 @@ from loceval.errors import InputError
 from loceval.evaluation import Tolerance
 from loceval.metrics.redrive import RedriveTiming, redrive_timing
 from loceval.metrics.repeatability import finite_positions, path_deviations
-from loceval.results.document import EstimateRead, ResultDocumentError, read_result
+from loceval.results.document import EstimateRead, read_result
 
 __all__ = [
     "RepeatabilityRow",
@@ -176,7 +176,7 @@ class SummaryRun:
         """
         try:
             read = read_result(document)
-        except ResultDocumentError as err:
+        except InputError as err:
             raise ValueError(str(err)) from None
         systems: dict[str, SystemFigures] = {}
         for estimate in read.estimates:

@@ -14,7 +14,7 @@ writers rename reads as missing here, and the round trip of every kind of docume
 A document may lack what its kind or its age leaves out (a control-point estimate has no
 RPE; documents from before the intervals carry no ``ci95`` and a verdict without
 ``outcome``): those read as None. What is not a result document at all (no list of
-estimates, an estimate that is not an object) raises :class:`ResultDocumentError`.
+estimates, an estimate that is not an object) raises :class:`InputError`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
-from typing import Any, ClassVar, Final, Literal
+from typing import Any, Final, Literal
 
 from loceval.errors import InputError
 from loceval.metrics.pose_errors import ErrorStats
@@ -30,7 +30,6 @@ from loceval.metrics.pose_errors import ErrorStats
 __all__ = [
     "STAT_NAMES",
     "EstimateRead",
-    "ResultDocumentError",
     "ResultRead",
     "StatsBlock",
     "VerdictRead",
@@ -48,12 +47,6 @@ _OUTCOMES: Final[Mapping[object, Outcome]] = {
 }
 _SECTIONS: Final = ("map", "ranging")
 """The document's parts besides the reference and the estimates that carry warnings."""
-
-
-class ResultDocumentError(InputError):
-    """A document that is not a result of an evaluation (no estimates, a malformed one)."""
-
-    code: ClassVar[str] = "result.invalid"
 
 
 def _finite(value: object) -> float | None:
@@ -141,7 +134,7 @@ class VerdictRead:
         """Read a verdict; None without one (no tolerance given).
 
         Raises:
-            ResultDocumentError: a verdict with its interval (``ci95``) but no outcome.
+            InputError: a verdict with its interval (``ci95``) but no outcome.
         """
         found = _mapping(verdict)
         passed = None if found is None else found.get("passed")
@@ -152,7 +145,7 @@ class VerdictRead:
             return cls(passed, _OUTCOMES[written])
         if "ci95" in found:  # written since the intervals: the outcome is always there
             msg = f"{where} of the result document has no outcome (pass, fail or undecided)."
-            raise ResultDocumentError(msg)
+            raise InputError(msg)
         return cls(passed, "pass" if passed else "fail")  # before the intervals: from passed
 
 
@@ -211,12 +204,12 @@ class EstimateRead:
         """Read ``estimates[index]``.
 
         Raises:
-            ResultDocumentError: it is not an object.
+            InputError: it is not an object.
         """
         found = _mapping(estimate)
         if found is None:
             msg = f"estimates[{index}] of the result document is not an object."
-            raise ResultDocumentError(msg)
+            raise InputError(msg)
         ate = _mapping(found.get("ate")) or {}
         rpe = _mapping(found.get("rpe")) or {}
         name = found.get("name")
@@ -279,13 +272,13 @@ def read_result(document: object) -> ResultRead:
     """Read a result document (``result.json``, or an evaluation's stored result).
 
     Raises:
-        ResultDocumentError: it has no list of estimates, or an estimate is not an object.
+        InputError: it has no list of estimates, or an estimate is not an object.
     """
     found = _mapping(document)
     estimates = None if found is None else found.get("estimates")
     if found is None or not isinstance(estimates, Sequence) or isinstance(estimates, str | bytes):
         msg = "The result document has no 'estimates' list; is it a result.json?"
-        raise ResultDocumentError(msg)
+        raise InputError(msg)
     reference = _mapping(found.get("reference")) or {}
     name = reference.get("name")
     return ResultRead(
