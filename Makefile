@@ -67,7 +67,7 @@ lock:
 	rm -rf .lockenv
 
 # Refresh the Swagger UI that /docs serves (templates/web/vendor/swagger-ui; see its README):
-# `make vendor-swagger-ui SWAGGER_UI_VERSION=5.x.y`, then run tests/service/test_docs_browser.py.
+# `make vendor-swagger-ui SWAGGER_UI_VERSION=5.x.y`, then run tests/service/api/test_docs_browser.py.
 # npm checks the package against the registry's sha512; the files /docs needs, their licences
 # and their SHA-256 sums (checked by the tests) are written; node and npm are needed only here.
 SWAGGER_UI_VERSION ?= 5.35.0
@@ -87,7 +87,7 @@ vendor-swagger-ui:
 
 # Refresh the vendored three.js (templates/vendor/three) from the npm registry: the module
 # build and its licence, byte for byte; then put the printed version and SHA-256 into
-# exporters/viewer/vendor.py (THREE_VERSION, THREE_SHA256), which tests/exporters/test_viewer.py
+# exporters/viewer/vendor.py (THREE_VERSION, THREE_SHA256), which tests/exporters/viewer/test_viewer.py
 # checks the file against.
 THREE_VERSION ?= 0.170.0
 vendor-three:

@@ -190,7 +190,7 @@ def _service_runs(data: Path, repeat: int, folder: Path) -> tuple[list[float], l
     with running_server(folder / "data", folder / "service.log") as server:
         key = create_key(server)
         headers = {"Authorization": f"Bearer {key}"}
-        with httpx.Client(base_url=server.base_url, headers=headers, timeout=120.0) as http:
+        with httpx.Client(base_url=server.url, headers=headers, timeout=120.0) as http:
             ids = []
             for name in FR2:
                 with (data / name).open("rb") as fh:

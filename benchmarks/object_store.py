@@ -40,9 +40,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
-import secrets
 import shutil
-import signal
 import statistics
 import subprocess
 import sys
@@ -52,17 +50,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import boto3
 import httpx2 as httpx
-import psycopg
-import redis
-from botocore.config import Config
-from psycopg import sql
 
-from benchmarks.upload_load import RssSampler, _descendants, _free_port, prepare_recordings
+from benchmarks.upload_load import RssSampler, _descendants, prepare_recordings
+from tests.harness.databases import SHARED_REDIS, empty_redis_database, fresh_database
+from tests.harness.ports import free_port
+from tests.harness.processes import ServiceProcess, wait_ready
+from tests.harness.seaweedfs import running_seaweedfs
 
 POSTGRES = "host=127.0.0.1 port=5432 user=postgres dbname=postgres connect_timeout=5"
-REDIS = "redis://127.0.0.1:6379"
+REDIS = SHARED_REDIS
 BASELINE_S = 2.0
 _MB = 1_000_000
 _CREDENTIALS = {"AWS_ACCESS_KEY_ID": "bench", "AWS_SECRET_ACCESS_KEY": "bench-secret"}
@@ -88,136 +85,13 @@ def _loceval() -> str:
 
 
 @contextlib.contextmanager
-def _database() -> Iterator[str]:
-    name = f"loceval_bench_{secrets.token_hex(4)}"
-    with psycopg.connect(POSTGRES, autocommit=True) as admin:
-        admin.execute(sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
-    try:
-        yield f"postgresql+psycopg://postgres@127.0.0.1:5432/{name}"
-    finally:
-        with psycopg.connect(POSTGRES, autocommit=True) as admin:
-            admin.execute(
-                sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name))
-            )
-
-
-@contextlib.contextmanager
-def _redis() -> Iterator[str]:
-    for number in range(15, 0, -1):
-        client = redis.Redis.from_url(f"{REDIS}/{number}")
-        if client.dbsize() == 0:
-            break
-        client.close()
-    else:
-        msg = "no empty Redis database number (1..15) to use"
-        raise RuntimeError(msg)
-    try:
-        yield f"{REDIS}/{number}"
-    finally:
-        keys = list(client.scan_iter(match="*loceval*"))
-        if keys:
-            client.delete(*keys)
-        client.close()
-
-
-@contextlib.contextmanager
-def _seaweedfs(folder: Path) -> Iterator[tuple[dict[str, str], int]]:
-    """Run ``weed server -s3`` on loopback ports; yield the AWS_* variables for it, its pid."""
-    weed = Path(sys.executable).with_name("weed")
-    folder.mkdir(parents=True, exist_ok=True)
-    ports = []
-    while len(ports) < 4:
-        port = _free_port()
-        if port + 10000 <= 65535 and port not in ports:
-            ports.append(port)
-    master, volume, filer, s3 = ports
-    log = (folder / "weed.log").open("wb")
-    process = subprocess.Popen(
-        [
-            str(weed),
-            "server",
-            f"-dir={folder}",
-            "-ip=127.0.0.1",
-            "-ip.bind=127.0.0.1",
-            f"-master.port={master}",
-            f"-volume.port={volume}",
-            f"-filer.port={filer}",
-            "-s3",
-            f"-s3.port={s3}",
-            "-master.volumeSizeLimitMB=1024",
-            "-volume.max=200",
-            "-s3.port.iceberg=0",  # no Iceberg or Lance listeners on their fixed default ports
-            "-s3.port.lance=0",
-        ],
-        stdout=log,
-        stderr=subprocess.STDOUT,
-        start_new_session=True,
-    )
-    env = {"AWS_ENDPOINT_URL": f"http://127.0.0.1:{s3}", "AWS_REGION": "us-east-1", **_CREDENTIALS}
-    try:
-        yield env, process.pid
-    finally:
-        process.terminate()
-        try:
-            process.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
-        log.close()
-
-
-def _bucket(env: dict[str, str]) -> str:
-    client = boto3.session.Session().client(
-        "s3",
-        endpoint_url=env["AWS_ENDPOINT_URL"],
-        region_name="us-east-1",
-        aws_access_key_id=_CREDENTIALS["AWS_ACCESS_KEY_ID"],
-        aws_secret_access_key=_CREDENTIALS["AWS_SECRET_ACCESS_KEY"],
-        config=Config(s3={"addressing_style": "path"}),
-    )
-    name = f"bench-{secrets.token_hex(4)}"
-    deadline = time.monotonic() + 60
-    while True:
-        try:
-            client.create_bucket(Bucket=name)
-        except Exception:
-            if time.monotonic() > deadline:
-                raise
-            time.sleep(0.5)
-            continue
-        return name
-
-
-@contextlib.contextmanager
-def _process(argv: list[str], env: dict[str, str], log: Path) -> Iterator[subprocess.Popen[bytes]]:
-    with log.open("wb") as out:
-        process = subprocess.Popen(
-            argv, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True
-        )
+def _process(argv: list[str], env: dict[str, str], log: Path) -> Iterator[ServiceProcess]:
+    """Run a service process (its own process group, its output in ``log``); always stop it."""
+    process = ServiceProcess.start(argv, env, cwd=None, log=log, own_session=True)
     try:
         yield process
     finally:
-        if process.poll() is None:
-            process.terminate()
-            try:
-                process.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
-                process.wait()
-
-
-def _wait_ready(url: str, process: subprocess.Popen[bytes], log: Path) -> None:
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        if process.poll() is not None:
-            msg = f"the server exited: {log.read_text()[-2000:]}"
-            raise RuntimeError(msg)
-        with contextlib.suppress(httpx.HTTPError):
-            if httpx.get(f"{url}/readyz", timeout=2).status_code == 200:
-                return
-        time.sleep(0.3)
-    msg = f"the server was not ready: {log.read_text()[-2000:]}"
-    raise RuntimeError(msg)
+        process.stop(timeout=30)
 
 
 def _cpu_s(root: int | None) -> float:
@@ -274,8 +148,8 @@ def run_backend(
     shutil.rmtree(folder, ignore_errors=True)
     folder.mkdir(parents=True)
     with contextlib.ExitStack() as stack:
-        database = stack.enter_context(_database())
-        queue = stack.enter_context(_redis())
+        database = stack.enter_context(fresh_database(POSTGRES, prefix="loceval_bench"))
+        queue = stack.enter_context(empty_redis_database(REDIS))
         env = {k: v for k, v in os.environ.items() if not k.startswith(("LOCEVAL_", "AWS_"))}
         env.update(
             LOCEVAL_DATABASE_URL=database,
@@ -290,10 +164,19 @@ def run_backend(
         api_dir, worker_dir = folder / "api", folder / "api"
         store_pid: int | None = None
         if backend == "s3":
-            aws, store_pid = stack.enter_context(_seaweedfs(folder / "seaweedfs"))
-            env.update(aws, LOCEVAL_BLOB_URL=f"s3://{_bucket(aws)}/bench")
+            store = stack.enter_context(
+                running_seaweedfs(
+                    folder / "seaweedfs",
+                    volume_size_mb=1024,
+                    volume_max=200,
+                    credentials=_CREDENTIALS,
+                    own_session=True,
+                )
+            )
+            store_pid = store.process.pid
+            env.update(store.env(), LOCEVAL_BLOB_URL=f"s3://{store.new_bucket('bench')}/bench")
             worker_dir = folder / "worker"
-        port = _free_port()
+        port = free_port()
         url = f"http://127.0.0.1:{port}"
         api_env = {**env, "LOCEVAL_DATA_DIR": str(api_dir), "LOCEVAL_PUBLIC_URL": url}
         api = stack.enter_context(
@@ -303,7 +186,7 @@ def run_backend(
                 folder / "api.log",
             )
         )
-        _wait_ready(url, api, folder / "api.log")
+        wait_ready(url, api, timeout=120.0)
         key = subprocess.run(
             [_loceval(), "keys", "create", "--project", "bench"],
             env=api_env,

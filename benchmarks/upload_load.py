@@ -37,8 +37,6 @@ import json
 import os
 import resource
 import shutil
-import signal
-import socket
 import statistics
 import subprocess
 import sys
@@ -54,6 +52,8 @@ from typing import Any
 import httpx2 as httpx
 
 from benchmarks.bags import IMAGE_HZ, generate_bag
+from tests.harness.ports import free_port
+from tests.harness.processes import RunningService, ServiceProcess, wait_ready
 
 TARGET_GROWTH_MIB = 100.0
 SAMPLE_INTERVAL_S = 0.05
@@ -224,88 +224,31 @@ class RssSampler:
 # --------------------------------------------------------------------------- server
 
 
-@dataclass
-class Server:
-    process: subprocess.Popen[bytes]
-    base_url: str
-    env: dict[str, str]
-    log: Path
-
-
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
 def _cli() -> str:
     return str(Path(sys.executable).with_name("loceval"))
 
 
-def _log_tail(log: Path, lines: int = 30) -> str:
-    try:
-        return "\n".join(log.read_text(errors="replace").splitlines()[-lines:])
-    except OSError:
-        return "(no log)"
-
-
-def _wait_ready(server: Server, timeout_s: float) -> None:
-    deadline = time.monotonic() + timeout_s
-    last = "no answer"
-    while time.monotonic() < deadline:
-        if server.process.poll() is not None:
-            msg = f"server exited with {server.process.returncode}:\n{_log_tail(server.log)}"
-            raise RuntimeError(msg)
-        try:
-            answer = httpx.get(f"{server.base_url}/readyz", timeout=2.0)
-        except httpx.HTTPError as exc:
-            last = repr(exc)
-        else:
-            if answer.status_code == 200:
-                return
-            last = f"{answer.status_code} {answer.text[:200]}"
-        time.sleep(0.2)
-    msg = f"server not ready after {timeout_s:.0f} s (last: {last}):\n{_log_tail(server.log)}"
-    raise RuntimeError(msg)
-
-
 @contextlib.contextmanager
-def running_server(data_dir: Path, log: Path) -> Iterator[Server]:
+def running_server(data_dir: Path, log: Path) -> Iterator[RunningService]:
     """Start ``loceval serve`` on a free port with its own data dir; always stop it."""
-    port = _free_port()
+    port = free_port()
     env = {**os.environ, "LOCEVAL_DATA_DIR": str(data_dir.resolve())}
-    with log.open("wb") as log_fh:
-        process = subprocess.Popen(
-            [_cli(), "serve", "--host", "127.0.0.1", "--port", str(port)],
-            stdout=log_fh,
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-            env=env,
-            start_new_session=True,  # its own process group: stop all of it, nothing else
-        )
-    server = Server(process, f"http://127.0.0.1:{port}", env, log)
+    service = ServiceProcess.start(
+        [_cli(), "serve", "--host", "127.0.0.1", "--port", str(port)],
+        env,
+        cwd=None,
+        log=log,
+        own_session=True,  # its own process group: stop all of it, nothing else
+    )
+    server = RunningService(f"http://127.0.0.1:{port}", env, service)
     try:
-        _wait_ready(server, timeout_s=120.0)
+        wait_ready(server.url, service, timeout=120.0)
         yield server
     finally:
-        _stop(process)
+        service.stop(timeout=30)
 
 
-def _stop(process: subprocess.Popen[bytes]) -> None:
-    if process.poll() is not None:
-        return
-    process.terminate()
-    try:
-        process.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        print("server ignored SIGTERM for 30 s; killing its process group", flush=True)
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(process.pid, signal.SIGKILL)
-        process.wait(timeout=30)
-
-
-def create_key(server: Server) -> str:
+def create_key(server: RunningService) -> str:
     done = subprocess.run(
         [_cli(), "keys", "create", "--project", "bench"],
         env=server.env,
@@ -339,12 +282,12 @@ class UploadResult:
 
 
 def _upload(
-    client: int, recording: Recording, server: Server, key: str, barrier: threading.Barrier
+    client: int, recording: Recording, server: RunningService, key: str, barrier: threading.Barrier
 ) -> UploadResult:
     timeout = httpx.Timeout(connect=30.0, read=1800.0, write=1800.0, pool=30.0)
     headers = {"Authorization": f"Bearer {key}"}
     with (
-        httpx.Client(base_url=server.base_url, headers=headers, timeout=timeout) as http,
+        httpx.Client(base_url=server.url, headers=headers, timeout=timeout) as http,
         recording.path.open("rb") as fh,
     ):
         barrier.wait()
@@ -381,7 +324,9 @@ def _check(answer: httpx.Response, recording: Recording) -> str:
     return "; ".join(problems) or f"ok {body.get('id')}"
 
 
-def run_uploads(server: Server, key: str, recordings: list[Recording]) -> list[UploadResult]:
+def run_uploads(
+    server: RunningService, key: str, recordings: list[Recording]
+) -> list[UploadResult]:
     barrier = threading.Barrier(len(recordings))
     with ThreadPoolExecutor(max_workers=len(recordings), thread_name_prefix="client") as pool:
         futures = [
@@ -485,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
                 sampler.stop()
             ok = _report(results, sampler, t_idle)
             if not all(r.status == 201 for r in results):
-                print(f"\nserver log tail:\n{_log_tail(log)}")
+                print(f"\nserver log tail:\n{server.service.tail(30)}")
     finally:
         if args.keep_data:
             print(f"kept {data_dir}")

@@ -529,10 +529,6 @@ def _assess(
     )
 
 
-def _stats_or_none(series: ErrorSeries | None) -> dict[str, float | int] | None:
-    return None if series is None else series.stats.to_dict()
-
-
 def _stats(e: EstimateResult, name: str) -> dict[str, object] | None:
     """Return a STATS block with its 95 % intervals (``ci95`` null when not computed)."""
     series = getattr(e, name)
@@ -586,22 +582,11 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig, t0: int) -> dict
         "within": {f"{t:g}": share for t, share in e.within.items()},
         "within_ci95": _within_ci95(e),
         "worst": [w.to_dict() for w in e.worst],
-        "drift_pct": _stats_or_none(e.drift),
+        "drift_pct": None if e.drift is None else e.drift.stats.to_dict(),
         "verdict": None if e.verdict is None else e.verdict.to_dict(),
-        "consistency": _assessed(e, "consistency"),
-        "reference_error": _assessed(e, "reference_error"),
+        "consistency": None if e.assessment is None else e.assessment.consistency_dict(),
+        "reference_error": None if e.assessment is None else e.assessment.reference_error_dict(),
         "excursions": [x.to_dict(t0) for x in e.excursions],
         "warnings": list(e.warnings),
         "notes": [*e.estimate.notes, *e.notes],
     }
-
-
-def _assessed(e: EstimateResult, what: str) -> dict[str, object] | None:
-    """Return the consistency (NEES) or reference-error block, or None."""
-    if e.assessment is None:
-        return None
-    if what == "consistency":
-        found = e.assessment.consistency
-        return None if found is None else found.to_dict()
-    checks = e.assessment.reference_error
-    return {k: c.to_dict() for k, c in checks.items()} or None

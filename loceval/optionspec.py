@@ -273,8 +273,9 @@ class OptionSpec:
 # The grammars of the text options: regular expressions the HTTP API declares and checks.
 # Each takes a subset of what the option's parser takes (plain decimals, no exponent, the
 # option's bounds spelled out in digits), so that the API's schema says exactly which texts
-# the server takes: a pattern cannot bound "1e3" but can bound "1000". The CLI keeps the
-# parsers' wider forms. Only ASCII classes, groups and counts: the same in Python, in JSON
+# the server takes: a pattern cannot bound "1e3" but can bound "1000". Every front door holds
+# a text to its pattern after its parser (service.jobs.options.parse_text), so the CLI takes
+# what the API takes. Only ASCII classes, groups and counts: the same in Python, in JSON
 # Schema (ECMA-262) and in a browser's ``pattern``.
 
 _SEP: Final = "[ ,]"

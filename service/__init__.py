@@ -1,8 +1,8 @@
 """The application layer: the command line and the HTTP service, the two front doors.
 
 ``service.cli`` is the command line (a module per command), ``service.main`` builds the HTTP
-service; both turn their options into the core's with ``service.options`` and run an
-evaluation with ``service.runner``.
+service; both turn their options into the core's with ``service.jobs.options`` and run an
+evaluation with ``service.jobs.runner``.
 
 Importing this package (which the ``loceval`` command does first, before numpy) runs
 OpenBLAS on one thread unless ``OPENBLAS_NUM_THREADS`` says otherwise. Two reasons: a

@@ -4,7 +4,7 @@ Routes never write ``except Exception``: a call that reaches the queue (huey on 
 Redis) or the metadata database (SQLAlchemy) runs inside :func:`converted`, which raises
 :class:`~service.errors.ServiceUnavailableError` for an outage (a refused connection, a
 locked or unreachable database) and lets everything else through, so a bug stays a bug (a
-500 with an error id; in a job, :func:`service.tracking.tracked_job` records it as one).
+500 with an error id; in a job, :func:`service.jobs.tracking.tracked_job` records it as one).
 """
 
 from __future__ import annotations

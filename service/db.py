@@ -1,6 +1,6 @@
 """Metadata tables (SQLAlchemy 2) and the engine; the schema is owned by Alembic migrations.
 
-Blobs (uploads, artifacts) live in :mod:`service.storage`; rows here point at them by path
+Blobs (uploads, artifacts) live in :mod:`service.blobs`; rows here point at them by path
 relative to the data directory, so the same rows work on every machine that mounts it.
 """
 
@@ -170,7 +170,7 @@ EvaluationStatus = JobStatus
 class JobState:
     """The columns of a queued job, shared by evaluations and schedule runs.
 
-    The job functions in :mod:`service.jobs` (claim, progress, heartbeat, finish, recovery)
+    The job functions in :mod:`service.jobs.tracking` (claim, progress, heartbeat, finish, recovery)
     work on either table through these columns.
     """
 
@@ -198,6 +198,8 @@ class Evaluation(JobState, Base):
 
     id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
     project_id: Mapped[str] = mapped_column(ForeignKey("projects.id", ondelete="CASCADE"))
+    kind: Mapped[str] = mapped_column(String(32), default="trajectory")
+    """The kind of its request (:data:`service.jobs.kinds.REQUEST_KINDS`), read with it."""
     request: Mapped[dict[str, Any]] = mapped_column()
     dataset_ids: Mapped[list[Any]] = mapped_column(default=list)
     result: Mapped[dict[str, Any] | None] = mapped_column(default=None)

@@ -1,27 +1,20 @@
 """The service's errors and the one table that turns every error into a problem document.
 
 Routes raise typed errors and contain no ``try/except`` for domain conditions; the handlers
-here render them as ``application/problem+json`` (RFC 9457). Request validation, unknown
-routes and wrong methods are rendered the same way, so a client parses one error shape.
+in :mod:`service.api.problems` render them as ``application/problem+json`` (RFC 9457) with
+:func:`problem_for`, which jobs use too for the errors they store. Plain Python: the
+blob stores, the uploads and the jobs raise these without importing a web framework.
 """
 
 from __future__ import annotations
 
 import errno
 import json
-import logging
 import sqlite3
 import uuid
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
 from typing import Any, ClassVar, Final
-
-from fastapi import FastAPI, Request
-from fastapi.encoders import jsonable_encoder
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
-from sqlalchemy.exc import SQLAlchemyError
-from starlette.exceptions import HTTPException as StarletteHTTPException
-from starlette.routing import Match
 
 from exporters.errors import ExportUnavailableError
 from loceval.core.display import display_text
@@ -32,12 +25,13 @@ from loceval.errors import (
     LocevalError,
     MetricError,
 )
-from service.redact import register_private_root, scrub
+from service.redact import scrub
 
 __all__ = [
     "PROBLEM_JSON",
     "RETRY_AFTER_S",
     "STATUS_BY_ERROR",
+    "STORAGE_FULL_DETAIL",
     "AuthenticationError",
     "ConflictError",
     "InsufficientStorageError",
@@ -53,21 +47,15 @@ __all__ = [
     "UploadTooLargeError",
     "WebhookRefusedError",
     "WebhookUnresolvedError",
-    "install_error_handlers",
     "internal_problem",
     "is_storage_full",
     "problem",
     "problem_for",
     "problem_headers",
-    "register_private_root",
-    "scrub",
     "status_for",
 ]
 
-logger = logging.getLogger(__name__)
-
 PROBLEM_JSON: Final = "application/problem+json"
-_METHODS: Final = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
 RETRY_AFTER_S: Final = 5
 """The ``Retry-After`` of a 503: a restarting database or queue is back within seconds."""
 
@@ -174,7 +162,7 @@ class ServiceUnavailableError(LocevalError):
 class StoreUnavailableError(ServiceUnavailableError):
     """The object store cannot be reached or refuses to serve (an outage, not the input's fault).
 
-    A job that meets it is put back in the queue, not failed (:mod:`service.tracking`).
+    A job that meets it is put back in the queue, not failed (:mod:`service.jobs.tracking`).
     """
 
     code: ClassVar[str] = "service.unavailable"
@@ -257,17 +245,23 @@ def problem(
     return {"type": type_, "title": title, "status": status, "detail": detail, **extra}
 
 
-def problem_for(exc: LocevalError) -> dict[str, Any]:
+def problem_for(exc: LocevalError, *, private: Iterable[Path] = ()) -> dict[str, Any]:
     """Return the problem document of a domain error (also stored with failed jobs).
 
-    This is the one place where messages are scrubbed of server paths (the data directory,
-    temporary and extraction folders: :func:`service.redact.scrub`) and of control
-    characters (:func:`loceval.core.display.display_text`): every problem a
-    client sees, from a route or stored with a failed job, is built here. An error about an
-    option names it as the API does: ``options.max_dt_s: ...`` in the detail, and
-    ``"option": "options.max_dt_s"`` as a member a client can point at.
+    This is the one place where messages are scrubbed of server paths (the runtime's data
+    directory, given as ``private``; temporary and extraction folders:
+    :func:`service.redact.scrub`) and of control characters
+    (:func:`loceval.core.display.display_text`): every problem a client sees, from a route or
+    stored with a failed job, is built here. An error about an option names it as the API
+    does: ``options.max_dt_s: ...`` in the detail, and ``"option": "options.max_dt_s"`` as a
+    member a client can point at.
+
+    Args:
+        exc: the error.
+        private: the server's folders no client may see
+            (:attr:`service.runtime.Runtime.private_roots`).
     """
-    detail = display_text(scrub(str(exc), all_temp=True), one_line=False)
+    detail = display_text(scrub(str(exc), private=private, all_temp=True), one_line=False)
     if exc.option is None:
         return problem(status_for(exc), exc.code, type(exc).__name__, detail)
     name = f"options.{exc.option}"
@@ -289,15 +283,6 @@ def internal_problem(error_id: str | None = None) -> dict[str, Any]:
     )
 
 
-def _response(body: Mapping[str, Any], headers: Mapping[str, str] | None = None) -> JSONResponse:
-    return JSONResponse(
-        jsonable_encoder(body),
-        status_code=int(body["status"]),
-        media_type=PROBLEM_JSON,
-        headers=dict(headers or {}),
-    )
-
-
 def problem_headers(exc: LocevalError) -> dict[str, str]:
     """Return the headers that go with an error's problem document.
 
@@ -309,133 +294,3 @@ def problem_headers(exc: LocevalError) -> dict[str, str]:
     if isinstance(exc, ServiceUnavailableError) and not isinstance(exc, StartupError):
         return {"Retry-After": str(RETRY_AFTER_S)}
     return {}
-
-
-async def _handle_loceval_error(_request: Request, exc: Exception) -> JSONResponse:
-    assert isinstance(exc, LocevalError)  # noqa: S101  (registered for this class only)
-    body = problem_for(exc)
-    if body["status"] >= 500:
-        logger.error("%s: %s", type(exc).__name__, exc)
-    return _response(body, problem_headers(exc))
-
-
-async def _handle_validation_error(request: Request, exc: Exception) -> JSONResponse:
-    assert isinstance(exc, RequestValidationError | InvalidFieldsError)  # noqa: S101
-    if isinstance(exc, InvalidFieldsError) and not exc.errors:
-        return await _handle_loceval_error(request, exc)
-    found = exc.errors() if isinstance(exc, RequestValidationError) else exc.errors
-    errors = [
-        {
-            "loc": list(e.get("loc", ())),
-            "msg": str(e.get("msg", "")),
-            "type": str(e.get("type", "")),
-        }
-        for e in found
-    ]
-    where = "; ".join(f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}" for e in errors[:5])
-    detail = f"The request is not valid: {where}." if where else "The request is not valid."
-    body = problem(422, "request.invalid", "RequestValidationError", detail, errors=errors)
-    return _response(body)
-
-
-def _allowed_methods(request: Request) -> str:
-    """Return every method the request's path answers to (Starlette names one route's only)."""
-    routes = request.app.router.routes
-    allowed = [
-        method
-        for method in _METHODS
-        if any(r.matches({**request.scope, "method": method})[0] is Match.FULL for r in routes)
-    ]
-    return ", ".join(allowed)
-
-
-def _other_slash_form(request: Request) -> str | None:
-    """Return the request's path with its trailing slash toggled, if a route answers that.
-
-    Only the path is returned, never a URL: the request's Host header is not trusted.
-    """
-    path = str(request.scope.get("path", ""))
-    if path in {"", "/"}:
-        return None
-    other = path[:-1] if path.endswith("/") else path + "/"
-    routes = request.app.router.routes
-    scope = {**request.scope, "path": other}
-    if any(route.matches(scope)[0] is not Match.NONE for route in routes):
-        return other
-    return None
-
-
-async def _handle_http_error(request: Request, exc: Exception) -> JSONResponse:
-    assert isinstance(exc, StarletteHTTPException)  # noqa: S101
-    if exc.status_code == 400 and isinstance(exc.__cause__, UnicodeDecodeError):
-        # FastAPI's 400 for a JSON body that is not UTF-8: the same 422 as any undecodable JSON.
-        msg = "JSON decode error (the body is not UTF-8)"
-        errors = [{"loc": ["body"], "msg": msg, "type": "json_invalid"}]
-        detail = f"The request is not valid: body: {msg}."
-        return _response(
-            problem(422, "request.invalid", "RequestValidationError", detail, errors=errors)
-        )
-    titles = {404: "NotFound", 405: "MethodNotAllowed", 401: "Unauthorized"}
-    detail = str(exc.detail)
-    if exc.status_code == 404 and detail == "Not Found":
-        detail = "No such endpoint; the API is described at /docs."
-        if other := _other_slash_form(request):
-            detail = f"No such endpoint; did you mean {other} (no redirect is sent)?"
-    headers = dict(exc.headers or {})
-    if exc.status_code == 405 and (allowed := _allowed_methods(request)):
-        headers["Allow"] = allowed
-        detail = f"This endpoint answers to {allowed} only."
-    body = problem(exc.status_code, "http", titles.get(exc.status_code, "HTTPError"), detail)
-    return _response(body, headers)
-
-
-async def _handle_backend_error(request: Request, exc: Exception) -> JSONResponse:
-    """A database or file error that reached a route: a full disk is 507, else a bug."""
-    if is_storage_full(exc):
-        logger.error("Refused a request: the disk is full (%s)", type(exc).__name__)
-        return _response(
-            problem(507, InsufficientStorageError.code, "InsufficientStorage", STORAGE_FULL_DETAIL)
-        )
-    return await _handle_bug(request, exc)
-
-
-async def _handle_bug(_request: Request, exc: Exception) -> JSONResponse:
-    error_id = uuid.uuid4().hex[:12]
-    logger.error("Unhandled error (error_id=%s)", error_id, exc_info=exc)
-    return _response(internal_problem(error_id))
-
-
-def install_error_handlers(
-    app: FastAPI,
-    *,
-    outages: tuple[type[Exception], ...] = (),
-    unavailable: Callable[[Exception], ServiceUnavailableError] | None = None,
-) -> None:
-    """Register the problem+json handlers.
-
-    Args:
-        app: the application.
-        outages: the backends' errors of an outage (:data:`service.adapters.OUTAGE_ERRORS`)
-            that a route may let through: answered 503 with ``Retry-After``, like
-            :class:`ServiceUnavailableError`, not 500. (Registered by class, they are handled
-            inside the app: the kept-alive connection stays open, unlike after a 500.)
-        unavailable: turns such an error into the 503 error
-            (:func:`service.adapters.unavailable`).
-    """
-    app.add_exception_handler(LocevalError, _handle_loceval_error)
-    if unavailable is not None:
-        convert = unavailable
-
-        async def _handle_outage(request: Request, exc: Exception) -> JSONResponse:
-            if is_storage_full(exc):  # SQLite's "disk is full" is an OperationalError too
-                return await _handle_backend_error(request, exc)
-            return await _handle_loceval_error(request, convert(exc))
-
-        for outage in outages:
-            app.add_exception_handler(outage, _handle_outage)
-    app.add_exception_handler(RequestValidationError, _handle_validation_error)
-    app.add_exception_handler(InvalidFieldsError, _handle_validation_error)
-    app.add_exception_handler(StarletteHTTPException, _handle_http_error)
-    for backend_error in (SQLAlchemyError, sqlite3.Error, OSError):
-        app.add_exception_handler(backend_error, _handle_backend_error)
-    app.add_exception_handler(Exception, _handle_bug)

@@ -5,8 +5,9 @@ a terminal (a container, a service manager), readable lines on a terminal. Every
 carries the context of where it was written (:func:`log_context`: ``request_id`` in a
 request, ``job_id``, ``kind`` and ``project`` in a job), and the fields a call passes with
 ``extra={...}``. uvicorn's loggers are routed through the same handler; its access log is
-off (``serve`` passes ``access_log=False``) because :class:`RequestLogMiddleware` writes one
-line per request with the request id.
+off (``serve`` passes ``access_log=False``) because
+:class:`service.api.requestlog.RequestLogMiddleware` writes one line per request with the
+request id.
 """
 
 from __future__ import annotations
@@ -14,20 +15,15 @@ from __future__ import annotations
 import datetime as dt
 import json
 import logging
-import re
 import sys
 import time
-import uuid
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
 from typing import IO, Any, Final
 
-from starlette.types import ASGIApp, Message, Receive, Scope, Send
-
 __all__ = [
     "JsonFormatter",
-    "RequestLogMiddleware",
     "TextFormatter",
     "configure_logging",
     "current_context",
@@ -36,15 +32,12 @@ __all__ = [
     "reset_logging",
 ]
 
-logger = logging.getLogger("service.requests")
-
 _CONTEXT: ContextVar[Mapping[str, str]] = ContextVar("loceval_log_context", default={})  # noqa: B039  (never mutated)
 _UVICORN: Final = ("uvicorn", "uvicorn.error", "uvicorn.access")
 _QUIET: Final = {"huey": logging.WARNING, "huey.consumer": logging.WARNING}
 _RECORD_FIELDS: Final = frozenset(
     logging.LogRecord("", 0, "", 0, "", (), None).__dict__.keys() | {"message", "asctime"}
 )
-_REQUEST_ID: Final = re.compile(r"^[\w.:-]{1,64}$")
 
 
 def current_context() -> Mapping[str, str]:
@@ -184,63 +177,3 @@ def log_transition(
             **{key: value for key, value in fields.items() if value is not None},
         },
     )
-
-
-class RequestLogMiddleware:
-    """Write one line per HTTP request: method, path, status, duration, request id, project.
-
-    The request id is the client's ``X-Request-ID`` when it is short and plain, else a new
-    one; it is sent back in ``X-Request-ID`` and is in the context of every line the request
-    writes (a job run inside the request included).
-    """
-
-    def __init__(self, app: ASGIApp) -> None:
-        """Wrap the application."""
-        self.app = app
-
-    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
-        """Time the request and log it when the response has been sent (or failed)."""
-        if scope["type"] != "http":
-            await self.app(scope, receive, send)
-            return
-        request_id = _request_id(scope)
-        status = 500
-        started = time.perf_counter()
-
-        async def send_with_id(message: Message) -> None:
-            nonlocal status
-            if message["type"] == "http.response.start":
-                status = int(message["status"])
-                headers = [*message.get("headers", []), (b"x-request-id", request_id.encode())]
-                message = {**message, "headers": headers}
-            await send(message)
-
-        with log_context(request_id=request_id):
-            try:
-                await self.app(scope, receive, send_with_id)
-            finally:
-                state = scope.get("state") or {}
-                logger.info(
-                    "%s %s %d",
-                    scope.get("method", ""),
-                    scope.get("path", ""),
-                    status,
-                    extra={
-                        "event": "request",
-                        "method": scope.get("method", ""),
-                        "path": scope.get("path", ""),
-                        "status": status,
-                        "duration_ms": round((time.perf_counter() - started) * 1000, 1),
-                        "project": state.get("project_id"),
-                    },
-                )
-
-
-def _request_id(scope: Scope) -> str:
-    headers: list[tuple[bytes, bytes]] = scope.get("headers", [])
-    for name, value in headers:
-        if name == b"x-request-id":
-            given = value.decode("latin-1")
-            if _REQUEST_ID.match(given):
-                return given
-    return uuid.uuid4().hex[:16]

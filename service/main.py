@@ -13,21 +13,22 @@ from contextlib import asynccontextmanager
 from fastapi import APIRouter, FastAPI
 
 from loceval import __version__
-from service import web
 from service.adapters import OUTAGE_ERRORS, unavailable
-from service.api import comparisons, datasets, docs, evaluations, health, hops, schedules
+from service.api import comparisons, datasets, docs, evaluations, health, hops, schedules, web
+from service.api.metrics import MetricsMiddleware, create_metrics
+from service.api.metrics import router as metrics_router
 from service.api.middleware import ApiKeyMiddleware
-from service.errors import StartupError, install_error_handlers
-from service.jobs import create_runtime
-from service.logs import RequestLogMiddleware, configure_logging
-from service.metrics import MetricsMiddleware, create_metrics
-from service.metrics import router as metrics_router
+from service.api.problems import install_error_handlers
+from service.api.requestlog import RequestLogMiddleware
+from service.errors import StartupError
+from service.jobs.queue import create_runtime
+from service.jobs.retention import sweep_leftovers
+from service.jobs.tracking import recover
+from service.logs import configure_logging
 from service.preflight import check_data_dir
-from service.retention import sweep_leftovers
 from service.runtime import Runtime
-from service.schedules import tick
+from service.schedules.resource import tick
 from service.settings import Settings, get_settings
-from service.tracking import recover
 
 __all__ = ["create_app"]
 

@@ -1,6 +1,6 @@
 """Start-up checks: the data directory and the database's migration level.
 
-:func:`service.jobs.create_runtime` runs both before anything else opens (so ``loceval
+:func:`service.jobs.queue.create_runtime` runs both before anything else opens (so ``loceval
 serve``, ``worker`` and ``keys`` and :func:`service.main.create_app` all pass through them),
 and the app's start-up checks the data directory again. A check that fails raises
 :class:`StartupError`, whose message says what is wrong and what to do; the command line

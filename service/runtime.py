@@ -1,17 +1,20 @@
 """What a service or worker process shares: settings, database, blobs, the queue, job kinds.
 
 This module knows no job kind by name: the kinds (evaluations, schedule runs) are given to
-:class:`Runtime` by :func:`service.jobs.create_runtime`, which wires them to the queue. Code that
-runs or queues a job does it through the runtime (``runtime.enqueue("evaluation", id)``), so no
-job module imports another job module to reach its executor.
+:class:`Runtime` by :func:`service.jobs.queue.create_runtime`, which wires them to the
+queue. Code that runs or queues a job does it through the runtime
+(``runtime.enqueue("evaluation", id)``), so no job module imports another job module to reach
+its executor.
 """
 
 from __future__ import annotations
 
+import importlib
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Final
+from pathlib import Path
+from typing import Any, Final
 
 from huey import Huey, MemoryHuey, RedisHuey, SqliteHuey
 from huey.consumer import Consumer
@@ -21,11 +24,10 @@ from sqlalchemy.orm import Session, sessionmaker
 from service.adapters import converted
 from service.blobs import Blobs
 from service.db import Evaluation, ScheduleRun
-from service.limits import warm_up
 from service.logs import log_transition
 from service.settings import Settings
 
-__all__ = ["JobKind", "JobModel", "Runtime", "create_huey"]
+__all__ = ["JobKind", "JobModel", "Runtime", "create_huey", "load_target"]
 
 logger = logging.getLogger(__name__)
 
@@ -33,6 +35,18 @@ _CONSUMER_SHUTDOWN_S: Final = 10.0
 
 JobModel = type[Evaluation] | type[ScheduleRun]
 """A table of queued jobs (both have the :class:`~service.db.JobState` columns)."""
+
+
+def load_target(target: str) -> Callable[..., Any]:
+    """Import and return the function that ``"module:function"`` names.
+
+    Raises:
+        ImportError: the module cannot be imported.
+        AttributeError: it has no such function.
+    """
+    module_name, _, name = target.partition(":")
+    function: Callable[..., Any] = getattr(importlib.import_module(module_name), name)
+    return function
 
 
 @dataclass(frozen=True)
@@ -44,7 +58,10 @@ class JobKind:
         task_name: the queue task that runs it (stored in queued messages: never rename).
         model: the table holding the job's state.
         folder: the blob store folder of its artifacts (``evaluations``, ``runs``).
-        execute: runs one job to its end; never raises for the job's own failures.
+        executor: ``"module:function"`` of what runs one job to its end (never raising for
+            the job's own failures), imported when a job of the kind first runs, so the
+            registry names kinds of every folder without importing them
+            (:data:`service.jobs.kinds.JOB_KINDS`).
         interrupted_code: problem type of a job given up after repeated interruptions.
         interrupted_title: problem title of that failure.
         interrupted_detail: its detail, with ``{n}`` for the number of interruptions.
@@ -54,10 +71,14 @@ class JobKind:
     task_name: str
     model: JobModel
     folder: str
-    execute: Callable[[Runtime, str], None]
+    executor: str
     interrupted_code: str
     interrupted_title: str
     interrupted_detail: str
+
+    def execute(self, runtime: Runtime, job_id: str) -> None:
+        """Run one job of this kind to its end."""
+        load_target(self.executor)(runtime, job_id)
 
 
 @dataclass
@@ -74,9 +95,11 @@ class Runtime:
         kinds: the job kinds by name.
         tasks: the queue task of each job kind by kind name, and ``"webhook"``.
         release: queues again the jobs this process still runs when it stops
-            (:func:`service.tracking.release`; given by the wiring, which knows both).
+            (:func:`service.jobs.tracking.release`; given by the wiring, which knows both).
         watch: starts the re-queue check of a consumer process and returns what stops it
-            (:func:`service.watchdog.start_watchdog`; given by the wiring).
+            (:func:`service.jobs.watchdog.start_watchdog`; given by the wiring).
+        warm_up: prepares the jobs' processes before a consumer starts
+            (:func:`service.jobs.limits.warm_up`; given by the wiring).
         active: the ids of the jobs this process is running now (never judged abandoned).
     """
 
@@ -90,8 +113,18 @@ class Runtime:
     tasks: dict[str, Callable[[str], object]] = field(default_factory=dict)
     release: Callable[[Runtime], int] = lambda _runtime: 0
     watch: Callable[[Runtime], Callable[[], None]] = lambda _runtime: lambda: None
+    warm_up: Callable[[], None] = lambda: None
     active: set[str] = field(default_factory=set)
     _unwatch: Callable[[], None] | None = None
+
+    @property
+    def private_roots(self) -> tuple[Path, ...]:
+        """The server's folders no message to a client may show: the blob store's data folder.
+
+        Every problem built for a client or stored with a job is scrubbed of them
+        (:func:`service.errors.problem_for`); they belong to this runtime, not the process.
+        """
+        return self.store.private_roots
 
     def enqueue(self, kind: str, job_id: str, *, requeued: str | None = None) -> None:
         """Queue a job of a kind (in immediate mode: run it now).
@@ -121,7 +154,7 @@ class Runtime:
         Logging is the process's entry point's to configure (the app's start, ``loceval
         worker``), once.
         """
-        warm_up()  # the jobs' forkserver imports the evaluation modules now, not at the first job
+        self.warm_up()  # the jobs' forkserver imports the evaluation modules now, not at a job
         consumer = _EmbeddedConsumer(
             self.huey,
             workers=self.settings.workers,

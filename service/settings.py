@@ -8,19 +8,38 @@ and either a shared ``LOCEVAL_DATA_DIR`` or a bucket, ``LOCEVAL_BLOB_URL=s3://bu
 
 from __future__ import annotations
 
+import re
 from functools import lru_cache
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Final
 from urllib.parse import urlsplit
 
 from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-__all__ = ["Settings", "get_settings"]
+__all__ = ["Settings", "get_settings", "parse_blob_url"]
 
 _REPO = Path(__file__).resolve().parent.parent
 _GIB = 1 << 30
 _MIN_JOB_MEMORY_MB = 1024
+_BUCKET: Final = re.compile(r"[a-z0-9][a-z0-9.\-]{1,61}[a-z0-9]")
+
+
+def parse_blob_url(url: str) -> tuple[str, str]:
+    """Return the bucket and the key prefix (``""`` or ending in ``/``) of an ``s3://`` URL.
+
+    Raises:
+        ValueError: not ``s3://BUCKET[/PREFIX]``, or not a valid bucket name.
+    """
+    match = re.fullmatch(r"s3://([^/]+)(/.*)?", url.strip())
+    if match is None or not _BUCKET.fullmatch(match.group(1)):
+        msg = (
+            "LOCEVAL_BLOB_URL must be s3://BUCKET[/PREFIX] (a bucket name of 3 to 63 "
+            f"lower-case letters, digits, '.' and '-'), or empty for the data folder, not {url!r}"
+        )
+        raise ValueError(msg)
+    prefix = (match.group(2) or "").strip("/")
+    return match.group(1), f"{prefix}/" if prefix else ""
 
 
 class Settings(BaseSettings):
@@ -96,8 +115,6 @@ class Settings(BaseSettings):
     def _known_blob_url(cls, value: str) -> str:
         if not value.strip():
             return ""
-        from service.blobs.base import parse_blob_url  # noqa: PLC0415  (imports starlette)
-
         parse_blob_url(value)  # ValueError says what is wrong
         return value.strip()
 

@@ -95,6 +95,7 @@ STAGES: Final[tuple[tuple[str, ...], ...]] = (
     ("loceval.checkpoints", "loceval.radio", "loceval.maps"),
     ("loceval.evaluation",),
     ("loceval.checkpoint_evaluation", "loceval.radio_evaluation"),
+    ("loceval.results",),
     ("loceval",),
     ("exporters.errors",),
     ("exporters.options",),
@@ -109,6 +110,32 @@ STAGES: Final[tuple[tuple[str, ...], ...]] = (
 folder or of a lower stage (readers never import metrics, metrics never import calibration,
 the core never imports the exporters, ...). Stages on one row are siblings that import
 neither each other nor anything above them."""
+
+SERVICE_STAGES: Final[tuple[tuple[str, ...], ...]] = (
+    ("service.redact",),
+    ("service.errors",),
+    ("service.webhooks",),
+    ("service.settings", "service.logs", "service.schemas"),
+    ("service.db",),
+    ("service.migrations", "service.adapters"),
+    ("service.auth", "service.preflight"),
+    ("service.blobs",),
+    ("service.runtime",),
+    ("service.uploads",),
+    ("service.jobs",),
+    ("service.schedules", "service.results"),
+    ("service.api",),
+    ("service.main",),
+    ("service.cli",),
+    ("service",),
+)
+"""The service's rooms, lowest first, above the core's and the exporters' stages: what every
+process shares at the top of ``service/`` (errors, settings, logging, the database, the
+runtime), then the blob stores, the uploads, the jobs (the registry names the schedules'
+executors as ``"module:function"`` and imports none), the schedules and finished results,
+the routes, the app and the command line."""
+MAX_SERVICE_TOP_MODULES = 12
+"""``service/`` keeps what every process shares at its top; each concern is a folder."""
 
 HTTP_MODULES: Final = ("fastapi", "starlette", "uvicorn", "pydantic", "httpx")
 HTTP_ERROR_NAMES: Final = frozenset(
@@ -304,6 +331,17 @@ def test_stages_import_only_downward() -> None:
     assert upward_imports(ROOT, CORE_PACKAGES, STAGES) == []
 
 
+def test_service_stages_import_only_downward() -> None:
+    """Each room of the service imports only its own modules, lower rooms and the core."""
+    assert upward_imports(ROOT, PACKAGES, STAGES + SERVICE_STAGES) == []
+
+
+def test_service_keeps_a_dozen_modules_at_its_top() -> None:
+    """A newcomer finds each concern of the service (api, jobs, blobs, ...) as one folder."""
+    top = top_modules(ROOT, "service")
+    assert len(top) <= MAX_SERVICE_TOP_MODULES, top
+
+
 def test_core_keeps_few_modules_at_its_top() -> None:
     """A newcomer finds each stage of the data flow as one folder of ``loceval/``."""
     top = top_modules(ROOT, "loceval")
@@ -316,13 +354,13 @@ def test_core_and_exporters_know_no_http() -> None:
 
 
 RESOURCE_MODULES: Final = (
-    "service.datasets",
-    "service.evaluations",
-    "service.schedules",
-    "service.schedule_runs",
-    "service.recordings",
-    "service.jobs",
-    "service.runner",
+    "service.uploads.datasets",
+    "service.jobs.evaluations",
+    "service.schedules.resource",
+    "service.schedules.runs",
+    "service.uploads.recordings",
+    "service.jobs.executor",
+    "service.jobs.runner",
 )
 """The service's resource and job modules: below the routes, so they raise domain errors."""
 
@@ -337,6 +375,82 @@ def test_resource_modules_raise_no_http_types() -> None:
     ]
     assert set(RESOURCE_MODULES) <= set(files)
     assert leaks == []
+
+
+HTTP_FREE_ROOMS: Final = ("service.blobs", "service.uploads", "service.jobs", "service.errors")
+"""Below the routes: the blob stores return what to send, the uploads read any body, the jobs
+and the errors are plain; only ``service/api/`` (and the app) make responses."""
+
+
+def test_storage_uploads_jobs_and_errors_import_no_web_framework() -> None:
+    """No module under blobs/, uploads/, jobs/ or the errors imports FastAPI or Starlette."""
+    files = module_files(ROOT, ("service",))
+    rooms = [m for m in files if any(m == r or m.startswith(r + ".") for r in HTTP_FREE_ROOMS)]
+    leaks = [
+        hit
+        for hit in http_leaks(ROOT, ("service",), ("fastapi", "starlette"))
+        if hit.split(":")[0] in rooms
+    ]
+    assert len(rooms) > 20  # the rooms are there (a renamed folder would pass unchecked)
+    assert leaks == []
+
+
+RESULT_READER: Final = "loceval.results.document"
+"""The one reader of the result document (``result.json``)."""
+RESULT_KEYS: Final = frozenset({"ate", "rpe", "verdict", "estimates"})
+"""Keys of the result document that only its reader reads."""
+READ_KEYS: Final = RESULT_KEYS - {"estimates"}
+"""Keys whose subscript read is a dig (a stored request's ``["estimates"]`` is no result)."""
+NOT_RESULTS: Final = {
+    "exporters.grasshopper.loceval_paths": "ate",
+    "service.results.paths": "ate",
+}
+"""Modules that read such a key of another document: the Grasshopper script and the service's
+reader of an evaluation's paths (for Hops) read the ATE runs of ``paths.3dm.json``'s paths,
+not the result document."""
+
+
+def result_digs(root: Path, packages: Sequence[str]) -> list[str]:
+    """Return ``module:line: how`` for every dict-digging read of a result key.
+
+    ``x.get("ate")`` (any key of :data:`RESULT_KEYS`), ``x["ate"]`` read (not written) and
+    any use of a helper named ``_dig``.
+    """
+    hits: list[str] = []
+    for name, path in module_files(root, packages).items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            how = ""
+            if (
+                isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Attribute)
+                and node.func.attr == "get"
+                and node.args
+                and isinstance(node.args[0], ast.Constant)
+                and node.args[0].value in RESULT_KEYS
+                and NOT_RESULTS.get(name) != node.args[0].value
+            ):
+                how = f".get({node.args[0].value!r})"
+            elif (
+                isinstance(node, ast.Subscript)
+                and isinstance(node.ctx, ast.Load)
+                and isinstance(node.slice, ast.Constant)
+                and node.slice.value in READ_KEYS
+                and NOT_RESULTS.get(name) != node.slice.value
+            ):
+                how = f"[{node.slice.value!r}]"
+            elif isinstance(node, ast.Name | ast.FunctionDef) and "_dig" in {
+                getattr(node, "id", None),
+                getattr(node, "name", None),
+            }:
+                how = "_dig"
+            if how and name != RESULT_READER:
+                hits.append(f"{name}:{node.lineno}: {how}")
+    return hits
+
+
+def test_the_result_document_is_read_only_through_its_reader() -> None:
+    """No module digs the result document as a dict: loceval.results.document reads it."""
+    assert result_digs(ROOT, ("service", "exporters")) == []
 
 
 def test_no_import_cycle() -> None:
@@ -443,6 +557,20 @@ class TestLayeringChecksOnFakeTrees:
         }
         root = _write_tree(tmp_path, tree)
         assert http_leaks(root, ("core",)) == ["core.a:1", "core.b:4"]
+
+    def test_result_digs_are_found(self, tmp_path: Path) -> None:
+        """``.get("ate")``, a read of ``["verdict"]`` and ``_dig`` are found; a write is not."""
+        tree = {
+            **_CLEAN_TREE,
+            "core/a.py": "def f(d):\n    return d.get('ate'), d['verdict']\n",
+            "core/b.py": "def _dig(d):\n    d['rpe'] = 1\n    return d.get('other')\n",
+        }
+        root = _write_tree(tmp_path, tree)
+        assert result_digs(root, ("core",)) == [
+            "core.a:2: .get('ate')",
+            "core.a:2: ['verdict']",
+            "core.b:1: _dig",
+        ]
 
     def test_long_module_is_found(self, tmp_path: Path) -> None:
         """601 lines is too long; 600 is not."""

@@ -10,7 +10,7 @@ polyline vertex flag 32). A path cut into pieces of one colour each (the ATE lay
 pieces for a 50,000-pose estimate) goes further: ezdxf makes the first piece, the others are
 written as text after it, polyline, vertices and ``SEQEND``, with the handles ezdxf would
 have given them (:meth:`BulkPolylines.add_coloured`). The file is the one ezdxf would have
-written, byte for byte (``tests/exporters/test_dxf.py`` checks that), in a fraction of the
+written, byte for byte (``tests/exporters/cad/test_dxf.py`` checks that), in a fraction of the
 time.
 """
 

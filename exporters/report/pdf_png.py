@@ -10,8 +10,8 @@ per report figure, a quarter of second per report, for bytes that say the same.
 chunks of the PNG Pillow was opened on when its rows can go to the PDF unchanged (8 bits
 per sample, grey or RGB, no interlacing, the mode WeasyPrint declares for it), and
 otherwise calls WeasyPrint's own. Any PNG qualifies, not only the report's: the stream is
-the one a PDF reader decodes to the same pixels (``tests/exporters/test_report_pdf_images.py``
-reads them back with poppler).
+the one a PDF reader decodes to the same pixels
+(``tests/exporters/report/test_report_pdf_images.py`` reads them back with poppler).
 """
 
 from __future__ import annotations

@@ -195,7 +195,7 @@ def preload_templates(templates_dir: Path = DEFAULT_TEMPLATES_DIR) -> None:
     """Compile the report templates of ``templates_dir`` ahead of the first report.
 
     The service's job processes start from a process that called this, so no job compiles
-    them (:mod:`service.job_preload`). A template that fails is left to the report that
+    them (:mod:`service.jobs.preload`). A template that fails is left to the report that
     uses it, which reports the failure.
     """
     import jinja2  # noqa: PLC0415  (optional dependency: loceval[report])

@@ -9,7 +9,6 @@ compares every run's reference path with the first run's, in space, through the 
 from __future__ import annotations
 
 import datetime as dt
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, Literal
@@ -21,6 +20,7 @@ from loceval.errors import InputError
 from loceval.evaluation import Tolerance
 from loceval.metrics.redrive import RedriveTiming, redrive_timing
 from loceval.metrics.repeatability import finite_positions, path_deviations
+from loceval.results.document import EstimateRead, read_result
 
 __all__ = [
     "RepeatabilityRow",
@@ -72,32 +72,13 @@ def _aware_utc(value: dt.datetime, what: str) -> dt.datetime:
     return value.astimezone(UTC)
 
 
-def _finite(value: object) -> float | None:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        return None
-    number = float(value)
-    return number if math.isfinite(number) else None
-
-
-def _dig(document: Mapping[str, Any], *keys: str) -> object:
-    """``document[k1][k2]...`` or None where a level is missing or not a mapping."""
-    node: object = document
-    for key in keys:
-        if not isinstance(node, Mapping):
-            return None
-        node = node.get(key)
-    return node
-
-
-def _system_figures(estimate: Mapping[str, Any]) -> SystemFigures:
-    matched = estimate.get("matched")
-    verdict = estimate.get("verdict")
-    passed = verdict.get("passed") if isinstance(verdict, Mapping) else None
+def _system_figures(estimate: EstimateRead) -> SystemFigures:
+    verdict = estimate.verdict
     return SystemFigures(
-        ate_rmse_m=_finite(_dig(estimate, "ate", "translation_m", "rmse")),
-        rpe_rmse_m=_finite(_dig(estimate, "rpe", "translation_m", "rmse")),
-        matched=matched if isinstance(matched, int) and not isinstance(matched, bool) else None,
-        verdict=None if not isinstance(passed, bool) else ("pass" if passed else "fail"),
+        ate_rmse_m=estimate.rmse_m("ate"),
+        rpe_rmse_m=estimate.rmse_m("rpe"),
+        matched=estimate.matched,
+        verdict=None if verdict is None else ("pass" if verdict.passed else "fail"),
     )
 
 
@@ -172,7 +153,8 @@ class SummaryRun:
         """Build a succeeded run from an evaluation's result document.
 
         The document is the CLI's ``--json`` output (``result.json``,
-        :meth:`loceval.evaluation.EvaluationResult.to_dict`). Estimates without a name are
+        :meth:`loceval.evaluation.EvaluationResult.to_dict`), read through
+        :func:`loceval.results.document.read_result`. Estimates without a name are
         called ``estimate 1``, ``estimate 2``, ...; a repeated name gets `` (2)``. Missing
         or non-finite figures become None (shown as a dash).
 
@@ -189,22 +171,18 @@ class SummaryRun:
             The run, status ``"succeeded"``.
 
         Raises:
-            ValueError: the document has no ``estimates`` list (it is not a result).
+            ValueError: the document has no ``estimates`` list (it is not a result), or one
+                is not an object.
         """
-        estimates = document.get("estimates")
-        if not isinstance(estimates, Sequence) or isinstance(estimates, str | bytes):
-            msg = "The result document has no 'estimates' list; is it a result.json?"
-            raise ValueError(msg)  # noqa: TRY004  (a malformed document, not a type error)
+        try:
+            read = read_result(document)
+        except InputError as err:
+            raise ValueError(str(err)) from None
         systems: dict[str, SystemFigures] = {}
-        for k, estimate in enumerate(estimates):
-            if not isinstance(estimate, Mapping):
-                msg = f"estimates[{k}] of the result document is not an object."
-                raise ValueError(msg)  # noqa: TRY004  (a malformed document, not a type error)
-            raw = estimate.get("name")
-            name = raw if isinstance(raw, str) and raw.strip() else f"estimate {k + 1}"
-            unique, n = name, 2
+        for estimate in read.estimates:
+            unique, n = estimate.label, 2
             while unique in systems:
-                unique, n = f"{name} ({n})", n + 1
+                unique, n = f"{estimate.label} ({n})", n + 1
             systems[unique] = _system_figures(estimate)
         return cls(
             dataset=dataset,
@@ -214,7 +192,7 @@ class SummaryRun:
             systems=systems,
             reference_xyz=reference_xyz,
             reference_t_s=reference_t_s,
-            duration_s=_finite(_dig(document, "reference", "duration_s")),
+            duration_s=read.reference_duration_s,
             recorded_at_is_upload=recorded_at_is_upload,
         )
 

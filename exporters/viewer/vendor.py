@@ -4,7 +4,7 @@ three.js (MIT) is vendored, not fetched: ``templates/vendor/three/three.module.m
 the ``build/three.module.min.js`` of the npm package at :data:`THREE_VERSION`, with its
 ``LICENSE``. Refresh it with ``make vendor-three THREE_VERSION=x.y.z`` (``npm pack``, copy,
 print the new hash), then update :data:`THREE_VERSION` and :data:`THREE_SHA256`; the test
-``tests/exporters/test_viewer.py`` checks the file against them.
+``tests/exporters/viewer/test_viewer.py`` checks the file against them.
 
 The module build ends in one ``export{a as WebGLRenderer,...}`` clause and imports nothing,
 so :func:`three_script` turns it into a classic script (the clause becomes the object

@@ -89,6 +89,14 @@ class Assessment:
     reference_error: Mapping[str, ReferenceErrorCheck]
     warnings: tuple[str, ...]
 
+    def consistency_dict(self) -> dict[str, object] | None:
+        """Return the result document's consistency (NEES) block, or None."""
+        return None if self.consistency is None else self.consistency.to_dict()
+
+    def reference_error_dict(self) -> dict[str, object] | None:
+        """Return the result document's reference-error block, or None without checks."""
+        return {k: c.to_dict() for k, c in self.reference_error.items()} or None
+
 
 def assess(
     *,

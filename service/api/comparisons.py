@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from service import comparisons
 from service.api.deps import ProjectDep, RuntimeDep
 from service.api.responses import problems
-from service.comparison_schemas import ComparisonCreate, ComparisonPublic
+from service.results import comparisons
+from service.schemas.comparisons import ComparisonCreate, ComparisonPublic
 
 __all__ = ["router"]
 

@@ -7,14 +7,15 @@ from typing import Annotated
 import anyio.to_thread
 from fastapi import APIRouter, Query, Request, Response, status
 
-from service import datasets
 from service.api.deps import PathText, ProjectDep, RuntimeDep
+from service.api.links import api_url
+from service.api.metrics import count_upload
+from service.api.multipart import receive_multipart
 from service.api.responses import problems
+from service.blobs.base import MAX_FILENAME_BYTES
 from service.db import Dataset, get_owned
-from service.links import api_url
-from service.metrics import count_upload
-from service.schema_base import NO_NUL
-from service.schemas import (
+from service.schemas.base import NO_NUL
+from service.schemas.evaluations import (
     MAX_DATASET_NAME,
     MAX_TAG,
     MAX_TAGS,
@@ -22,8 +23,7 @@ from service.schemas import (
     DatasetsPublic,
     DatasetUploaded,
 )
-from service.storage import MAX_FILENAME_BYTES
-from service.uploads import receive_multipart
+from service.uploads import datasets
 
 __all__ = ["router"]
 

@@ -10,7 +10,7 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from service.auth import authenticate
 from service.errors import AuthenticationError
 from service.runtime import Runtime
-from service.schema_base import NO_NUL
+from service.schemas.base import NO_NUL
 
 __all__ = ["PathText", "ProjectDep", "RuntimeDep", "get_runtime"]
 

@@ -9,15 +9,17 @@ from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import FileResponse
 
 from exporters import ARTIFACTS
-from service import evaluations, retention
 from service.api.deps import PathText, ProjectDep, RuntimeDep
+from service.api.downloads import download_response
+from service.api.links import api_url, public_base
+from service.api.metrics import count_upload
+from service.api.multipart import receive_multipart
 from service.api.responses import problems
 from service.db import Evaluation, get_owned
-from service.links import api_url, public_base
-from service.metrics import count_upload
+from service.jobs import evaluations, retention
 from service.runtime import Runtime
-from service.schema_base import NO_NUL
-from service.schemas import (
+from service.schemas.base import NO_NUL
+from service.schemas.evaluations import (
     EvaluationCreate,
     EvaluationPublic,
     EvaluationsPublic,
@@ -25,7 +27,6 @@ from service.schemas import (
     RangingCreate,
     options_public,
 )
-from service.uploads import receive_multipart
 
 __all__ = ["router"]
 
@@ -160,7 +161,8 @@ def read_artifact(
 ) -> Response:
     """Download an artifact: report.html, report.pdf, errors.csv, result.json, paths.*."""
     key = evaluations.artifact_path(runtime, project_id, evaluation_id, name)
-    return runtime.store.response(
+    return download_response(
+        runtime.store,
         key,
         media_type=ARTIFACTS[name].media_type,
         filename=f"loceval-{evaluation_id[:8]}-{name}",

@@ -21,12 +21,14 @@ A domain error (unknown evaluation, not finished, no such trajectory) comes back
 protocol's ``errors`` list with its HTTP status, so the Hops component shows the message.
 
 The curves are the ones the evaluation wrote to ``paths.3dm.json``: model coordinates in
-the evaluation's units, the same vertices as ``paths.dxf``.
+the evaluation's units, the same vertices as ``paths.dxf``; the statistics are its result's.
+Both are read by :func:`service.results.paths.read_paths`: this module only speaks Hops.
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from typing import Annotated, Any, Final
 
 import anyio.to_thread
@@ -35,14 +37,13 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 
 from loceval.errors import InputError, LocevalError
+from loceval.results.document import EstimateRead
 from service.api.deps import RuntimeDep
 from service.api.responses import problems
 from service.auth import authenticate
-from service.blobs import artifact_key
-from service.db import Evaluation, EvaluationStatus, get_owned
-from service.errors import AuthenticationError, NotFoundError, NotReadyError, status_for
-from service.jobs import Runtime
-from service.storage import EVALUATIONS
+from service.errors import AuthenticationError, NotFoundError, status_for
+from service.results.paths import read_paths
+from service.runtime import Runtime
 
 __all__ = ["COMPONENTS", "router"]
 
@@ -306,37 +307,21 @@ def _solve_paths(
     if not evaluation_id:
         msg = "The Evaluation input is empty; connect a panel with the evaluation's id."
         raise InputError(msg, option="Evaluation")
-    evaluation = get_owned(runtime.sessions, Evaluation, evaluation_id, project_id)
-    if evaluation.status != EvaluationStatus.SUCCEEDED:
-        msg = (
-            f"Evaluation {evaluation_id!r} is {evaluation.status}, so it has no paths yet; "
-            "solve again when it has succeeded."
-        )
-        raise NotReadyError(msg)
-    paths_key = artifact_key(EVALUATIONS, evaluation.id, "paths.3dm.json")
-    if not runtime.store.exists(paths_key):
-        msg = (
-            f"Evaluation {evaluation_id!r} did not write 'paths.3dm.json' (its formats left it "
-            "out); run it again with the CAD files."
-        )
-        raise NotFoundError(msg)
-    document = json.loads(runtime.store.read_bytes(paths_key).decode("utf-8"))
-    result_key = artifact_key(EVALUATIONS, evaluation.id, "result.json")
-    result = json.loads(runtime.store.read_bytes(result_key).decode("utf-8"))
-    paths: list[dict[str, Any]] = document["paths"]
+    found = read_paths(runtime, project_id, evaluation_id)
+    paths = list(found.paths)
     wanted = inputs.get("Trajectory", "").strip()
     if wanted:
         paths = [p for p in paths if p["name"] == wanted]
         if not paths:
-            names = ", ".join(repr(p["name"]) for p in document["paths"])
+            names = ", ".join(repr(p["name"]) for p in found.paths)
             msg = (
                 f"Evaluation {evaluation_id!r} has no trajectory {wanted!r}; its "
                 f"trajectories are {names}."
             )
             raise InputError(msg, option="Trajectory")
-    estimates = {e["name"]: e for e in result.get("estimates", [])}
+    estimates = {e.name: e for e in found.result.estimates}
     warnings = []
-    rhino_units = _RHINO_UNITS.get(str(document["units"]), str(document["units"]))
+    rhino_units = _RHINO_UNITS.get(found.units, found.units)
     if body.modelunits and body.modelunits.lower() != rhino_units.lower():
         warnings.append(
             f"The paths are in {rhino_units} (the evaluation's units) and this document is in "
@@ -358,14 +343,14 @@ def _solve_paths(
         ate = path.get("ate_translation_m")
         trees["ATE"][branch] = [] if not ate else [_item("System.Double", ate["rmse"])]
         # the runs paths.3dm.json carries, in the one error colour scale (exporters.colours)
-        runs = path.get("ate", [])
+        runs = found.ate_runs.get(path["name"], ())
         trees["ATE paths"][branch] = [
             _item("Rhino.Geometry.PolylineCurve", r["curve"]) for r in runs
         ]
         trees["ATE colours"][branch] = [
             _item("System.String", ",".join(map(str, r["color"]))) for r in runs
         ]
-        statistics = {**_statistics(path, estimate), "ate_legend": document.get("ate_legend")}
+        statistics = {**_statistics(path, estimate), "ate_legend": found.ate_legend}
         trees["Statistics"][branch] = [_item("System.String", json.dumps(statistics))]
     values = [{"ParamName": name, "InnerTree": tree} for name, tree in trees.items()]
     return values, warnings
@@ -375,7 +360,7 @@ def _item(type_name: str, value: object) -> dict[str, str]:
     return {"type": type_name, "data": json.dumps(value)}
 
 
-def _statistics(path: dict[str, Any], estimate: dict[str, Any] | None) -> dict[str, Any]:
+def _statistics(path: Mapping[str, Any], estimate: EstimateRead | None) -> dict[str, Any]:
     out = {
         "name": path["name"],
         "kind": path["kind"],
@@ -385,5 +370,5 @@ def _statistics(path: dict[str, Any], estimate: dict[str, Any] | None) -> dict[s
         "max_deviation_m": path["max_deviation_m"],
     }
     if estimate is not None:
-        out.update(ate=estimate["ate"], rpe=estimate["rpe"], verdict=estimate["verdict"])
+        out.update(estimate.figures_as_written())
     return out

@@ -87,7 +87,7 @@ class ApiKeyMiddleware:
                 headers = [
                     (k.lower().encode(), v.encode()) for k, v in problem_headers(err).items()
                 ]
-                await _send_problem(send, problem_for(err), headers)
+                await _send_problem(send, problem_for(err, private=runtime.private_roots), headers)
                 return
         if project_id is None:
             await _refuse(send, _MISSING if key is None else _UNKNOWN)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from service.errors import PROBLEM_JSON
-from service.schemas import Problem
+from service.schemas.evaluations import Problem
 
 __all__ = ["problems"]
 

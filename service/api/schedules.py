@@ -7,12 +7,19 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
 
-from service import schedules
 from service.api.deps import PathText, ProjectDep, RuntimeDep
+from service.api.downloads import download_response
+from service.api.links import api_url, public_base
 from service.api.responses import problems
 from service.db import Schedule, get_owned
-from service.links import api_url, public_base
-from service.schedule_schemas import (
+from service.schedules import resource as schedules
+from service.schedules.resource import (
+    SUMMARY_ARTIFACTS,
+    run_public,
+    schedule_public,
+    schedule_with_secret,
+)
+from service.schemas.schedules import (
     ScheduleCreate,
     SchedulePatch,
     SchedulePublic,
@@ -20,12 +27,6 @@ from service.schedule_schemas import (
     ScheduleRunsPublic,
     SchedulesPublic,
     ScheduleWithSecret,
-)
-from service.schedules import (
-    SUMMARY_ARTIFACTS,
-    run_public,
-    schedule_public,
-    schedule_with_secret,
 )
 
 __all__ = ["router"]
@@ -159,7 +160,8 @@ def read_run_artifact(
 ) -> Response:
     """Download the summary report: summary.html or summary.pdf."""
     key = schedules.run_artifact_path(runtime, project_id, schedule_id, run_id, name)
-    return runtime.store.response(
+    return download_response(
+        runtime.store,
         key,
         media_type=SUMMARY_ARTIFACTS[name],
         filename=f"loceval-run-{run_id[:8]}-{name}",

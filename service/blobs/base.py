@@ -6,6 +6,9 @@ embedded default) and :class:`service.blobs.s3.S3Blobs` (an S3-compatible bucket
 store's root with ``/`` separators (``datasets/...``, ``evaluations/<id>/artifacts/<name>``);
 a dataset's key is its row's ``storage_path``.
 
+A store never speaks HTTP: a download is handed out as what to send (:data:`Download`: a local
+file, a presigned URL or a stream) and the routes make the response.
+
 Readers and exporters work on local files, so the interface hands out local paths where they
 need them: :meth:`Blobs.local_path` for an input (the file itself, or a copy in a bounded
 cache keyed by content hash), :meth:`Blobs.job_staging_dir` for the artifacts being written
@@ -17,24 +20,31 @@ from __future__ import annotations
 import abc
 import contextlib
 import re
-from collections.abc import Callable, Iterable, Mapping
+import unicodedata
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
-
-from starlette.responses import Response
-
-from service.storage import Swept
 
 if TYPE_CHECKING:
     from loceval.readers.rosbag import RemoteFile
 
 __all__ = [
+    "EVALUATIONS",
     "HEAD_BYTES",
+    "MAX_FILENAME_BYTES",
+    "RUNS",
     "STALE_UPLOAD_S",
     "Blobs",
+    "Download",
     "Incoming",
+    "LocalFile",
+    "Redirect",
+    "Stream",
+    "Swept",
     "artifact_key",
-    "parse_blob_url",
+    "safe_filename",
+    "sanitize_filename",
 ]
 
 STALE_UPLOAD_S: Final = 3600.0
@@ -43,24 +53,121 @@ STALE_UPLOAD_S: Final = 3600.0
 HEAD_BYTES: Final = 64
 """How many leading bytes of an upload are kept for sniffing its kind."""
 
-_BUCKET: Final = re.compile(r"[a-z0-9][a-z0-9.\-]{1,61}[a-z0-9]")
+EVALUATIONS: Final = "evaluations"
+"""The folder of evaluation jobs."""
+RUNS: Final = "runs"
+"""The folder of schedule runs."""
+
+_UNSAFE: Final = re.compile(r"[^\w.\-+]+")
+_SUFFIX: Final = re.compile(r"\.[0-9A-Za-z]{1,10}$")
+MAX_FILENAME_BYTES: Final = 120
+"""The longest stored file name, in UTF-8 bytes (file systems allow 255)."""
 
 
-def parse_blob_url(url: str) -> tuple[str, str]:
-    """Return the bucket and the key prefix (``""`` or ending in ``/``) of an ``s3://`` URL.
+@dataclass(frozen=True, slots=True)
+class Swept:
+    """What one sweep of leftovers removed.
 
-    Raises:
-        ValueError: not ``s3://BUCKET[/PREFIX]``, or not a valid bucket name.
+    Attributes:
+        partial_uploads: uploads whose process is gone (or untouched for the grace period).
+        datasets: dataset folders published by a process that died before recording them.
     """
-    match = re.fullmatch(r"s3://([^/]+)(/.*)?", url.strip())
-    if match is None or not _BUCKET.fullmatch(match.group(1)):
-        msg = (
-            "LOCEVAL_BLOB_URL must be s3://BUCKET[/PREFIX] (a bucket name of 3 to 63 "
-            f"lower-case letters, digits, '.' and '-'), or empty for the data folder, not {url!r}"
+
+    partial_uploads: int = 0
+    datasets: int = 0
+
+
+def sanitize_filename(name: str, *, default: str = "upload") -> tuple[str, list[str]]:
+    r"""Return a file name safe to store and show, and what was changed, in words.
+
+    The client's name is text, never a path: folders (``/`` and ``\``) are dropped, then
+    everything but letters, digits, ``.``, ``-``, ``+`` and ``_`` (control characters,
+    spaces, shell characters) becomes ``_``, leading dots go, and a name longer than
+    :data:`MAX_FILENAME_BYTES` is shortened before its suffix (readers sniff ``.mcap``,
+    ``.bag``, ``.zip`` by it). The result is never empty, ``.`` or ``..``.
+
+    Args:
+        name: the name the client gave.
+        default: the name when nothing usable is left.
+
+    Returns:
+        The name, and one phrase per kind of change (empty when it is kept as sent).
+    """
+    changes: list[str] = []
+    base = name.replace("\\", "/").rsplit("/", 1)[-1]
+    if base != name:
+        changes.append("its folders were removed")
+    cleaned = _UNSAFE.sub("_", unicodedata.normalize("NFKC", base).strip().lstrip("."))
+    if cleaned != base:
+        changes.append(
+            "characters other than letters, digits, '.', '-', '+' and '_' were replaced, "
+            "leading dots removed"
         )
-        raise ValueError(msg)
-    prefix = (match.group(2) or "").strip("/")
-    return match.group(1), f"{prefix}/" if prefix else ""
+    fitted = _fit(cleaned, MAX_FILENAME_BYTES)
+    if fitted != cleaned:
+        changes.append(f"it was shortened to {MAX_FILENAME_BYTES} bytes")
+    if not fitted.strip("._"):
+        return default, [*changes, f"nothing usable was left, so it is {default!r}"]
+    return fitted, changes
+
+
+def safe_filename(name: str, *, default: str = "upload") -> str:
+    """Return a file name safe to store: no folders, no control or shell characters.
+
+    The suffix is kept (readers sniff ``.mcap``, ``.bag``, ``.zip`` by it); see
+    :func:`sanitize_filename`.
+    """
+    return sanitize_filename(name, default=default)[0]
+
+
+def _fit(name: str, max_bytes: int) -> str:
+    """Shorten a name to ``max_bytes`` of UTF-8, cutting the stem and keeping the suffix."""
+    if len(name.encode("utf-8")) <= max_bytes:
+        return name
+    match = _SUFFIX.search(name)
+    suffix = match.group() if match else ""
+    stem = name[: len(name) - len(suffix)].encode("utf-8")[: max_bytes - len(suffix)]
+    return stem.decode("utf-8", "ignore") + suffix
+
+
+@dataclass(frozen=True, slots=True)
+class LocalFile:
+    """A download served from a file on this machine.
+
+    Attributes:
+        path: the file.
+    """
+
+    path: Path
+
+
+@dataclass(frozen=True, slots=True)
+class Redirect:
+    """A download the client fetches from the store itself (a presigned URL, 307).
+
+    Attributes:
+        url: where to fetch it; the store answers with the media type and disposition asked.
+    """
+
+    url: str
+
+
+@dataclass(frozen=True, slots=True)
+class Stream:
+    """A download passed through from the store, chunk by chunk.
+
+    Attributes:
+        chunks: the bytes, in order.
+        size: their total length.
+    """
+
+    chunks: Iterator[bytes]
+    size: int
+
+
+Download = LocalFile | Redirect | Stream
+"""What a store hands out for a download (:meth:`Blobs.download`); the routes make the
+response (:func:`service.api.downloads.download_response`)."""
 
 
 def artifact_key(folder: str, job_id: str, name: str) -> str:
@@ -109,6 +216,9 @@ class Blobs(abc.ABC):
 
     root: Path
     kind: str
+    private_roots: tuple[Path, ...] = ()
+    """The server folders no message to a client may show (the data directory): the
+    runtime's (:attr:`service.runtime.Runtime.private_roots`), scrubbed from every problem."""
     reads_in_place: bool = False
     """Whether bags are read where they lie (:meth:`remote_file`), not from a local copy."""
 
@@ -241,8 +351,15 @@ class Blobs(abc.ABC):
         """Return a (small) blob's bytes."""
 
     @abc.abstractmethod
-    def response(self, key: str, *, media_type: str, filename: str, inline: bool) -> Response:
-        """Return the HTTP response that downloads a blob (streamed, or a redirect)."""
+    def download(self, key: str, *, media_type: str, filename: str, inline: bool) -> Download:
+        """Return what to send for a download of a blob: a local file, a redirect or a stream.
+
+        Args:
+            key: the blob.
+            media_type: its media type (a redirect's store answers with it).
+            filename: the name the client saves it under.
+            inline: shown in the browser rather than saved.
+        """
 
     # -- upkeep ----------------------------------------------------------------------------
 

@@ -16,20 +16,34 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import Final, Protocol
 
 from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
 
+from service.blobs.base import EVALUATIONS, RUNS, Blobs
 from service.blobs.s3 import S3Blobs, store_errors
 from service.db import Dataset
-from service.runtime import Runtime
-from service.storage import EVALUATIONS, RUNS
 
 __all__ = ["MigrationCounts", "migrate_folder"]
 
 logger = logging.getLogger(__name__)
 
 _HASH_CHUNK: Final = 8 << 20
+
+
+class _Opened(Protocol):
+    """What a migration needs of a process's runtime: the database and the store."""
+
+    @property
+    def sessions(self) -> sessionmaker[Session]:
+        """The metadata database's session factory."""
+        ...
+
+    @property
+    def store(self) -> Blobs:
+        """The blob store to copy into."""
+        ...
 
 
 @dataclass
@@ -61,7 +75,7 @@ def _sha256(path: Path) -> str:
 
 
 def migrate_folder(
-    runtime: Runtime, source: Path, *, say: Callable[[str], None] = lambda _line: None
+    runtime: _Opened, source: Path, *, say: Callable[[str], None] = lambda _line: None
 ) -> MigrationCounts:
     """Copy the uploads and artifacts of the data folder ``source`` into the runtime's bucket.
 

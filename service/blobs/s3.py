@@ -41,17 +41,24 @@ from typing import IO, TYPE_CHECKING, Any, Final
 
 from boto3.s3.transfer import TransferConfig
 from botocore.exceptions import BotoCoreError, ClientError
-from starlette.responses import RedirectResponse, Response, StreamingResponse
 
-from service.blobs.base import STALE_UPLOAD_S, Blobs, Incoming, artifact_key, parse_blob_url
+from service.blobs.base import (
+    STALE_UPLOAD_S,
+    Blobs,
+    Download,
+    Incoming,
+    Redirect,
+    Stream,
+    Swept,
+    artifact_key,
+)
 from service.blobs.cache import InputCache
 from service.blobs.lease import LEASE_S, Lease, claim_slot
 from service.blobs.ranged import ObjectFile
 from service.blobs.s3client import make_client, store_errors, unless_missing
 from service.blobs.s3upload import PART_BYTES, S3Incoming, pending_key
-from service.errors import StartupError, register_private_root
-from service.settings import Settings
-from service.storage import Swept
+from service.errors import StartupError
+from service.settings import Settings, parse_blob_url
 
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
@@ -123,7 +130,7 @@ class S3Blobs(Blobs):
             self.root / "cache", max_bytes=cache_bytes, min_free_bytes=min_free_bytes
         )
         self.staging = self.root / "staging"
-        register_private_root(self.root)  # problem documents never show it
+        self.private_roots = (self.root,)  # problem documents never show it
 
     @property
     def description(self) -> str:
@@ -310,10 +317,10 @@ class S3Blobs(Blobs):
             body = self.client.get_object(Bucket=self.bucket, Key=self.prefix + key)["Body"]
             return body.read()
 
-    def response(self, key: str, *, media_type: str, filename: str, inline: bool) -> Response:
-        """See :meth:`Blobs.response`."""
-        disposition = f'{"inline" if inline else "attachment"}; filename="{filename}"'
+    def download(self, key: str, *, media_type: str, filename: str, inline: bool) -> Download:
+        """See :meth:`Blobs.download`: a presigned URL, or the object streamed through."""
         if self.redirect_s:
+            disposition = f'{"inline" if inline else "attachment"}; filename="{filename}"'
             with store_errors():
                 url = self.client.generate_presigned_url(
                     "get_object",
@@ -325,16 +332,10 @@ class S3Blobs(Blobs):
                     },
                     ExpiresIn=self.redirect_s,
                 )
-            return RedirectResponse(url, status_code=307)
+            return Redirect(url)
         with store_errors():
             answer = self.client.get_object(Bucket=self.bucket, Key=self.prefix + key)
-        headers = {
-            "content-length": str(answer["ContentLength"]),
-            "content-disposition": disposition,
-        }
-        return StreamingResponse(
-            answer["Body"].iter_chunks(_DOWNLOAD_CHUNK), media_type=media_type, headers=headers
-        )
+        return Stream(answer["Body"].iter_chunks(_DOWNLOAD_CHUNK), int(answer["ContentLength"]))
 
     # -- upkeep ----------------------------------------------------------------------------
 

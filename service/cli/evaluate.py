@@ -1,7 +1,7 @@
 """``loceval evaluate`` and ``loceval demo``: read, evaluate, print, write the artifacts.
 
 The parsed arguments hold the options under the table's keys, so they go to the same
-builders as the API's options (:mod:`service.options`).
+builders as the API's options (:mod:`service.jobs.options`).
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ from loceval.errors import InputError
 from loceval.evaluation import EvaluationResult
 from loceval.readers import TrajectoryFormat, parse_source
 from service.cli.output import emit
-from service.mapjob import map_source
-from service.options import (
+from service.jobs.mapjob import map_source
+from service.jobs.options import (
     artifact_names,
     check_device_choice,
     checkpoints_from_options,
@@ -24,7 +24,7 @@ from service.options import (
     export_from_options,
     is_auto,
 )
-from service.runner import (
+from service.jobs.runner import (
     JobSource,
     default_name,
     evaluation_job,
@@ -156,7 +156,7 @@ def _device_file_offset(args: argparse.Namespace) -> SimilarityTransform | None:
     """Return the offset read from ``--device FILE`` between its two links (None without one).
 
     The CLI's own rules of ``--device-from`` and ``--device-to``; that ``--offset`` is not
-    given too is :func:`~service.options.check_device_choice`'s, checked first.
+    given too is :func:`~service.jobs.options.check_device_choice`'s, checked first.
     """
     check_device_choice(vars(args), front_door="cli")
     if is_auto(args.device):
@@ -181,7 +181,7 @@ def _device_file_offset(args: argparse.Namespace) -> SimilarityTransform | None:
 def run_demo(args: argparse.Namespace) -> int:
     """Write a synthetic recording and evaluate it as ``loceval evaluate`` would."""
     from service.cli import main  # noqa: PLC0415
-    from service.demo import write_demo_recording  # noqa: PLC0415
+    from service.cli.demo import write_demo_recording  # noqa: PLC0415
 
     try:
         inputs = write_demo_recording(args.out / "inputs")

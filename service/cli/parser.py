@@ -2,7 +2,7 @@
 
 The flags of :data:`loceval.options.OPTIONS` are generated here: each option's flag,
 default, choices and help, stored under its key (``--max-dt`` in ``args.max_dt_s``), so
-:func:`service.options.config_from_options` reads the parsed arguments as the API's options.
+:func:`service.jobs.options.config_from_options` reads the parsed arguments as the API's options.
 Bounds are checked where both front doors meet them: in the core's ``EvaluationConfig``.
 Handlers are named ``"module:function"`` and imported only when their command runs.
 """

@@ -1,8 +1,8 @@
 """``loceval ranging``: the ranges per anchor, and the positions solved from them, evaluated.
 
 The parsed arguments hold the options under the table's keys, so they go to the same
-builders as the API's options (:mod:`service.options`); the job is run by
-:func:`service.runner.run_job` like an evaluation, with its radio inputs.
+builders as the API's options (:mod:`service.jobs.options`); the job is run by
+:func:`service.jobs.runner.run_job` like an evaluation, with its radio inputs.
 """
 
 from __future__ import annotations
@@ -13,12 +13,12 @@ from typing import TYPE_CHECKING
 from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
 from service.cli.evaluate import export_options
 from service.cli.output import emit
-from service.options import (
+from service.jobs.options import (
     artifact_names,
     config_from_options,
     ranging_from_options,
 )
-from service.runner import (
+from service.jobs.runner import (
     JobSource,
     RangingJob,
     RangingSources,

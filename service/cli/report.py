@@ -16,14 +16,21 @@ from loceval.errors import InputError, LocevalError
 from loceval.readers import SourceSpec
 from loceval.readers.evo_result import is_result_zip, read_result_zip
 from service.cli.output import emit
-from service.options import config_from_options
-from service.runner import Job, JobSource, default_name, evaluation_job, file_provenance, run_job
+from service.jobs.options import config_from_options
+from service.jobs.runner import (
+    Job,
+    JobSource,
+    default_name,
+    evaluation_job,
+    file_provenance,
+    run_job,
+)
 
 if TYPE_CHECKING:
     import argparse
 
     from loceval.evaluation import EvaluationConfig
-    from service.schedule_schemas import EvaluationTemplate, TemplateSource
+    from service.schemas.schedules import EvaluationTemplate, TemplateSource
 
 __all__ = ["run_report"]
 
@@ -38,7 +45,7 @@ def run_report(args: argparse.Namespace) -> int:
     the HTML alone.
     """
     from exporters.summary import SummaryRun, summary_formats  # noqa: PLC0415
-    from service.summaries import summary_files  # noqa: PLC0415
+    from service.schedules.summaries import summary_files  # noqa: PLC0415
 
     formats = summary_formats(args.formats)
     template = _read_template(args.template)
@@ -108,7 +115,7 @@ def _evo_run(path: Path, modified: dt.datetime) -> Any:  # noqa: ANN401  (a Summ
     """
     from exporters.summary import SummaryRun  # noqa: PLC0415
     from exporters.summary.evo import evo_summary_run  # noqa: PLC0415
-    from service.schedule_runs import recording_start  # noqa: PLC0415
+    from service.schedules.runs import recording_start  # noqa: PLC0415
 
     try:
         result = read_result_zip(path)
@@ -143,7 +150,7 @@ def _api_words(err: LocevalError) -> str:
 def _read_template(path: Path) -> EvaluationTemplate:
     from pydantic import ValidationError  # noqa: PLC0415
 
-    from service.schedule_schemas import EvaluationTemplate  # noqa: PLC0415
+    from service.schemas.schedules import EvaluationTemplate  # noqa: PLC0415
 
     try:
         text = path.read_text(encoding="utf-8")

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     import argparse
     from collections.abc import Callable
 
-    from service.jobs import Runtime
+    from service.runtime import Runtime
     from service.settings import Settings
 
 __all__ = ["run_keys_create", "run_keys_revoke", "run_serve", "run_worker"]
@@ -22,9 +22,9 @@ __all__ = ["run_keys_create", "run_keys_revoke", "run_serve", "run_worker"]
 
 def run_serve(args: argparse.Namespace) -> int:
     """Start the HTTP service (with its queue consumer unless told not to)."""
+    from service.api.http_server import run  # noqa: PLC0415
     from service.auth import bootstrap  # noqa: PLC0415
-    from service.http_server import run  # noqa: PLC0415
-    from service.jobs import create_runtime  # noqa: PLC0415
+    from service.jobs.queue import create_runtime  # noqa: PLC0415
     from service.main import create_app  # noqa: PLC0415
     from service.settings import get_settings  # noqa: PLC0415
 
@@ -56,10 +56,11 @@ def run_worker(_args: argparse.Namespace) -> int:
     import sys  # noqa: PLC0415
     import threading  # noqa: PLC0415
 
-    from service.jobs import create_runtime, recover  # noqa: PLC0415
+    from service.jobs.queue import create_runtime  # noqa: PLC0415
+    from service.jobs.tracking import recover  # noqa: PLC0415
     from service.logs import configure_logging  # noqa: PLC0415
     from service.preflight import check_data_dir  # noqa: PLC0415
-    from service.schedules import tick  # noqa: PLC0415
+    from service.schedules.resource import tick  # noqa: PLC0415
     from service.settings import get_settings  # noqa: PLC0415
 
     configure_logging()  # once, for the consumer threads and the jobs' processes alike
@@ -91,7 +92,7 @@ def run_worker(_args: argparse.Namespace) -> int:
 def run_keys_create(args: argparse.Namespace) -> int:
     """Create an API key and print it."""
     from service.auth import create_key  # noqa: PLC0415
-    from service.jobs import create_runtime  # noqa: PLC0415
+    from service.jobs.queue import create_runtime  # noqa: PLC0415
     from service.settings import get_settings  # noqa: PLC0415
 
     runtime = _open_runtime(create_runtime, _settings(get_settings))
@@ -104,7 +105,7 @@ def run_keys_create(args: argparse.Namespace) -> int:
 def run_keys_revoke(args: argparse.Namespace) -> int:
     """Revoke an API key."""
     from service.auth import revoke_key  # noqa: PLC0415
-    from service.jobs import create_runtime  # noqa: PLC0415
+    from service.jobs.queue import create_runtime  # noqa: PLC0415
     from service.settings import get_settings  # noqa: PLC0415
 
     runtime = _open_runtime(create_runtime, _settings(get_settings))

@@ -17,7 +17,7 @@ def run_storage_migrate(args: argparse.Namespace) -> int:
     """Copy the folder's datasets and artifacts into LOCEVAL_BLOB_URL's bucket."""
     from service.blobs.migrate import migrate_folder  # noqa: PLC0415
     from service.cli.serve import _open_runtime, _settings  # noqa: PLC0415
-    from service.jobs import create_runtime  # noqa: PLC0415
+    from service.jobs.queue import create_runtime  # noqa: PLC0415
     from service.settings import get_settings  # noqa: PLC0415
 
     settings = _settings(get_settings)

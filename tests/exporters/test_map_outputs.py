@@ -16,7 +16,7 @@ from loceval.core.geometry import SimilarityTransform
 from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from loceval.maps import evaluate_map
 from loceval.registration.alignment import AlignWindow
-from tests.loceval.test_excursions import _run
+from tests.loceval.metrics.test_excursions import _run
 from tests.mapfactory import Distortion, draw_map, office_plan
 
 ezdxf = pytest.importorskip("ezdxf")

@@ -27,8 +27,8 @@ from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
 from loceval.readers import read_trajectory
 from loceval.registration.alignment import AlignMethod
 
+from .cad.test_gltf import accessor, load
 from .conftest import Validator
-from .test_gltf import accessor, load
 
 pytestmark = pytest.mark.public_data
 

@@ -1,4 +1,4 @@
-"""Stand-ins for ``service.runner.run_job`` that a job's process runs (tests patch them in).
+"""Stand-ins for ``service.jobs.runner.run_job`` that a job's process runs (tests patch them in).
 
 A job's process imports its work by name, so a test cannot hand it a closure: these are
 module-level functions, in a module that imports little (a job's process imports it).
@@ -16,7 +16,7 @@ import numpy as np
 from exporters import ArtifactCallback
 from loceval.errors import AssociationError, InputError
 from loceval.evaluation import ProgressCallback
-from service.runner import Job, run_job
+from service.jobs.runner import Job, run_job
 
 __all__ = [
     "CHUNK_MIB",

@@ -3,7 +3,8 @@
 ``live_server`` (one per test) and ``live_server_module`` (one per test module) start
 ``python -m service.cli serve`` with an empty data folder, read the first API key from its
 output and wait for ``/readyz``. :func:`start_server` and :func:`start_worker` are the
-building blocks for tests that restart, kill or scale out the service.
+building blocks for tests that restart, kill or scale out the service; the processes, ports
+and readiness come from :mod:`tests.harness`, which the benchmarks use too.
 
 ``api`` is the in-process app of the HTTP API tests (:func:`tests.service._api_fixtures.open_api`).
 """
@@ -12,16 +13,12 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import re
-import signal
-import socket
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,11 +26,39 @@ import httpx2
 import pytest
 
 from service.logs import reset_logging
+from tests.conftest import skip_or_fail
+from tests.harness import HarnessUnavailableError
+from tests.harness.databases import empty_redis_database, fresh_database
+from tests.harness.ports import free_port
+from tests.harness.processes import (
+    REPO,
+    RunningService,
+    ServiceNotReadyError,
+    ServiceProcess,
+    loceval_argv,
+    service_env,
+)
+from tests.harness.processes import wait_ready as harness_wait_ready
 from tests.service._api_fixtures import Api, open_api
 
-REPO = Path(__file__).resolve().parents[2]
+__all__ = [
+    "REPO",
+    "LiveServer",
+    "ServiceProcess",
+    "cli",
+    "cli_json",
+    "free_port",
+    "running_server",
+    "service_env",
+    "start_server",
+    "start_worker",
+    "submit",
+    "succeeded",
+    "upload",
+    "wait_for_evaluation",
+    "wait_ready",
+]
 READY_TIMEOUT_S = 90.0  # a loaded CI machine imports the app in tens of seconds
-STOP_TIMEOUT_S = 15.0
 EVALUATION_TIMEOUT_S = 180.0
 _KEY_LINE = re.compile(r"API key for project 'default' \(shown once\): (\S+)")
 
@@ -53,30 +78,6 @@ def api(tmp_path: Path) -> Iterator[Api]:
     """
     with open_api(tmp_path) as api:
         yield api
-
-
-def free_port() -> int:
-    """Return a loopback port that was free a moment ago."""
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-def service_env(data_dir: Path, extra: Mapping[str, str] | None = None) -> dict[str, str]:
-    """Return the environment of a service process: this one's, minus stray LOCEVAL_ settings."""
-    env = {
-        k: v
-        for k, v in os.environ.items()
-        if not k.startswith("LOCEVAL_") or k == "LOCEVAL_PUBLIC_DATA"
-    }
-    env.update(
-        LOCEVAL_DATA_DIR=str(data_dir),
-        LOCEVAL_WORKERS="2",
-        PYTHONUNBUFFERED="1",
-    )
-    env.update(extra or {})
-    return env
 
 
 def cli(*args: str, env: Mapping[str, str] | None = None, timeout: float = 120) -> str:
@@ -104,108 +105,11 @@ def cli_json(*args: str) -> dict[str, Any]:
 
 
 @dataclass
-class ServiceProcess:
-    """A ``serve`` or ``worker`` subprocess whose output (stdout and stderr) is collected."""
-
-    process: subprocess.Popen[str]
-    lines: list[str] = field(default_factory=list)
-    _reader: threading.Thread | None = None
-    _changed: threading.Condition = field(default_factory=threading.Condition)
-
-    @classmethod
-    def start(cls, argv: list[str], env: Mapping[str, str]) -> ServiceProcess:
-        """Start ``argv`` with its output drained by a thread."""
-        process = subprocess.Popen(
-            argv,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            stdin=subprocess.DEVNULL,
-            text=True,
-            env=dict(env),
-            cwd=REPO,
-        )
-        started = cls(process)
-        started._reader = threading.Thread(target=started._drain, daemon=True)
-        started._reader.start()
-        return started
-
-    def _drain(self) -> None:
-        assert self.process.stdout is not None
-        for line in self.process.stdout:
-            with self._changed:
-                self.lines.append(line.rstrip("\n"))
-                self._changed.notify_all()
-        with self._changed:
-            self._changed.notify_all()
-
-    @property
-    def output(self) -> str:
-        """Everything the process printed so far."""
-        with self._changed:
-            return "\n".join(self.lines)
-
-    def wait_for_line(self, pattern: re.Pattern[str], timeout: float) -> re.Match[str] | None:
-        """Return the first match of ``pattern`` in the output, waiting up to ``timeout``."""
-        deadline = time.monotonic() + timeout
-        with self._changed:
-            while True:
-                for line in self.lines:
-                    match = pattern.search(line)
-                    if match:
-                        return match
-                remaining = deadline - time.monotonic()
-                if remaining <= 0 or (self.process.poll() is not None and not self._alive()):
-                    return None
-                self._changed.wait(min(remaining, 0.2))
-
-    def _alive(self) -> bool:
-        return self._reader is not None and self._reader.is_alive()
-
-    def stop(self, timeout: float = STOP_TIMEOUT_S) -> int:
-        """SIGTERM, then SIGKILL after ``timeout``; close the pipe; return the exit code."""
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGTERM)
-            try:
-                self.process.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(5)
-        return self._reap()
-
-    def kill(self) -> int:
-        """SIGKILL (a crash: no shutdown code runs); close the pipe; return the exit code."""
-        if self.process.poll() is None:
-            self.process.kill()
-            self.process.wait(5)
-        return self._reap()
-
-    def _reap(self) -> int:
-        if self._reader is not None:
-            self._reader.join(5)
-        if self.process.stdout is not None:
-            self.process.stdout.close()
-        return self.process.returncode
-
-
-@dataclass
-class LiveServer:
+class LiveServer(RunningService):
     """A running ``loceval serve``: its address, first API key, data folder and process."""
 
-    url: str
-    api_key: str
-    data_dir: Path
-    env: dict[str, str]
-    service: ServiceProcess
-
-    @property
-    def process(self) -> subprocess.Popen[str]:
-        """The server's process."""
-        return self.service.process
-
-    @property
-    def output(self) -> str:
-        """What the server printed so far (stdout and stderr)."""
-        return self.service.output
+    api_key: str = ""
+    data_dir: Path = Path()
 
     def client(self, api_key: str | None = None) -> httpx2.Client:
         """Return an HTTP client with the project's key (or ``api_key``); close it after use."""
@@ -231,31 +135,13 @@ class LiveServer:
         return self.service.kill()
 
 
-def wait_ready(url: str, service: ServiceProcess, timeout: float = READY_TIMEOUT_S) -> None:
-    """Wait for ``GET /readyz`` to answer 200; fail with the server's output otherwise."""
-    deadline = time.monotonic() + timeout
-    last = "no answer"
-    with httpx2.Client(base_url=url, timeout=5) as client:
-        while time.monotonic() < deadline:
-            if service.process.poll() is not None:
-                service.stop()
-                pytest.fail(
-                    f"the server exited with {service.process.returncode} before it was "
-                    f"ready; its output:\n{service.output}"
-                )
-            try:
-                answer = client.get("/readyz")
-            except httpx2.TransportError as err:
-                last = repr(err)
-            else:
-                if answer.status_code == 200:
-                    return
-                last = f"{answer.status_code} {answer.text}"
-            time.sleep(0.1)
-    service.stop()
-    pytest.fail(
-        f"/readyz did not answer 200 within {timeout:g} s ({last}); output:\n{service.output}"
-    )
+def wait_ready(url: str, service: ServiceProcess, timeout: float | None = None) -> None:
+    """Wait for ``GET /readyz`` to answer 200; stop the server and fail with its output else."""
+    try:
+        harness_wait_ready(url, service, READY_TIMEOUT_S if timeout is None else timeout)
+    except ServiceNotReadyError as err:
+        service.stop()
+        pytest.fail(str(err))
 
 
 def start_server(
@@ -278,9 +164,7 @@ def start_server(
     # links (Location, artifact URLs) are built from the configured public address
     public = {"LOCEVAL_PUBLIC_URL": f"http://127.0.0.1:{port}"}
     full_env = service_env(data_dir, {**public, **(env or {})})
-    service = ServiceProcess.start(
-        [sys.executable, "-m", "service.cli", "serve", "--port", str(port), *args], full_env
-    )
+    service = ServiceProcess.start(loceval_argv("serve", "--port", str(port), *args), full_env)
     if api_key is None:
         match = service.wait_for_line(_KEY_LINE, READY_TIMEOUT_S)
         if match is None:
@@ -294,9 +178,7 @@ def start_server(
 
 def start_worker(data_dir: Path, env: Mapping[str, str] | None = None) -> ServiceProcess:
     """Start ``loceval worker`` and wait for its start line; fail with its output otherwise."""
-    service = ServiceProcess.start(
-        [sys.executable, "-m", "service.cli", "worker"], service_env(data_dir, env)
-    )
+    service = ServiceProcess.start(loceval_argv("worker"), service_env(data_dir, env))
     if service.wait_for_line(re.compile(r"^loceval worker: "), READY_TIMEOUT_S) is None:
         service.stop()
         pytest.fail(f"the worker did not start; its output:\n{service.output}")
@@ -325,6 +207,26 @@ def live_server_module(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Liv
     """A ``loceval serve`` shared by the tests of a module (they must not interfere)."""
     with running_server(tmp_path_factory.mktemp("data")) as server:
         yield server
+
+
+@pytest.fixture
+def postgres_url() -> Iterator[str]:
+    """A fresh database on the machine's PostgreSQL for this test, dropped afterwards."""
+    try:
+        with fresh_database() as url:
+            yield url
+    except HarnessUnavailableError as err:
+        skip_or_fail(str(err))
+
+
+@pytest.fixture
+def redis_url() -> Iterator[str]:
+    """An unused database number of the machine's Redis; its loceval keys deleted after."""
+    try:
+        with empty_redis_database() as url:
+            yield url
+    except HarnessUnavailableError as err:
+        skip_or_fail(str(err))
 
 
 # --- API helpers -------------------------------------------------------------------------

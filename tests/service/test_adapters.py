@@ -10,9 +10,9 @@ from sqlalchemy import create_engine, select, text
 
 from loceval.errors import InputError
 from service.adapters import converted
+from service.blobs.local import LocalBlobs
 from service.db import Evaluation
 from service.errors import ServiceUnavailableError, problem_for
-from service.storage import BlobStore
 from tests.factories import make_trajectory, write_tum
 from tests.service._api_fixtures import open_api
 from tests.service.conftest import free_port
@@ -40,7 +40,7 @@ def test_other_errors_pass_through_the_adapter() -> None:
 
 def test_problem_documents_never_show_the_data_folder(tmp_path: Path) -> None:
     """Every problem is scrubbed where it is built: the data folder and id folders go."""
-    store = BlobStore(tmp_path / "data")
+    store = LocalBlobs(tmp_path / "data")
     dataset_id = str(uuid.uuid4())
     err = InputError(f"{store.root}/datasets/{dataset_id}/run.bag has no topic '/odom'.")
     assert problem_for(err)["detail"] == "run.bag has no topic '/odom'."

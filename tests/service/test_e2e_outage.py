@@ -1,7 +1,7 @@
 """Backend outages: the API answers 503 and keeps the connection; no job is lost or run twice.
 
 One ``loceval serve --no-consumer`` and two ``loceval worker`` processes run on a PostgreSQL
-and a Redis of the test's own (:mod:`tests.service._backends`), with the default lease, so
+and a Redis of the test's own (:mod:`tests.harness.databases`), with the default lease, so
 the faults can be real: the database is stopped, restarted after 6 s, Redis is restarted
 without persistence (its queue comes back empty), a worker is killed with SIGKILL mid-job.
 After each fault every job must succeed exactly once (one ``succeeded`` line in all the
@@ -29,7 +29,9 @@ from typing import Any, Final
 import numpy as np
 import pytest
 
-from tests.service._backends import OwnPostgres, OwnRedis
+from tests.conftest import skip_or_fail
+from tests.harness import HarnessUnavailableError
+from tests.harness.databases import OwnPostgres, OwnRedis
 from tests.service.conftest import (
     LiveServer,
     ServiceProcess,
@@ -110,7 +112,11 @@ def _write_pair(folder: Path) -> tuple[Path, Path]:
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Cluster]:
     """Own PostgreSQL and Redis, ``serve --no-consumer`` and two workers (default lease)."""
-    postgres = OwnPostgres.create()
+    try:
+        postgres = OwnPostgres.create()
+    except HarnessUnavailableError as err:
+        skip_or_fail(str(err))
+        raise  # unreachable: skip_or_fail raised
     redis = None
     server = None
     cluster = None

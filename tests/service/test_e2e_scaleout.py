@@ -8,15 +8,12 @@ test is skipped (a failure when CI is set).
 
 from __future__ import annotations
 
-import secrets
 import socket
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import skip_or_fail
 from tests.service.conftest import (
     ServiceProcess,
     assert_same_ate,
@@ -33,52 +30,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.public_data]
 
 GROUNDTRUTH = "freiburg1_xyz-groundtruth.txt"
 ESTIMATE = "freiburg1_xyz-rgbdslam.txt"
-POSTGRES = "host=127.0.0.1 port=5432 user=postgres dbname=test connect_timeout=5"
-REDIS = "redis://127.0.0.1:6379"
 JOBS = 4
 WORKER_STOP_S = 20.0
-
-
-@pytest.fixture
-def postgres_url() -> Iterator[str]:
-    """A fresh PostgreSQL database for this test, dropped afterwards; its SQLAlchemy URL."""
-    import psycopg
-    from psycopg import sql
-
-    try:
-        admin = psycopg.connect(POSTGRES, autocommit=True)
-    except psycopg.OperationalError as err:
-        skip_or_fail(f"PostgreSQL is not reachable at 127.0.0.1:5432 as postgres/test ({err})")
-    name = f"loceval_test_{secrets.token_hex(6)}"
-    with admin:
-        admin.execute(sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
-    try:
-        yield f"postgresql+psycopg://postgres@127.0.0.1:5432/{name}"
-    finally:
-        with psycopg.connect(POSTGRES, autocommit=True) as admin:
-            admin.execute(
-                sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name))
-            )
-
-
-@pytest.fixture
-def redis_url() -> Iterator[str]:
-    """An emptied Redis database (5..15) for this test, emptied again afterwards; its URL."""
-    import redis
-
-    url = f"{REDIS}/{5 + secrets.randbelow(11)}"
-    client = redis.Redis.from_url(url, socket_timeout=5, socket_connect_timeout=5)
-    try:
-        client.ping()
-    except redis.RedisError as err:
-        client.close()
-        skip_or_fail(f"Redis is not reachable at 127.0.0.1:6379 ({err})")
-    client.flushdb()
-    try:
-        yield url
-    finally:
-        client.flushdb()
-        client.close()
 
 
 def _workers_of(database_url: str) -> dict[str, str]:

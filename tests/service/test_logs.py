@@ -224,3 +224,34 @@ def test_a_jobs_core_warnings_are_json_lines_with_its_job_id(tmp_path: Path, rng
     assert all(line["level"] == "warning" for line in core)
     assert {line["job_id"] for line in core} == {evaluation["id"]}
     assert {line["kind"] for line in core} == {"evaluation"}
+
+
+@pytest.mark.slow
+def test_a_jobs_result_warnings_are_logged_with_its_job_id(tmp_path: Path, rng) -> None:
+    """Under ``loceval serve`` each warning of a job's result is a warning line with job_id."""
+    gt, est = _tum_pair(tmp_path, rng)
+    rows = est.read_text().splitlines()
+    est.write_text("\n".join([*rows[:50], rows[49], *rows[50:]]) + "\n")  # a duplicate stamp
+    with running_server(tmp_path / "data") as server, server.client() as client:
+        reference = upload(client, gt)
+        estimate = upload(client, est)
+        evaluation = submit(
+            client, {"dataset_id": reference["id"]}, [{"dataset_id": estimate["id"]}],
+            {"formats": ["result.json"]},
+        )  # fmt: skip
+        done = wait_for_evaluation(client, evaluation["id"])
+        assert done["status"] == "succeeded"
+        result = client.get(f"/api/v1/evaluations/{evaluation['id']}").json()["result"]
+        server.stop()
+        output = server.output
+    (warned,) = [w for e in result["estimates"] for w in e["warnings"] if "duplicate" in w]
+    lines = _json_lines(output)
+    logged = [line for line in lines if line.get("message") == warned]
+    assert len(logged) == 1, output
+    (line,) = logged
+    assert line["level"] == "warning"
+    assert line["job_id"] == evaluation["id"]
+    assert (line["kind"], line["warning_in"]) == ("evaluation", result["estimates"][0]["name"])
+    assert line["project"] == next(
+        j["project"] for j in lines if j.get("job_id") == evaluation["id"] and j.get("project")
+    )

@@ -14,7 +14,7 @@ from sqlalchemy import text
 
 from service import preflight
 from service.cli import main
-from service.jobs import create_runtime
+from service.jobs.queue import create_runtime
 from service.main import create_app
 from service.preflight import StartupError, check_data_dir, schema_heads
 from service.settings import Settings, get_settings

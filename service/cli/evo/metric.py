@@ -31,7 +31,7 @@ from loceval.registration.association import AssociationMethod
 from loceval.registration.stamps import match_nearest_seconds
 from service.cli.evo.runs import EvoRun
 from service.cli.output import emit
-from service.runner import JobSource, file_provenance
+from service.jobs.runner import JobSource, file_provenance
 
 if TYPE_CHECKING:
     import argparse

@@ -1,0 +1,1 @@
+"""Schedules: recurring summary reports, their runs and their webhooks."""

@@ -1,0 +1,1 @@
+"""Uploads: receiving files into the blob store, recognising them, the datasets they become."""
