@@ -83,7 +83,7 @@ def _map_with_history(tmp_path: Path) -> EvaluationResult:
     from loceval.maps import OccupancyGrid, evaluate_map_source
     from loceval.registration.alignment import AlignWindow
     from tests.loceval.maps.test_map_history import _write_bag
-    from tests.loceval.test_excursions import _run
+    from tests.loceval.metrics.test_excursions import _run
     from tests.mapfactory import Distortion, draw_map, office_plan
 
     reference, estimate, _ = _run()
@@ -103,7 +103,7 @@ def _map_with_history(tmp_path: Path) -> EvaluationResult:
 
 
 def _tf_chain(tmp_path: Path) -> EvaluationResult:
-    from tests.exporters.test_report_reading import _tf_bag
+    from tests.exporters.report.test_report_reading import _tf_bag
 
     bag = _tf_bag(tmp_path, np.random.default_rng(11))
     reference = read_trajectory(parse_source(f"{bag}@tf:map:base_link"))
