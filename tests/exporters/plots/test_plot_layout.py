@@ -82,7 +82,11 @@ def _check(name: str, fig: Figure) -> list[str]:
 
 
 def _cases(tmp_path: Path) -> dict[str, Callable[[], object]]:
-    from tests.exporters.report.test_report_pdf_text import _map_with_history, _ranging, _two_failing
+    from tests.exporters.report.test_report_pdf_text import (
+        _map_with_history,
+        _ranging,
+        _two_failing,
+    )
 
     def summary() -> object:
         from exporters.summary.plots import render_summary_plots
