@@ -1,6 +1,6 @@
 """Issues 25 and 43's table: whole-process times of the artifacts, against a baseline and evo.
 
-Run by hand (the public data of the repository's README; evo in a scratch environment):
+Run by hand (the public data named in docs/development.md; evo in a scratch environment):
 
     .venv/bin/python -m benchmarks.artifacts --data ../shared/data/public \\
         [--baseline /tmp/base75] [--evo /work/evo-venv/bin] [--repeat 5] [--service]

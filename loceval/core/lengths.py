@@ -1,7 +1,7 @@
 """The one rule for showing lengths: which unit and how many digits, in every output.
 
 The viewer, the web page, the reports and the command line show lengths by this rule
-(README, "Units and digits"):
+(docs/files.md, "Units and digits"):
 
 - **Errors and distances** (ATE, RPE, the worst error of a stretch, a scale bar) read in
   metres to the millimetre, ``0.027 m``; a group of them shown together (one table, the

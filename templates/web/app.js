@@ -83,7 +83,7 @@
 
   /** A length in metres as the report prints it: three decimals. */
   // The one rule for lengths, as the viewer, the reports and the command line print them
-  // (loceval/core/lengths.py, README "Units and digits"): a group of lengths shown together
+  // (loceval/core/lengths.py, docs/files.md "Units and digits"): a group of lengths shown together
   // (a table) reads in millimetres to a tenth when every value is below 0.1 m, else in
   // metres to the millimetre.
   function lengthUnit(values) {
