@@ -52,6 +52,7 @@ import numpy as np
 
 from exporters.cad.building import georeferenced_options
 from exporters.cad.ifc_map import add_annotation, add_excursions, add_map
+from exporters.cad.ifc_text import PLACEHOLDER_TEXT, Prototype, TextRuns, write_runs
 from exporters.cad.placement import Marker, PlacedPath, Placement, place_evaluation
 from exporters.colours import hex_colour, scale_words
 from exporters.errors import ExportError, ExportOptionsError
@@ -81,7 +82,7 @@ _NS_PER_S: Final = 1_000_000_000
 _GUID_NAMESPACE: Final = uuid.UUID("5f0c7c57-6d1e-4c1b-9a43-7b1f0f1c1e15")
 _YAW_ONLY_ATOL: Final = 1e-9
 _PLACEHOLDER: Final = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
-_PLACEHOLDER_TEXT: Final = "((0.,0.,0.),(0.,0.,0.))"
+_PLACEHOLDER_TEXT: Final = PLACEHOLDER_TEXT
 _PLACEHOLDER_LINE: Final = re.compile(
     r"^#(\d+)=IFCCARTESIANPOINTLIST3D\(" + re.escape(_PLACEHOLDER_TEXT), re.MULTILINE
 )
@@ -165,7 +166,7 @@ def export_ifc(
     except (RuntimeError, TypeError, ValueError) as err:
         msg = f"ifcopenshell could not write the IFC model ({err}); please report this."
         raise ExportError(msg) from err
-    return builder.splice_point_lists(text).encode("utf-8")
+    return builder.finish(text).encode("utf-8")
 
 
 class IfcBuilder:
@@ -175,16 +176,29 @@ class IfcBuilder:
     100,000 poses of two paths), so each path's ``IfcCartesianPointList3D`` is created with
     a two-point placeholder and its coordinates are written into the text afterwards
     (:meth:`splice_point_lists`), fixed-point with 6 decimals (1 nm in millimetres, 1 um
-    in metres), in bulk.
+    in metres), in bulk. An estimate's ATE runs (25,000 for 50,000 poses) are created by
+    ifcopenshell once per bin and written as STEP text for the rest
+    (:mod:`exporters.cad.ifc_text`), unless ``text_runs`` is False.
     """
 
-    def __init__(self, placement: Placement, geo: Georeference) -> None:
+    def __init__(self, placement: Placement, geo: Georeference, *, text_runs: bool = True) -> None:
         self.placement = placement
         self.geo = geo
         self.f = ifcopenshell.file(schema="IFC4")
         # with a CRS the file keeps evaluation-frame coordinates: model -> evaluation frame
         self.to_local = geo.site.inverse() if geo.crs is not None else None
         self.point_lists: dict[int, FloatArray] = {}  # entity id -> (M, 3) coordinates
+        self.text_runs = text_runs
+        self.run_groups: list[TextRuns] = []  # the ATE runs written as text, per annotation
+
+    def finish(self, text: str) -> str:
+        """Return the file's text: the ATE runs added and every point list's coordinates."""
+        if not self.run_groups:
+            return self.splice_point_lists(text)
+        text, runs = write_runs(text, self.run_groups, int(self.f.get_max_id()) + 1)
+        text = self.splice_point_lists(text)
+        end = text.rindex("ENDSEC;")  # the DATA section's end
+        return text[:end] + runs + text[end:]
 
     def point_list(self, points: FloatArray) -> ifcopenshell.entity_instance:
         """Return an ``IfcCartesianPointList3D`` placeholder for (M, 3) coordinates."""
@@ -307,15 +321,17 @@ class IfcBuilder:
         axis = f.createIfcAxis2Placement3D(f.createIfcCartesianPoint((0.0, 0.0, 0.0)))
         return f.createIfcLocalPlacement(self.site_placement, axis)
 
-    def style(self, item: ifcopenshell.entity_instance, name: str, rgb: Sequence[int]) -> None:
-        """Give a representation item a named curve colour (0-255 sRGB)."""
+    def style(
+        self, item: ifcopenshell.entity_instance, name: str, rgb: Sequence[int]
+    ) -> ifcopenshell.entity_instance:
+        """Give a representation item a named curve colour (0-255 sRGB); return the styling."""
         f = self.f
         r, g, b = (c / 255.0 for c in rgb)
         colour = f.create_entity("IfcColourRgb", Name=name, Red=r, Green=g, Blue=b)
         style = f.create_entity(
             "IfcCurveStyle", Name=name, CurveColour=colour, ModelOrDraughting=True
         )
-        f.create_entity("IfcStyledItem", Item=item, Styles=[style], Name=name)
+        return f.create_entity("IfcStyledItem", Item=item, Styles=[style], Name=name)
 
     def _path(self, path: PlacedPath) -> ifcopenshell.entity_instance:
         f = self.f
@@ -352,14 +368,26 @@ class IfcBuilder:
         f, placement = self.f, self.placement
         bins = placement.ate_bins()
         items = []
+        runs = TextRuns(representation=0)
         for run in placement.ate_runs(path):  # one curve per colour run
-            curve = f.create_entity(
-                "IfcIndexedPolyCurve", Points=self.point_list(self.coords(run.vertices)),
-                SelfIntersect=False,
-            )  # fmt: skip
+            if self.text_runs and run.bin_index in runs.prototypes:  # written as text
+                runs.order.append(None)
+                runs.bins.append(run.bin_index)
+                runs.coordinates.append(run.vertices)
+                runs.sizes.append(len(run.vertices))
+                continue
+            point_list = self.point_list(self.coords(run.vertices))
+            curve = f.create_entity("IfcIndexedPolyCurve", Points=point_list, SelfIntersect=False)
             b = bins[run.bin_index]
-            self.style(curve, f"{path.layer} ATE {b.label}", b.color_rgb)
+            styled = self.style(curve, f"{path.layer} ATE {b.label}", b.color_rgb)
+            (style,) = styled.Styles
+            entities = (point_list, curve, style.CurveColour, style, styled)
+            p, c, k, s, y = (int(e.id()) for e in entities)
+            runs.prototypes[run.bin_index] = Prototype((p, c, k, s, y))
+            runs.order.append(int(curve.id()))
             items.append(curve)
+        if runs.coordinates:  # the text runs' file coordinates, mapped at once
+            runs.coordinates = [self.coords(np.concatenate(runs.coordinates))]
         legend = scale_words(placement.result)
         annotation = add_annotation(
             self,
@@ -369,6 +397,9 @@ class IfcBuilder:
             representation=("Curve3D", items),
             key=f"ate/{path.name}",
         )
+        if runs.bins:
+            runs.representation = int(annotation.Representation.Representations[0].id())
+            self.run_groups.append(runs)
         scale: dict[str, object] = {"Legend": legend}
         scale |= {f"Bin{k}": f"{b.label}: {hex_colour(b.color_rgb)}" for k, b in enumerate(bins, 1)}
         self.pset(annotation, "Loceval_ATE", scale)

@@ -69,8 +69,10 @@ class IfcBuilder(Protocol):
     def local_placement(self) -> ifcopenshell.entity_instance:
         """A placement at the site's origin."""
 
-    def style(self, item: ifcopenshell.entity_instance, name: str, rgb: Sequence[int]) -> None:
-        """Colour a representation item."""
+    def style(
+        self, item: ifcopenshell.entity_instance, name: str, rgb: Sequence[int]
+    ) -> ifcopenshell.entity_instance:
+        """Colour a representation item; return its ``IfcStyledItem``."""
 
     def pset(
         self, target: ifcopenshell.entity_instance, name: str, values: dict[str, object]

@@ -40,6 +40,7 @@ from exporters.cad.excursions import EXCURSION_LAYER, EXCURSION_RGB, placed_excu
 from exporters.cad.georef import set_earth_anchor
 from exporters.cad.jsondoc import finite_json
 from exporters.cad.placement import Marker, PlacedPath, Placement, layer_name, place_evaluation
+from exporters.cad.rhino_encode import encode_polylines, point_list, polyline_curve
 from exporters.colours import hex_colour, map_bins, scale_words
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
@@ -156,20 +157,19 @@ def export_3dm_json(
     placement = placement or place_evaluation(result, options)
     paths = []
     bins = placement.ate_bins()
+    colours = [list(b.color_rgb) for b in bins]
     try:
         for path in placement.paths:
             entry = path.metadata()
             entry["layer"] = layer_path(placement, path)
-            pieces, runs = _curves(placement, path)
-            entry["curves"] = [curve.Encode() for curve in pieces]
+            entry["curves"] = [curve.Encode() for curve in _pieces(placement, path)]
             entry["ate_layer"] = f"{entry['layer']}::ATE"
+            runs = placement.ate_runs(path)
+            # tens of thousands of runs: encoded with NumPy, as rhino3dm would (rhino_encode)
+            curves = encode_polylines([run.vertices for run in runs])
             entry["ate"] = [
-                {
-                    "bin": run.bin_index,
-                    "color": list(bins[run.bin_index].color_rgb),
-                    "curve": curve.Encode(),
-                }
-                for run, curve in zip(placement.ate_runs(path), runs, strict=True)
+                {"bin": run.bin_index, "color": colours[run.bin_index], "curve": curve}
+                for run, curve in zip(runs, curves, strict=True)
             ]
             paths.append(entry)
     except RuntimeError as err:
@@ -236,8 +236,7 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
         attributes.ColorSource = rhino3dm.ObjectColorSource.ColorFromLayer
         for key, value in _user_strings(path).items():
             attributes.SetUserString(key, value)
-        pieces, runs = _curves(placement, path)
-        for curve in pieces:  # one curve per continuous piece (the model keeps a copy)
+        for curve in _pieces(placement, path):  # one per continuous piece (the model copies it)
             model.Objects.AddCurve(curve, attributes)
         if path.estimate is None:
             continue
@@ -245,8 +244,9 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
         by_bin = [
             _bin_attributes(f"{path.name} ATE", b.label, b.color_rgb, ate_layer) for b in bins
         ]
-        for run, curve in zip(placement.ate_runs(path), runs, strict=True):  # one per colour run
-            model.Objects.AddCurve(curve, by_bin[run.bin_index])  # the model copies both
+        for run in placement.ate_runs(path):  # one curve per colour run
+            # a PolylineCurve made by the model from the points: no curve object to copy
+            model.Objects.AddPolyline(point_list(run.vertices), by_bin[run.bin_index])
         worst = [m for m in markers if m.kind == "worst" and m.path == path.name]
         if worst:
             _add_dots(model, worst, _add_layer(model, "markers", path.color_rgb, layer))
@@ -362,31 +362,23 @@ def _add_layer(
     return index
 
 
-def _curves(placement: Placement, path: PlacedPath) -> tuple[list[Any], list[Any]]:
-    """Return a path's curves: one per continuous piece, one per ATE run.
+def _pieces(placement: Placement, path: PlacedPath) -> list[Any]:
+    """Return a path's curves, one per continuous piece, with the path's user strings.
 
     Built once per placement: a run writing both the .3dm and its JSON builds them for the
     first and encodes the same curves for the second (a model keeps copies of its curves).
     """
 
-    def build() -> tuple[list[Any], list[Any]]:
+    def build() -> list[Any]:
         strings = _user_strings(path)  # once per path: its statistics cover every pose
-        pieces = [_curve(v, strings) for v in _piece_vertices(path)]
-        # A run's geometry carries no strings: its object (.3dm) or its entry (JSON) names
-        # the path and the bin, and a path cut into tens of thousands of runs would repeat
-        # the path's statistics in each (more than half of a long run's file and time).
-        runs = [_curve(run.vertices, {}) for run in placement.ate_runs(path)]
-        return pieces, runs
+        return [_curve(v, strings) for v in _piece_vertices(path)]
 
-    return placement.shared(("rhino.curves", id(path)), build)
+    return list(placement.shared(("rhino.pieces", id(path)), build))
 
 
 def _curve(vertices: FloatArray, user_strings: Mapping[str, str]) -> Any:  # noqa: ANN401
     """A polyline curve through ``vertices`` carrying its path's user strings."""
-    points = rhino3dm.Point3dList(len(vertices))
-    for x, y, z in vertices.tolist():  # rhino3dm takes points one by one
-        points.Add(x, y, z)
-    curve = rhino3dm.PolylineCurve(points)
+    curve = polyline_curve(vertices)
     for key, value in user_strings.items():
         curve.SetUserString(key, value)
     return curve
