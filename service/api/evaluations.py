@@ -160,12 +160,12 @@ def read_artifact(
     evaluation_id: PathText, name: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> Response:
     """Download an artifact: report.html, report.pdf, errors.csv, result.json, paths.*."""
-    key = evaluations.artifact_path(runtime, project_id, evaluation_id, name)
+    key, filename = evaluations.artifact_path(runtime, project_id, evaluation_id, name)
     return download_response(
         runtime.store,
         key,
         media_type=ARTIFACTS[name].media_type,
-        filename=f"loceval-{evaluation_id[:8]}-{name}",
+        filename=filename,
         inline=name in _INLINE,
     )
 

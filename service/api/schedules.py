@@ -159,11 +159,11 @@ def read_run_artifact(
     project_id: ProjectDep,
 ) -> Response:
     """Download the summary report: summary.html or summary.pdf."""
-    key = schedules.run_artifact_path(runtime, project_id, schedule_id, run_id, name)
+    key, filename = schedules.run_artifact_path(runtime, project_id, schedule_id, run_id, name)
     return download_response(
         runtime.store,
         key,
         media_type=SUMMARY_ARTIFACTS[name],
-        filename=f"loceval-run-{run_id[:8]}-{name}",
+        filename=filename,
         inline=True,
     )

@@ -477,6 +477,10 @@ class ArtifactPublic(BaseModel):
     media_type: str
     size_bytes: int
     url: str
+    filename: str = Field(
+        description="the name a download is saved under (its Content-Disposition): the "
+        "evaluation's estimates' names, or its id, then the artifact's name"
+    )
 
 
 class EvaluationPublic(BaseModel):

@@ -1533,7 +1533,7 @@
       if (inTab && tab && !tab.closed) {
         tab.location.href = url;
       } else if (!inTab || !window.open(url, "_blank")) {
-        const link = el("a", { href: url, download: artifact.name, hidden: true });
+        const link = el("a", { href: url, download: artifact.filename || artifact.name, hidden: true });
         document.body.append(link);
         link.click();
         link.remove();
