@@ -537,6 +537,11 @@ class OptionPublic(BaseModel):
     )
     auto: bool = Field(description='the value may also be "auto" (estimated from the data)')
     bounds: str = Field(description="the allowed range in words", examples=["more than 0"])
+    bounds_hint: str = Field(
+        description="the bounds a person would type, for a form's hint (1e+09 left out)",
+        examples=["at least 0"],
+    )
+    label: str = Field(description="the option's short name on a form", examples=["Max gap (s)"])
 
 
 class OptionsPublic(BaseModel):

@@ -840,9 +840,8 @@
       if (!FORM_GROUPS.has(doc.group) || optionField(doc.key)) continue;
       const input = otherOptionInput(doc);
       if (!input) continue;
-      const words = doc.words.replace(/^the /, "");
-      const label = words.charAt(0).toUpperCase() + words.slice(1);
-      const hint = doc.bounds || (doc.kind === "file" ? "an uploaded dataset" : "");
+      const label = doc.label; // a short name; the help is the field's tooltip
+      const hint = doc.bounds_hint || (doc.kind === "file" ? "an uploaded dataset" : "");
       fields.push(el("label", {
         className: doc.kind === "switch" ? "field field-switch" : "field",
         title: doc.help, dataset: { option: doc.key, label, kind: doc.kind, generated: "" },
