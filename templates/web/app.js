@@ -24,6 +24,8 @@
   // key, kind, default, bounds, choices and help of every option, from the one table the
   // API's schema and the CLI's flags are made from. The form's fields take their bounds,
   // choices and help from it, and an option no field of the page holds gets one of its own.
+  // The readers' formats and what each file holds, from the server (<body data-formats>).
+  const READ_FORMATS = JSON.parse(document.body.dataset.formats || "[]");
   const OPTION_DOCS = new Map(JSON.parse(document.body.dataset.options || "[]").map((o) => [o.key, o]));
   const FORM_GROUPS = new Set(["evaluation", "reading", "export", "map"]); // not ranging's
 
@@ -322,6 +324,27 @@
     return `The server answered ${status} ${statusText}.`.replace(/ \.$/, ".");
   }
 
+  /**
+   * What the page says when the server refuses an upload. An unreadable file's problem ends
+   * in advice for the command line (a format prefix such as tum:FILE, a column mapping),
+   * which the page has no field for: the page keeps what is wrong and says what it reads.
+   */
+  function uploadProblemText(status, statusText, bodyText) {
+    let body = null;
+    try {
+      body = JSON.parse(bodyText);
+    } catch {
+      body = null;
+    }
+    if (!body || body.type !== "input.unreadable" || typeof body.detail !== "string") {
+      return problemText(status, statusText, bodyText);
+    }
+    const cli = /;[^;]*(prefix|e\.g\. [a-z]+:|map it)/;
+    const what = body.detail.search(cli) > 0 ? body.detail.slice(0, body.detail.search(cli)) : body.detail.replace(/\.$/, "");
+    const formats = READ_FORMATS.map((f) => f.shape).join("; ");
+    return `${what}. The page reads these formats: ${formats}. Save or export the recording in one of them and upload it again.`;
+  }
+
   function authHeaders() {
     return { Authorization: `Bearer ${state.key}` };
   }
@@ -502,7 +525,7 @@
           item.setState("error", "Not uploaded", UNAUTHORIZED);
           onUnauthorized();
         } else {
-          item.setState("error", "Not uploaded", problemText(status, xhr.statusText, xhr.responseText));
+          item.setState("error", "Not uploaded", uploadProblemText(status, xhr.statusText, xhr.responseText));
         }
         resolve();
       };
