@@ -1153,8 +1153,9 @@
 
   function renderRadioSelects() {
     const { anchors, ranges } = radioChoices();
-    fillChoice($("ranging-anchors-select"), anchors, "Upload an anchors table (id,x,y,z)", "— choose the anchors —");
-    fillChoice($("ranging-ranges-select"), ranges, "Upload ranges (t,anchor_id,range_m) or a bag", "— choose the ranges —");
+    // short choices (a select cuts its text); the fields' labels say what to upload
+    fillChoice($("ranging-anchors-select"), anchors, "— none uploaded yet —", "— choose the anchors —");
+    fillChoice($("ranging-ranges-select"), ranges, "— none uploaded yet —", "— choose the ranges —");
   }
 
   /** The tag height applies to 2D positioning only. */
