@@ -63,6 +63,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "the association method",
         "associate",
         choices=tuple(AssociationMethod),
+        label="Association",
     ),
     OptionSpec(
         "max_dt_s",
@@ -75,6 +76,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=0.0,
         maximum=3600.0,
         exclusive_minimum=True,
+        label="Max time difference (s)",
     ),
     OptionSpec(
         "max_gap_s",
@@ -86,6 +88,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "S",
         minimum=1e-9,  # 1 ns, the resolution of stamps
         maximum=1e6,
+        label="Max gap (s)",
     ),
     OptionSpec(
         "time_offset_s",
@@ -98,6 +101,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=-_MAX_S,
         maximum=_MAX_S,
         auto=True,
+        label="Time offset (s)",
     ),
     OptionSpec(
         "clock_drift_ppm",
@@ -112,6 +116,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=-1000.0,  # loceval.calibration.drift.MAX_RATE_PPM
         maximum=1000.0,
         auto=True,
+        label="Clock drift (ppm)",
     ),
     OptionSpec(
         "stamp",
@@ -122,6 +127,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "stamp",
         choices=tuple(StampSource),
         group="reading",
+        label="Stamps",
     ),
     OptionSpec(
         "align",
@@ -131,6 +137,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "the alignment method",
         "align",
         choices=tuple(AlignMethod),
+        label="Alignment",
     ),
     OptionSpec(
         "align_first",
@@ -142,6 +149,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "N|Ns",
         max_length=32,
         pattern=grammar.ALIGN_FIRST_PATTERN,
+        label="Align on the first",
     ),
     OptionSpec(
         "calibrate_at_s",
@@ -153,6 +161,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "S",
         minimum=0.0,
         maximum=_MAX_S,
+        label="Calibration time (s)",
     ),
     OptionSpec(
         "offset",
@@ -164,6 +173,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         '"x y z qx qy qz qw"',
         max_length=300,
         pattern=grammar.OFFSET_PATTERN,
+        label="Device offset",
     ),
     OptionSpec(
         "device",
@@ -175,6 +185,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "device",
         "FILE|auto",
         auto=True,
+        label="Device file",
     ),
     OptionSpec(
         "rpe_delta",
@@ -187,6 +198,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=0.0,
         maximum=_MAX_S,
         exclusive_minimum=True,
+        label="RPE delta",
     ),
     OptionSpec(
         "rpe_unit",
@@ -196,6 +208,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "the RPE unit",
         "rpe-unit",
         choices=tuple(RPEUnit),
+        label="RPE unit",
     ),
     OptionSpec(
         "rpe_all_pairs",
@@ -204,6 +217,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "every pose starts an RPE pair (default: consecutive segments)",
         "all RPE pairs",
         "rpe-all-pairs",
+        label="All RPE pairs",
     ),
     OptionSpec(
         "thresholds_m",
@@ -217,6 +231,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         maximum=1e6,
         exclusive_minimum=True,
         max_length=20,
+        label="Thresholds (m)",
     ),
     OptionSpec(
         "tolerance",
@@ -229,6 +244,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         max_length=40,
         pattern=grammar.TOLERANCE_PATTERN,
         example="0.10@95",
+        label="Tolerance",
     ),
     OptionSpec(
         "worst",
@@ -240,6 +256,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "N",
         minimum=0,
         maximum=1000,
+        label="Worst poses listed",
     ),
     OptionSpec(
         "units",
@@ -250,6 +267,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "units",
         choices=tuple(Units),
         group="export",
+        label="CAD units",
     ),
     OptionSpec(
         "site",
@@ -264,6 +282,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         pattern=grammar.SITE_PATTERN,
         example="12.5 3.2 0 90",
         group="export",
+        label="Site transform",
     ),
     OptionSpec(
         "site_matrix",
@@ -274,6 +293,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "site-matrix",
         "FILE",
         group="export",
+        label="Site matrix",
     ),
     OptionSpec(
         "simplify_m",
@@ -286,6 +306,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=0.0,
         maximum=1000.0,
         group="export",
+        label="Path simplification (m)",
     ),
     OptionSpec(
         "crs",
@@ -300,6 +321,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         pattern=grammar.CRS_PATTERN,
         example="EPSG:25832",
         group="export",
+        label="Coordinate system",
     ),
     OptionSpec(
         "building_up",
@@ -310,6 +332,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "building-up",
         choices=tuple(UpAxis),
         group="export",
+        label="Building model's up axis",
     ),
     OptionSpec(
         "formats",
@@ -322,6 +345,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         min_length=1,
         max_length=20,
         group="export",
+        label="Files",
     ),
     OptionSpec(
         "building",
@@ -335,6 +359,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "FILE",
         max_length=64,
         group="export",
+        label="Building model",
     ),
     OptionSpec(
         "no_ci",
@@ -343,6 +368,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "skip the confidence intervals and the comparisons of estimates (ci95 null)",
         "the switch that turns confidence intervals off",
         "no-ci",
+        label="No confidence intervals",
     ),
     OptionSpec(
         "reference_sigma_m",
@@ -355,6 +381,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=0.0,
         maximum=10.0,
         example="0.0002",
+        label="Reference std. dev. (m)",
     ),
     OptionSpec(
         "planar",
@@ -363,6 +390,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "measure position errors in x-y only (height differences count as zero)",
         "the x-y only measurement",
         "planar",
+        label="Planar (x-y only)",
     ),
     OptionSpec(
         "visits",
@@ -376,6 +404,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "auto|FILE|BAG@TOPIC",
         max_length=500,
         example="auto",
+        label="Visits",
     ),
     OptionSpec(
         "visit_radius_m",
@@ -389,6 +418,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=0.0,
         maximum=1e6,
         exclusive_minimum=True,
+        label="Visit radius (m)",
     ),
     OptionSpec(
         "align_points",
@@ -400,6 +430,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "ID,...",
         min_length=1,
         max_length=1000,
+        label="Alignment points",
     ),
     OptionSpec(
         "stop_speed_mps",
@@ -412,6 +443,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=0.0,
         maximum=100.0,
         exclusive_minimum=True,
+        label="Stop speed (m/s)",
     ),
     OptionSpec(
         "stop_min_s",
@@ -424,6 +456,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=0.0,
         maximum=3600.0,
         exclusive_minimum=True,
+        label="Shortest stop (s)",
     ),
     OptionSpec(
         "map",
@@ -437,6 +470,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "SOURCE",
         max_length=500,
         group="map",
+        label="Map",
     ),
     OptionSpec(
         "map_estimate",
@@ -448,6 +482,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "NAME",
         max_length=120,
         group="map",
+        label="Estimate placing the map",
     ),
     OptionSpec(
         "clutter_m",
@@ -462,6 +497,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         maximum=100.0,
         exclusive_minimum=True,
         group="map",
+        label="Clutter distance (m)",
     ),
     OptionSpec(
         "min_excursion_s",
@@ -474,6 +510,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=0.0,
         maximum=_MAX_S,
         exclusive_minimum=True,
+        label="Shortest excursion (s)",
     ),
     OptionSpec(
         "solve",
@@ -487,6 +524,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         min_length=1,
         max_length=2,
         group="ranging",
+        label="Positioning algorithms",
     ),
     OptionSpec(
         "dims",
@@ -497,6 +535,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "dims",
         choices=("2", "3"),
         group="ranging",
+        label="Dimensions",
     ),
     OptionSpec(
         "epoch_s",
@@ -510,6 +549,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         maximum=3600.0,
         exclusive_minimum=True,
         group="ranging",
+        label="Epoch (s)",
     ),
     OptionSpec(
         "tag_height_m",
@@ -522,6 +562,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         minimum=-1e4,
         maximum=1e4,
         group="ranging",
+        label="Tag height (m)",
     ),
     OptionSpec(
         "tag_offset_xyz",
@@ -535,6 +576,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         pattern=grammar.TAG_OFFSET_PATTERN,
         example="0 0 0.3",
         group="ranging",
+        label="Tag offset (m)",
     ),
     OptionSpec(
         "outlier_threshold_m",
@@ -548,6 +590,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         maximum=1e4,
         exclusive_minimum=True,
         group="ranging",
+        label="Outlier threshold (m)",
     ),
     OptionSpec(
         "distance_bin_m",
@@ -561,6 +604,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         maximum=1e4,
         exclusive_minimum=True,
         group="ranging",
+        label="Distance bin (m)",
     ),
 )
 """Every option, in the order ``--help`` and the API schema list them."""

@@ -118,6 +118,10 @@ class OptionKind(StrEnum):
     """A local file (CLI only)."""
 
 
+_TYPED_BOUND: Final = 1e6
+"""Bounds of this magnitude or more (or positive ones below its inverse) are not shown on a
+form: no person types them; they only stop a mistake (:attr:`OptionSpec.bounds_hint`)."""
+
 OptionValue = float | int | bool | str | tuple[float, ...] | tuple[str, ...] | None
 """The type of a default."""
 
@@ -149,6 +153,7 @@ class OptionSpec:
         api: the HTTP API takes it.
         cli: the CLI takes it.
         auto: the value may also be ``auto`` (estimated from the data; :data:`AUTO`).
+        label: its short name on a form ("Max gap (s)"); ``help`` says what it does.
     """
 
     key: str
@@ -170,6 +175,7 @@ class OptionSpec:
     api: bool = True
     cli: bool = True
     auto: bool = False
+    label: str = ""
 
     def document(self) -> dict[str, object]:
         """Return the option as JSON: what a front door needs to offer and check it.
@@ -196,6 +202,8 @@ class OptionSpec:
             "group": self.group,
             "auto": self.auto,
             "bounds": self.bounds_text,
+            "bounds_hint": self.bounds_hint,
+            "label": self.label,
         }
 
     @property
@@ -211,6 +219,26 @@ class OptionSpec:
             below = "more than" if self.exclusive_minimum else "at least"
             parts.append(f"{below} {self.minimum:g}")
         if self.maximum is not None:
+            parts.append(f"at most {self.maximum:g}")
+        return " and ".join(parts)
+
+    @property
+    def bounds_hint(self) -> str:
+        """Return the bounds a person would type, in words, for a form's hint.
+
+        A bound that only stops nonsense (``1e+09`` seconds, ``1e-09`` as the least gap) is
+        left out: a tiny positive minimum reads "more than 0", and a bound of a million or
+        more is not shown. :attr:`bounds_text` keeps every bound for messages.
+        """
+        parts = []
+        low = self.minimum
+        if low is not None and abs(low) < _TYPED_BOUND:
+            if 0 < low < 1 / _TYPED_BOUND:
+                parts.append("more than 0")
+            else:
+                below = "more than" if self.exclusive_minimum else "at least"
+                parts.append(f"{below} {low:g}")
+        if self.maximum is not None and abs(self.maximum) < _TYPED_BOUND:
             parts.append(f"at most {self.maximum:g}")
         return " and ".join(parts)
 

@@ -119,5 +119,6 @@ def create_app(
     app.include_router(metrics_router)  # GET /metrics: Prometheus, no key, no names or ids
     app.include_router(hops.router)  # Grasshopper Hops: /hops/ and POST /solve at the root
     app.include_router(docs.router)
+    docs.document_examples(app)  # the answers' examples, shown by /docs
     app.include_router(web.router)
     return app

@@ -22,6 +22,7 @@ __all__ = ["Settings", "get_settings", "parse_blob_url"]
 _REPO = Path(__file__).resolve().parent.parent
 _GIB = 1 << 30
 _MIN_JOB_MEMORY_MB = 1024
+_LOOPBACK_OF_WILDCARD: Final = {"0.0.0.0": "127.0.0.1", "::": "::1", "": "127.0.0.1"}  # noqa: S104
 _BUCKET: Final = re.compile(r"[a-z0-9][a-z0-9.\-]{1,61}[a-z0-9]")
 
 
@@ -57,7 +58,8 @@ class Settings(BaseSettings):
         templates_dir: Jinja2 templates of the reports and the web page.
         public_url: the service's address as users reach it (``https://host/prefix/``):
             every absolute link (``Location``, artifact URLs, webhooks) starts with it; the
-            request's ``Host`` and forwarded headers are never used for links.
+            request's ``Host`` and forwarded headers are never used for links. Not set:
+            ``http://HOST:PORT`` of ``host`` and ``port`` (see :attr:`resolved_public_url`).
         host: the address ``loceval serve`` listens on when ``--host`` is not given.
         port: the port ``loceval serve`` listens on when ``--port`` is not given.
         webhook_allow: internal webhook targets let through anyway, comma-separated host
@@ -97,7 +99,7 @@ class Settings(BaseSettings):
     job_attempts: Annotated[int, Field(ge=1, le=20)] = 3
     job_lease_s: Annotated[float, Field(gt=0)] = 10.0
     templates_dir: Path = _REPO / "templates"
-    public_url: str = "http://127.0.0.1:8000"
+    public_url: str | None = None
     host: Annotated[str, Field(min_length=1)] = "127.0.0.1"
     port: Annotated[int, Field(ge=1, le=65535)] = 8000
     webhook_allow: str = ""
@@ -147,7 +149,9 @@ class Settings(BaseSettings):
 
     @field_validator("public_url")
     @classmethod
-    def _absolute_public_url(cls, value: str) -> str:
+    def _absolute_public_url(cls, value: str | None) -> str | None:
+        if value is None:
+            return None
         parts = urlsplit(value.strip())
         absolute = parts.scheme in {"http", "https"} and bool(parts.hostname)
         if absolute and not parts.query and not parts.fragment:
@@ -157,6 +161,23 @@ class Settings(BaseSettings):
             f"http(s)://HOST[:PORT][/PREFIX], not {value!r}"
         )
         raise ValueError(msg)
+
+    @property
+    def resolved_public_url(self) -> str:
+        """The address links start with: ``public_url``, or where ``serve`` listens.
+
+        Without ``LOCEVAL_PUBLIC_URL`` the links follow ``host`` and ``port`` (``loceval
+        serve --host/--port`` set them for its process), so ``LOCEVAL_PORT=18731 make serve``
+        hands out links to port 18731. An address that listens on every interface
+        (``0.0.0.0``, ``::``) is reached as this machine's loopback; behind a proxy or for
+        other machines, set ``LOCEVAL_PUBLIC_URL``.
+        """
+        if self.public_url is not None:
+            return self.public_url
+        host = _LOOPBACK_OF_WILDCARD.get(self.host, self.host)
+        if ":" in host and not host.startswith("["):  # an IPv6 address
+            host = f"[{host}]"
+        return f"http://{host}:{self.port}"
 
     @property
     def resolved_database_url(self) -> str:

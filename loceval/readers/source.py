@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
 from types import MappingProxyType
+from typing import Final
 
 from loceval.errors import ReaderError
 
@@ -61,6 +62,28 @@ class TrajectoryFormat(StrEnum):
     """A ROS 1 bag, ROS 2 bag (directory, .db3, .mcap) or a zip of one."""
     POINTS = "points"
     """Surveyed control points ``id,x,y,z`` (a reference, not a trajectory)."""
+
+    @property
+    def shape(self) -> str:
+        """What a file of this format holds, in words a person checks a file against."""
+        return _SHAPES[self]
+
+
+_SHAPES: Final = MappingProxyType(
+    {
+        TrajectoryFormat.TUM: "TUM: a line per pose, t x y z qx qy qz qw separated by spaces, "
+        "t in seconds",
+        TrajectoryFormat.EUROC: "EuRoC: the ground-truth CSV, t in nanoseconds, then x y z "
+        "and qw qx qy qz",
+        TrajectoryFormat.KITTI: "KITTI: a line per pose, the 12 numbers of a 3x4 matrix",
+        TrajectoryFormat.CSV: "CSV: a header row naming the columns t, x, y, z (qx qy qz qw "
+        "optional)",
+        TrajectoryFormat.MOTIVE: "Motive: OptiTrack Motive's CSV export of a take",
+        TrajectoryFormat.BAG: "ROS bag: .bag, .db3 or .mcap, or a bag folder as .zip",
+        TrajectoryFormat.POINTS: "surveyed points: a CSV of id,x,y,z",
+    }
+)
+"""The formats' shapes (:attr:`TrajectoryFormat.shape`), for a person choosing a file."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Final
 
 import anyio.to_thread
 from fastapi import APIRouter, Query, Request, Response, status
 
+from loceval.errors import ReaderError
 from service.api.deps import PathText, ProjectDep, RuntimeDep
 from service.api.links import api_url
 from service.api.metrics import count_upload
 from service.api.multipart import receive_multipart
-from service.api.responses import problems
+from service.api.responses import not_found, problem_example, problems
 from service.blobs.base import MAX_FILENAME_BYTES
 from service.db import Dataset, get_owned
+from service.errors import ConflictError
 from service.schemas.base import NO_NUL
 from service.schemas.evaluations import (
     MAX_DATASET_NAME,
@@ -29,6 +31,15 @@ __all__ = ["router"]
 
 router = APIRouter(prefix="/datasets", tags=["datasets"])
 
+_EXAMPLES: Final = {
+    404: not_found("datasets", "26dcd1ee-d6ab-43f3-a9d1-7de7c3c461b6"),
+    409: problem_example(
+        ConflictError,
+        409,
+        "Dataset 'fr2_desk_ORB.txt' is used by an evaluation that has not finished; delete it "
+        "when the evaluation is done.",
+    ),
+}
 _PRINTABLE = r"^[^\x00-\x1f\x7f]*$"  # control characters are refused (422)
 _UPLOAD_BODY = {
     "required": True,
@@ -81,7 +92,20 @@ def dataset_public(dataset: Dataset) -> DatasetPublic:
             "description": "the same bytes were uploaded before: that dataset, with this "
             "request's tags merged in (see upload)",
         },
-        **problems(400, 413, 507),
+        **problems(
+            400,
+            413,
+            507,
+            examples={
+                422: problem_example(
+                    ReaderError,
+                    422,
+                    "Cannot tell the format of 'run-03.bin' from its first lines; name it with "
+                    "a prefix, e.g. tum:run-03.bin (one of tum, euroc, kitti, csv, motive, bag, "
+                    "points).",
+                )
+            },
+        ),
     },
 )
 async def create_dataset(
@@ -130,7 +154,9 @@ def read_datasets(
     return DatasetsPublic(items=[dataset_public(d) for d in rows], count=count)
 
 
-@router.get("/{dataset_id}", response_model=DatasetPublic, responses=problems(404))
+@router.get(
+    "/{dataset_id}", response_model=DatasetPublic, responses=problems(404, examples=_EXAMPLES)
+)
 def read_dataset(
     dataset_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> DatasetPublic:
@@ -141,7 +167,7 @@ def read_dataset(
 @router.delete(
     "/{dataset_id}",
     status_code=status.HTTP_204_NO_CONTENT,
-    responses=problems(404, 409, 507),
+    responses=problems(404, 409, 507, examples=_EXAMPLES),
 )
 def delete_dataset(dataset_id: PathText, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Delete a dataset and its file (refused while a queued or running evaluation uses it).

@@ -10,13 +10,15 @@ writes, which the 4.x of the ``swagger-ui-bundle`` package could not.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 
-from fastapi import APIRouter, HTTPException, Request
+from fastapi import APIRouter, FastAPI, HTTPException, Request
 from fastapi.openapi.docs import get_swagger_ui_html, get_swagger_ui_oauth2_redirect_html
 from fastapi.responses import HTMLResponse, Response
 
-__all__ = ["ASSETS_PREFIX", "SWAGGER_UI_DIR", "router"]
+from service.schemas.examples import BY_SCHEMA
+
+__all__ = ["ASSETS_PREFIX", "SWAGGER_UI_DIR", "document_examples", "router"]
 
 ASSETS_PREFIX: Final = "/docs/assets"
 SWAGGER_UI_DIR: Final = Path("web/vendor/swagger-ui")
@@ -29,6 +31,26 @@ _ASSETS: Final = {
 _CACHE: Final = {"Cache-Control": "public, max-age=86400", "X-Content-Type-Options": "nosniff"}
 
 router = APIRouter(include_in_schema=False)
+
+
+def document_examples(app: FastAPI) -> None:
+    """Give the answers' schemas in the app's OpenAPI document their examples, nulls kept.
+
+    FastAPI writes the document without any ``null`` (``exclude_none``), so an example of a
+    real answer set on a model would lose its ``"error": null`` and no longer be one; they
+    are set here, once, on the written document (:data:`service.schemas.examples.BY_SCHEMA`).
+    """
+    write = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            document = write()
+            schemas = document["components"]["schemas"]
+            for name, example in BY_SCHEMA.items():
+                schemas[name]["examples"] = [example]
+        return app.openapi_schema or {}
+
+    app.openapi = openapi  # type: ignore[method-assign]
 
 
 def _assets_dir(request: Request) -> Path:

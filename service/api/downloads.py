@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from starlette.responses import FileResponse, RedirectResponse, Response, StreamingResponse
 
-from service.blobs.base import Blobs, LocalFile, Redirect, Stream
+from service.blobs.base import Blobs, LocalFile, Redirect, Stream, content_disposition
 
 __all__ = ["download_response"]
 
@@ -23,23 +23,15 @@ def download_response(
         store: the blob store.
         key: the blob.
         media_type: its media type.
-        filename: the name the client saves it under.
+        filename: the name the client saves it under (``download_filename``).
         inline: shown in the browser rather than saved.
     """
     found = store.download(key, media_type=media_type, filename=filename, inline=inline)
-    disposition = "inline" if inline else "attachment"
+    disposition = {"content-disposition": content_disposition(filename, inline=inline)}
     if isinstance(found, LocalFile):
-        return FileResponse(
-            found.path,
-            media_type=media_type,
-            filename=filename,
-            content_disposition_type=disposition,
-        )
+        return FileResponse(found.path, media_type=media_type, headers=disposition)
     if isinstance(found, Redirect):
         return RedirectResponse(found.url, status_code=307)
     assert isinstance(found, Stream)  # noqa: S101  (the three kinds of Download)
-    headers = {
-        "content-length": str(found.size),
-        "content-disposition": f'{disposition}; filename="{filename}"',
-    }
+    headers = {"content-length": str(found.size), **disposition}
     return StreamingResponse(found.chunks, media_type=media_type, headers=headers)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Final, Literal
 
 import anyio.to_thread
 from fastapi import APIRouter, Query, Request, Response, status
@@ -14,8 +14,9 @@ from service.api.downloads import download_response
 from service.api.links import api_url, public_base
 from service.api.metrics import count_upload
 from service.api.multipart import receive_multipart
-from service.api.responses import problems
+from service.api.responses import UNREADABLE, problem_example, problems
 from service.db import Evaluation, get_owned
+from service.errors import NotReadyError, UploadError
 from service.jobs import evaluations, retention
 from service.runtime import Runtime
 from service.schemas.base import NO_NUL
@@ -51,7 +52,7 @@ def _accepted(evaluation: Evaluation, response: Response, runtime: Runtime) -> E
     "/evaluations",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=EvaluationPublic,
-    responses=problems(404, 503, 507),
+    responses=problems(404, 503, 507, examples={422: UNREADABLE}),
 )
 def create_evaluation_job(
     body: EvaluationCreate,
@@ -68,7 +69,7 @@ def create_evaluation_job(
     "/ranging",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=EvaluationPublic,
-    responses=problems(404, 503, 507),
+    responses=problems(404, 503, 507, examples={422: UNREADABLE}),
 )
 def create_ranging_job(
     body: RangingCreate,
@@ -145,6 +146,14 @@ def delete_evaluation(
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
 
+_ARTIFACT_NOT_READY: Final = problem_example(
+    NotReadyError,
+    409,
+    "Evaluation '297a1e94-c86c-4e41-a598-ddbfae842cde' is running and has not written "
+    "'report.pdf' yet; poll GET /evaluations/{id} until its artifacts list it.",
+)
+
+
 @router.get(
     "/evaluations/{evaluation_id}/artifacts/{name}",
     response_class=FileResponse,
@@ -153,22 +162,30 @@ def delete_evaluation(
             "description": "the file",
             "content": {spec.media_type: {} for spec in ARTIFACTS.values()},
         },
-        **problems(404, 409),
+        **problems(404, 409, examples={409: _ARTIFACT_NOT_READY}),
     },
 )
 def read_artifact(
     evaluation_id: PathText, name: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> Response:
     """Download an artifact: report.html, report.pdf, errors.csv, result.json, paths.*."""
-    key = evaluations.artifact_path(runtime, project_id, evaluation_id, name)
+    key, filename = evaluations.artifact_path(runtime, project_id, evaluation_id, name)
     return download_response(
         runtime.store,
         key,
         media_type=ARTIFACTS[name].media_type,
-        filename=f"loceval-{evaluation_id[:8]}-{name}",
+        filename=filename,
         inline=name in _INLINE,
     )
 
+
+_NO_ESTIMATES: Final = problem_example(
+    UploadError,
+    400,
+    "Name the estimates: send 'estimate' files, or 'estimate_selector' values when the "
+    "reference file holds them (a bag).",
+)
+"""The answer to a one-shot request that names no estimate."""
 
 _ONE_SHOT_BODY = {
     "required": True,
@@ -177,6 +194,10 @@ _ONE_SHOT_BODY = {
             "schema": {
                 "type": "object",
                 "required": ["reference"],
+                "description": "one of 'estimate' (files) or 'estimate_selector' (the "
+                "estimates in the reference file, a bag) is needed; with neither the answer is "
+                "400",
+                "anyOf": [{"required": ["estimate"]}, {"required": ["estimate_selector"]}],
                 "additionalProperties": False,
                 "properties": {
                     "reference": {"type": "string", "format": "binary"},
@@ -211,7 +232,7 @@ _ONE_SHOT_BODY = {
     status_code=status.HTTP_202_ACCEPTED,
     response_model=EvaluationPublic,
     openapi_extra={"requestBody": _ONE_SHOT_BODY},
-    responses=problems(400, 404, 413, 503, 507),
+    responses=problems(400, 404, 413, 503, 507, examples={400: _NO_ESTIMATES, 422: UNREADABLE}),
 )
 async def evaluate_upload(
     request: Request, response: Response, runtime: RuntimeDep, project_id: ProjectDep

@@ -20,7 +20,9 @@ logger = logging.getLogger(__name__)
 router = APIRouter(tags=["health"])
 
 
-@router.get("/healthz")
+@router.get(
+    "/healthz", responses={200: {"content": {"application/json": {"example": {"status": "ok"}}}}}
+)
 def read_health() -> dict[str, str]:
     """The process is up."""
     return {"status": "ok"}
@@ -66,10 +68,17 @@ def _check(runtime: Runtime) -> dict[str, str]:
 @router.get(
     "/readyz",
     responses={
+        200: {
+            "content": {
+                "application/json": {
+                    "example": {"status": "ready", "database": "ok", "queue": "ok"}
+                }
+            }
+        },
         503: {
             "description": "database, queue or object store unreachable, or less free space "
             "than the reserve"
-        }
+        },
     },
 )
 async def read_readiness(runtime: RuntimeDep) -> dict[str, str]:

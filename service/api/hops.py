@@ -39,11 +39,12 @@ from pydantic import BaseModel, ConfigDict, Field
 from loceval.errors import InputError, LocevalError
 from loceval.results.document import EstimateRead
 from service.api.deps import RuntimeDep
-from service.api.responses import problems
+from service.api.responses import problem_example, problems
 from service.auth import authenticate
-from service.errors import AuthenticationError, NotFoundError, status_for
+from service.errors import PROBLEM_JSON, AuthenticationError, NotFoundError, status_for
 from service.results.paths import read_paths
 from service.runtime import Runtime
+from service.schemas import examples
 
 __all__ = ["COMPONENTS", "router"]
 
@@ -189,19 +190,71 @@ class HopsAnswer(BaseModel):
     warnings: list[str]
 
 
+_HOPS_ANSWER: Final = {"$ref": "#/components/schemas/HopsAnswer"}
+
+
+def _refused(message: str) -> dict[str, Any]:
+    """Return Hops' own answer of a refused solve: no values, the message in ``errors``."""
+    return {"values": [], "errors": [message], "warnings": []}
+
+
+_REQUEST_INVALID: Final = {
+    "type": "request.invalid",
+    "title": "RequestValidationError",
+    "status": 422,
+    "detail": "The request is not valid: body.values: Input should be a valid list.",
+    "errors": [
+        {"loc": ["body", "values"], "msg": "Input should be a valid list", "type": "list_type"}
+    ],
+}
 _SOLVE_RESPONSES: Final[dict[int | str, dict[str, Any]]] = {
     **problems(),
+    422: {
+        "description": "Hops' own answer (application/json: values, errors, warnings; the "
+        "component shows the errors) when an input cannot be used; a problem document "
+        "(application/problem+json) when the request itself is malformed",
+        "content": {
+            "application/json": {"schema": _HOPS_ANSWER, "example": examples.HOPS_REFUSED},
+            PROBLEM_JSON: {
+                "schema": {"$ref": "#/components/schemas/Problem"},
+                "example": _REQUEST_INVALID,
+            },
+        },
+    },
     **{
         status: {
-            "model": HopsAnswer,
-            "description": f"{description}: the message is in the document's errors",
+            "description": f"{description}: Hops' own answer, the message in its errors",
+            "content": {"application/json": {"schema": _HOPS_ANSWER, "example": example}},
         }
-        for status, description in (
-            (404, "no such evaluation in this key's project, or it wrote no paths.3dm.json"),
-            (409, "the evaluation has not succeeded (yet)"),
+        for status, description, example in (
+            (
+                404,
+                "no such evaluation in this key's project, or it wrote no paths.3dm.json",
+                _refused(
+                    "No evaluation '297a1e94-c86c-4e41-a598-ddbfae842cde' in this project; "
+                    "list them with GET /evaluations."
+                ),
+            ),
+            (
+                409,
+                "the evaluation has not succeeded (yet)",
+                _refused(
+                    "Evaluation '297a1e94-c86c-4e41-a598-ddbfae842cde' is running, so it has "
+                    "no paths yet; solve again when it has succeeded."
+                ),
+            ),
         )
     },
 }
+_COMPONENT_RESPONSES: Final = problems(
+    404,
+    keyed=False,
+    examples={
+        404: problem_example(
+            NotFoundError, 404, "No Hops component 'path'; the components are paths."
+        )
+    },
+)
 
 
 def hops_project(request: Request, runtime: RuntimeDep) -> str:
@@ -227,13 +280,22 @@ HopsProjectDep = Annotated[str, Depends(hops_project)]
 
 
 @router.get("/hops", include_in_schema=False)
-@router.get("/hops/")
+@router.get(
+    "/hops/",
+    responses={200: {"content": {"application/json": {"example": list(COMPONENTS.values())}}}},
+)
 def list_hops_components() -> list[dict[str, Any]]:
     """List the Grasshopper Hops components."""
     return list(COMPONENTS.values())
 
 
-@router.get("/hops/{name}")
+@router.get(
+    "/hops/{name}",
+    responses={
+        200: {"content": {"application/json": {"example": COMPONENTS["paths"]}}},
+        **_COMPONENT_RESPONSES,
+    },
+)
 def read_hops_component(name: str) -> dict[str, Any]:
     """Describe one Hops component: its inputs and outputs."""
     return _component(name)

@@ -25,7 +25,7 @@ def public_base(settings: Settings) -> str:
     Returns:
         ``https://host/prefix/`` or ``https://host/``.
     """
-    return settings.public_url.rstrip("/") + "/"
+    return settings.resolved_public_url.rstrip("/") + "/"
 
 
 def api_url(settings: Settings, *segments: str) -> str:

@@ -412,7 +412,16 @@ router = APIRouter(tags=["health"])
     responses={
         200: {
             "description": "the metrics in Prometheus' text format (version 0.0.4)",
-            "content": {CONTENT_TYPE: {"schema": {"type": "string"}}},
+            "content": {
+                CONTENT_TYPE: {
+                    "schema": {"type": "string"},
+                    "example": "# HELP loceval_http_requests_total HTTP requests answered, "
+                    "by method, route template and status.\n"
+                    "# TYPE loceval_http_requests_total counter\n"
+                    'loceval_http_requests_total{method="GET",route="/api/v1/datasets",'
+                    'status="200"} 4.0\n',
+                }
+            },
         }
     },
 )

@@ -1,13 +1,28 @@
-"""OpenAPI descriptions of the problem documents each route can answer with."""
+"""OpenAPI descriptions of the problem documents each route can answer with.
+
+Each status is shown in ``/docs`` with an answer the service gives under it (its ``type``,
+``title`` and ``status`` those of the error class that makes it), not one example for all:
+a 401 example is a 401 problem.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Final
 
-from service.errors import PROBLEM_JSON
-from service.schemas.evaluations import Problem
+from loceval.errors import LocevalError, ReaderError
+from service.errors import (
+    PROBLEM_JSON,
+    STORAGE_FULL_DETAIL,
+    AuthenticationError,
+    ConflictError,
+    InsufficientStorageError,
+    NotFoundError,
+    ServiceUnavailableError,
+    UploadError,
+    UploadTooLargeError,
+)
 
-__all__ = ["problems"]
+__all__ = ["EXAMPLES", "UNREADABLE", "not_found", "problem_example", "problems"]
 
 _DESCRIPTIONS = {
     400: "malformed request (not multipart, truncated body)",
@@ -20,15 +35,93 @@ _DESCRIPTIONS = {
     507: "the server's storage is full or nearly so: nothing was saved (the detail says "
     "what to free)",
 }
+_PROBLEM_SCHEMA: Final = {"$ref": "#/components/schemas/Problem"}
 
 
-def problems(*statuses: int) -> dict[int | str, dict[str, Any]]:
-    """Return the ``responses=`` entries of these statuses, as problem+json."""
+def problem_example(error: type[LocevalError], status: int, detail: str) -> dict[str, Any]:
+    """Return the problem document the service answers for ``error`` (``type`` its code)."""
+    return {"type": error.code, "title": error.__name__, "status": status, "detail": detail}
+
+
+def not_found(plural: str, row_id: str) -> dict[str, Any]:
+    """Return the 404 of a resource id that is not in the key's project."""
+    detail = f"No {plural[:-1]} {row_id!r} in this project; list them with GET /{plural}."
+    return problem_example(NotFoundError, 404, detail)
+
+
+_EVALUATION_ID: Final = "297a1e94-c86c-4e41-a598-ddbfae842cde"
+EXAMPLES: Final[dict[int, dict[str, Any]]] = {
+    400: problem_example(
+        UploadError,
+        400,
+        "Send the upload as multipart/form-data with the file in the field 'file' "
+        "(curl -F FIELD=@FILE).",
+    ),
+    401: problem_example(
+        AuthenticationError,
+        401,
+        "This endpoint needs an API key: send the header 'Authorization: Bearer KEY' "
+        "(loceval keys create --project NAME prints one).",
+    ),
+    404: not_found("evaluations", _EVALUATION_ID),
+    409: problem_example(
+        ConflictError,
+        409,
+        f"Evaluation {_EVALUATION_ID!r} is running and cannot be deleted until it has "
+        "finished; poll GET /evaluations/{id} and delete it once it has succeeded or failed.",
+    ),
+    413: problem_example(
+        UploadTooLargeError,
+        413,
+        "The upload is larger than the limit of 4,295 MB; split the recording, or raise "
+        "LOCEVAL_MAX_UPLOAD_BYTES on the server.",
+    ),
+    422: {
+        "type": "request.invalid",
+        "title": "RequestValidationError",
+        "status": 422,
+        "detail": "The request is not valid: query.limit: Input should be less than or equal "
+        "to 500.",
+        "errors": [
+            {
+                "loc": ["query", "limit"],
+                "msg": "Input should be less than or equal to 500",
+                "type": "less_than_equal",
+            }
+        ],
+    },
+    503: problem_example(
+        ServiceUnavailableError,
+        503,
+        "The metadata database cannot be reached (OperationalError); try again in a minute "
+        "(GET /readyz shows when it is back).",
+    ),
+    507: problem_example(InsufficientStorageError, 507, STORAGE_FULL_DETAIL),
+}
+"""An answer of each status, as ``/docs`` shows it (a route may show its own instead)."""
+
+UNREADABLE: Final = problem_example(
+    ReaderError, 422, "run.mcap: no topic '/odom'; the bag has /amcl_pose, /tf."
+)
+"""The 422 of a route that reads a recording: the input cannot be used."""
+
+
+def problems(
+    *statuses: int, keyed: bool = True, examples: dict[int, dict[str, Any]] | None = None
+) -> dict[int | str, dict[str, Any]]:
+    """Return the ``responses=`` entries of these statuses, as problem+json with an example.
+
+    Args:
+        statuses: the statuses besides 401 and 422.
+        keyed: the route needs an API key (it may answer 401); a route without one may
+            still answer 422 for a malformed request.
+        examples: this route's own example of a status, instead of :data:`EXAMPLES`'.
+    """
+    shown = {**EXAMPLES, **(examples or {})}
     return {
         status: {
-            "model": Problem,
             "description": _DESCRIPTIONS[status],
-            "content": {PROBLEM_JSON: {"schema": {"$ref": "#/components/schemas/Problem"}}},
+            "content": {PROBLEM_JSON: {"schema": _PROBLEM_SCHEMA, "example": shown[status]}},
         }
-        for status in (401, 422, *statuses)
+        for status in ((401,) if keyed else ()) + (422, *statuses)
     }

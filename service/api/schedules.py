@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Final
 
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
@@ -10,8 +10,9 @@ from fastapi.responses import FileResponse
 from service.api.deps import PathText, ProjectDep, RuntimeDep
 from service.api.downloads import download_response
 from service.api.links import api_url, public_base
-from service.api.responses import problems
+from service.api.responses import not_found, problem_example, problems
 from service.db import Schedule, get_owned
+from service.errors import NotReadyError
 from service.schedules import resource as schedules
 from service.schedules.resource import (
     SUMMARY_ARTIFACTS,
@@ -32,6 +33,18 @@ from service.schemas.schedules import (
 __all__ = ["router"]
 
 router = APIRouter(prefix="/schedules", tags=["schedules"])
+
+_SCHEDULE_ID: Final = "5b0f2a7e-3c41-4d8e-9a6b-1f2e3d4c5b6a"
+_EXAMPLES: Final = {404: not_found("schedules", _SCHEDULE_ID)}
+_RUN_ARTIFACT: Final = {
+    404: _EXAMPLES[404],
+    409: problem_example(
+        NotReadyError,
+        409,
+        "Run 'c7e9d1a3-6b2f-4e08-8d5c-2a4b6c8e0f13' is running, so it has no report yet; "
+        "poll the run until it succeeds.",
+    ),
+}
 
 
 @router.post(
@@ -61,7 +74,9 @@ def read_schedules(runtime: RuntimeDep, project_id: ProjectDep) -> SchedulesPubl
     return SchedulesPublic(items=[schedule_public(s) for s in rows], count=len(rows))
 
 
-@router.get("/{schedule_id}", response_model=SchedulePublic, responses=problems(404))
+@router.get(
+    "/{schedule_id}", response_model=SchedulePublic, responses=problems(404, examples=_EXAMPLES)
+)
 def read_schedule(
     schedule_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> SchedulePublic:
@@ -69,7 +84,11 @@ def read_schedule(
     return schedule_public(get_owned(runtime.sessions, Schedule, schedule_id, project_id))
 
 
-@router.patch("/{schedule_id}", response_model=SchedulePublic, responses=problems(404, 507))
+@router.patch(
+    "/{schedule_id}",
+    response_model=SchedulePublic,
+    responses=problems(404, 507, examples=_EXAMPLES),
+)
 def update_schedule(
     schedule_id: PathText, body: SchedulePatch, runtime: RuntimeDep, project_id: ProjectDep
 ) -> SchedulePublic:
@@ -82,7 +101,9 @@ def update_schedule(
 
 
 @router.post(
-    "/{schedule_id}/secret", response_model=ScheduleWithSecret, responses=problems(404, 507)
+    "/{schedule_id}/secret",
+    response_model=ScheduleWithSecret,
+    responses=problems(404, 507, examples=_EXAMPLES),
 )
 def rotate_secret(
     schedule_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
@@ -92,7 +113,9 @@ def rotate_secret(
 
 
 @router.delete(
-    "/{schedule_id}", status_code=status.HTTP_204_NO_CONTENT, responses=problems(404, 507)
+    "/{schedule_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    responses=problems(404, 507, examples=_EXAMPLES),
 )
 def delete_schedule(schedule_id: PathText, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Delete a schedule with its runs and their reports (the evaluations stay)."""
@@ -104,7 +127,7 @@ def delete_schedule(schedule_id: PathText, runtime: RuntimeDep, project_id: Proj
     "/{schedule_id}/run",
     status_code=status.HTTP_202_ACCEPTED,
     response_model=ScheduleRunPublic,
-    responses=problems(404, 507),
+    responses=problems(404, 507, examples=_EXAMPLES),
 )
 def run_schedule_now(
     schedule_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
@@ -116,7 +139,11 @@ def run_schedule_now(
     return run_public(run, public_base(runtime.settings))
 
 
-@router.get("/{schedule_id}/runs", response_model=ScheduleRunsPublic, responses=problems(404))
+@router.get(
+    "/{schedule_id}/runs",
+    response_model=ScheduleRunsPublic,
+    responses=problems(404, examples=_EXAMPLES),
+)
 def read_runs(
     schedule_id: PathText,
     runtime: RuntimeDep,
@@ -130,7 +157,9 @@ def read_runs(
 
 
 @router.get(
-    "/{schedule_id}/runs/{run_id}", response_model=ScheduleRunPublic, responses=problems(404)
+    "/{schedule_id}/runs/{run_id}",
+    response_model=ScheduleRunPublic,
+    responses=problems(404, examples=_EXAMPLES),
 )
 def read_run(
     schedule_id: PathText, run_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
@@ -148,7 +177,7 @@ def read_run(
             "description": "the summary report",
             "content": {"text/html": {}, "application/pdf": {}},
         },
-        **problems(404, 409),
+        **problems(404, 409, examples=_RUN_ARTIFACT),
     },
 )
 def read_run_artifact(
@@ -159,11 +188,11 @@ def read_run_artifact(
     project_id: ProjectDep,
 ) -> Response:
     """Download the summary report: summary.html or summary.pdf."""
-    key = schedules.run_artifact_path(runtime, project_id, schedule_id, run_id, name)
+    key, filename = schedules.run_artifact_path(runtime, project_id, schedule_id, run_id, name)
     return download_response(
         runtime.store,
         key,
         media_type=SUMMARY_ARTIFACTS[name],
-        filename=f"loceval-run-{run_id[:8]}-{name}",
+        filename=filename,
         inline=True,
     )

@@ -22,6 +22,7 @@ from exporters.summary.render import SUMMARY_PDF_TEMPLATE_NAME
 from loceval import __version__
 from loceval.core.display import shown_text
 from loceval.options import option
+from loceval.readers.source import TrajectoryFormat
 from service.schemas.evaluations import options_public
 
 __all__ = ["router"]
@@ -78,7 +79,9 @@ def index(request: Request) -> HTMLResponse:
         formats and the up-axis choice offers the option table's choices, and
         ``<body data-options>`` is the API's options document (``GET /api/v1/options``),
         from which the form takes its fields' bounds, choices and help and makes a field
-        for every option it does not place itself; so the page copies none of these.
+        for every option it does not place itself; ``<body data-formats>`` names the
+        readers' formats and their shapes, which the page offers when an upload is
+        unreadable; so the page copies none of these.
     """
     template = _environment(_templates_dir(request)).get_template(_PAGE)
     html = template.render(
@@ -87,6 +90,7 @@ def index(request: Request) -> HTMLResponse:
         artifacts=list(ARTIFACTS),
         building_formats=", ".join(s.lstrip(".").upper() for s in BUILDING_SUFFIXES),
         building_up=option("building_up"),
+        formats=[{"name": f.value, "shape": f.shape} for f in TrajectoryFormat],
         options=[item.model_dump() for item in options_public().items],
     )
     return HTMLResponse(

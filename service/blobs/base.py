@@ -25,6 +25,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
+from urllib.parse import quote
 
 if TYPE_CHECKING:
     from loceval.readers.rosbag import RemoteFile
@@ -43,6 +44,8 @@ __all__ = [
     "Stream",
     "Swept",
     "artifact_key",
+    "content_disposition",
+    "download_filename",
     "safe_filename",
     "sanitize_filename",
 ]
@@ -59,6 +62,7 @@ RUNS: Final = "runs"
 """The folder of schedule runs."""
 
 _UNSAFE: Final = re.compile(r"[^\w.\-+]+")
+_NOT_TOKEN: Final = re.compile(r"[^A-Za-z0-9.\-+_]+")
 _SUFFIX: Final = re.compile(r"\.[0-9A-Za-z]{1,10}$")
 MAX_FILENAME_BYTES: Final = 120
 """The longest stored file name, in UTF-8 bytes (file systems allow 255)."""
@@ -128,6 +132,42 @@ def _fit(name: str, max_bytes: int) -> str:
     suffix = match.group() if match else ""
     stem = name[: len(name) - len(suffix)].encode("utf-8")[: max_bytes - len(suffix)]
     return stem.decode("utf-8", "ignore") + suffix
+
+
+def download_filename(stem: str, artifact: str, *, default: str) -> str:
+    """Return the name a download is saved under: ``<stem>-<artifact>``.
+
+    Two evaluations' ``report.pdf`` saved into one folder must not take each other's name,
+    so the file is named after what it came from (``fr2_desk_ORB-report.pdf``).
+
+    Args:
+        stem: what the file came from, in words (an evaluation's estimates, a schedule); made
+            safe like an upload's name (:func:`safe_filename`), letters of every script kept.
+        artifact: the artifact's own name (``report.pdf``).
+        default: the stem when nothing usable is left of ``stem`` (an id).
+    """
+    room = MAX_FILENAME_BYTES - len(artifact.encode("utf-8")) - 1
+    safe = _fit(safe_filename(stem.replace(" ", "_"), default=default), room).strip("._-")
+    return f"{safe or default}-{artifact}"
+
+
+def content_disposition(filename: str, *, inline: bool) -> str:
+    """Return the ``Content-Disposition`` of a download saved as ``filename`` (RFC 6266).
+
+    ``filename=`` carries an ASCII form of the name (accents dropped, other characters
+    ``_``); a name that is not ASCII adds it as ``filename*=UTF-8''...`` (RFC 8187), which
+    browsers prefer. The value is ASCII, so a presigned URL can ask the bucket for it too.
+
+    Args:
+        filename: the name, as :func:`download_filename` made it (no quotes, no folders).
+        inline: shown in the browser rather than saved.
+    """
+    kind = "inline" if inline else "attachment"
+    plain = unicodedata.normalize("NFKD", filename).encode("ascii", "ignore").decode("ascii")
+    plain = _NOT_TOKEN.sub("_", plain) or "download"
+    if plain == filename:
+        return f'{kind}; filename="{plain}"'
+    return f"{kind}; filename=\"{plain}\"; filename*=UTF-8''{quote(filename, safe='')}"
 
 
 @dataclass(frozen=True, slots=True)

@@ -51,6 +51,7 @@ from service.blobs.base import (
     Stream,
     Swept,
     artifact_key,
+    content_disposition,
 )
 from service.blobs.cache import InputCache
 from service.blobs.lease import LEASE_S, Lease, claim_slot
@@ -320,7 +321,7 @@ class S3Blobs(Blobs):
     def download(self, key: str, *, media_type: str, filename: str, inline: bool) -> Download:
         """See :meth:`Blobs.download`: a presigned URL, or the object streamed through."""
         if self.redirect_s:
-            disposition = f'{"inline" if inline else "attachment"}; filename="{filename}"'
+            disposition = content_disposition(filename, inline=inline)
             with store_errors():
                 url = self.client.generate_presigned_url(
                     "get_object",

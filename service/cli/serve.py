@@ -29,18 +29,21 @@ def run_serve(args: argparse.Namespace) -> int:
     from service.settings import get_settings  # noqa: PLC0415
 
     settings = _settings(get_settings)
+    host: str = args.host if args.host is not None else settings.host
+    port: int = args.port if args.port is not None else settings.port
+    # links follow the address served on, unless LOCEVAL_PUBLIC_URL says otherwise
+    settings = settings.model_copy(update={"host": host, "port": port})
     runtime = _open_runtime(create_runtime, settings)
     with runtime.sessions() as session:
         key = bootstrap(session)
     if key is not None:
         print(f"API key for project 'default' (shown once): {key}", flush=True)  # noqa: T201
     app = create_app(settings, runtime=runtime, consumer=not args.no_consumer)
-    host: str = args.host if args.host is not None else settings.host
-    port: int = args.port if args.port is not None else settings.port
     print(  # noqa: T201
         f"loceval {__version__}: http://{host}:{port}/ (data in "
         f"{settings.data_dir.resolve()}, {_blobs(runtime)}queue {settings.queue_url}; "
-        f"links start with {settings.public_url.rstrip('/')}/, set by LOCEVAL_PUBLIC_URL)",
+        f"links start with {settings.resolved_public_url.rstrip('/')}/, "
+        "set by LOCEVAL_PUBLIC_URL)",
         flush=True,
     )
     try:

@@ -17,7 +17,7 @@ from sqlalchemy.orm import Session, defer
 from exporters import ARTIFACTS
 from loceval.errors import InputError
 from service.blobs import artifact_key
-from service.blobs.base import EVALUATIONS
+from service.blobs.base import EVALUATIONS, download_filename
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, JobStatus, get_owned, utcnow
 from service.errors import (
     InvalidFieldsError,
@@ -44,11 +44,13 @@ from service.schemas.evaluations import (
     RangingCreate,
     RangingOptions,
     SourceRef,
+    SummaryRow,
 )
 from service.uploads.datasets import store_upload
 from service.uploads.multipart import ReceivedForm
 
 __all__ = [
+    "artifact_filename",
     "artifact_path",
     "check_options",
     "create_evaluation",
@@ -444,7 +446,9 @@ def evaluation_public(
     if shown and evaluation.artifacts is not None:
         artifacts = [
             ArtifactPublic(
-                **a, url=f"{base_url}api/v1/evaluations/{evaluation.id}/artifacts/{a['name']}"
+                **a,
+                url=f"{base_url}api/v1/evaluations/{evaluation.id}/artifacts/{a['name']}",
+                filename=artifact_filename(evaluation, a["name"]),
             )
             for a in evaluation.artifacts
         ]
@@ -491,8 +495,24 @@ def list_evaluations(
     return rows, int(count or 0)
 
 
-def artifact_path(runtime: Runtime, project_id: str, evaluation_id: str, name: str) -> str:
-    """Return the blob key of an evaluation's artifact.
+def artifact_filename(evaluation: Evaluation, name: str) -> str:
+    """Return the name a download of an artifact is saved under: ``<evaluation>-<name>``.
+
+    An evaluation is named by its estimates (the names its summary gives them, else the
+    request's), ``+`` between several; one with no estimate names (a ranging evaluation's
+    request names none) by its id.
+    """
+    names = [SummaryRow.model_validate(row).name for row in evaluation.summary or ()]
+    if not any(names):
+        names = [SourceRef.model_validate(ref).name for ref in evaluation.request["estimates"]]
+    stem = "+".join(dict.fromkeys(n for n in names if n))
+    return download_filename(stem, name, default=evaluation.id)
+
+
+def artifact_path(
+    runtime: Runtime, project_id: str, evaluation_id: str, name: str
+) -> tuple[str, str]:
+    """Return the blob key of an evaluation's artifact and the name it is saved under.
 
     Raises:
         NotFoundError: no such evaluation, artifact name, or file (its formats left it out).
@@ -519,7 +539,7 @@ def artifact_path(runtime: Runtime, project_id: str, evaluation_id: str, name: s
     if not runtime.store.exists(key):
         msg = f"Evaluation {evaluation_id!r} did not write {name!r} (its formats left it out)."
         raise NotFoundError(msg)
-    return key
+    return key, artifact_filename(evaluation, name)
 
 
 def evaluate_form(runtime: Runtime, project_id: str, form: ReceivedForm) -> Evaluation:

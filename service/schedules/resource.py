@@ -25,7 +25,7 @@ from sqlalchemy.exc import IntegrityError
 
 from loceval.errors import InputError
 from service.blobs import artifact_key
-from service.blobs.base import RUNS
+from service.blobs.base import RUNS, download_filename
 from service.db import (
     ACTIVE_STATUSES,
     Dataset,
@@ -65,6 +65,7 @@ __all__ = [
     "list_schedules",
     "next_fire",
     "rotate_secret",
+    "run_artifact_filename",
     "run_artifact_path",
     "run_public",
     "schedule_public",
@@ -289,7 +290,12 @@ def run_public(run: ScheduleRun, base_url: str) -> ScheduleRunPublic:
     artifacts = None
     if run.status == JobStatus.SUCCEEDED and run.artifacts is not None:
         prefix = f"{base_url}api/v1/schedules/{run.schedule_id}/runs/{run.id}/artifacts/"
-        artifacts = [ArtifactPublic(**a, url=prefix + a["name"]) for a in run.artifacts]
+        artifacts = [
+            ArtifactPublic(
+                **a, url=prefix + a["name"], filename=run_artifact_filename(run, a["name"])
+            )
+            for a in run.artifacts
+        ]
     return ScheduleRunPublic.model_validate(
         {
             "id": run.id,
@@ -476,10 +482,17 @@ def get_run(runtime: Runtime, project_id: str, schedule_id: str, run_id: str) ->
     return run
 
 
+def run_artifact_filename(run: ScheduleRun, name: str) -> str:
+    """Return the name a run's report is saved under: ``run-<day due>-<id>-<name>``."""
+    return download_filename(f"run-{run.due_at:%Y-%m-%d}-{run.id[:8]}", name, default=run.id)
+
+
 def run_artifact_path(
     runtime: Runtime, project_id: str, schedule_id: str, run_id: str, name: str
-) -> str:
-    """Return the blob key of a run's summary report (summary.html or summary.pdf).
+) -> tuple[str, str]:
+    """Return the blob key of a run's summary report and the name it is saved under.
+
+    The reports are summary.html and summary.pdf.
 
     Raises:
         NotFoundError: no such run, report name, or file (the schedule's formats left it out).
@@ -499,4 +512,4 @@ def run_artifact_path(
     if not runtime.store.exists(key):
         msg = f"Run {run_id!r} did not write {name!r} (the schedule's formats left it out)."
         raise NotFoundError(msg)
-    return key
+    return key, run_artifact_filename(run, name)

@@ -380,7 +380,7 @@ def _render(
 
 def webhook_payload(runtime: Runtime, run: ScheduleRun, schedule: Schedule) -> dict[str, Any]:
     """Return the JSON a webhook receives: the run, its links and each recording's verdicts."""
-    base = runtime.settings.public_url.rstrip("/")
+    base = runtime.settings.resolved_public_url.rstrip("/")
     run_url = f"{base}/api/v1/schedules/{schedule.id}/runs/{run.id}"
     return {
         "event": "schedule.run.finished",

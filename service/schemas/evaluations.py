@@ -477,6 +477,10 @@ class ArtifactPublic(BaseModel):
     media_type: str
     size_bytes: int
     url: str
+    filename: str = Field(
+        description="the name a download is saved under (its Content-Disposition): the "
+        "evaluation's estimates' names, or its id, then the artifact's name"
+    )
 
 
 class EvaluationPublic(BaseModel):
@@ -533,6 +537,11 @@ class OptionPublic(BaseModel):
     )
     auto: bool = Field(description='the value may also be "auto" (estimated from the data)')
     bounds: str = Field(description="the allowed range in words", examples=["more than 0"])
+    bounds_hint: str = Field(
+        description="the bounds a person would type, for a form's hint (1e+09 left out)",
+        examples=["at least 0"],
+    )
+    label: str = Field(description="the option's short name on a form", examples=["Max gap (s)"])
 
 
 class OptionsPublic(BaseModel):

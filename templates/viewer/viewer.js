@@ -149,6 +149,22 @@
         : ""),
     });
     root.append(head, bar, stage, el("div", { className: "lv-time" }, play, slider, readout), info);
+    // The hint is never cut: its line takes the hint's height (again when the width changes),
+    // and keeps it for a point's figures shown there later, so they do not resize the view.
+    const hint = info.textContent;
+    let infoWidth = -1;
+    function fitInfo() {
+      if (info.clientWidth === infoWidth) return;
+      infoWidth = info.clientWidth;
+      const shown = info.textContent;
+      info.style.height = "";
+      info.textContent = hint;
+      const needed = info.scrollHeight + (info.offsetHeight - info.clientHeight);
+      info.textContent = shown;
+      info.style.height = `${Math.max(needed, info.offsetHeight)}px`;
+    }
+    fitInfo();
+    new ResizeObserver(fitInfo).observe(root);
     if (beyond.length) drawStretchList();
 
     // --- three.js ----------------------------------------------------------------------

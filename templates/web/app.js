@@ -24,6 +24,8 @@
   // key, kind, default, bounds, choices and help of every option, from the one table the
   // API's schema and the CLI's flags are made from. The form's fields take their bounds,
   // choices and help from it, and an option no field of the page holds gets one of its own.
+  // The readers' formats and what each file holds, from the server (<body data-formats>).
+  const READ_FORMATS = JSON.parse(document.body.dataset.formats || "[]");
   const OPTION_DOCS = new Map(JSON.parse(document.body.dataset.options || "[]").map((o) => [o.key, o]));
   const FORM_GROUPS = new Set(["evaluation", "reading", "export", "map"]); // not ranging's
 
@@ -322,6 +324,27 @@
     return `The server answered ${status} ${statusText}.`.replace(/ \.$/, ".");
   }
 
+  /**
+   * What the page says when the server refuses an upload. An unreadable file's problem ends
+   * in advice for the command line (a format prefix such as tum:FILE, a column mapping),
+   * which the page has no field for: the page keeps what is wrong and says what it reads.
+   */
+  function uploadProblemText(status, statusText, bodyText) {
+    let body = null;
+    try {
+      body = JSON.parse(bodyText);
+    } catch {
+      body = null;
+    }
+    if (!body || body.type !== "input.unreadable" || typeof body.detail !== "string") {
+      return problemText(status, statusText, bodyText);
+    }
+    const cli = /;[^;]*(prefix|e\.g\. [a-z]+:|map it)/;
+    const what = body.detail.search(cli) > 0 ? body.detail.slice(0, body.detail.search(cli)) : body.detail.replace(/\.$/, "");
+    const formats = READ_FORMATS.map((f) => f.shape).join("; ");
+    return `${what}. The page reads these formats: ${formats}. Save or export the recording in one of them and upload it again.`;
+  }
+
   function authHeaders() {
     return { Authorization: `Bearer ${state.key}` };
   }
@@ -502,7 +525,7 @@
           item.setState("error", "Not uploaded", UNAUTHORIZED);
           onUnauthorized();
         } else {
-          item.setState("error", "Not uploaded", problemText(status, xhr.statusText, xhr.responseText));
+          item.setState("error", "Not uploaded", uploadProblemText(status, xhr.statusText, xhr.responseText));
         }
         resolve();
       };
@@ -840,9 +863,8 @@
       if (!FORM_GROUPS.has(doc.group) || optionField(doc.key)) continue;
       const input = otherOptionInput(doc);
       if (!input) continue;
-      const words = doc.words.replace(/^the /, "");
-      const label = words.charAt(0).toUpperCase() + words.slice(1);
-      const hint = doc.bounds || (doc.kind === "file" ? "an uploaded dataset" : "");
+      const label = doc.label; // a short name; the help is the field's tooltip
+      const hint = doc.bounds_hint || (doc.kind === "file" ? "an uploaded dataset" : "");
       fields.push(el("label", {
         className: doc.kind === "switch" ? "field field-switch" : "field",
         title: doc.help, dataset: { option: doc.key, label, kind: doc.kind, generated: "" },
@@ -1131,8 +1153,9 @@
 
   function renderRadioSelects() {
     const { anchors, ranges } = radioChoices();
-    fillChoice($("ranging-anchors-select"), anchors, "Upload an anchors table (id,x,y,z)", "— choose the anchors —");
-    fillChoice($("ranging-ranges-select"), ranges, "Upload ranges (t,anchor_id,range_m) or a bag", "— choose the ranges —");
+    // short choices (a select cuts its text); the fields' labels say what to upload
+    fillChoice($("ranging-anchors-select"), anchors, "— none uploaded yet —", "— choose the anchors —");
+    fillChoice($("ranging-ranges-select"), ranges, "— none uploaded yet —", "— choose the ranges —");
   }
 
   /** The tag height applies to 2D positioning only. */
@@ -1533,7 +1556,7 @@
       if (inTab && tab && !tab.closed) {
         tab.location.href = url;
       } else if (!inTab || !window.open(url, "_blank")) {
-        const link = el("a", { href: url, download: artifact.name, hidden: true });
+        const link = el("a", { href: url, download: artifact.filename || artifact.name, hidden: true });
         document.body.append(link);
         link.click();
         link.remove();

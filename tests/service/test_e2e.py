@@ -166,7 +166,7 @@ def _check_all_artifacts(client: httpx2.Client, evaluation: dict[str, Any], tmp_
         media_type = answer.headers["content-type"].split(";")[0].strip()
         assert media_type == ARTIFACTS[name].media_type, name
         disposition = answer.headers["content-disposition"]
-        assert f'filename="loceval-{evaluation["id"][:8]}-{name}"' in disposition
+        assert f'filename="{artifact["filename"]}"' in disposition
         size = len(answer.content)
         assert int(answer.headers["content-length"]) == artifact["size_bytes"] == size
         _check_artifact(name, answer, evaluation, tmp_path)

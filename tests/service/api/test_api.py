@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from service.db import Evaluation, EvaluationStatus
+from service.jobs import evaluations
 from tests import bagfactory
 from tests.factories import (
     ROVER_URDF,
@@ -495,6 +496,26 @@ def test_selectors_are_checked_before_queueing(
 # --- artifacts -------------------------------------------------------------------------
 
 
+def test_downloads_are_named_after_the_evaluation(api: Api, datasets: tuple[str, str]) -> None:
+    """Each file saves as <estimates>-<name> (RFC 6266 filename* for non-ASCII), not report.pdf."""
+    reference, estimate = datasets
+    body = evaluation_body(reference, estimate, estimate, options=CHEAP)
+    body["estimates"][1]["name"] = "Büro 2"
+    evaluation = api.evaluate(body).json()
+    assert evaluation["status"] == "succeeded", evaluation["error"]
+    (artifact,) = evaluation["artifacts"]
+    assert artifact["filename"] == "slam+Büro_2-result.json"
+    response = api.client.get(artifact["url"], headers=api.headers)
+    assert response.headers["content-disposition"] == (
+        'attachment; filename="slam+Buro_2-result.json"; '
+        "filename*=UTF-8''slam%2BB%C3%BCro_2-result.json"
+    )
+    # without estimate names (their summary not written yet) the id names the files
+    assert evaluations.artifact_filename(
+        Evaluation(id="e-1", request={"estimates": [{"dataset_id": "d"}]}), "report.pdf"
+    ) == ("e-1-report.pdf")
+
+
 @pytest.mark.pdf
 def test_all_artifacts(api: Api, datasets: tuple[str, str]) -> None:
     """With the default formats every artifact is listed and served with its media type."""
@@ -515,15 +536,13 @@ def test_all_artifacts(api: Api, datasets: tuple[str, str]) -> None:
     }
     listed = {a["name"]: a for a in evaluation["artifacts"]}
     assert list(listed) == list(expected)
-    prefix = evaluation["id"][:8]
     for name, (media_type, disposition) in expected.items():
         assert listed[name]["media_type"] == media_type
+        assert listed[name]["filename"] == f"slam-{name}"  # named after the estimate
         response = api.client.get(listed[name]["url"], headers=api.headers)
         assert response.status_code == 200, name
         assert response.headers["content-type"].split(";")[0] == media_type
-        assert response.headers["content-disposition"] == (
-            f'{disposition}; filename="loceval-{prefix}-{name}"'
-        )
+        assert response.headers["content-disposition"] == (f'{disposition}; filename="slam-{name}"')
         assert len(response.content) == listed[name]["size_bytes"]
         on_disk = api.data_dir / "evaluations" / evaluation["id"] / "artifacts" / name
         assert response.content == on_disk.read_bytes()

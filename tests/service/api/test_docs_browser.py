@@ -10,6 +10,7 @@ page makes must go to the service itself. Screenshots are left in the test's tmp
 from __future__ import annotations
 
 import hashlib
+import json
 import re
 from pathlib import Path
 from typing import Any
@@ -120,3 +121,42 @@ def test_docs_without_the_key_shows_the_servers_401(page: Any, live_server_modul
     block.get_by_role("button", name="Execute").click()
     live = block.locator(".live-responses-table .response .response-col_status")
     expect(live).to_contain_text("401", timeout=30_000)
+
+
+@pytest.mark.slow
+def test_docs_shows_real_answers_under_each_status(
+    page: Any, live_server_module: Any, tmp_path: Path
+) -> None:
+    """Each status's example on the page is of that status; none is "string" or random junk."""
+    from tests.service.api.test_docs_examples import _strings, looks_random
+
+    page.goto(f"{live_server_module.url}/docs")
+    page.wait_for_selector(".opblock")
+    controls = page.locator(".opblock-summary-control")
+    for k in range(controls.count()):
+        controls.nth(k).click()
+    shown = page.locator("tr.response pre.example code")
+    shown.first.wait_for()
+    page.wait_for_timeout(1000)  # the last blocks' examples
+    page.screenshot(path=str(tmp_path / "docs-examples.png"), full_page=True)
+    rows = page.evaluate(
+        """() => Array.from(document.querySelectorAll('.opblock')).flatMap(op => {
+          const path = op.querySelector('.opblock-summary-path').dataset.path;
+          return Array.from(op.querySelectorAll('tr.response')).map(r => [path,
+            r.dataset.code, (r.querySelector('pre.example code') || {}).textContent || null]);
+        })"""
+    )
+    examples = [(path, code, text) for path, code, text in rows if text]
+    assert len(examples) >= 100
+    for path, code, text in examples:
+        where = f"{path} {code}"
+        assert '"additionalProp1"' not in text, where
+        assert '"string"' not in text, where
+        if not text.lstrip().startswith(("{", "[")):  # the metrics' text
+            assert not looks_random(text), where
+            continue
+        document = json.loads(text)
+        for words in _strings(document):
+            assert not looks_random(words), (where, words)
+        if isinstance(document, dict) and code.startswith(("4", "5")) and "status" in document:
+            assert document["status"] == int(code), where

@@ -224,11 +224,11 @@ def _check_artifacts(page: Any, evaluation: Any, tmp_path: Path) -> None:
     assert ESTIMATE_NAME in html
     assert "ATE" in html
 
-    # Other artifacts download under their own names.
+    # Other artifacts download under names of their own: the evaluation's, then the file's.
     with page.expect_download() as download_info:
         page.click("#artifact-list button[data-artifact='result.json']")
     download = download_info.value
-    assert download.suggested_filename == "result.json"
+    assert download.suggested_filename == "rgbdslam_run-result.json"
     saved = tmp_path / "result.json"
     download.save_as(saved)
     assert saved.stat().st_size > 0

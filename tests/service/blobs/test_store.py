@@ -16,7 +16,8 @@ from starlette.requests import Request
 
 from service.api.downloads import download_response
 from service.api.multipart import receive_multipart
-from service.blobs import artifact_key
+from service.blobs import LocalBlobs, artifact_key
+from service.blobs.base import download_filename
 from service.blobs.s3 import PART_BYTES, S3Blobs
 from service.errors import InsufficientStorageError, UploadError
 from tests.service.blobs.conftest import SeaweedFS, object_keys, open_multipart_uploads
@@ -245,6 +246,47 @@ def test_download_streams_or_redirects(bucket: str, s3_env: dict[str, str], tmp_
     assert fetched.status_code == 200
     assert fetched.content == b"<p>hi</p>"
     assert fetched.headers["content-disposition"] == 'inline; filename="s.html"'
+
+
+NAMED = [
+    ("fr2_desk_ORB", 'attachment; filename="fr2_desk_ORB-report.pdf"'),
+    (
+        "Müller Büro 東",
+        (
+            'attachment; filename="Muller_Buro_-report.pdf"; '
+            "filename*=UTF-8''M%C3%BCller_B%C3%BCro_%E6%9D%B1-report.pdf"
+        ),
+    ),
+]
+
+
+@pytest.mark.parametrize(("stem", "header"), NAMED, ids=["ascii", "non-ascii"])
+def test_downloads_are_named_after_their_evaluation_by_folder_and_bucket(
+    bucket: str, s3_env: dict[str, str], tmp_path: Path, stem: str, header: str
+) -> None:
+    """Folder, bucket stream and presigned redirect: the same RFC 6266 attachment name."""
+    del s3_env
+    import httpx2
+
+    filename = download_filename(stem, "report.pdf", default="e1")
+    folder = LocalBlobs(tmp_path / "folder")
+    stores = [folder, _store(bucket, tmp_path / "a"), _store(bucket, tmp_path / "b", redirect_s=60)]
+    for store in stores:
+        staging = store.job_staging_dir("evaluations", "e1")
+        staging.mkdir(exist_ok=True)
+        (staging / "report.pdf").write_bytes(b"%PDF-1.7 x")
+        store.publish_job_artifacts("evaluations", "e1", staging)
+        key = artifact_key("evaluations", "e1", "report.pdf")
+        answer = download_response(
+            store, key, media_type="application/pdf", filename=filename, inline=False
+        )
+        if answer.status_code == 307:  # the bucket answers the presigned URL with the name
+            fetched = httpx2.get(answer.headers["location"])
+            assert fetched.content == b"%PDF-1.7 x"
+            assert fetched.headers["content-disposition"] == header
+        else:
+            assert answer.headers["content-disposition"] == header, store.kind
+    folder.close()
 
 
 def _dataset(store: S3Blobs, data: bytes, project: str = "p") -> tuple[str, str]:
