@@ -80,7 +80,8 @@ def test_a_camera_bag_streams_in_whole_and_is_evaluated_from_a_fraction_of_it(
     """Upload through the API: the object is the file, byte for byte, with its SHA-256.
     Evaluate it from the bucket: the store answers well under a tenth of the bag (its
     tf and poses, a few index records; never the images), nothing is copied into the
-    input cache, and the numbers equal the same evaluation from a data folder."""
+    input cache, and the numbers equal the same evaluation from a data folder. Deleting
+    the dataset deletes its held messages with it."""
     mcap = _camera_bag(tmp_path, rng)
     content = mcap.read_bytes()
     assert len(content) > IMAGES * IMAGE_SIDE**2 * 3  # mostly images
@@ -99,6 +100,10 @@ def test_a_camera_bag_streams_in_whole_and_is_evaluated_from_a_fraction_of_it(
         fetched = gate.answered_bytes - before
         cache = api.data_dir / "cache"
         assert [p for p in cache.rglob("*") if p.is_file() and p.name != ".lock"] == []
+        deleted = api.client.delete(f"/api/v1/datasets/{dataset['id']}", headers=api.headers)
+        assert deleted.status_code == 204, deleted.text
+        assert object_keys(seaweedfs, bucket, "site/uploads/") == []
+        assert object_keys(seaweedfs, bucket, "site/held/") == []  # gone with its bag
     assert fetched < len(content) / 10, f"{fetched} of {len(content)} bytes fetched"
     with open_api(tmp_path / "folder", min_free_bytes=0) as api:  # the disk is not the point
         from_folder = _evaluate(api, api.dataset("cam.mcap", content)["id"])
