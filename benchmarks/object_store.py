@@ -17,9 +17,13 @@ It uploads one generated ROS 2 MCAP bag (``benchmarks.bags.generate_bag``: tf at
 640x480 images at 15 Hz; cached in ``benchmarks/_work/object_store``), streaming it from disk,
 then evaluates ``tf:odom:base_link`` against ``tf:map:base_link`` of it (result.json only),
 and prints per backend: upload time and throughput, the job's time (queue to succeeded,
-including the worker's fetch into its cache), the peak RSS growth of the API's and the
-worker's process trees (the job's own process included) over their idle baseline, and the
+including whatever the worker fetches from the store), the peak RSS growth of the API's and
+the worker's process trees (the job's own process included) over their idle baseline, and the
 CPU seconds the API's process tree and SeaweedFS spent during the upload.
+
+With the bucket, the same run also uploads the bag with a bare boto3 client
+(``upload_file``, default ``TransferConfig``) into the same store, before the API's upload in
+odd rounds and after it in even ones, so the two meet the same store and machine load.
 
 SeaweedFS runs on the same machine: it takes about 19-21 CPU seconds per 2 GB (a bare boto3
 upload of the bag, no loceval involved, takes 11 s on two vCPUs), so on a small machine the
@@ -32,7 +36,9 @@ The runs are interleaved (every code and backend once per round, ``--repeats`` r
 the machine's load changes over minutes, and the medians are printed.
 
 Targets (issue 26): the bucket's upload throughput at least half the folder's; memory flat in
-the file's size (the API's growth well under the file's size).
+the file's size (the API's growth well under the file's size). Issue 40: the API's upload into
+the bucket at least 0.8 of the bare boto3 upload's throughput, and the evaluation job from the
+bucket within 1.5x of the same job from the folder; both ratios are printed from the medians.
 """
 
 from __future__ import annotations
