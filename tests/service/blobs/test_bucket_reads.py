@@ -183,3 +183,47 @@ def test_a_connection_dropped_mid_upload_leaves_no_object_and_no_open_upload(
             assert client.get("/api/v1/datasets").json()["count"] == 0
     finally:
         server.stop()
+
+
+def test_a_job_process_reads_the_held_messages_in_one_request(
+    bucket: str, s3_env: dict[str, str], rng: np.random.Generator, tmp_path: Path
+) -> None:
+    """job_input's file, pickled into a job's process as the worker does: the wanted tf and
+    pose messages come from the held record (one GET of it), equal to the local file's."""
+    import pickle
+
+    from loceval.readers._mcap import read_indexed_messages
+    from loceval.readers.rosbag import McapScan
+    from service.blobs.ranged import ObjectFile
+    from service.blobs.s3 import S3Blobs
+
+    del s3_env
+    content = _camera_bag(tmp_path, rng).read_bytes()
+    store = S3Blobs(f"s3://{bucket}/site", tmp_path / "w", cache_bytes=1 << 30, min_free_bytes=0)
+    try:
+        incoming = store.open_incoming()
+        scan = McapScan()
+        for start in range(0, len(content), 1 << 20):
+            incoming.write(content[start : start + (1 << 20)])
+            scan.feed(content[start : start + (1 << 20)])
+        incoming.commit()
+        incoming.held = scan.finish()
+        assert incoming.held is not None
+        sha = hashlib.sha256(content).hexdigest()
+        with store.publishing("d"):
+            key = store.publish_upload(
+                incoming, project_id="p", dataset_id="d", filename="cam.mcap", sha256=sha
+            )
+        store.ranged_bytes = 0
+        remote = store.job_input(key, filename="cam.mcap", sha256=sha, size=len(content))
+        assert isinstance(remote, ObjectFile)
+        in_job = pickle.loads(pickle.dumps(remote))  # noqa: S301  (our own bytes: the job's copy)
+        wanted = [("/tf", bf.TF), ("/gt", bf.POSE)]
+        local = tmp_path / "cam.mcap"
+        local.write_bytes(content)
+        before = in_job.fetched_bytes
+        assert read_indexed_messages(in_job, wanted) == read_indexed_messages(local, wanted)
+        assert in_job.requests == 0  # no ranged read: the held record answered
+        assert 0 < in_job.fetched_bytes - before == in_job.held_bytes < len(content) / 50
+    finally:
+        store.close()
