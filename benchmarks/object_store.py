@@ -17,9 +17,13 @@ It uploads one generated ROS 2 MCAP bag (``benchmarks.bags.generate_bag``: tf at
 640x480 images at 15 Hz; cached in ``benchmarks/_work/object_store``), streaming it from disk,
 then evaluates ``tf:odom:base_link`` against ``tf:map:base_link`` of it (result.json only),
 and prints per backend: upload time and throughput, the job's time (queue to succeeded,
-including the worker's fetch into its cache), the peak RSS growth of the API's and the
-worker's process trees (the job's own process included) over their idle baseline, and the
+including whatever the worker fetches from the store), the peak RSS growth of the API's and
+the worker's process trees (the job's own process included) over their idle baseline, and the
 CPU seconds the API's process tree and SeaweedFS spent during the upload.
+
+With the bucket, the same run also uploads the bag with a bare boto3 client
+(``upload_file``, default ``TransferConfig``) into the same store, before the API's upload in
+odd rounds and after it in even ones, so the two meet the same store and machine load.
 
 SeaweedFS runs on the same machine: it takes about 19-21 CPU seconds per 2 GB (a bare boto3
 upload of the bag, no loceval involved, takes 11 s on two vCPUs), so on a small machine the
@@ -32,7 +36,9 @@ The runs are interleaved (every code and backend once per round, ``--repeats`` r
 the machine's load changes over minutes, and the medians are printed.
 
 Targets (issue 26): the bucket's upload throughput at least half the folder's; memory flat in
-the file's size (the API's growth well under the file's size).
+the file's size (the API's growth well under the file's size). Issue 40: the API's upload into
+the bucket at least 0.8 of the bare boto3 upload's throughput, and the evaluation job from the
+bucket within 1.5x of the same job from the folder; both ratios are printed from the medians.
 """
 
 from __future__ import annotations
@@ -51,12 +57,13 @@ from pathlib import Path
 from typing import Any
 
 import httpx2 as httpx
+from boto3.s3.transfer import TransferConfig
 
 from benchmarks.upload_load import RssSampler, _descendants, prepare_recordings
 from tests.harness.databases import SHARED_REDIS, empty_redis_database, fresh_database
 from tests.harness.ports import free_port
 from tests.harness.processes import ServiceProcess, wait_ready
-from tests.harness.seaweedfs import running_seaweedfs
+from tests.harness.seaweedfs import SeaweedFS, running_seaweedfs
 
 POSTGRES = "host=127.0.0.1 port=5432 user=postgres dbname=postgres connect_timeout=5"
 REDIS = SHARED_REDIS
@@ -78,6 +85,9 @@ class Figures:
     status: str
     api_cpu_s: float = 0.0
     store_cpu_s: float = 0.0
+    boto3_s: float | None = None
+    """A bare boto3 upload of the same file into the same store (s3 only), same run."""
+    boto3_store_cpu_s: float = 0.0
 
 
 def _loceval() -> str:
@@ -113,6 +123,22 @@ def _peak(sampler: RssSampler, start: float, end: float) -> float:
     return max((s.rss_mib for s in window), default=0.0)
 
 
+def _boto3_upload(store: SeaweedFS, bucket: str, bag: Path) -> tuple[float, float]:
+    """Upload ``bag`` with a bare boto3 client (default TransferConfig).
+
+    Returns:
+        The seconds it took and the store's CPU seconds meanwhile.
+    """
+    client = store.client()
+    cpu = _cpu_s(store.process.pid)
+    start = time.perf_counter()
+    client.upload_file(str(bag), bucket, f"boto3/{bag.name}", Config=TransferConfig())
+    elapsed = time.perf_counter() - start
+    cpu = _cpu_s(store.process.pid) - cpu
+    client.delete_object(Bucket=bucket, Key=f"boto3/{bag.name}")
+    return elapsed, cpu
+
+
 def _evaluate(http: httpx.Client, dataset: str) -> tuple[float, str]:
     """Evaluate the bag's two tf chains (result.json only); return when it ended and how."""
     body: dict[str, Any] = {
@@ -127,13 +153,37 @@ def _evaluate(http: httpx.Client, dataset: str) -> tuple[float, str]:
     evaluation_id = created.json()["id"]
     status = "queued"
     while status not in {"succeeded", "failed"}:
-        time.sleep(0.5)
+        time.sleep(0.1)
         status = http.get(f"/api/v1/evaluations/{evaluation_id}").json()["status"]
     return time.perf_counter(), status
 
 
+def _bucket(
+    stack: contextlib.ExitStack, folder: Path, env: dict[str, str]
+) -> tuple[SeaweedFS, str]:
+    """Start a SeaweedFS for the run, make a bucket, point ``env`` at it; return both."""
+    store = stack.enter_context(
+        running_seaweedfs(
+            folder / "seaweedfs",
+            volume_size_mb=1024,
+            volume_max=200,
+            credentials=_CREDENTIALS,
+            own_session=True,
+        )
+    )
+    bucket = store.new_bucket("bench")
+    env.update(store.env(), LOCEVAL_BLOB_URL=f"s3://{bucket}/bench")
+    return store, bucket
+
+
 def run_backend(
-    backend: str, bag: Path, work: Path, *, code: Path | None = None, evaluate: bool = True
+    backend: str,
+    bag: Path,
+    work: Path,
+    *,
+    code: Path | None = None,
+    evaluate: bool = True,
+    boto3_first: bool = True,
 ) -> Figures:
     """Upload and evaluate ``bag`` with one backend; return the figures.
 
@@ -143,6 +193,8 @@ def run_backend(
         work: a folder for the data folders, logs and SeaweedFS.
         code: run the service from this source tree (None: the installed one).
         evaluate: also evaluate it (else only the upload is timed).
+        boto3_first: with the bucket, the bare boto3 upload goes before the API's (else
+            after it; the rounds alternate, so neither always meets a fresher store).
     """
     folder = work / backend
     shutil.rmtree(folder, ignore_errors=True)
@@ -162,19 +214,9 @@ def run_backend(
         if code is not None:
             env["PYTHONPATH"] = str(code.resolve())
         api_dir, worker_dir = folder / "api", folder / "api"
-        store_pid: int | None = None
-        if backend == "s3":
-            store = stack.enter_context(
-                running_seaweedfs(
-                    folder / "seaweedfs",
-                    volume_size_mb=1024,
-                    volume_max=200,
-                    credentials=_CREDENTIALS,
-                    own_session=True,
-                )
-            )
-            store_pid = store.process.pid
-            env.update(store.env(), LOCEVAL_BLOB_URL=f"s3://{store.new_bucket('bench')}/bench")
+        store, bucket = _bucket(stack, folder, env) if backend == "s3" else (None, "")
+        store_pid = None if store is None else store.process.pid
+        if store is not None:
             worker_dir = folder / "worker"
         port = free_port()
         url = f"http://127.0.0.1:{port}"
@@ -208,6 +250,9 @@ def run_backend(
         stack.callback(worker_rss.stop)
         time.sleep(BASELINE_S + 3)  # the worker warms up its job process meanwhile
         idle_end = time.perf_counter()
+        boto3_s, boto3_cpu = None, 0.0
+        if store is not None and boto3_first:
+            boto3_s, boto3_cpu = _boto3_upload(store, bucket, bag)
         timeout = httpx.Timeout(connect=30.0, read=3600.0, write=3600.0, pool=30.0)
         headers = {"Authorization": f"Bearer {key}"}
         with httpx.Client(base_url=url, headers=headers, timeout=timeout) as http:
@@ -224,19 +269,52 @@ def run_backend(
                 msg = f"upload: {answer.status_code} {answer.text[:500]}"
                 raise RuntimeError(msg)
             dataset = answer.json()["id"]
-            finished, status = _evaluate(http, dataset) if evaluate else (uploaded, "uploaded")
+            if store is not None and not boto3_first:
+                boto3_s, boto3_cpu = _boto3_upload(store, bucket, bag)
+            evaluated = time.perf_counter()
+            finished, status = _evaluate(http, dataset) if evaluate else (evaluated, "uploaded")
         return Figures(
             backend,
             bag.stat().st_size,
             uploaded - start,
-            finished - uploaded,
+            finished - evaluated,
             _peak(api_rss, idle_end - BASELINE_S, idle_end),
             _peak(api_rss, start, uploaded),
             _peak(worker_rss, idle_end - BASELINE_S, idle_end),
-            _peak(worker_rss, uploaded, finished),
+            _peak(worker_rss, evaluated, finished),
             status,
             api_cpu,
             store_cpu,
+            boto3_s,
+            boto3_cpu,
+        )
+
+
+def _print_ratios(
+    label: str, results: dict[tuple[str, str], list[Figures]], *, evaluated: bool
+) -> None:
+    """Print the bucket's two ratios of one source tree, from the medians of its rounds."""
+    local, s3 = results.get((label, "local"), []), results.get((label, "s3"), [])
+    name = label or "-"
+    if local and s3:
+        ratio = statistics.median(f.upload_s for f in local) / statistics.median(
+            f.upload_s for f in s3
+        )
+        print(f"{name}: bucket upload throughput / folder's: {ratio:.2f} (issue 26: >= 0.5)")
+    if s3:
+        api_s = statistics.median(f.upload_s for f in s3)
+        boto3_s = statistics.median(f.boto3_s or 0.0 for f in s3)
+        print(
+            f"{name}: upload into the bucket: API {api_s:.1f} s, bare boto3 {boto3_s:.1f} s; "
+            f"API time / boto3 time {api_s / boto3_s:.2f}, API throughput / boto3's "
+            f"{boto3_s / api_s:.2f} (target >= 0.8)"
+        )
+    if local and s3 and evaluated:
+        folder_s = statistics.median(f.job_s for f in local)
+        bucket_s = statistics.median(f.job_s for f in s3)
+        print(
+            f"{name}: evaluation job: bucket {bucket_s:.1f} s, folder {folder_s:.1f} s; "
+            f"bucket / folder {bucket_s / folder_s:.2f} (target <= 1.5)"
         )
 
 
@@ -251,6 +329,7 @@ def main(argv: list[str] | None = None) -> int:
         "--code", action="append", default=[], metavar="LABEL=DIR", help="a source tree to run"
     )
     args = parser.parse_args(argv)
+    args.workdir = args.workdir.resolve()  # SeaweedFS runs in its own folder
     codes: list[tuple[str, Path | None]] = [
         (label, Path(folder)) for label, _, folder in (c.partition("=") for c in args.code)
     ] or [("", None)]
@@ -265,13 +344,21 @@ def main(argv: list[str] | None = None) -> int:
                     args.workdir / "runs",
                     code=code,
                     evaluate=not args.upload_only,
+                    boto3_first=round_ % 2 == 0,
                 )
                 results.setdefault((label, backend), []).append(figures)
                 print(
                     f"round {round_ + 1} {label or '-'} {backend}: upload {figures.upload_s:.1f} s "
                     f"({figures.size_bytes / _MB / figures.upload_s:.1f} MB/s), "
                     f"API peak {figures.api_peak_mib:.0f} MiB, CPU s: API "
-                    f"{figures.api_cpu_s:.1f}, store {figures.store_cpu_s:.1f}; {figures.status}",
+                    f"{figures.api_cpu_s:.1f}, store {figures.store_cpu_s:.1f}; "
+                    f"job {figures.job_s:.1f} s; {figures.status}"
+                    + (
+                        ""
+                        if figures.boto3_s is None
+                        else f"; bare boto3 upload {figures.boto3_s:.1f} s "
+                        f"(store CPU {figures.boto3_store_cpu_s:.1f} s)"
+                    ),
                     flush=True,
                 )
     size_mb = recording.size_bytes / _MB
@@ -297,11 +384,7 @@ def main(argv: list[str] | None = None) -> int:
             f"{statistics.median(f.store_cpu_s for f in runs):12.1f}"
         )
     for label, _ in codes:
-        if (label, "local") in medians and (label, "s3") in medians:
-            ratio = medians[label, "local"] / medians[label, "s3"]
-            print(
-                f"{label or '-'}: bucket upload throughput / folder's: {ratio:.2f} (target >= 0.5)"
-            )
+        _print_ratios(label, results, evaluated=not args.upload_only)
     shutil.rmtree(args.workdir / "runs", ignore_errors=True)
     ok = {"succeeded", "uploaded"}
     return 0 if all(f.status in ok for runs in results.values() for f in runs) else 1

@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Final
 from urllib.parse import quote
 
 if TYPE_CHECKING:
-    from loceval.readers.rosbag import RemoteFile
+    from loceval.readers.rosbag import HeldMessages, RemoteFile
 
 __all__ = [
     "EVALUATIONS",
@@ -226,6 +226,10 @@ class Incoming(abc.ABC):
         """Start with nothing received."""
         self.head = b""
         """The first :data:`HEAD_BYTES` bytes (a bag's magic)."""
+        self.held: HeldMessages | None = None
+        """An MCAP upload's small messages (tf, poses), kept as it streamed past (set by the
+        receiver once the bytes are complete): a bucket stores them beside the object, so an
+        evaluation reads them in one request (a folder's files are read locally: unused)."""
 
     def write(self, chunk: bytes) -> None:
         """Append ``chunk``."""

@@ -30,6 +30,7 @@ same bytes. A client without that session falls back to ``GetObject``.
 from __future__ import annotations
 
 import bisect
+import contextlib
 import functools
 import io
 import os
@@ -44,12 +45,14 @@ from typing import TYPE_CHECKING, BinaryIO, Final
 from botocore.awsrequest import AWSRequest
 from botocore.exceptions import BotoCoreError
 
-from service.blobs.s3client import make_client, store_errors
+from service.blobs.s3client import make_client, store_errors, unless_missing
 from service.errors import StoreUnavailableError
 
 if TYPE_CHECKING:
     from _typeshed import WriteableBuffer
     from mypy_boto3_s3 import S3Client
+
+    from loceval.readers.rosbag import HeldMessages
 
 __all__ = ["MANY_AT_ONCE", "MAX_AHEAD", "MIN_AHEAD", "ObjectFile", "RangedFile"]
 
@@ -299,6 +302,10 @@ class ObjectFile:
         key: the object's full key.
         name: the file name (its suffix tells the readers the format).
         size: its size in bytes (None: asked with a HeadObject).
+        held_key: the full key of the small messages its upload held as it streamed in
+            (:meth:`loceval.readers.rosbag.HeldMessages.to_bytes`; None: none kept). They
+            are fetched in one request when a reader first asks for held messages
+            (:meth:`held_messages`); a missing or unreadable one reads the index instead.
 
     It pickles as its bucket, key, name and size with this process's ``AWS_*`` variables:
     unpickled in an evaluation's job process (a child of the forkserver, which may have
@@ -308,10 +315,22 @@ class ObjectFile:
     """
 
     def __init__(
-        self, client: S3Client, bucket: str, key: str, *, name: str, size: int | None = None
+        self,
+        client: S3Client,
+        bucket: str,
+        key: str,
+        *,
+        name: str,
+        size: int | None = None,
+        held_key: str | None = None,
     ) -> None:
         """Open the object (a HeadObject when its size is not given)."""
         self._file = RangedFile(client, bucket, key, size=size)
+        self._held_key = held_key
+        self._held: HeldMessages | None = None
+        self._held_lock = threading.Lock()
+        self.held_bytes = 0
+        """Bytes of held messages fetched (counted in :attr:`fetched_bytes` too)."""
         self._opened: list[RangedFile] = [self._file]
         self._client, self._bucket, self._key = client, bucket, key
         self.name = name
@@ -321,10 +340,13 @@ class ObjectFile:
 
     def __reduce__(
         self,
-    ) -> tuple[Callable[..., ObjectFile], tuple[str, str, str, int, dict[str, str]]]:
+    ) -> tuple[
+        Callable[..., ObjectFile], tuple[tuple[str, str, str | None], str, int, dict[str, str]]
+    ]:
         """Pickle the object's address and the client's variables (not its connections)."""
         environ = {k: v for k, v in os.environ.items() if k.startswith("AWS_")}
-        return _reopen, (self._bucket, self._key, self.name, self.size, environ)
+        address = (self._bucket, self._key, self._held_key)
+        return _reopen, (address, self.name, self.size, environ)
 
     def __str__(self) -> str:
         """Return the file name (what messages show)."""
@@ -379,10 +401,40 @@ class ObjectFile:
                 self._memo_bytes += len(data)
         return [self._memo[r] if r in self._memo else fetched[r] for r in reads]
 
+    def held_messages(
+        self, wanted: Sequence[tuple[str, str]]
+    ) -> list[tuple[int, int, bytes]] | None:
+        """Return the wanted channels' messages from what the upload held, or None.
+
+        See :class:`loceval.readers.HoldsMessages`: None (no held messages kept, a wanted
+        channel not among them) makes the index reader read the file itself.
+        """
+        held = self._load_held()
+        return None if held is None else held.messages(wanted)
+
+    def _load_held(self) -> HeldMessages | None:
+        """Fetch and read the held messages once (one GET); None when there are none."""
+        from loceval.readers.rosbag import HeldMessages  # noqa: PLC0415  (rosbags: jobs only)
+
+        with self._held_lock:
+            if self._held is None and self._held_key is not None:
+                key, self._held_key = self._held_key, None  # asked once, found or not
+
+                def read() -> bytes:
+                    answer = self._client.get_object(Bucket=self._bucket, Key=key)
+                    return answer["Body"].read()
+
+                data = unless_missing(read)
+                if data is not None:
+                    self.held_bytes += len(data)
+                    with contextlib.suppress(ValueError):  # another version: read the index
+                        self._held = HeldMessages.from_bytes(data)
+            return self._held
+
     @property
     def fetched_bytes(self) -> int:
         """Return the bytes fetched from the store by every reader of this object."""
-        return sum(f.fetched_bytes for f in self._opened)
+        return sum(f.fetched_bytes for f in self._opened) + self.held_bytes
 
     @property
     def requests(self) -> int:
@@ -390,20 +442,29 @@ class ObjectFile:
         return sum(f.requests for f in self._opened)
 
 
-def _reopen(bucket: str, key: str, name: str, size: int, environ: dict[str, str]) -> ObjectFile:
+def _reopen(
+    address: tuple[str, str, str | None], name: str, size: int, environ: dict[str, str]
+) -> ObjectFile:
     """Open a pickled :class:`ObjectFile` again, with a client of this process.
 
-    One object is one :class:`ObjectFile` here: the reference and the estimates of one bag
-    share its answers (``pread_many``'s memo).
+    ``address`` is its bucket, key and held messages' key. One object is one
+    :class:`ObjectFile` here: the reference and the estimates of one bag share its answers
+    (``pread_many``'s memo) and its held messages.
     """
-    return _opened(bucket, key, name, size, tuple(sorted(environ.items())))
+    return _opened(address, name, size, tuple(sorted(environ.items())))
 
 
 @functools.cache
 def _opened(
-    bucket: str, key: str, name: str, size: int, environ: tuple[tuple[str, str], ...]
+    address: tuple[str, str, str | None],
+    name: str,
+    size: int,
+    environ: tuple[tuple[str, str], ...],
 ) -> ObjectFile:
-    return ObjectFile(_process_client(environ), bucket, key, name=name, size=size)
+    bucket, key, held_key = address
+    return ObjectFile(
+        _process_client(environ), bucket, key, name=name, size=size, held_key=held_key
+    )
 
 
 @functools.cache

@@ -6,6 +6,8 @@ Layout under the URL's prefix (keys relative to it are the database's storage pa
                                           then, completed in place, the dataset's object
     pending/<instance>/<uuid>             an upload completed but not yet recorded (holds the
                                           dataset id; gone once the row is committed)
+    held/<instance>/<uuid>                an MCAP upload's tf and pose messages, kept as it
+                                          streamed through (an evaluation's one request)
     instances/<instance>                  the lease of a live process that receives uploads
     datasets/<project id>/<sha256>        a dataset moved in by ``loceval storage migrate``
     evaluations/<id>/artifacts/<name>     an evaluation's artifacts
@@ -57,7 +59,7 @@ from service.blobs.cache import InputCache
 from service.blobs.lease import LEASE_S, Lease, claim_slot
 from service.blobs.ranged import ObjectFile
 from service.blobs.s3client import make_client, store_errors, unless_missing
-from service.blobs.s3upload import PART_BYTES, S3Incoming, pending_key
+from service.blobs.s3upload import PART_BYTES, S3Incoming, held_key, pending_key
 from service.errors import StartupError
 from service.settings import Settings, parse_blob_url
 
@@ -206,9 +208,8 @@ class S3Blobs(Blobs):
         with store_errors():
             self.client.delete_object(Bucket=self.bucket, Key=self.prefix + storage_path)
             if storage_path.startswith("uploads/"):
-                self.client.delete_object(
-                    Bucket=self.bucket, Key=self.prefix + pending_key(storage_path)
-                )
+                for key in (held_key(storage_path), pending_key(storage_path)):
+                    self.client.delete_object(Bucket=self.bucket, Key=self.prefix + key)
 
     def check_free_space(self, min_free_bytes: int, *, incoming_bytes: int = 0) -> bool:
         """See :meth:`Blobs.check_free_space`."""
@@ -241,9 +242,11 @@ class S3Blobs(Blobs):
         """See :meth:`Blobs.job_input`: an MCAP file of ``ranged_bytes`` or more.
 
         Only an MCAP file whose index serves a few topics (a summary, chunk indexes,
-        uncompressed chunks: three small reads tell) is read so. Compressed chunks and ROS 1
-        bags, whose chunks mix every topic, would be read whole one request after another,
-        slower than the cache's parallel download.
+        uncompressed chunks: three small reads tell) is read so. The tf and pose messages
+        its upload held as it streamed through (``held/<instance>/<uuid>``) are read in one
+        request; only other topics, or a file uploaded without them, go through the index.
+        Compressed chunks and ROS 1 bags, whose chunks mix every topic, would be read whole
+        one request after another, slower than the cache's parallel download.
         """
         from loceval.readers.rosbag import serves_by_index  # noqa: PLC0415  (rosbags: jobs only)
 
@@ -252,7 +255,8 @@ class S3Blobs(Blobs):
         if self.cache.holds(sha256, filename, size):
             return None
         key = self.prefix + storage_path
-        file = ObjectFile(self.client, self.bucket, key, name=filename, size=size)
+        held = self.prefix + held_key(storage_path) if storage_path.startswith("uploads/") else None
+        file = ObjectFile(self.client, self.bucket, key, name=filename, size=size, held_key=held)
         return file if serves_by_index(file) else None
 
     def pinned(self) -> contextlib.AbstractContextManager[None]:
@@ -366,7 +370,7 @@ class S3Blobs(Blobs):
             renewed = leases.get(instance)
             return renewed is None or (now - renewed).total_seconds() > self.lease_s
 
-        partial = unrecorded = 0
+        partial = 0
         with store_errors():
             paginator = self.client.get_paginator("list_multipart_uploads")
             for page in paginator.paginate(Bucket=self.bucket, Prefix=f"{self.prefix}uploads/"):
@@ -383,19 +387,23 @@ class S3Blobs(Blobs):
             if gone(_instance_of(item["Key"], self.prefix + "pending/"))
             or (now - item["LastModified"]).total_seconds() > older_than_s
         ]
-        for item in markers:
-            marker = item["Key"][len(self.prefix) :]
-            upload = "uploads/" + marker.removeprefix("pending/")
-            dataset_id = self._marker(marker)
-            if dataset_id is None:  # settled, or another sweep took it, meanwhile
-                continue
-            if dataset_id not in set(recorded([dataset_id])):
-                with store_errors():
-                    self.client.delete_object(Bucket=self.bucket, Key=self.prefix + upload)
-                unrecorded += 1
-            with store_errors():
-                self.client.delete_object(Bucket=self.bucket, Key=item["Key"])
+        unrecorded = sum(self._settle(item["Key"], recorded) for item in markers)
         return Swept(partial_uploads=partial, datasets=unrecorded)
+
+    def _settle(self, marker_key: str, recorded: Callable[[list[str]], Iterable[str]]) -> bool:
+        """Delete a pending marker, and its upload when never recorded; return whether it was."""
+        marker = marker_key[len(self.prefix) :]
+        upload = "uploads/" + marker.removeprefix("pending/")
+        dataset_id = self._marker(marker)
+        if dataset_id is None:  # settled, or another sweep took it, meanwhile
+            return False
+        removed = dataset_id not in set(recorded([dataset_id]))
+        with store_errors():
+            if removed:
+                for key in (upload, held_key(upload)):
+                    self.client.delete_object(Bucket=self.bucket, Key=self.prefix + key)
+            self.client.delete_object(Bucket=self.bucket, Key=marker_key)
+        return removed
 
     def close(self) -> None:
         """See :meth:`Blobs.close`: the lease is deleted and the slot let go."""

@@ -19,7 +19,7 @@ from service.blobs.s3client import store_errors
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
 
-__all__ = ["PART_BYTES", "Bucket", "S3Incoming", "pending_key"]
+__all__ = ["PART_BYTES", "Bucket", "S3Incoming", "held_key", "pending_key"]
 
 PART_BYTES: Final = 8 << 20
 """The size of an upload's parts (S3 wants at least 5 MiB but for the last)."""
@@ -130,6 +130,12 @@ class S3Incoming(Incoming):
                 Key=self.store.prefix + pending_key(self.key),
                 Body=dataset_id.encode(),
             )
+            if self.held is not None:  # after the marker: a sweep deletes both with the upload
+                client.put_object(
+                    Bucket=self.store.bucket,
+                    Key=self.store.prefix + held_key(self.key),
+                    Body=self.held.to_bytes(),
+                )
             if self._upload_id is None:  # smaller than one part: one request
                 client.put_object(
                     Bucket=self.store.bucket, Key=self._full_key, Body=bytes(self._buffer)
@@ -164,6 +170,16 @@ class S3Incoming(Incoming):
                 self.store.client.abort_multipart_upload(
                     Bucket=self.store.bucket, Key=self._full_key, UploadId=self._upload_id
                 )
+
+
+def held_key(upload_key: str) -> str:
+    """Return the key of an upload's held messages (``uploads/I/U`` -> ``held/I/U``).
+
+    An MCAP upload's tf and pose messages, kept as it streamed through the API
+    (:meth:`loceval.readers.rosbag.HeldMessages.to_bytes`): an evaluation reads them in one
+    request instead of a ranged read per run of them between the images.
+    """
+    return "held/" + upload_key.removeprefix("uploads/")
 
 
 def pending_key(upload_key: str) -> str:

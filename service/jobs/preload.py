@@ -39,6 +39,8 @@ MODULES: Final = (
     "exporters.cad.gltf",
     "exporters.cad.ifc",
     "exporters.checkpoints",
+    "loceval.readers.rosbag",
+    "service.blobs.ranged",  # a bag in a bucket, read where it lies (boto3)
 )
 """The modules a job's process needs, loaded once in the forkserver."""
 
@@ -47,6 +49,8 @@ def _preload() -> None:
     for name in MODULES:
         with contextlib.suppress(Exception):  # a missing optional library: its job says so
             importlib.import_module(name)
+    with contextlib.suppress(Exception):  # boto3 missing: no bucket to read from
+        importlib.import_module("service.blobs.s3client").load_models()
     with contextlib.suppress(Exception):  # Jinja2 missing: the report job says so itself
         render = importlib.import_module("exporters.report.render")
         render.preload_templates()  # the repository's templates, compiled once for every job

@@ -307,6 +307,7 @@ class _Receiver:
                 self._digest.hexdigest(),
                 None if self._scan is None else self._scan.finish(),
             )
+            self._fh.held = received.held  # a bucket stores them beside the object
             self._fh = None
             self._scan = None
             if received.size == 0 and not received.filename:

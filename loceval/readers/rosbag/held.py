@@ -21,9 +21,12 @@ follow the MCAP specification (https://mcap.dev/spec).
 
 from __future__ import annotations
 
+import json
 import struct
 from collections.abc import Callable, Generator, Sequence
-from typing import BinaryIO
+from typing import BinaryIO, Final
+
+import numpy as np
 
 from loceval.readers._mcap import (
     MAGIC,
@@ -64,6 +67,10 @@ _MAX_COMPRESSION_NAME = 64
 _MESSAGE_HEAD = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
 _CHUNK_HEAD = struct.Struct("<QQQII")  # start and end time, uncompressed size, crc, name length
 _U64 = struct.Struct("<Q")
+
+_SAVED_MAGIC: Final = b"LOCEVAL-HELD-1\n"
+"""The first bytes of :meth:`HeldMessages.to_bytes` (its version: another is not read)."""
+_SAVED_HEAD = struct.Struct("<I")  # the JSON head's length
 
 _Request = Generator[int, bytes, None]
 """The parser: it yields ``n >= 0`` to take the next ``n`` bytes (sent back), ``-n`` to skip."""
@@ -121,6 +128,84 @@ class HeldMessages:
             found.extend((t, seq, index, data) for t, seq, data in self._held.get(channel_id, ()))
         found.sort(key=lambda m: (m[0], m[1]))
         return [(t, index, data) for t, _, index, data in found]
+
+    def to_bytes(self) -> bytes:
+        """Return the held messages as bytes that :meth:`from_bytes` reads back.
+
+        Stored beside an upload in a bucket, they let an evaluation take a camera bag's tf
+        and poses in one request instead of a ranged read per run of them. Layout: a
+        magic line, a JSON head (schemas, channels, dropped channels, each held channel's
+        message count), then per held channel its log times and sequence numbers (u64), its
+        message lengths (u32), and the messages' bytes, all little-endian.
+        """
+        channels = sorted(self._held)
+        head = {
+            "schemas": {str(k): v for k, v in self.schemas.items()},
+            "channels": {str(k): list(v) for k, v in self.channels.items()},
+            "dropped": sorted(self._dropped),
+            "held": [[cid, len(self._held[cid])] for cid in channels],
+        }
+        encoded = json.dumps(head, separators=(",", ":")).encode()
+        parts = [_SAVED_MAGIC, _SAVED_HEAD.pack(len(encoded)), encoded]
+        for cid in channels:
+            messages = self._held[cid]
+            parts.append(np.array([m[0] for m in messages], dtype="<u8").tobytes())
+            parts.append(np.array([m[1] for m in messages], dtype="<u8").tobytes())
+            parts.append(np.array([len(m[2]) for m in messages], dtype="<u4").tobytes())
+            parts.extend(m[2] for m in messages)
+        return b"".join(parts)
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> HeldMessages:
+        """Read what :meth:`to_bytes` wrote.
+
+        Raises:
+            ValueError: the bytes are not such a record (another version, cut short).
+        """
+        view = memoryview(data)
+        start = len(_SAVED_MAGIC) + _SAVED_HEAD.size
+        if bytes(view[: len(_SAVED_MAGIC)]) != _SAVED_MAGIC or len(data) < start:
+            msg = "not a record of held MCAP messages (or another version of it)"
+            raise ValueError(msg)
+        (head_size,) = _SAVED_HEAD.unpack_from(view, len(_SAVED_MAGIC))
+        try:
+            head = json.loads(bytes(view[start : start + head_size]))
+            schemas = {int(k): str(v) for k, v in head["schemas"].items()}
+            channels = {
+                int(k): (str(topic), int(schema), str(encoding))
+                for k, (topic, schema, encoding) in head["channels"].items()
+            }
+            dropped = {int(c) for c in head["dropped"]}
+            counts = [(int(cid), int(n)) for cid, n in head["held"]]
+        except (KeyError, TypeError, ValueError) as err:
+            msg = f"the head of the held MCAP messages is malformed ({err})"
+            raise ValueError(msg) from None
+        pos = start + head_size
+        held: dict[int, list[tuple[int, int, bytes]]] = {}
+        for cid, n in counts:
+            if n < 0 or pos + 20 * n > len(data):
+                msg = "the held MCAP messages are cut short"
+                raise ValueError(msg)
+            times = np.frombuffer(view, dtype="<u8", count=n, offset=pos)
+            seqs = np.frombuffer(view, dtype="<u8", count=n, offset=pos + 8 * n)
+            sizes = np.frombuffer(view, dtype="<u4", count=n, offset=pos + 16 * n)
+            pos += 20 * n
+            ends = pos + np.cumsum(sizes, dtype=np.int64)
+            if n and int(ends[-1]) > len(data):
+                msg = "the held MCAP messages are cut short"
+                raise ValueError(msg)
+            starts = ends - sizes
+            held[cid] = [
+                (t, q, bytes(view[a:b]))
+                for t, q, a, b in zip(
+                    times.tolist(), seqs.tolist(), starts.tolist(), ends.tolist(), strict=True
+                )
+            ]
+            pos = int(ends[-1]) if n else pos
+        if pos != len(data):
+            msg = "the held MCAP messages have bytes past their end"
+            raise ValueError(msg)
+        return cls(schemas, channels, held, dropped)
 
 
 class McapScan:

@@ -214,3 +214,36 @@ def test_held_messages_follow_channels_by_topic_and_type():
     assert held.messages(wanted) == [(1, 0, b"c"), (5, 1, b"a"), (5, 1, b"b"), (9, 1, b"d")]
     assert held.messages([("/j", bf.POSE)]) is None
     assert held.messages([("/pose", bf.TF)]) == []
+
+
+def test_held_messages_read_back_from_their_bytes_as_they_were(tmp_path, rng):
+    """to_bytes then from_bytes: every channel's messages, the dropped ones still dropped."""
+    mcap = camera_bag(tmp_path, rng)
+    held = scanned(mcap.read_bytes()).finish()
+    assert held is not None
+    back = HeldMessages.from_bytes(held.to_bytes())
+    assert back.schemas == held.schemas
+    assert back.channels == held.channels
+    for wanted in (WANTED, *([key] for key in WANTED)):
+        assert back.messages(wanted) == held.messages(wanted) == read_indexed_messages(mcap, wanted)
+    assert back.messages([("/camera", bf.IMAGE)]) is None  # let go while scanning: still so
+    empty = HeldMessages({}, {}, {}, set())
+    assert HeldMessages.from_bytes(empty.to_bytes()).messages(WANTED) == []
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [
+        lambda b: b[:-1],  # cut short
+        lambda b: b + b"x",  # bytes past the end
+        lambda b: b"LOCEVAL-HELD-2\n" + b[15:],  # another version
+        lambda b: b[:15] + struct.pack("<I", 3) + b"{x}" + b[19:],  # a head that is no JSON
+        lambda b: b[:10],
+    ],
+)
+def test_damaged_held_bytes_are_refused(tmp_path, rng, damage):
+    """Damaged or foreign bytes raise ValueError (the reader then reads the file's index)."""
+    held = scanned(camera_bag(tmp_path, rng).read_bytes()).finish()
+    assert held is not None
+    with pytest.raises(ValueError, match="held MCAP messages"):
+        HeldMessages.from_bytes(damage(held.to_bytes()))

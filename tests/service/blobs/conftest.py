@@ -127,6 +127,8 @@ class Gate:
         self._listener: socket.socket | None = None
         self._open: set[socket.socket] = set()
         self._lock = threading.Lock()
+        self.answered_bytes = 0
+        """Bytes the store sent back through the gate (answers: what clients fetched)."""
         self.open()
 
     def open(self) -> None:
@@ -163,13 +165,18 @@ class Gate:
             upstream.settimeout(None)
             with self._lock:
                 self._open.update((client, upstream))
-            for source, sink in ((client, upstream), (upstream, client)):
-                threading.Thread(target=self._pump, args=(source, sink), daemon=True).start()
+            for source, sink, answers in ((client, upstream, False), (upstream, client, True)):
+                threading.Thread(
+                    target=self._pump, args=(source, sink), kwargs={"answers": answers}, daemon=True
+                ).start()
 
-    def _pump(self, source: socket.socket, sink: socket.socket) -> None:
+    def _pump(self, source: socket.socket, sink: socket.socket, *, answers: bool) -> None:
         try:
             while data := source.recv(1 << 16):
                 sink.sendall(data)
+                if answers:
+                    with self._lock:
+                        self.answered_bytes += len(data)
         except OSError:
             pass
         finally:

@@ -21,7 +21,9 @@ from typing import Any
 
 import pytest
 
+from loceval.readers.rosbag import HeldMessages
 from service.blobs.s3 import PART_BYTES, S3Blobs
+from service.blobs.s3upload import held_key
 from tests.service.blobs.conftest import SeaweedFS, object_keys, open_multipart_uploads
 from tests.service.conftest import REPO
 
@@ -151,6 +153,7 @@ def test_an_upload_completed_but_never_recorded_is_deleted(
         incoming = first.open_incoming()
         incoming.write(data)
         incoming.commit()
+        incoming.held = HeldMessages({}, {}, {}, set())  # an MCAP upload's, stored beside it
         stored.append(
             first.publish_upload(
                 incoming,
@@ -172,4 +175,6 @@ def test_an_upload_completed_but_never_recorded_is_deleted(
     assert restarted.exists(stored[0])
     assert not restarted.exists(stored[1])
     assert [k for k in object_keys(seaweedfs, lab) if "/pending/" in k] == []
+    assert restarted.exists(held_key(stored[0]))  # the held messages go with their upload
+    assert not restarted.exists(held_key(stored[1]))
     restarted.close()
