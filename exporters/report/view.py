@@ -46,13 +46,17 @@ from loceval.core.lengths import MM_BELOW_M, LengthUnit, length_unit
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.options import option
+from loceval.results.document import read_result
+from loceval.results.gate import Gate, judge_gate
 
 __all__ = [
     "BEST_MARK",
     "MM_BELOW_M",
     "LengthUnit",
     "ReportView",
+    "ResultsView",
     "build_report_view",
+    "build_results_view",
     "length_unit",
 ]
 
@@ -344,6 +348,128 @@ def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple
     )
 
 
+@dataclass(frozen=True, slots=True)
+class ResultsView:
+    """The report's figures and words without its plots: what CI files show too.
+
+    :func:`build_report_view` takes its verdicts, tables, intervals and shares from here, and
+    ``junit.xml`` and ``summary.md`` (:mod:`exporters.ci`) render the same object, so a
+    figure is computed and formatted once for all three.
+
+    Attributes:
+        title: the report title.
+        evaluation_id: the evaluation's id.
+        created_at: when the evaluation ran (ISO 8601, UTC).
+        summary: one sentence: what was evaluated against what.
+        tolerance: the tolerance in words, or None.
+        estimate_names: one per estimate, in order.
+        verdicts: one per estimate.
+        shares: threshold rows of "share of poses within" (label, one value per estimate).
+        tables: Tables 1 (ATE) and 2 (RPE).
+        confidence: the intervals of the tables, the comparisons of estimates, NEES.
+        warnings: (source, message) pairs.
+        gate: the gate of the options' ``fail_on`` (None without conditions).
+    """
+
+    title: str
+    evaluation_id: str
+    created_at: str
+    summary: str
+    tolerance: str | None
+    estimate_names: tuple[str, ...]
+    verdicts: tuple[VerdictView, ...]
+    shares: tuple[tuple[str, tuple[str, ...]], ...]
+    tables: tuple[StatsTable, ...]
+    confidence: ConfidenceView
+    warnings: tuple[tuple[str, str], ...]
+    gate: Gate | None = None
+
+    def figure(self, table: int, label: str, column: int, group: str = "translation") -> str:
+        """Return a Table 1-2 value with its unit and interval (``0.194 m (0.180–0.210)``).
+
+        Args:
+            table: 1 (ATE) or 2 (RPE).
+            label: the row (``RMSE``, ``MEAN``, ...).
+            column: the estimate's index.
+            group: ``translation`` or ``rotation``.
+
+        Returns:
+            The text, or ``—`` when the table has no such value.
+        """
+        found = next(t for t in self.tables if t.number == table)
+        rows = dict(found.groups).get(group, ())
+        row = next((r for r in rows if r.label == label), None)
+        if row is None or column >= len(row.cells) or row.cells[column].text == "—":
+            return "—"
+        return row.cells[column].text + self.confidence.suffix(table, group, label, column)
+
+
+def build_results_view(
+    result: EvaluationResult,
+    options: ExportOptions,
+    *,
+    map_figures: Mapping[int, int] | None = None,
+) -> ResultsView:
+    """Compute and format the report's figures and words, without drawing anything.
+
+    Args:
+        result: the evaluation (placed on its building, when it has one).
+        options: the title, the evaluation id and the gate's conditions.
+        map_figures: per estimate the number of its error map in the report, where its
+            verdict's stretches are numbered (none outside the report).
+    """
+    estimates = result.estimates
+    cfg = result.config
+    tables = (
+        _stats_table(
+            result,
+            number=1,
+            title="Absolute Trajectory Error (ATE)",
+            note="Distance between each aligned estimate pose and the ground truth at the same "
+            "time.",
+            translation=[e.ate_translation for e in estimates],
+            rotation=[e.ate_rotation for e in estimates],
+        ),
+        _stats_table(
+            result,
+            number=2,
+            title="Relative Pose Error (RPE)",
+            note=f"Error of the motion over each step of {describe_rpe_step(cfg)} "
+            "(drift per step).",
+            translation=[e.rpe_translation for e in estimates],
+            rotation=[e.rpe_rotation for e in estimates],
+        ),
+    )
+    shares = tuple(
+        (
+            f"≤ {t:g} m",
+            tuple(f"{100.0 * e.within.get(t, float('nan')):.1f} %" for e in estimates),
+        )
+        for t in cfg.thresholds_m
+    )
+    figure_of = map_figures or {}
+    gate = None
+    if options.fail_on:
+        gate = judge_gate(read_result(result.to_dict()), options.fail_on)
+    return ResultsView(
+        title=options.title,
+        evaluation_id=options.evaluation_id,
+        created_at=result.created_at,
+        summary=_summary(result),
+        tolerance=None if cfg.tolerance is None else str(cfg.tolerance),
+        estimate_names=tuple(estimate_name(e, k) for k, e in enumerate(estimates)),
+        verdicts=tuple(verdict_view(result, k, figure_of.get(k)) for k in range(len(estimates))),
+        shares=shares,
+        tables=tables,
+        confidence=build_confidence_view(
+            result,
+            {(t.number, "translation"): t.length.format for t in tables if t.length is not None},
+        ),
+        warnings=_warnings(result),
+        gate=gate,
+    )
+
+
 def build_report_view(
     result: EvaluationResult,
     options: ExportOptions,
@@ -380,49 +506,24 @@ def build_report_view(
     figures = number_figures(rendered, image_format)
     figure_of = {f.key: f.number for f in figures}
     estimates = result.estimates
-    cfg = result.config
-    tables = (
-        _stats_table(
-            result,
-            number=1,
-            title="Absolute Trajectory Error (ATE)",
-            note="Distance between each aligned estimate pose and the ground truth at the same "
-            "time.",
-            translation=[e.ate_translation for e in estimates],
-            rotation=[e.ate_rotation for e in estimates],
-        ),
-        _stats_table(
-            result,
-            number=2,
-            title="Relative Pose Error (RPE)",
-            note=f"Error of the motion over each step of {describe_rpe_step(cfg)} "
-            "(drift per step).",
-            translation=[e.rpe_translation for e in estimates],
-            rotation=[e.rpe_rotation for e in estimates],
-        ),
-    )
+    maps = {
+        k: figure_of[f"ate_path_{k}"] for k in range(len(estimates)) if f"ate_path_{k}" in figure_of
+    }
+    results = build_results_view(result, options, map_figures=maps)
     ranging = build_ranging_view(result)
     map_view = build_map_view(result)
-    warnings = _warnings(result)
-    shares = tuple(
-        (
-            f"≤ {t:g} m",
-            tuple(f"{100.0 * e.within.get(t, float('nan')):.1f} %" for e in estimates),
-        )
-        for t in cfg.thresholds_m
-    )
+    warnings = results.warnings
+    tables = results.tables
     return ReportView(
-        title=options.title,
-        evaluation_id=options.evaluation_id,
-        created_at=result.created_at,
+        title=results.title,
+        evaluation_id=results.evaluation_id,
+        created_at=results.created_at,
         loceval_version=result.loceval_version,
-        summary=_summary(result),
-        tolerance=None if cfg.tolerance is None else str(cfg.tolerance),
-        verdicts=tuple(
-            verdict_view(result, k, figure_of.get(f"ate_path_{k}")) for k in range(len(estimates))
-        ),
-        shares=shares,
-        estimate_names=tuple(estimate_name(e, k) for k, e in enumerate(estimates)),
+        summary=results.summary,
+        tolerance=results.tolerance,
+        verdicts=results.verdicts,
+        shares=results.shares,
+        estimate_names=results.estimate_names,
         estimate_colours=tuple(estimate_colour(k) for k in range(len(estimates))),
         reference_colour=REFERENCE_COLOUR,
         inputs=input_rows(result),
@@ -434,10 +535,7 @@ def build_report_view(
         worst=_worst(result),
         warnings=warnings,
         notes=_notes(result),
-        confidence=build_confidence_view(
-            result,
-            {(t.number, "translation"): t.length.format for t in tables if t.length is not None},
-        ),
+        confidence=results.confidence,
         clocks=build_clock_section(
             result,
             number=len(figures) + 1,

@@ -65,6 +65,14 @@ def _mapping(value: object) -> Mapping[str, Any] | None:
     return value if isinstance(value, Mapping) else None
 
 
+def _interval(value: object) -> tuple[float, float] | None:
+    """A written ``[low, high]`` of two finite numbers, else None."""
+    if not isinstance(value, Sequence) or isinstance(value, str | bytes) or len(value) != 2:
+        return None
+    low, high = _finite(value[0]), _finite(value[1])
+    return None if low is None or high is None else (low, high)
+
+
 @dataclass(frozen=True, slots=True)
 class StatsBlock:
     """One statistics block: an error series' :class:`ErrorStats`, and its 95 % intervals.
@@ -124,10 +132,19 @@ class VerdictRead:
         passed: whether the estimate meets the tolerance (False when undecided).
         outcome: ``pass``, ``fail`` or ``undecided`` (documents before the intervals carry
             only ``passed``: pass or fail).
+        share_within: the share of poses within the tolerance's distance, 0-1 (None: not
+            written).
+        tolerance_m: the tolerance's distance, metres (None: not written).
+        required_share: the share the tolerance requires, 0-1 (None: not written).
+        ci95: the 95 % interval of ``share_within`` (None: intervals off or not written).
     """
 
     passed: bool
     outcome: Outcome
+    share_within: float | None = None
+    tolerance_m: float | None = None
+    required_share: float | None = None
+    ci95: tuple[float, float] | None = None
 
     @classmethod
     def read(cls, verdict: object, where: str = "verdict") -> VerdictRead | None:
@@ -141,12 +158,19 @@ class VerdictRead:
         if found is None or not isinstance(passed, bool):
             return None
         written = found.get("outcome")
+        figures = {
+            "share_within": _finite(found.get("share_within")),
+            "tolerance_m": _finite(found.get("tolerance_m")),
+            "required_share": _finite(found.get("required_share")),
+            "ci95": _interval(found.get("ci95")),
+        }
         if written in _OUTCOMES:
-            return cls(passed, _OUTCOMES[written])
+            return cls(passed, _OUTCOMES[written], **figures)
         if "ci95" in found:  # written since the intervals: the outcome is always there
             msg = f"{where} of the result document has no outcome (pass, fail or undecided)."
             raise InputError(msg)
-        return cls(passed, "pass" if passed else "fail")  # before the intervals: from passed
+        # before the intervals: the outcome from passed
+        return cls(passed, "pass" if passed else "fail", **figures)
 
 
 @dataclass(frozen=True, slots=True)

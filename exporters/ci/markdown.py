@@ -1,0 +1,109 @@
+"""``summary.md``: the results in GitHub-flavoured Markdown, for CI job summaries.
+
+GitHub Actions shows it when it is appended to ``$GITHUB_STEP_SUMMARY``; GitLab and Gitea
+show it as a merge-request comment. It holds, from the report's figure-free view model:
+the gate (when ``--fail-on`` is given), the results table (an estimate per row: verdict,
+ATE and RPE RMSE with their 95 % intervals, the shares within the thresholds), each
+verdict in words, the comparisons of estimates, and the warnings (folded).
+
+Text from the inputs (names, messages) is escaped: a ``|`` in a name cannot split a table
+cell, and ``*``, ``_``, `````, ``[``, ``<`` cannot start emphasis, code, links or HTML.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Final
+
+from exporters.options import ExportOptions
+from exporters.report.view import ResultsView, build_results_view
+from loceval.core.display import display_text
+from loceval.evaluation import EvaluationResult
+
+__all__ = ["STATUS_MARKS", "export_summary_md", "markdown_text", "summary_markdown"]
+
+STATUS_MARKS: Final = {
+    "pass": "✅ PASS",
+    "fail": "❌ FAIL",
+    "undecided": "⚠️ UNDECIDED",
+    "none": "— (no tolerance)",
+}
+"""How the results table shows a verdict (a mark and the word, so it reads without colour)."""
+
+_SPECIAL: Final = re.compile(r"([\\`*_{}\[\]<>|#~!])")
+"""Markdown's punctuation that could start markup inside a line or end a table cell."""
+
+
+def markdown_text(text: str) -> str:
+    """Return one line of text from the inputs with Markdown's punctuation escaped."""
+    return _SPECIAL.sub(r"\\\1", display_text(text))
+
+
+def _table(view: ResultsView) -> list[str]:
+    heads = ["Estimate", "Verdict", "ATE RMSE (95 % CI)", "RPE RMSE (95 % CI)"]
+    heads += [f"{label} (share of poses)" for label, _ in view.shares]
+    lines = [
+        "| " + " | ".join(markdown_text(h) for h in heads) + " |",
+        "| --- | --- | " + " | ".join("---:" for _ in heads[2:]) + " |",
+    ]
+    for k, name in enumerate(view.estimate_names):
+        cells = [
+            markdown_text(name),
+            STATUS_MARKS.get(view.verdicts[k].status, view.verdicts[k].badge),
+            view.figure(1, "RMSE", k),
+            view.figure(2, "RMSE", k),
+            *(values[k] for _, values in view.shares),
+        ]
+        lines.append("| " + " | ".join(markdown_text(c) for c in cells) + " |")
+    return lines
+
+
+def _gate(view: ResultsView) -> list[str]:
+    gate = view.gate
+    if gate is None:
+        return []
+    conditions = ", ".join(gate.fail_on)
+    if gate.passed:
+        return [f"**Gate: ✅ passed** (fails on {conditions})", ""]
+    lines = [f"**Gate: ❌ closed** (fails on {conditions}):", ""]
+    lines += [f"- {markdown_text(reason)}" for reason in gate.reasons]
+    return [*lines, ""]
+
+
+def summary_markdown(view: ResultsView) -> str:
+    """Return ``summary.md`` of an evaluation's view model."""
+    lines = [f"## {markdown_text(view.title)}", "", markdown_text(view.summary), ""]
+    lines += _gate(view)
+    if view.tolerance:
+        lines += [f"Tolerance: {markdown_text(view.tolerance)}.", ""]
+    lines += [*_table(view), ""]
+    lines += ["### Verdicts", ""]
+    lines += [f"- **{markdown_text(v.name)}**: {markdown_text(v.headline)}" for v in view.verdicts]
+    lines.append("")
+    if view.confidence.comparisons:
+        lines += ["### Comparisons of the estimates", ""]
+        lines += [f"- {markdown_text(c)}" for c in view.confidence.comparisons]
+        lines.append("")
+    if view.confidence.note:
+        lines += [markdown_text(view.confidence.note), ""]
+    if view.warnings:
+        lines += [f"<details><summary>Warnings ({len(view.warnings)})</summary>", ""]
+        lines += [
+            f"- **{markdown_text(about)}**: {markdown_text(text)}" for about, text in view.warnings
+        ]
+        lines += ["", "</details>", ""]
+    lines.append(
+        f"<sub>loceval evaluation {markdown_text(view.evaluation_id)}, "
+        f"{markdown_text(view.created_at)}</sub>"
+    )
+    return "\n".join(lines) + "\n"
+
+
+def export_summary_md(result: EvaluationResult, options: ExportOptions) -> bytes:
+    """Return ``summary.md``: the results table, verdicts, comparisons and gate.
+
+    Args:
+        result: the evaluation.
+        options: the title, the evaluation id and the gate's conditions (``fail_on``).
+    """
+    return summary_markdown(build_results_view(result, options)).encode()
