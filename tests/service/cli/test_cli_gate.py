@@ -146,16 +146,14 @@ def test_exit_2_stays_a_bug(
         raise RuntimeError(msg)
 
     monkeypatch.setattr(gate_module, "judge_gate", broken)
-    code, _, err = _run(
-        capsys, files, "lost", args=["--tolerance", "0.10@95", "--fail-on", "fail"]
-    )
+    code, _, err = _run(capsys, files, "lost", args=["--tolerance", "0.10@95", "--fail-on", "fail"])
     assert code == 2
     assert "RuntimeError: a bug in the gate" in err
 
 
 def test_the_process_exits_3_as_a_ci_job_sees_it(files: dict[str, Path], tmp_path: Path) -> None:
     """Run as a CI job runs it (a process): exit status 3, the gate's line last on stdout."""
-    completed = subprocess.run(  # noqa: S603  (our own command line)
+    completed = subprocess.run(
         [
             sys.executable, "-m", "service.cli", "evaluate", str(files["reference"]),
             str(files["lost"]), "--tolerance", "0.10@95", "--fail-on", "fail",
