@@ -464,6 +464,19 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         group="map",
     ),
     OptionSpec(
+        "min_trial_coverage",
+        OptionKind.NUMBER,
+        0.5,
+        "trials (estimates of a named system): the least share of the reference's duration "
+        "a trial must track; a trial tracking less failed (tracking lost) and is counted, "
+        "not averaged",
+        "the least trial coverage",
+        "min-trial-coverage",
+        "SHARE",
+        minimum=0.0,
+        maximum=1.0,
+    ),
+    OptionSpec(
         "min_excursion_s",
         OptionKind.NUMBER,
         5.0,
