@@ -464,6 +464,19 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         group="map",
     ),
     OptionSpec(
+        "baseline",
+        OptionKind.FILE,
+        None,
+        "an earlier result to compare each estimate and system with, by name: a result.json "
+        "(errors.csv beside it pairs the errors), an --out folder, an evo result zip or a "
+        "folder of them (the API: the id of a succeeded evaluation)",
+        "the baseline",
+        "baseline",
+        "PATH",
+        max_length=500,
+        group="baseline",
+    ),
+    OptionSpec(
         "min_trial_coverage",
         OptionKind.NUMBER,
         0.5,

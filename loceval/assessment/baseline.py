@@ -40,9 +40,9 @@ Result document::
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Final, Literal
+from typing import TYPE_CHECKING, Any, Final, Literal
 
 import numpy as np
 
@@ -52,6 +52,8 @@ from loceval.errors import LocevalError
 
 if TYPE_CHECKING:
     from loceval.evaluation import EstimateResult, EvaluationResult
+    from loceval.readers.evo_result import ResultZip
+    from loceval.results.document import ResultRead
 
 __all__ = [
     "BASELINE_METRICS",
@@ -60,6 +62,8 @@ __all__ = [
     "BaselineDifference",
     "BaselineEntry",
     "BaselineSystem",
+    "baseline_from_document",
+    "baseline_from_evo",
     "compare_with_baseline",
     "mover_interval",
 ]
@@ -343,10 +347,10 @@ def _estimate_difference(
     theirs: tuple[float, float] | None = entry.ci95.get(metric)
     if theirs is None and series is not None:
         theirs = _bootstrap_ci(series[1])
-    interval = None if own is None or theirs is None else mover_interval(current, own, base, theirs)
+    combined = None if own is None or theirs is None else mover_interval(current, own, base, theirs)
     return BaselineDifference(
-        e.name, "estimate", metric, unit, current, base, current - base, interval,
-        paired=False, n=len(current_series), method=_MOVER, verdict=_verdict(interval),
+        e.name, "estimate", metric, unit, current, base, current - base, combined,
+        paired=False, n=len(current_series), method=_MOVER, verdict=_verdict(combined),
     )  # fmt: skip
 
 
@@ -473,3 +477,118 @@ def baseline_from_parts(
 ) -> Baseline:
     """Return a :class:`Baseline` (a convenience for readers that gather its parts)."""
     return Baseline(label, kind, source, tuple(estimates), tuple(systems), tuple(notes))
+
+
+SeriesOf = Callable[[str, str], "tuple[StampsNs, FloatArray] | None"]
+"""Called with an estimate's name and a metric key: its per-pose errors, or None."""
+
+
+def _pairing_of(options: Mapping[str, Any]) -> str | None:
+    delta, unit, every = (
+        options.get("rpe_delta"),
+        options.get("rpe_unit"),
+        options.get("rpe_all_pairs"),
+    )
+    if not isinstance(delta, int | float) or not isinstance(unit, str):
+        return None
+    return f"{delta:g} {unit}, {'all' if every else 'consecutive'}"
+
+
+def baseline_from_document(
+    read: ResultRead, *, label: str, source: str, series_of: SeriesOf | None = None
+) -> Baseline:
+    """Return the baseline held by a loceval result document.
+
+    Args:
+        read: the document, read (:func:`loceval.results.document.read_result`).
+        label: how reports name the baseline.
+        source: where it came from.
+        series_of: the per-pose errors of an estimate (from its ``errors.csv``), if at hand.
+
+    Returns:
+        Its estimates (RMSE, 95 % interval, per-pose errors) and systems (per-trial values).
+    """
+    options = _mapping_of(read.document.get("options"))
+    pairing = _pairing_of(options)
+    estimates = []
+    for e in read.estimates:
+        rmse: dict[str, float] = {}
+        ci95: dict[str, tuple[float, float]] = {}
+        series: dict[str, tuple[StampsNs, FloatArray]] = {}
+        for metric, kind in (("ate_rmse", "ate"), ("rpe_rmse", "rpe")):
+            value = e.rmse_m(kind)  # type: ignore[arg-type]
+            if value is None:
+                continue
+            rmse[metric] = value
+            block = e.block(kind)  # type: ignore[arg-type]
+            written = None if block is None or block.ci95 is None else block.ci95.get("rmse")
+            if isinstance(written, Sequence) and len(written) == 2:
+                ci95[metric] = (float(written[0]), float(written[1]))
+            found = None if series_of is None else series_of(e.label, metric)
+            if found is not None and found[0].size:
+                series[metric] = found
+        estimates.append(
+            BaselineEntry(e.label, rmse, ci95, series, pairing, dict.fromkeys(rmse, "m"))
+        )
+    systems = [
+        BaselineSystem(
+            s.name,
+            {k: np.asarray(m.values, dtype=np.float64) for k, m in s.metrics.items() if m.values},
+            {k: m.unit for k, m in s.metrics.items()},
+        )
+        for s in read.systems
+    ]
+    return Baseline(label, "loceval", source, tuple(estimates), tuple(systems))
+
+
+def _mapping_of(value: object) -> Mapping[str, Any]:
+    return value if isinstance(value, Mapping) else {}
+
+
+def baseline_from_evo(
+    zips: Sequence[tuple[str, ResultZip]], *, label: str, source: str
+) -> Baseline:
+    """Return the baseline held by evo result zips (one system and metric per zip).
+
+    A zip of APE or RPE of the translation in metres (``trans_part``, ``point_distance``)
+    gives its system's ATE or RPE RMSE and, with ``timestamps``, its per-pose errors
+    (evo's RPE pairs are evo's own: compared unpaired). Other zips are noted and left out.
+
+    Args:
+        zips: ``(system name, zip)`` of each zip.
+        label: how reports name the baseline.
+        source: where it came from.
+    """
+    rmse: dict[str, dict[str, float]] = {}
+    series: dict[str, dict[str, tuple[StampsNs, FloatArray]]] = {}
+    ci95: dict[str, dict[str, tuple[float, float]]] = {}
+    notes = []
+    for name, result in zips:
+        value = result.stats.get("rmse")
+        if result.metric is None or not result.translation_m or value is None:
+            notes.append(
+                f"The evo result {result.path.name!r} ({result.title or 'no title'}) is no "
+                "translation error in metres; it is left out of the baseline."
+            )
+            continue
+        metric = "ate_rmse" if result.metric == "ape" else "rpe_rmse"
+        rmse.setdefault(name, {})[metric] = value
+        found = result.error_series()
+        if found is not None:
+            series.setdefault(name, {})[metric] = found
+        elif (errors := result.arrays.get("error_array")) is not None and errors.size >= 8:
+            lo_hi = _bootstrap_ci(errors)  # no stamps: its own interval, for MOVER
+            if lo_hi is not None:
+                ci95.setdefault(name, {})[metric] = lo_hi
+    estimates = tuple(
+        BaselineEntry(
+            name,
+            values,
+            ci95.get(name, {}),
+            series.get(name, {}),
+            "evo",  # evo's RPE pairs: never paired with loceval's
+            dict.fromkeys(values, "m"),
+        )
+        for name, values in rmse.items()
+    )
+    return Baseline(label, "evo", source, estimates, (), tuple(notes))
