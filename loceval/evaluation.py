@@ -11,12 +11,20 @@ import numpy as np
 
 from loceval._version import __version__
 from loceval.assessment.spaces import Building, locate_verdict
+from loceval.assessment.trials import (
+    FailedTrial,
+    SystemComparison,
+    SystemTrials,
+    TrialFigures,
+    compare_all_systems,
+    group_trials,
+)
 from loceval.assessment.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
 from loceval.calibration.offsets import DeviceSource, OffsetCheck, check_offsets, parse_offset
 from loceval.core.arrays import IntArray
 from loceval.core.gaps import gap_threshold_ns, path_breaks
 from loceval.core.geometry import SimilarityTransform
-from loceval.errors import InputError
+from loceval.errors import InputError, LocevalError
 from loceval.metrics.excursions import Excursion, find_excursions
 from loceval.metrics.pose_errors import (
     ErrorSeries,
@@ -41,6 +49,7 @@ from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from loceval.assessment.assess import Assessment
+    from loceval.assessment.baseline import BaselineComparison
     from loceval.assessment.comparison import Comparison
     from loceval.assessment.uncertainty import IntervalStats
     from loceval.maps import MapEvaluation
@@ -99,6 +108,8 @@ class EvaluationConfig:
         planar: measure position errors in x-y only (each matched estimate pose takes
             the reference's height after alignment), for 2D systems.
         min_excursion_s: the shortest reference loss that is an excursion, seconds.
+        min_trial_coverage: the least share of the reference's duration a trial (an
+            estimate of a named system) must track; less is a failed trial (tracking lost).
     """
 
     association: AssociationMethod = _DEFAULT_ASSOCIATION
@@ -124,6 +135,7 @@ class EvaluationConfig:
     min_excursion_s: float = number_default("min_excursion_s")
     clock_drift_ppm: float = number_default("clock_drift_ppm")
     auto_clock_drift: bool = False
+    min_trial_coverage: float = number_default("min_trial_coverage")
 
     def __post_init__(self) -> None:
         """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
@@ -145,6 +157,7 @@ class EvaluationConfig:
             check_option("thresholds_m", threshold, unit="metres")
         check_option("worst", self.worst_count)
         check_option("min_excursion_s", self.min_excursion_s, unit="seconds")
+        check_option("min_trial_coverage", self.min_trial_coverage)
         if self.reference_sigma_m is not None:
             check_option("reference_sigma_m", self.reference_sigma_m, unit="metres")
         if self.auto_device and self.reference_offset is not None:
@@ -179,6 +192,7 @@ class EvaluationConfig:
             "min_excursion_s": self.min_excursion_s,
             "clock_drift_ppm": self.clock_drift_ppm,
             "auto_clock_drift": self.auto_clock_drift,
+            "min_trial_coverage": self.min_trial_coverage,
         }
 
 
@@ -206,6 +220,9 @@ class EstimateResult:
         offsets: the time and device offsets given, estimated and applied.
         excursions: the stretches outside the tracked room (:mod:`loceval.metrics.excursions`).
         notes: what the evaluation found that asks nothing of the user (the clock check).
+        system: the system this estimate is a trial of (None: not a trial).
+        coverage: the share of the reference's duration it tracked (matched poses no
+            farther apart than a gap), 0..1.
     """
 
     estimate: Trajectory
@@ -226,6 +243,8 @@ class EstimateResult:
     offsets: OffsetCheck | None = None
     excursions: tuple[Excursion, ...] = ()
     notes: tuple[str, ...] = ()
+    system: str | None = None
+    coverage: float | None = None
 
     @property
     def name(self) -> str:
@@ -265,6 +284,17 @@ class EvaluationResult:
     building: Building | None = None
     """The building model the paths were placed on: its spaces and warnings
     (:func:`loceval.assessment.spaces.on_building`), once an exporter placed them."""
+    systems: tuple[SystemTrials, ...] = ()
+    """The systems whose trials the estimates are (:mod:`loceval.assessment.trials`)."""
+    system_comparisons: tuple[SystemComparison, ...] = ()
+    """Every two systems compared over all their trials."""
+    baseline: BaselineComparison | None = None
+    """Each estimate and system against an earlier result (:mod:`loceval.assessment.baseline`)."""
+
+    @property
+    def failed_trials(self) -> tuple[FailedTrial, ...]:
+        """Return every failed trial, system by system."""
+        return tuple(f for s in self.systems for f in s.failed)
 
     def with_building(self, building: Building) -> EvaluationResult:
         """Return the result placed on ``building``: each stretch in its space, kept.
@@ -317,6 +347,9 @@ class EvaluationResult:
             if self.comparisons is None
             else [c.to_dict() for c in self.comparisons],
             "comparison_notes": list(self.comparison_notes),
+            "systems": [s.to_dict() for s in self.systems],
+            "system_comparisons": [c.to_dict() for c in self.system_comparisons],
+            "baseline": None if self.baseline is None else self.baseline.to_dict(),
         }
 
 
@@ -327,8 +360,15 @@ def evaluate(
     *,
     inputs: Sequence[Mapping[str, object]] = (),
     progress: ProgressCallback | None = None,
+    systems: Sequence[str | None] | None = None,
+    failed_trials: Sequence[FailedTrial] = (),
 ) -> EvaluationResult:
     """Evaluate one or more estimates against a reference.
+
+    Estimates that name a system are its trials (:mod:`loceval.assessment.trials`): a trial
+    whose evaluation raises a :class:`~loceval.errors.LocevalError`, or that tracks less than
+    ``config.min_trial_coverage`` of the reference's duration, is a failed trial, counted
+    under its system; the others go on. An estimate of no system raises as before.
 
     Args:
         reference: the ground truth.
@@ -336,6 +376,8 @@ def evaluate(
         config: the options; defaults as on the CLI.
         inputs: provenance of the input files (path, sha256, bytes) for the result.
         progress: called with (stage, fraction done).
+        systems: the system of each estimate (None: not a trial), as long as ``estimates``.
+        failed_trials: trials that failed before the evaluation (an unreadable file).
 
     Returns:
         The evaluation result.
@@ -347,7 +389,11 @@ def evaluate(
         MetricError: a metric cannot be computed (RPE delta too long).
     """
     config = config or EvaluationConfig()
-    if not estimates:
+    systems = list(systems) if systems is not None else [None] * len(estimates)
+    if len(systems) != len(estimates):
+        msg = f"Give a system per estimate: {len(estimates)} estimates, {len(systems)} systems."
+        raise InputError(msg)
+    if not estimates and not failed_trials:
         msg = "Give at least one estimate to evaluate against the reference."
         raise InputError(msg)
     report = progress or (lambda _stage, _fraction: None)
@@ -368,18 +414,37 @@ def evaluate(
             "evaluated."
         )
     results = []
-    for k, estimate in enumerate(estimates):
+    failed = list(failed_trials)
+    for k, (estimate, system) in enumerate(zip(estimates, systems, strict=True)):
         report(f"evaluating {estimate.name or k}", k / len(estimates))
-        results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
+        if system is None:
+            results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
+            continue
+        try:  # a trial that fails is counted under its system; the others go on
+            one = _evaluate_one(reference, estimate, config, recorded=recorded)
+        except LocevalError as err:
+            failed.append(
+                FailedTrial(estimate.name or f"estimate {k + 1}", system, err.code, str(err))
+            )
+            continue
+        one = replace(one, system=system, coverage=_coverage(reference, one, config))
+        results.append(one)
+    if not results:
+        reasons = "; ".join(f"{f.name}: {f.reason}" for f in failed)
+        msg = f"Every trial failed, so there is nothing to evaluate ({reasons})."
+        raise InputError(msg)
+    trial_systems = _trial_systems(results, failed, config)
     comparisons = None
     comparison_notes: tuple[str, ...] = ()
     if not config.no_ci:
         from loceval.assessment.assess import compare_estimates  # noqa: PLC0415  (scipy)
 
+        # trials are compared system against system over all their trials, not pairwise
         found, notes = compare_estimates(
             [
                 (e.name or f"estimate {k + 1}", e.ate_translation, e.rpe_translation)
                 for k, e in enumerate(results)
+                if e.system is None
             ]
         )
         comparisons, comparison_notes = tuple(found), tuple(notes)
@@ -393,7 +458,58 @@ def evaluate(
         inputs=tuple(inputs),
         comparisons=comparisons,
         comparison_notes=comparison_notes,
+        systems=trial_systems,
+        system_comparisons=compare_all_systems(trial_systems),
     )
+
+
+def _coverage(reference: Trajectory, one: EstimateResult, config: EvaluationConfig) -> float:
+    """Return the share of the reference's duration the estimate tracked, 0..1.
+
+    The matched stamps' intervals no longer than a gap (:func:`gap_threshold_ns` of the
+    matched stamps, floored at ``max_gap_s``) count as tracked; vectorised.
+    """
+    span = int(reference.stamps_ns[-1]) - int(reference.stamps_ns[0])
+    stamps = one.association.reference.stamps_ns
+    if span <= 0 or stamps.shape[0] < 2:
+        return 0.0
+    steps = np.diff(stamps)
+    limit = gap_threshold_ns(stamps, min_gap_ns=round(config.max_gap_s * _NS_PER_S))
+    return min(1.0, float(steps[steps <= limit].sum()) / span)
+
+
+def _trial_systems(
+    results: Sequence[EstimateResult], failed: list[FailedTrial], config: EvaluationConfig
+) -> tuple[SystemTrials, ...]:
+    """Group the trials; a trial that tracked too little of the run is a failed trial."""
+    figures = []
+    for e in results:
+        if e.system is None:
+            continue
+        coverage = 0.0 if e.coverage is None else e.coverage
+        if coverage < config.min_trial_coverage:
+            failed.append(
+                FailedTrial(
+                    e.name,
+                    e.system,
+                    "trial.tracking_lost",
+                    f"It tracked {coverage:.0%} of the reference's duration, less than the "
+                    f"{config.min_trial_coverage:.0%} a trial needs (tracking lost or too few "
+                    "matched poses); its figures are shown but not counted for "
+                    f"{e.system}.",
+                )
+            )
+            continue
+        values = {
+            "ate_rmse": e.ate_translation.stats.rmse,
+            "rpe_rmse": e.rpe_translation.stats.rmse,
+        }
+        units = {"ate_rmse": e.ate_translation.unit, "rpe_rmse": e.rpe_translation.unit}
+        for key, series in (("ate_rot_rmse", e.ate_rotation), ("rpe_rot_rmse", e.rpe_rotation)):
+            if series is not None and len(series):
+                values[key], units[key] = series.stats.rmse, series.unit
+        figures.append(TrialFigures(e.name, e.system, values, units))
+    return group_trials(figures, failed)
 
 
 def _evaluate_one(
@@ -552,6 +668,8 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig, t0: int) -> dict
     matched = e.association
     return {
         "name": e.estimate.name,
+        "system": e.system,
+        "coverage": e.coverage,
         "source": e.estimate.source,
         "poses": len(e.estimate),
         "duration_s": e.estimate.duration_s,

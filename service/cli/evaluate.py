@@ -40,6 +40,7 @@ if TYPE_CHECKING:
     import argparse
 
     from exporters.options import ExportOptions
+    from loceval.assessment.baseline import Baseline
     from loceval.checkpoint_evaluation import CheckpointEvaluation
     from loceval.core.geometry import SimilarityTransform
     from loceval.readers import SourceSpec
@@ -72,6 +73,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"{len(args.name)} names."
         )
         raise InputError(msg)
+    systems = _systems(args)
     export = export_options(args)
     plan = export
     if args.map is not None and plan is None:  # --json without --out still needs the plan
@@ -94,8 +96,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
                 provenance("reference", ref_spec),
             ),
             estimates=[
-                JobSource(spec, name, provenance("estimate", spec))
-                for spec, name in zip(est_specs, names, strict=True)
+                JobSource(spec, name, provenance("estimate", spec), system=system)
+                for spec, name, system in zip(est_specs, names, systems, strict=True)
             ],
             config=config,
             stamp=args.stamp,
@@ -104,6 +106,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             visits=_visits_source(args.visits),
             checkpoints=checkpoints_from_options(args),
             the_map=the_map,
+            baseline=_baseline(args),
         )
         result = run_job(job, args.out)
     if isinstance(result, EvaluationResult) and args.building is not None:
@@ -158,6 +161,28 @@ def gate_exit(
     sys.stdout.flush()  # the line comes last, after everything printed before it
     emit(gate.line(), file=sys.stderr if args.json else None)
     return 0 if gate.passed else EXIT_GATE
+
+
+def _systems(args: argparse.Namespace) -> list[str | None]:
+    """Return each estimate's system from ``--system`` (given once per estimate, or never)."""
+    if not args.system:
+        return [None] * len(args.estimates)
+    if len(args.system) != len(args.estimates):
+        msg = (
+            f"Give --system once per estimate, in order like --name ('' for an estimate of "
+            f"no system): {len(args.estimates)} estimates but {len(args.system)} systems."
+        )
+        raise InputError(msg)
+    return [s.strip() or None for s in args.system]
+
+
+def _baseline(args: argparse.Namespace) -> Baseline | None:
+    """Return the baseline ``--baseline`` names, read (None without one)."""
+    if args.baseline is None:
+        return None
+    from service.results.baseline import read_baseline  # noqa: PLC0415
+
+    return read_baseline(args.baseline)
 
 
 class _PendingProvenance(Mapping[str, object]):

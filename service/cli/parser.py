@@ -222,6 +222,15 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
     ev.add_argument(
         "--name", action="append", default=[], help="estimate name, once per estimate in order"
     )
+    ev.add_argument(
+        "--system",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="the system an estimate is a trial (a run) of, once per estimate in order like "
+        "--name ('' for an estimate of no system); trials of one system are grouped, "
+        "summarised (median, mean, spread, interval over trials) and compared",
+    )
     ev.add_argument("--reference-name", default=None, help="name of the reference")
     ev.add_argument(
         "--format",
@@ -246,7 +255,9 @@ def _add_result_flags(parser: argparse.ArgumentParser) -> None:
     )
 
 
-RANGING_SKIPPED: Final = frozenset({"offset", "device", "map", "map_estimate", "clutter_m"})
+RANGING_SKIPPED: Final = frozenset(
+    {"offset", "device", "map", "map_estimate", "clutter_m", "baseline", "min_trial_coverage"}
+)
 """Evaluation options ``loceval ranging`` does not take (the tag offset says where the tag is)."""
 
 

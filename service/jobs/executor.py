@@ -47,6 +47,7 @@ from service.jobs.runner import (
     run_job,
 )
 from service.jobs.tracking import tracked_job
+from service.results.baseline import evaluation_baseline
 from service.runtime import Runtime, load_target
 from service.schemas.evaluations import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
 
@@ -274,6 +275,9 @@ def trajectory_job(
         visits=visits,
         checkpoints=checkpoints_from_options(options),
         the_map=the_map,
+        baseline=None
+        if options.baseline is None
+        else evaluation_baseline(runtime, project_id, options.baseline),
     )
 
 
@@ -367,4 +371,11 @@ def _source(
         provenance = file_provenance(role, spec, sha256=dataset.sha256, size=dataset.size_bytes)
     provenance.update(path=dataset.filename, dataset_id=dataset.id)
     name = ref.name or ref.selector or Path(dataset.filename).stem
-    return JobSource(spec, str(name), provenance, display_path=dataset.filename, remote=remote)
+    return JobSource(
+        spec,
+        str(name),
+        provenance,
+        display_path=dataset.filename,
+        remote=remote,
+        system=ref.system if role == "estimate" else None,
+    )

@@ -73,6 +73,11 @@ class SourceRef(Strict):
     name: Annotated[str, Field(min_length=1, max_length=120)] | None = Field(
         default=None, description="name in the report (default: selector or file name)"
     )
+    system: Annotated[str, Field(min_length=1, max_length=120), Printable] | None = Field(
+        default=None,
+        description="estimates only: the system this estimate is a trial (a run) of; the "
+        "estimates of one system are grouped, summarised over their trials and compared",
+    )
 
 
 class DeviceOffset(Strict):
@@ -245,7 +250,11 @@ def _other_than_auto(spec: OptionSpec) -> str:
 
 def _fields(group: str) -> dict[str, Any]:
     """Return ``create_model``'s fields of the API's options of a group of the table."""
-    wanted = {"ranging"} if group == "ranging" else {"evaluation", "reading", "export", "map"}
+    wanted = (
+        {"ranging"}
+        if group == "ranging"
+        else {"evaluation", "reading", "export", "map", "baseline"}
+    )
     return {
         spec.key: (_annotation(spec), _field(spec.key))
         for spec in OPTIONS
@@ -528,7 +537,7 @@ class OptionPublic(BaseModel):
     min_length: int | None
     pattern: str | None
     example: str | None
-    group: Literal["evaluation", "reading", "export", "map", "ranging"] = Field(
+    group: Literal["evaluation", "reading", "export", "map", "baseline", "ranging"] = Field(
         description="ranging: only POST /ranging takes it"
     )
     auto: bool = Field(description='the value may also be "auto" (estimated from the data)')
