@@ -1,14 +1,17 @@
 """``junit.xml``: the evaluation's checks as a JUnit XML test report.
 
-One ``<testsuite>`` per estimate, one ``<testcase>`` per check:
+One ``<testsuite>`` per estimate, or per system of trials (``--system``: its trials'
+checks, prefixed with the trial's name, and one ``<error>`` case per failed trial, so a
+failed trial is counted, never dropped), one ``<testcase>`` per check:
 
 - ``tolerance``: the tolerance verdict. ``fail`` is a ``<failure>``; ``pass`` passes;
   ``undecided`` (the share's interval straddles the requirement) is a ``<failure>`` when the
   gate's conditions (``--fail-on``) include ``undecided``, and otherwise ``<skipped>`` with
   the verdict as its message: the run could not tell, which a CI system should show without
   failing the build. Without a tolerance the case is ``<skipped>`` ("no tolerance").
-- one case per comparison with the baseline (when one is given): ``worse`` is a
-  ``<failure>``, ``better`` and ``within noise`` pass.
+- one case per comparison with the baseline (when one is given; ATE and RPE RMSE, a
+  system's by its median over the trials): ``worse`` is a ``<failure>``, ``better`` and
+  ``within noise`` pass, ``undetermined`` (no interval) is ``<skipped>``.
 
 A failure's ``message`` holds the figures and the interval that decided it
 ("ORB-SLAM3: FAIL: 87.2 % within 0.1 m (95 % interval 85.0–89.1 %, 95 % required); ATE RMSE
@@ -23,12 +26,12 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final
 
 from exporters.options import ExportOptions
 from exporters.report.verdicts import VerdictView
-from exporters.report.view import ResultsView, build_results_view
+from exporters.report.view import BaselineCheck, ResultsView, SystemView, build_results_view
 from loceval.core.display import display_text
 from loceval.evaluation import EvaluationResult
 
@@ -47,7 +50,7 @@ class _Case:
     """One check: its name, and a failure or skip with its message and text (or a pass)."""
 
     name: str
-    outcome: str  # "passed", "failure" or "skipped"
+    outcome: str  # "passed", "failure", "error" or "skipped"
     kind: str = ""
     message: str = ""
     text: str = ""
@@ -75,16 +78,46 @@ def _tolerance_case(
     return _Case(name, "skipped", verdict.status, message, text)
 
 
-def _suite(view: ResultsView, k: int, fail_on: tuple[str, ...]) -> ET.Element:
+def _baseline_case(check: BaselineCheck) -> _Case:
+    what = " (median over the trials)" if check.level == "system" else ""
+    name = f"baseline {check.metric}{what}"
+    words = check.verdict.replace("_", " ")
+    message = f"{check.name}: {words}: {check.figures}"
+    if check.verdict == "worse":
+        return _Case(name, "failure", "worse", message, check.summary)
+    if check.verdict == "undetermined":
+        return _Case(name, "skipped", "undetermined", message, check.summary)
+    return _Case(name, "passed", text=check.summary)
+
+
+def _cases_of_estimate(
+    view: ResultsView, k: int, fail_on: tuple[str, ...], *, trial: bool = False
+) -> list[_Case]:
+    """The tolerance case of estimate ``k`` and its baseline cases (named by it in a system)."""
     name = view.estimate_names[k]
     cases = [_tolerance_case(view, k, view.verdicts[k], fail_on)]
+    cases += [_baseline_case(c) for c in view.baseline if c.level == "estimate" and c.name == name]
+    if trial:  # a system's suite holds its trials' cases: each says which trial
+        cases = [replace(c, name=f"{c.name}: {name}") for c in cases]
+    return cases
+
+
+def _testsuite(
+    name: str,
+    k: int,
+    view: ResultsView,
+    *,
+    cases: list[_Case],
+    properties: list[tuple[str, str]],
+    notes: list[str],
+) -> ET.Element:
     suite = ET.Element(
         "testsuite",
         {
             "name": _text(name),
             "tests": str(len(cases)),
             "failures": str(sum(c.outcome == "failure" for c in cases)),
-            "errors": "0",
+            "errors": str(sum(c.outcome == "error" for c in cases)),
             "skipped": str(sum(c.outcome == "skipped" for c in cases)),
             "time": "0",
             "timestamp": view.created_at,
@@ -92,17 +125,9 @@ def _suite(view: ResultsView, k: int, fail_on: tuple[str, ...]) -> ET.Element:
             "package": "loceval",
         },
     )
-    properties = ET.SubElement(suite, "properties")
-    figures = [
-        ("evaluation_id", view.evaluation_id),
-        ("ate_rmse", view.figure(1, "RMSE", k)),
-        ("rpe_rmse", view.figure(2, "RMSE", k)),
-        *((f"share {label}", values[k]) for label, values in view.shares),
-    ]
-    if view.verdicts[k].status != "none":
-        figures.append(("verdict", view.verdicts[k].status))
-    for key, value in figures:
-        ET.SubElement(properties, "property", {"name": _text(key), "value": _text(value)})
+    listed = ET.SubElement(suite, "properties")
+    for key, value in [("evaluation_id", view.evaluation_id), *properties]:
+        ET.SubElement(listed, "property", {"name": _text(key), "value": _text(value)})
     for case in cases:
         element = ET.SubElement(
             suite,
@@ -116,10 +141,55 @@ def _suite(view: ResultsView, k: int, fail_on: tuple[str, ...]) -> ET.Element:
             detail.text = _text(case.text, one_line=False)
         elif case.text:
             ET.SubElement(element, "system-out").text = _text(case.text, one_line=False)
-    warnings = [f"warning ({about}): {text}" for about, text in view.warnings if about == name]
-    if warnings:
-        ET.SubElement(suite, "system-out").text = _text("\n".join(warnings), one_line=False)
+    if notes:
+        ET.SubElement(suite, "system-out").text = _text("\n".join(notes), one_line=False)
     return suite
+
+
+def _estimate_properties(view: ResultsView, k: int) -> list[tuple[str, str]]:
+    found = [
+        ("ate_rmse", view.figure(1, "RMSE", k)),
+        ("rpe_rmse", view.figure(2, "RMSE", k)),
+        *((f"share {label}", values[k]) for label, values in view.shares),
+    ]
+    if view.verdicts[k].status != "none":
+        found.append(("verdict", view.verdicts[k].status))
+    return found
+
+
+def _warnings_of(view: ResultsView, names: set[str]) -> list[str]:
+    return [f"warning ({about}): {text}" for about, text in view.warnings if about in names]
+
+
+def _estimate_suite(view: ResultsView, k: int, fail_on: tuple[str, ...]) -> ET.Element:
+    name = view.estimate_names[k]
+    cases = _cases_of_estimate(view, k, fail_on)
+    notes = _warnings_of(view, {name})
+    return _testsuite(
+        name, k, view, cases=cases, properties=_estimate_properties(view, k), notes=notes
+    )
+
+
+def _system_suite(
+    view: ResultsView, number: int, system: SystemView, fail_on: tuple[str, ...]
+) -> ET.Element:
+    trials = [k for k, s in enumerate(view.estimate_systems) if s == system.name]
+    cases = [c for k in trials for c in _cases_of_estimate(view, k, fail_on, trial=True)]
+    cases += [
+        _Case(f"trial {trial}", "error", "failed trial", f"{trial}: {why}", why)
+        for trial, why in system.failed
+    ]
+    cases += [
+        _baseline_case(c) for c in view.baseline if c.level == "system" and c.name == system.name
+    ]
+    properties = [
+        ("trials", str(len(system.trials))),
+        ("failed_trials", str(len(system.failed))),
+        *system.metrics,
+    ]
+    names = {system.name, *(view.estimate_names[k] for k in trials)}
+    notes = _warnings_of(view, names)
+    return _testsuite(system.name, number, view, cases=cases, properties=properties, notes=notes)
 
 
 def junit_document(view: ResultsView, *, fail_on: tuple[str, ...] = ()) -> ET.Element:
@@ -129,14 +199,22 @@ def junit_document(view: ResultsView, *, fail_on: tuple[str, ...] = ()) -> ET.El
         view: the report's figure-free view model.
         fail_on: the gate's conditions (``undecided`` makes an undecided verdict a failure).
     """
-    suites = [_suite(view, k, fail_on) for k in range(len(view.estimate_names))]
+    suites = [
+        _estimate_suite(view, k, fail_on)
+        for k in range(len(view.estimate_names))
+        if not (view.estimate_systems and view.estimate_systems[k])
+    ]
+    first = len(view.estimate_names)
+    suites += [
+        _system_suite(view, first + n, system, fail_on) for n, system in enumerate(view.systems)
+    ]
     root = ET.Element(
         "testsuites",
         {
             "name": _text(f"loceval: {view.title}"),
             "tests": str(sum(int(s.get("tests", "0")) for s in suites)),
             "failures": str(sum(int(s.get("failures", "0")) for s in suites)),
-            "errors": "0",
+            "errors": str(sum(int(s.get("errors", "0")) for s in suites)),
             "time": "0",
         },
     )

@@ -2,9 +2,10 @@
 
 GitHub Actions shows it when it is appended to ``$GITHUB_STEP_SUMMARY``; GitLab and Gitea
 show it as a merge-request comment. It holds, from the report's figure-free view model:
-the gate (when ``--fail-on`` is given), the results table (an estimate per row: verdict,
-ATE and RPE RMSE with their 95 % intervals, the shares within the thresholds), each
-verdict in words, the comparisons of estimates, and the warnings (folded).
+the gate (when ``--fail-on`` is given), the results table (an estimate per row: its system,
+verdict, ATE and RPE RMSE with their 95 % intervals, the shares within the thresholds), each
+verdict in words, the systems over their trials (with the failed trials), the comparisons
+with the baseline, the comparisons of estimates, and the warnings (folded).
 
 Text from the inputs (names, messages) is escaped: a ``|`` in a name cannot split a table
 cell, and ``*``, ``_``, `````, ``[``, ``<`` cannot start emphasis, code, links or HTML.
@@ -20,7 +21,13 @@ from exporters.report.view import ResultsView, build_results_view
 from loceval.core.display import display_text
 from loceval.evaluation import EvaluationResult
 
-__all__ = ["STATUS_MARKS", "export_summary_md", "markdown_text", "summary_markdown"]
+__all__ = [
+    "BASELINE_MARKS",
+    "STATUS_MARKS",
+    "export_summary_md",
+    "markdown_text",
+    "summary_markdown",
+]
 
 STATUS_MARKS: Final = {
     "pass": "✅ PASS",
@@ -39,22 +46,90 @@ def markdown_text(text: str) -> str:
     return _SPECIAL.sub(r"\\\1", display_text(text))
 
 
+BASELINE_MARKS: Final = {
+    "better": "✅ better",
+    "worse": "❌ worse",
+    "within_noise": "➖ within noise",
+    "undetermined": "❔ undetermined",
+}
+"""How the baseline table shows a comparison's verdict."""
+
+
+def _row(cells: list[str]) -> str:
+    return "| " + " | ".join(markdown_text(c) for c in cells) + " |"
+
+
+def _rule(left: int, right: int) -> str:
+    return "| " + " | ".join(["---"] * left + ["---:"] * right) + " |"
+
+
 def _table(view: ResultsView) -> list[str]:
-    heads = ["Estimate", "Verdict", "ATE RMSE (95 % CI)", "RPE RMSE (95 % CI)"]
-    heads += [f"{label} (share of poses)" for label, _ in view.shares]
-    lines = [
-        "| " + " | ".join(markdown_text(h) for h in heads) + " |",
-        "| --- | --- | " + " | ".join("---:" for _ in heads[2:]) + " |",
-    ]
+    systems = any(view.estimate_systems)
+    heads = ["Estimate", *(["System"] if systems else []), "Verdict"]
+    figures = ["ATE RMSE (95 % CI)", "RPE RMSE (95 % CI)"]
+    figures += [f"{label} (share of poses)" for label, _ in view.shares]
+    lines = [_row(heads + figures), _rule(len(heads), len(figures))]
     for k, name in enumerate(view.estimate_names):
         cells = [
-            markdown_text(name),
+            name,
+            *([view.estimate_systems[k] or "—"] if systems else []),
             STATUS_MARKS.get(view.verdicts[k].status, view.verdicts[k].badge),
             view.figure(1, "RMSE", k),
             view.figure(2, "RMSE", k),
             *(values[k] for _, values in view.shares),
         ]
-        lines.append("| " + " | ".join(markdown_text(c) for c in cells) + " |")
+        lines.append(_row(cells))
+    return lines
+
+
+def _systems(view: ResultsView) -> list[str]:
+    if not view.systems:
+        return []
+    metrics = list(dict.fromkeys(label for s in view.systems for label, _ in s.metrics))
+    lines = ["### Systems over their trials", ""]
+    lines += [_row(["System", "Trials", "Failed trials", *metrics]), _rule(1, 2 + len(metrics))]
+    for system in view.systems:
+        figures = dict(system.metrics)
+        lines.append(
+            _row(
+                [
+                    system.name,
+                    str(len(system.trials)),
+                    str(len(system.failed)),
+                    *(figures.get(m, "—") for m in metrics),
+                ]
+            )
+        )
+    lines.append("")
+    failed = [(s.name, trial, why) for s in view.systems for trial, why in s.failed]
+    if failed:
+        lines += ["Failed trials (counted, not averaged):", ""]
+        lines += [
+            f"- **{markdown_text(t)}** ({markdown_text(s)}): {markdown_text(w)}"
+            for s, t, w in failed
+        ]
+        lines.append("")
+    if view.system_comparisons:
+        lines += [f"- {markdown_text(c)}" for c in view.system_comparisons]
+        lines.append("")
+    return lines
+
+
+def _baseline(view: ResultsView) -> list[str]:
+    if not view.baseline and not view.baseline_label:
+        return []
+    lines = [f"### Against the baseline {markdown_text(view.baseline_label)}", ""]
+    if view.baseline:
+        lines += [_row(["Estimate or system", "Verdict", "Now against the baseline"])]
+        lines.append(_rule(3, 0))
+        for check in view.baseline:
+            what = f"{check.name} (system)" if check.level == "system" else check.name
+            mark = BASELINE_MARKS.get(check.verdict, check.verdict)
+            lines.append(_row([what, mark, check.figures]))
+        lines.append("")
+    if view.baseline_notes:
+        lines += [f"- {markdown_text(n)}" for n in view.baseline_notes]
+        lines.append("")
     return lines
 
 
@@ -80,6 +155,8 @@ def summary_markdown(view: ResultsView) -> str:
     lines += ["### Verdicts", ""]
     lines += [f"- **{markdown_text(v.name)}**: {markdown_text(v.headline)}" for v in view.verdicts]
     lines.append("")
+    lines += _systems(view)
+    lines += _baseline(view)
     if view.confidence.comparisons:
         lines += ["### Comparisons of the estimates", ""]
         lines += [f"- {markdown_text(c)}" for c in view.confidence.comparisons]

@@ -42,19 +42,22 @@ from exporters.report.verdicts import (
     building_view,
     verdict_view,
 )
+from loceval.assessment.baseline import BASELINE_METRICS
 from loceval.core.lengths import MM_BELOW_M, LengthUnit, length_unit
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.options import option
-from loceval.results.document import read_result
-from loceval.results.gate import Gate, judge_gate
+from loceval.results.document import ResultRead, TrialMetricRead, read_result
+from loceval.results.gate import Gate, baseline_figures, judge_gate
 
 __all__ = [
     "BEST_MARK",
     "MM_BELOW_M",
+    "BaselineCheck",
     "LengthUnit",
     "ReportView",
     "ResultsView",
+    "SystemView",
     "build_report_view",
     "build_results_view",
     "length_unit",
@@ -349,6 +352,105 @@ def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple
 
 
 @dataclass(frozen=True, slots=True)
+class BaselineCheck:
+    """One figure of an estimate or system against the baseline's, as a check.
+
+    Attributes:
+        name: the estimate's or system's name.
+        level: ``estimate`` or ``system``.
+        metric: the figure in words (``ATE RMSE``).
+        verdict: ``better``, ``worse``, ``within_noise`` or ``undetermined``.
+        figures: now, baseline, difference and interval in one line
+            (:func:`loceval.results.gate.baseline_figures`, the gate's words).
+        summary: the comparison in one sentence (the core's).
+    """
+
+    name: str
+    level: str
+    metric: str
+    verdict: str
+    figures: str
+    summary: str
+
+
+@dataclass(frozen=True, slots=True)
+class SystemView:
+    """A system of trials: its trials, its failed trials and each metric over the trials.
+
+    Attributes:
+        name: the system's name.
+        trials: the trials counted in its figures.
+        failed: the failed trials as (name, why), counted and never dropped.
+        metrics: (metric in words, its figures over the trials in one line).
+    """
+
+    name: str
+    trials: tuple[str, ...]
+    failed: tuple[tuple[str, str], ...]
+    metrics: tuple[tuple[str, str], ...]
+
+
+_TRIAL_METRICS: Final = {
+    "ate_rmse": "ATE RMSE",
+    "rpe_rmse": "RPE RMSE",
+    "ate_rot_rmse": "ATE rotation RMSE",
+    "rpe_rot_rmse": "RPE rotation RMSE",
+}
+
+
+def _amount(value: float, unit: str) -> str:
+    return f"{value:.3f} m" if unit == "m" else f"{value:.3g} {unit}".rstrip()
+
+
+def _over_trials(metric: TrialMetricRead) -> str:
+    """``median 0.123 m, mean 0.125 m ± 0.010 m, 95 % interval of the mean 0.11–0.14 m``."""
+    unit, fig = metric.unit, metric.figures
+    parts = [f"{metric.n} trial{'s' if metric.n != 1 else ''}"]
+    if "median" in fig:
+        parts.append(f"median {_amount(fig['median'], unit)}")
+    if "mean" in fig:
+        spread = f" ± {_amount(fig['std'], unit)}" if "std" in fig else ""
+        parts.append(f"mean {_amount(fig['mean'], unit)}{spread}")
+    if metric.interval is not None:
+        low, high = metric.interval.low, metric.interval.high
+        parts.append(f"95 % interval of the mean {_amount(low, unit)}–{_amount(high, unit)}")
+    elif metric.note:
+        parts.append(metric.note.rstrip("."))
+    return ", ".join(parts)
+
+
+def _systems(document: ResultRead) -> tuple[SystemView, ...]:
+    return tuple(
+        SystemView(
+            name=system.name,
+            trials=system.trials,
+            failed=tuple((f.name, f.reason) for f in system.failed),
+            metrics=tuple(
+                (_TRIAL_METRICS.get(key, key), _over_trials(metric))
+                for key, metric in system.metrics.items()
+            ),
+        )
+        for system in document.systems
+    )
+
+
+def _baseline_checks(document: ResultRead) -> tuple[BaselineCheck, ...]:
+    if document.baseline is None:
+        return ()
+    return tuple(
+        BaselineCheck(
+            name=c.name,
+            level=c.level,
+            metric=BASELINE_METRICS.get(c.metric, c.metric),
+            verdict=c.verdict,
+            figures=baseline_figures(c),
+            summary=c.summary,
+        )
+        for c in document.baseline.comparisons
+    )
+
+
+@dataclass(frozen=True, slots=True)
 class ResultsView:
     """The report's figures and words without its plots: what CI files show too.
 
@@ -369,6 +471,12 @@ class ResultsView:
         confidence: the intervals of the tables, the comparisons of estimates, NEES.
         warnings: (source, message) pairs.
         gate: the gate of the options' ``fail_on`` (None without conditions).
+        systems: the systems of trials (estimates naming a system).
+        system_comparisons: every two systems compared over their trials, a sentence each.
+        baseline: each estimate's and system's figures against the baseline's.
+        baseline_label: what the baseline is ("" without one).
+        baseline_notes: names without a counterpart, what reading the baseline found.
+        estimate_systems: each estimate's system ("" when it is no trial).
     """
 
     title: str
@@ -383,6 +491,12 @@ class ResultsView:
     confidence: ConfidenceView
     warnings: tuple[tuple[str, str], ...]
     gate: Gate | None = None
+    systems: tuple[SystemView, ...] = ()
+    system_comparisons: tuple[str, ...] = ()
+    baseline: tuple[BaselineCheck, ...] = ()
+    baseline_label: str = ""
+    baseline_notes: tuple[str, ...] = ()
+    estimate_systems: tuple[str, ...] = ()
 
     def figure(self, table: int, label: str, column: int, group: str = "translation") -> str:
         """Return a Table 1-2 value with its unit and interval (``0.194 m (0.180–0.210)``).
@@ -448,9 +562,9 @@ def build_results_view(
         for t in cfg.thresholds_m
     )
     figure_of = map_figures or {}
-    gate = None
-    if options.fail_on:
-        gate = judge_gate(read_result(result.to_dict()), options.fail_on)
+    document = read_result(result.to_dict())  # the systems and the baseline, read as written
+    gate = judge_gate(document, options.fail_on) if options.fail_on else None
+    baseline = document.baseline
     return ResultsView(
         title=options.title,
         evaluation_id=options.evaluation_id,
@@ -467,6 +581,12 @@ def build_results_view(
         ),
         warnings=_warnings(result),
         gate=gate,
+        systems=_systems(document),
+        system_comparisons=tuple(c.summary for c in document.system_comparisons),
+        baseline=_baseline_checks(document),
+        baseline_label="" if baseline is None else baseline.label or baseline.source,
+        baseline_notes=() if baseline is None else baseline.notes,
+        estimate_systems=tuple(e.system or "" for e in estimates),
     )
 
 

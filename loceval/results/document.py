@@ -79,14 +79,6 @@ def _mapping(value: object) -> Mapping[str, Any] | None:
     return value if isinstance(value, Mapping) else None
 
 
-def _interval(value: object) -> tuple[float, float] | None:
-    """A written ``[low, high]`` of two finite numbers, else None."""
-    if not isinstance(value, Sequence) or isinstance(value, str | bytes) or len(value) != 2:
-        return None
-    low, high = _finite(value[0]), _finite(value[1])
-    return None if low is None or high is None else (low, high)
-
-
 @dataclass(frozen=True, slots=True)
 class StatsBlock:
     """One statistics block: an error series' :class:`ErrorStats`, and its 95 % intervals.
@@ -176,7 +168,7 @@ class VerdictRead:
             "share_within": _finite(found.get("share_within")),
             "tolerance_m": _finite(found.get("tolerance_m")),
             "required_share": _finite(found.get("required_share")),
-            "ci95": _interval(found.get("ci95")),
+            "ci95": _pair(found.get("ci95")),
         }
         if written in _OUTCOMES:
             return cls(passed, _OUTCOMES[written], **figures)

@@ -17,17 +17,19 @@ merge request through.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
+from loceval.assessment.baseline import BASELINE_METRICS
 from loceval.errors import InputError
 from loceval.options import option
-from loceval.results.document import EstimateRead, ResultRead
+from loceval.results.document import BaselineDifferenceRead, EstimateRead, ResultRead
 
 __all__ = [
     "FAIL_ON",
     "Gate",
+    "baseline_figures",
     "check_fail_on",
     "judge_gate",
     "parse_fail_on",
@@ -160,20 +162,41 @@ def _verdict_reason(estimate: EstimateRead, fail_on: Sequence[str]) -> str | Non
     return f"{estimate.label} is undecided against the tolerance{bracket}"
 
 
+def _signed(value: float, unit: str) -> str:
+    return f"{value:+.3f} m" if unit == "m" else f"{value:+.3g} {unit}".rstrip()
+
+
+def baseline_figures(comparison: BaselineDifferenceRead) -> str:
+    """Return a comparison with the baseline's figures in brackets' words.
+
+    ``ATE RMSE 0.142 m against 0.120 m, +0.022 m, paired 95 % interval +0.015 m to
+    +0.029 m`` (parts not written in the document are left out).
+    """
+    unit = comparison.unit
+    parts = [BASELINE_METRICS.get(comparison.metric, comparison.metric)]
+    if comparison.current is not None and comparison.baseline is not None:
+        parts[0] += (
+            f" {_signed(comparison.current, unit).lstrip('+')} against "
+            f"{_signed(comparison.baseline, unit).lstrip('+')}"
+        )
+    if comparison.difference is not None:
+        parts.append(_signed(comparison.difference, unit))
+    if comparison.interval is not None:
+        low, high = (_signed(v, unit) for v in comparison.interval)
+        kind = "paired" if comparison.paired else "unpaired"
+        parts.append(f"{kind} 95 % interval {low} to {high}")
+    return ", ".join(parts)
+
+
 def _baseline_reasons(result: ResultRead) -> list[str]:
     """The comparisons with the baseline that say ``worse``, one sentence each."""
-    found = result.document.get("baseline")
-    comparisons = found.get("comparisons") if isinstance(found, Mapping) else None
-    if not isinstance(comparisons, Sequence) or isinstance(comparisons, str | bytes):
+    if result.baseline is None:
         return []
-    reasons = []
-    for comparison in comparisons:
-        if not isinstance(comparison, Mapping) or comparison.get("verdict") != BASELINE_WORSE:
-            continue
-        summary = comparison.get("summary")
-        name = comparison.get("name") or "an estimate"
-        reasons.append(str(summary) if summary else f"{name} is worse than the baseline")
-    return reasons
+    return [
+        f"{c.name} is worse than the baseline ({baseline_figures(c)})"
+        for c in result.baseline.comparisons
+        if c.verdict == BASELINE_WORSE
+    ]
 
 
 def judge_gate(result: ResultRead, fail_on: Sequence[str]) -> Gate:
