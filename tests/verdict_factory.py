@@ -16,7 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+from loceval.assessment.baseline import baseline_from_document, compare_with_baseline
+from loceval.assessment.trials import FailedTrial
 from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
+from loceval.results.document import read_result
 from loceval.trajectory import Trajectory
 from tests.factories import make_trajectory, perturb, write_tum
 
@@ -65,3 +68,49 @@ def write_verdict_files(folder: Path, seed: int = 41) -> dict[str, Path]:
     paths = {"reference": write_tum(folder / "reference.tum", truth)}
     paths.update({name: write_tum(folder / f"{name}.tum", e) for name, e in estimates.items()})
     return paths
+
+
+def baseline_result(seed: int = 41) -> EvaluationResult:
+    """Return an evaluation against a baseline, with a system of trials and a failed trial.
+
+    The baseline ran ``SLAM`` as steady, ``VIO`` as borderline and ``UWB`` as steady; now
+    ``SLAM`` is lost (worse), ``VIO`` steady (better) and ``UWB`` the same steady run (within
+    noise). ``ORB`` is a system of two trials (steady, borderline) and one trial that failed
+    (``orb-3``, unreadable), each a trial of the same name in the baseline. The tolerance is
+    0.1 m for 95 %.
+    """
+    truth, runs = verdict_trajectories(seed)
+    config = EvaluationConfig(tolerance=Tolerance(DISTANCE_M, 0.95))
+
+    def named(run: str, name: str) -> Trajectory:
+        return replace(runs[run], name=name)
+
+    before = evaluate(
+        truth,
+        [
+            named("steady", "SLAM"),
+            named("borderline", "VIO"),
+            named("steady", "UWB"),
+            named("borderline", "orb-1"),
+            named("borderline", "orb-2"),
+        ],
+        config,
+        systems=[None, None, None, "ORB", "ORB"],
+    )
+    baseline = baseline_from_document(
+        read_result(before.to_dict()), label="release-1.4", source="release-1.4/result.json"
+    )
+    now = evaluate(
+        truth,
+        [
+            named("lost", "SLAM"),
+            named("steady", "VIO"),
+            named("steady", "UWB"),
+            named("steady", "orb-1"),
+            named("borderline", "orb-2"),
+        ],
+        config,
+        systems=[None, None, None, "ORB", "ORB"],
+        failed_trials=[FailedTrial("orb-3", "ORB", "input.unreadable", "orb-3.tum is empty.")],
+    )
+    return replace(now, baseline=compare_with_baseline(now, baseline))
