@@ -35,6 +35,7 @@ __all__ = [
     "EvaluationOptions",
     "EvaluationPublic",
     "EvaluationsPublic",
+    "GatePublic",
     "OptionPublic",
     "OptionsPublic",
     "Problem",
@@ -479,6 +480,19 @@ class SummaryRow(BaseModel):
     verdict: Literal["pass", "fail", "undecided"] | None
 
 
+class GatePublic(BaseModel):
+    """The gate of ``options.fail_on``: what a CI job checks before it lets a change through."""
+
+    passed: bool = Field(description="no condition of fail_on holds (the CLI exits 0; else 3)")
+    fail_on: list[Literal["fail", "undecided", "worse"]] = Field(
+        description="the conditions judged, in the order fail, undecided, worse"
+    )
+    reasons: list[str] = Field(
+        description="one sentence per estimate and condition that holds, with the figures",
+        examples=[["ORB-SLAM3 fails the tolerance (87.2 % within 0.10 m, needs 95 %)"]],
+    )
+
+
 class ArtifactPublic(BaseModel):
     """A downloadable file of a succeeded evaluation."""
 
@@ -506,6 +520,11 @@ class EvaluationPublic(BaseModel):
     artifacts: list[ArtifactPublic] | None = None
     result: dict[str, Any] | None = Field(
         default=None, description="the CLI's --json document (GET of one evaluation only)"
+    )
+    gate: GatePublic | None = Field(
+        default=None,
+        description="the gate of options.fail_on, once the evaluation succeeded (GET of one "
+        "evaluation only; null without fail_on)",
     )
 
 
