@@ -11,7 +11,9 @@ failed trial is counted, never dropped), one ``<testcase>`` per check:
   failing the build. Without a tolerance the case is ``<skipped>`` ("no tolerance").
 - one case per comparison with the baseline (when one is given; ATE and RPE RMSE, a
   system's by its median over the trials): ``worse`` is a ``<failure>``, ``better`` and
-  ``within noise`` pass, ``undetermined`` (no interval) is ``<skipped>``.
+  ``within noise`` pass, ``undetermined`` (no interval) is ``<skipped>``. A trial's own
+  comparison with the baseline's trial of its name is in its system's ``<system-out>``,
+  not a case: a system is judged over all its trials, as the gate judges it.
 
 A failure's ``message`` holds the figures and the interval that decided it
 ("ORB-SLAM3: FAIL: 87.2 % within 0.1 m (95 % interval 85.0–89.1 %, 95 % required); ATE RMSE
@@ -96,7 +98,11 @@ def _cases_of_estimate(
     """The tolerance case of estimate ``k`` and its baseline cases (named by it in a system)."""
     name = view.estimate_names[k]
     cases = [_tolerance_case(view, k, view.verdicts[k], fail_on)]
-    cases += [_baseline_case(c) for c in view.baseline if c.level == "estimate" and c.name == name]
+    cases += [
+        _baseline_case(c)
+        for c in view.baseline
+        if c.gated and c.level == "estimate" and c.name == name
+    ]
     if trial:  # a system's suite holds its trials' cases: each says which trial
         cases = [replace(c, name=f"{c.name}: {name}") for c in cases]
     return cases
@@ -188,7 +194,14 @@ def _system_suite(
         *system.metrics,
     ]
     names = {system.name, *(view.estimate_names[k] for k in trials)}
+    trial_names = {view.estimate_names[k] for k in trials}
     notes = _warnings_of(view, names)
+    # each trial against the baseline's trial of its name: shown, not a check
+    notes += [
+        f"baseline, trial {c.name}: {c.summary}"
+        for c in view.baseline
+        if not c.gated and c.name in trial_names
+    ]
     return _testsuite(system.name, number, view, cases=cases, properties=properties, notes=notes)
 
 

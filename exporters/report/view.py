@@ -48,7 +48,7 @@ from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.options import option
 from loceval.results.document import ResultRead, TrialMetricRead, read_result
-from loceval.results.gate import Gate, baseline_figures, judge_gate
+from loceval.results.gate import Gate, baseline_figures, gated_comparisons, judge_gate
 
 __all__ = [
     "BEST_MARK",
@@ -363,6 +363,8 @@ class BaselineCheck:
         figures: now, baseline, difference and interval in one line
             (:func:`loceval.results.gate.baseline_figures`, the gate's words).
         summary: the comparison in one sentence (the core's).
+        gated: whether it is a check (the gate's ``worse`` judges it); a trial's own
+            comparison is shown only (:func:`loceval.results.gate.gated_comparisons`).
     """
 
     name: str
@@ -371,6 +373,7 @@ class BaselineCheck:
     verdict: str
     figures: str
     summary: str
+    gated: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -437,6 +440,7 @@ def _systems(document: ResultRead) -> tuple[SystemView, ...]:
 def _baseline_checks(document: ResultRead) -> tuple[BaselineCheck, ...]:
     if document.baseline is None:
         return ()
+    gated = {id(c) for c in gated_comparisons(document)}
     return tuple(
         BaselineCheck(
             name=c.name,
@@ -445,6 +449,7 @@ def _baseline_checks(document: ResultRead) -> tuple[BaselineCheck, ...]:
             verdict=c.verdict,
             figures=baseline_figures(c),
             summary=c.summary,
+            gated=id(c) in gated,
         )
         for c in document.baseline.comparisons
     )

@@ -7,7 +7,8 @@ just computed) and the service (from the stored document) judge the same way:
 
 - ``fail``: an estimate's tolerance verdict is ``fail`` (its share's interval falls short);
 - ``undecided``: a verdict is ``undecided`` (the interval straddles the requirement);
-- ``worse``: a comparison with the baseline says ``worse``.
+- ``worse``: a comparison with the baseline says ``worse`` (an estimate's own, or a
+  system's over all its trials: :func:`gated_comparisons`).
 
 The gate is closed when one of them holds; its reasons say which estimate, and the figures
 that decided it, in one sentence each. Conditions that need a tolerance or a baseline
@@ -31,6 +32,7 @@ __all__ = [
     "Gate",
     "baseline_figures",
     "check_fail_on",
+    "gated_comparisons",
     "judge_gate",
     "parse_fail_on",
     "verdict_figures",
@@ -188,13 +190,26 @@ def baseline_figures(comparison: BaselineDifferenceRead) -> str:
     return ", ".join(parts)
 
 
-def _baseline_reasons(result: ResultRead) -> list[str]:
-    """The comparisons with the baseline that say ``worse``, one sentence each."""
+def gated_comparisons(result: ResultRead) -> list[BaselineDifferenceRead]:
+    """Return the comparisons with the baseline that are checks (the gate's ``worse``).
+
+    A system is judged over all its trials (its ``system`` comparison); a trial's own
+    comparison with the baseline's trial of the same name is shown, not judged: the runs of
+    a system that is not deterministic are exchangeable, so trial 2 against the baseline's
+    trial 2 says nothing a rerun would keep. An estimate that is no trial is judged itself.
+    """
     if result.baseline is None:
         return []
+    trials = {e.name for e in result.estimates if e.system}
+    return [c for c in result.baseline.comparisons if c.level == "system" or c.name not in trials]
+
+
+def _baseline_reasons(result: ResultRead) -> list[str]:
+    """The comparisons with the baseline that say ``worse``, one sentence each."""
     return [
-        f"{c.name} is worse than the baseline ({baseline_figures(c)})"
-        for c in result.baseline.comparisons
+        f"{c.name}{' (over its trials)' if c.level == 'system' else ''} is worse than the "
+        f"baseline ({baseline_figures(c)})"
+        for c in gated_comparisons(result)
         if c.verdict == BASELINE_WORSE
     ]
 
