@@ -114,3 +114,22 @@ def baseline_result(seed: int = 41) -> EvaluationResult:
         failed_trials=[FailedTrial("orb-3", "ORB", "input.unreadable", "orb-3.tum is empty.")],
     )
     return replace(now, baseline=compare_with_baseline(now, baseline))
+
+
+def write_trial_runs(folder: Path, sigmas_m: dict[str, float], seed: int = 41) -> dict[str, Path]:
+    """Write the reference and one noisy run per name (its own noise draw) as TUM files.
+
+    Args:
+        folder: where to write ``reference.tum`` and ``NAME.tum``.
+        sigmas_m: each run's position noise per axis, metres, by name.
+        seed: the seed of the reference (the same as :func:`verdict_trajectories`') and of
+            the runs' noise.
+    """
+    truth, _ = verdict_trajectories(seed)
+    rng = np.random.default_rng(seed + 1)
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = {"reference": write_tum(folder / "reference.tum", truth)}
+    for name, sigma in sigmas_m.items():
+        run = replace(perturb(truth, rng, sigma_m=sigma, sigma_rad=0.002), name=name)
+        paths[name] = write_tum(folder / f"{name}.tum", run)
+    return paths

@@ -7,7 +7,7 @@ import pytest
 from loceval.errors import InputError
 from loceval.results.document import read_result
 from loceval.results.gate import FAIL_ON, check_fail_on, judge_gate, parse_fail_on
-from tests.verdict_factory import verdict_result
+from tests.verdict_factory import baseline_result, verdict_result
 
 
 @pytest.fixture(scope="module")
@@ -112,3 +112,25 @@ def test_a_document_from_before_the_intervals_is_judged_by_passed() -> None:
     }
     (reason,) = judge_gate(read_result(old), ["fail"]).reasons
     assert reason == "ORB-SLAM3 fails the tolerance (87.2 % within 0.10 m, needs 95 %)"
+
+
+def test_worse_judges_estimates_and_systems_not_trials() -> None:
+    """SLAM got worse (ATE and RPE); a trial's own comparison never closes the gate."""
+    document = baseline_result().to_dict()
+    reasons = judge_gate(read_result(document), ["worse"]).reasons
+    assert [r.split(" (")[0] for r in reasons] == [
+        "SLAM is worse than the baseline",
+        "SLAM is worse than the baseline",
+    ]
+    assert reasons[0].startswith("SLAM is worse than the baseline (ATE RMSE ")
+    assert "paired 95 % interval +" in reasons[0] or "unpaired 95 % interval +" in reasons[0]
+    baseline = document["baseline"]
+    for comparison in baseline["comparisons"]:  # every trial's own comparison now says worse
+        if comparison["name"] in {"orb-1", "orb-2"}:
+            comparison["verdict"] = "worse"
+    assert judge_gate(read_result(document), ["worse"]).reasons == reasons
+    for comparison in baseline["comparisons"]:  # the system's over its trials does count
+        if comparison["name"] == "ORB":
+            comparison["verdict"] = "worse"
+    more = judge_gate(read_result(document), ["worse"]).reasons
+    assert more[2].startswith("ORB (over its trials) is worse than the baseline (ATE RMSE ")
