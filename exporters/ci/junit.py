@@ -244,4 +244,5 @@ def export_junit_xml(result: EvaluationResult, options: ExportOptions) -> bytes:
     """
     root = junit_document(build_results_view(result, options), fail_on=options.fail_on)
     ET.indent(root)
-    return ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
+    data: bytes = ET.tostring(root, encoding="utf-8", xml_declaration=True)
+    return data + b"\n"

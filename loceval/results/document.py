@@ -164,19 +164,20 @@ class VerdictRead:
         if found is None or not isinstance(passed, bool):
             return None
         written = found.get("outcome")
-        figures = {
-            "share_within": _finite(found.get("share_within")),
-            "tolerance_m": _finite(found.get("tolerance_m")),
-            "required_share": _finite(found.get("required_share")),
-            "ci95": _pair(found.get("ci95")),
-        }
-        if written in _OUTCOMES:
-            return cls(passed, _OUTCOMES[written], **figures)
-        if "ci95" in found:  # written since the intervals: the outcome is always there
+        known = _OUTCOMES.get(written) if isinstance(written, str) else None
+        if known is None and "ci95" in found:  # written since the intervals: always there
             msg = f"{where} of the result document has no outcome (pass, fail or undecided)."
             raise InputError(msg)
-        # before the intervals: the outcome from passed
-        return cls(passed, "pass" if passed else "fail", **figures)
+        # before the intervals (no outcome written): the outcome from passed
+        outcome = known or ("pass" if passed else "fail")
+        return cls(
+            passed,
+            outcome,
+            share_within=_finite(found.get("share_within")),
+            tolerance_m=_finite(found.get("tolerance_m")),
+            required_share=_finite(found.get("required_share")),
+            ci95=_pair(found.get("ci95")),
+        )
 
 
 @dataclass(frozen=True, slots=True)
