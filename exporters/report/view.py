@@ -36,6 +36,12 @@ from exporters.report.provenance import (
     trajectory_rows,
 )
 from exporters.report.ranging import RangingView, build_ranging_view
+from exporters.report.trials import (
+    BaselineView,
+    TrialsView,
+    build_baseline_view,
+    build_trials_view,
+)
 from exporters.report.verdicts import (
     BuildingView,
     VerdictView,
@@ -191,6 +197,10 @@ class ReportView:
     """What the error colours mean: the tolerance in words (every figure and the viewer)."""
     building: BuildingView | None = None
     """The building model the paths were placed on, its spaces and warnings."""
+    trials: TrialsView | None = None
+    """The trials of each system (:mod:`exporters.report.trials`); None without systems."""
+    baseline: BaselineView | None = None
+    """Each estimate and system against the baseline; None without a baseline."""
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -324,7 +334,9 @@ def _summary(result: EvaluationResult) -> str:
     )
 
 
-def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple[str, str], ...]:
+def _contents(
+    *, ranging: bool, map_section: bool, warnings: int, trials: bool = False, baseline: bool = False
+) -> tuple[tuple[str, str], ...]:
     """Every section of the report, in order, as (anchor, title) for the contents list."""
     return tuple(
         entry
@@ -332,6 +344,8 @@ def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple
             (("verdict", "Verdict"), True),
             (("evaluated", "What was evaluated"), True),
             (("statistics", "Error statistics"), True),
+            (("trials", "Trials of each system"), trials),
+            (("baseline", "Against the baseline"), baseline),
             (("ranging", "Ranging"), ranging),
             (("map", "The map against the building plan"), map_section),
             (("viewer", "Interactive view"), True),
@@ -403,6 +417,10 @@ def build_report_view(
     )
     ranging = build_ranging_view(result)
     map_view = build_map_view(result)
+    trials = build_trials_view(
+        result, tuple(f.number for f in figures if f.key.startswith("trials_"))
+    )
+    baseline = build_baseline_view(result)
     warnings = _warnings(result)
     shares = tuple(
         (
@@ -456,8 +474,14 @@ def build_report_view(
         ),
         map=map_view,
         contents=_contents(
-            ranging=ranging is not None, map_section=map_view is not None, warnings=len(warnings)
+            ranging=ranging is not None,
+            map_section=map_view is not None,
+            warnings=len(warnings),
+            trials=trials is not None,
+            baseline=baseline is not None,
         ),
+        trials=trials,
+        baseline=baseline,
         legend=scale_words(result),
         building=building_view(result),
     )
