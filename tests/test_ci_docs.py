@@ -163,7 +163,11 @@ def test_github_a_regression_closes_the_gate(workspace: Path, runs: dict[str, Pa
     assert headings(text)[0] == "groundtruth vs SLAM"
     results, against = tables(text)
     assert results[1][:2] == ["SLAM", "❌ FAIL"]
-    assert [row[:2] for row in against[1:]] == [["SLAM", "❌ worse"], ["SLAM", "❌ worse"]]
+    assert [(row[0], row[1], row[6]) for row in against[1:]] == [
+        ("SLAM", "ATE RMSE", "❌ worse"),
+        ("SLAM", "RPE RMSE", "❌ worse"),
+    ]
+    assert all(row[5].endswith("(paired)") for row in against[1:])  # errors.csv kept
     assert "SLAM fails the tolerance (" in text
     assert "SLAM is worse than the baseline (ATE RMSE " in text
     junit = JUnitXml.fromfile(str(workspace / "loceval-out" / "junit.xml"))
@@ -180,7 +184,7 @@ def test_github_a_better_run_passes(workspace: Path, runs: dict[str, Path]) -> N
     assert "Gate: ✅ passed" in text
     results, against = tables(text)
     assert results[1][:2] == ["SLAM", "✅ PASS"]
-    assert {row[1] for row in against[1:]} <= {"➖ within noise", "✅ better"}
+    assert {row[6] for row in against[1:]} <= {"➖ within noise", "✅ better"}
 
 
 def test_gitlab_a_regression_fails_the_job_and_keeps_the_report(

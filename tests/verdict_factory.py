@@ -76,8 +76,8 @@ def baseline_result(seed: int = 41) -> EvaluationResult:
     The baseline ran ``SLAM`` as steady, ``VIO`` as borderline and ``UWB`` as steady; now
     ``SLAM`` is lost (worse), ``VIO`` steady (better) and ``UWB`` the same steady run (within
     noise). ``ORB`` is a system of two trials (steady, borderline) and one trial that failed
-    (``orb-3``, unreadable), each a trial of the same name in the baseline. The tolerance is
-    0.1 m for 95 %.
+    (``orb-3``, unreadable), against the baseline's two (borderline): compared over its
+    trials (too few for an interval: undetermined). The tolerance is 0.1 m for 95 %.
     """
     truth, runs = verdict_trajectories(seed)
     config = EvaluationConfig(tolerance=Tolerance(DISTANCE_M, 0.95))

@@ -10,7 +10,7 @@ failed trial is counted, never dropped), one ``<testcase>`` per check:
   the verdict as its message: the run could not tell, which a CI system should show without
   failing the build. Without a tolerance the case is ``<skipped>`` ("no tolerance").
 - one case per comparison with the baseline (when one is given; ATE and RPE RMSE, a
-  system's by its median over the trials): ``worse`` is a ``<failure>``, ``better`` and
+  system's over its trials): ``worse`` is a ``<failure>``, ``better`` and
   ``within noise`` pass, ``undetermined`` (no interval) is ``<skipped>``. A trial's own
   comparison with the baseline's trial of its name is in its system's ``<system-out>``,
   not a case: a system is judged over all its trials, as the gate judges it.
@@ -32,8 +32,9 @@ from dataclasses import dataclass, replace
 from typing import Final
 
 from exporters.options import ExportOptions
+from exporters.report.trials import BaselineRow
 from exporters.report.verdicts import VerdictView
-from exporters.report.view import BaselineCheck, ResultsView, SystemView, build_results_view
+from exporters.report.view import ResultsView, build_results_view
 from loceval.core.display import display_text
 from loceval.evaluation import EvaluationResult
 
@@ -80,16 +81,28 @@ def _tolerance_case(
     return _Case(name, "skipped", verdict.status, message, text)
 
 
-def _baseline_case(check: BaselineCheck) -> _Case:
-    what = " (median over the trials)" if check.level == "system" else ""
-    name = f"baseline {check.metric}{what}"
-    words = check.verdict.replace("_", " ")
-    message = f"{check.name}: {words}: {check.figures}"
-    if check.verdict == "worse":
-        return _Case(name, "failure", "worse", message, check.summary)
-    if check.verdict == "undetermined":
-        return _Case(name, "skipped", "undetermined", message, check.summary)
-    return _Case(name, "passed", text=check.summary)
+def _baseline_words(row: BaselineRow) -> str:
+    """``ATE RMSE 0.349 m against 0.017 m: +0.332 m (paired 95 % interval 0.327–0.337 m)``."""
+    interval = "" if row.interval == "—" else f" ({row.how} 95 % interval {row.interval})"
+    return f"{row.metric} {row.now} against {row.baseline}: {row.difference}{interval}"
+
+
+def _baseline_rows(view: ResultsView, name: str, *, judged: bool) -> list[BaselineRow]:
+    """The baseline rows of estimate or system ``name`` that are (or are not) checks."""
+    rows = () if view.baseline is None else view.baseline.rows
+    return [r for r in rows if r.name == name and ((r.name, r.metric) in view.judged) == judged]
+
+
+def _baseline_case(row: BaselineRow) -> _Case:
+    what = " (over the trials)" if row.name.endswith(" (system)") else ""
+    name = f"baseline {row.metric}{what}"
+    words = _baseline_words(row)
+    message = f"{row.name}: {row.verdict}: {words}"
+    if row.status == "worse":
+        return _Case(name, "failure", "worse", message, words)
+    if row.status == "undetermined":
+        return _Case(name, "skipped", "undetermined", message, words)
+    return _Case(name, "passed", text=f"{row.verdict}: {words}")
 
 
 def _cases_of_estimate(
@@ -98,11 +111,7 @@ def _cases_of_estimate(
     """The tolerance case of estimate ``k`` and its baseline cases (named by it in a system)."""
     name = view.estimate_names[k]
     cases = [_tolerance_case(view, k, view.verdicts[k], fail_on)]
-    cases += [
-        _baseline_case(c)
-        for c in view.baseline
-        if c.gated and c.level == "estimate" and c.name == name
-    ]
+    cases += [_baseline_case(row) for row in _baseline_rows(view, name, judged=True)]
     if trial:  # a system's suite holds its trials' cases: each says which trial
         cases = [replace(c, name=f"{c.name}: {name}") for c in cases]
     return cases
@@ -177,32 +186,44 @@ def _estimate_suite(view: ResultsView, k: int, fail_on: tuple[str, ...]) -> ET.E
 
 
 def _system_suite(
-    view: ResultsView, number: int, system: SystemView, fail_on: tuple[str, ...]
+    view: ResultsView, number: int, system: str, fail_on: tuple[str, ...]
 ) -> ET.Element:
-    trials = [k for k, s in enumerate(view.estimate_systems) if s == system.name]
+    trials = [k for k, s in enumerate(view.estimate_systems) if s == system]
+    found = view.trials
+    failed = [] if found is None else [f for f in found.failed if f.system == system]
     cases = [c for k in trials for c in _cases_of_estimate(view, k, fail_on, trial=True)]
     cases += [
-        _Case(f"trial {trial}", "error", "failed trial", f"{trial}: {why}", why)
-        for trial, why in system.failed
+        _Case(f"trial {f.name}", "error", "failed trial", f"{f.name}: {f.reason}", f.reason)
+        for f in failed
     ]
     cases += [
-        _baseline_case(c) for c in view.baseline if c.level == "system" and c.name == system.name
+        _baseline_case(row) for row in _baseline_rows(view, f"{system} (system)", judged=True)
     ]
-    properties = [
-        ("trials", str(len(system.trials))),
-        ("failed_trials", str(len(system.failed))),
-        *system.metrics,
+    rows = [] if found is None else [r for r in found.rows if r.system == system]
+    properties = [("trials", str(len(trials))), ("failed_trials", str(len(failed)))]
+    properties += [
+        (
+            row.metric,
+            f"median {row.median}, mean {row.mean} ± {row.std}, 95 % interval {row.interval}",
+        )
+        for row in rows
     ]
-    names = {system.name, *(view.estimate_names[k] for k in trials)}
-    trial_names = {view.estimate_names[k] for k in trials}
+    names = {system, *(view.estimate_names[k] for k in trials)}
     notes = _warnings_of(view, names)
     # each trial against the baseline's trial of its name: shown, not a check
     notes += [
-        f"baseline, trial {c.name}: {c.summary}"
-        for c in view.baseline
-        if not c.gated and c.name in trial_names
+        f"baseline, trial {row.name}: {row.verdict}: {_baseline_words(row)}"
+        for k in trials
+        for row in _baseline_rows(view, view.estimate_names[k], judged=False)
     ]
-    return _testsuite(system.name, number, view, cases=cases, properties=properties, notes=notes)
+    return _testsuite(system, number, view, cases=cases, properties=properties, notes=notes)
+
+
+def _systems(view: ResultsView) -> list[str]:
+    """The systems of trials, in order (each once)."""
+    if view.trials is None:
+        return []
+    return list(dict.fromkeys(row.system for row in view.trials.rows))
 
 
 def junit_document(view: ResultsView, *, fail_on: tuple[str, ...] = ()) -> ET.Element:
@@ -219,7 +240,7 @@ def junit_document(view: ResultsView, *, fail_on: tuple[str, ...] = ()) -> ET.El
     ]
     first = len(view.estimate_names)
     suites += [
-        _system_suite(view, first + n, system, fail_on) for n, system in enumerate(view.systems)
+        _system_suite(view, first + n, system, fail_on) for n, system in enumerate(_systems(view))
     ]
     root = ET.Element(
         "testsuites",

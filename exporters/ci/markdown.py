@@ -83,52 +83,45 @@ def _table(view: ResultsView) -> list[str]:
 
 
 def _systems(view: ResultsView) -> list[str]:
-    if not view.systems:
+    found = view.trials
+    if found is None:
         return []
-    metrics = list(dict.fromkeys(label for s in view.systems for label, _ in s.metrics))
-    lines = ["### Systems over their trials", ""]
-    lines += [_row(["System", "Trials", "Failed trials", *metrics]), _rule(1, 2 + len(metrics))]
-    for system in view.systems:
-        figures = dict(system.metrics)
-        lines.append(
-            _row(
-                [
-                    system.name,
-                    str(len(system.trials)),
-                    str(len(system.failed)),
-                    *(figures.get(m, "—") for m in metrics),
-                ]
-            )
-        )
+    heads = ["System", "Figure", "Trials", "Median", "Mean", "Std", "95 % interval"]
+    lines = ["### Systems over their trials", "", _row(heads), _rule(2, len(heads) - 2)]
+    lines += [
+        _row([r.system, r.metric, r.trials, r.median, r.mean, r.std, r.interval])
+        for r in found.rows
+    ]
     lines.append("")
-    failed = [(s.name, trial, why) for s in view.systems for trial, why in s.failed]
-    if failed:
+    if found.failed:
         lines += ["Failed trials (counted, not averaged):", ""]
         lines += [
-            f"- **{markdown_text(t)}** ({markdown_text(s)}): {markdown_text(w)}"
-            for s, t, w in failed
+            f"- **{markdown_text(f.name)}** ({markdown_text(f.system)}): {markdown_text(f.reason)}"
+            for f in found.failed
         ]
         lines.append("")
-    if view.system_comparisons:
-        lines += [f"- {markdown_text(c)}" for c in view.system_comparisons]
+    if found.comparisons:
+        lines += [f"- {markdown_text(c)}" for c in found.comparisons]
         lines.append("")
     return lines
 
 
 def _baseline(view: ResultsView) -> list[str]:
-    if not view.baseline and not view.baseline_label:
+    found = view.baseline
+    if found is None:
         return []
-    lines = [f"### Against the baseline {markdown_text(view.baseline_label)}", ""]
-    if view.baseline:
-        lines += [_row(["Estimate or system", "Verdict", "Now against the baseline"])]
-        lines.append(_rule(3, 0))
-        for check in view.baseline:
-            what = f"{check.name} (system)" if check.level == "system" else check.name
-            mark = BASELINE_MARKS.get(check.verdict, check.verdict)
-            lines.append(_row([what, mark, check.figures]))
+    lines = [f"### Against the baseline {markdown_text(found.label)}", ""]
+    if found.rows:
+        heads = ["Estimate or system", "Figure", "Now", "Baseline", "Difference", "95 % interval"]
+        lines += [_row([*heads, "Verdict"]), _rule(2, len(heads) - 2) + " --- |"]
+        for r in found.rows:
+            interval = r.interval if r.interval == "—" else f"{r.interval} ({r.how})"
+            mark = BASELINE_MARKS.get(r.status, r.verdict)
+            shown = mark if (r.name, r.metric) in view.judged else f"{mark} (a trial: not judged)"
+            lines.append(_row([r.name, r.metric, r.now, r.baseline, r.difference, interval, shown]))
         lines.append("")
-    if view.baseline_notes:
-        lines += [f"- {markdown_text(n)}" for n in view.baseline_notes]
+    if found.notes:
+        lines += [f"- {markdown_text(n)}" for n in found.notes]
         lines.append("")
     return lines
 

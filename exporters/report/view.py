@@ -36,6 +36,12 @@ from exporters.report.provenance import (
     trajectory_rows,
 )
 from exporters.report.ranging import RangingView, build_ranging_view
+from exporters.report.trials import (
+    BaselineView,
+    TrialsView,
+    build_baseline_view,
+    build_trials_view,
+)
 from exporters.report.verdicts import (
     BuildingView,
     VerdictView,
@@ -47,17 +53,15 @@ from loceval.core.lengths import MM_BELOW_M, LengthUnit, length_unit
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.options import option
-from loceval.results.document import ResultRead, TrialMetricRead, read_result
-from loceval.results.gate import Gate, baseline_figures, gated_comparisons, judge_gate
+from loceval.results.document import ResultRead, read_result
+from loceval.results.gate import Gate, gated_comparisons, judge_gate
 
 __all__ = [
     "BEST_MARK",
     "MM_BELOW_M",
-    "BaselineCheck",
     "LengthUnit",
     "ReportView",
     "ResultsView",
-    "SystemView",
     "build_report_view",
     "build_results_view",
     "length_unit",
@@ -198,6 +202,10 @@ class ReportView:
     """What the error colours mean: the tolerance in words (every figure and the viewer)."""
     building: BuildingView | None = None
     """The building model the paths were placed on, its spaces and warnings."""
+    trials: TrialsView | None = None
+    """The trials of each system (:mod:`exporters.report.trials`); None without systems."""
+    baseline: BaselineView | None = None
+    """Each estimate and system against the baseline; None without a baseline."""
 
 
 def _fmt(value: float, decimals: int = 3) -> str:
@@ -331,7 +339,9 @@ def _summary(result: EvaluationResult) -> str:
     )
 
 
-def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple[str, str], ...]:
+def _contents(
+    *, ranging: bool, map_section: bool, warnings: int, trials: bool = False, baseline: bool = False
+) -> tuple[tuple[str, str], ...]:
     """Every section of the report, in order, as (anchor, title) for the contents list."""
     return tuple(
         entry
@@ -339,6 +349,8 @@ def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple
             (("verdict", "Verdict"), True),
             (("evaluated", "What was evaluated"), True),
             (("statistics", "Error statistics"), True),
+            (("trials", "Trials of each system"), trials),
+            (("baseline", "Against the baseline"), baseline),
             (("ranging", "Ranging"), ranging),
             (("map", "The map against the building plan"), map_section),
             (("viewer", "Interactive view"), True),
@@ -351,107 +363,12 @@ def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple
     )
 
 
-@dataclass(frozen=True, slots=True)
-class BaselineCheck:
-    """One figure of an estimate or system against the baseline's, as a check.
-
-    Attributes:
-        name: the estimate's or system's name.
-        level: ``estimate`` or ``system``.
-        metric: the figure in words (``ATE RMSE``).
-        verdict: ``better``, ``worse``, ``within_noise`` or ``undetermined``.
-        figures: now, baseline, difference and interval in one line
-            (:func:`loceval.results.gate.baseline_figures`, the gate's words).
-        summary: the comparison in one sentence (the core's).
-        gated: whether it is a check (the gate's ``worse`` judges it); a trial's own
-            comparison is shown only (:func:`loceval.results.gate.gated_comparisons`).
-    """
-
-    name: str
-    level: str
-    metric: str
-    verdict: str
-    figures: str
-    summary: str
-    gated: bool = True
-
-
-@dataclass(frozen=True, slots=True)
-class SystemView:
-    """A system of trials: its trials, its failed trials and each metric over the trials.
-
-    Attributes:
-        name: the system's name.
-        trials: the trials counted in its figures.
-        failed: the failed trials as (name, why), counted and never dropped.
-        metrics: (metric in words, its figures over the trials in one line).
-    """
-
-    name: str
-    trials: tuple[str, ...]
-    failed: tuple[tuple[str, str], ...]
-    metrics: tuple[tuple[str, str], ...]
-
-
-_TRIAL_METRICS: Final = {
-    "ate_rmse": "ATE RMSE",
-    "rpe_rmse": "RPE RMSE",
-    "ate_rot_rmse": "ATE rotation RMSE",
-    "rpe_rot_rmse": "RPE rotation RMSE",
-}
-
-
-def _amount(value: float, unit: str) -> str:
-    return f"{value:.3f} m" if unit == "m" else f"{value:.3g} {unit}".rstrip()
-
-
-def _over_trials(metric: TrialMetricRead) -> str:
-    """``median 0.123 m, mean 0.125 m ± 0.010 m, 95 % interval of the mean 0.11–0.14 m``."""
-    unit, fig = metric.unit, metric.figures
-    parts = [f"{metric.n} trial{'s' if metric.n != 1 else ''}"]
-    if "median" in fig:
-        parts.append(f"median {_amount(fig['median'], unit)}")
-    if "mean" in fig:
-        spread = f" ± {_amount(fig['std'], unit)}" if "std" in fig else ""
-        parts.append(f"mean {_amount(fig['mean'], unit)}{spread}")
-    if metric.interval is not None:
-        low, high = metric.interval.low, metric.interval.high
-        parts.append(f"95 % interval of the mean {_amount(low, unit)}–{_amount(high, unit)}")
-    elif metric.note:
-        parts.append(metric.note.rstrip("."))
-    return ", ".join(parts)
-
-
-def _systems(document: ResultRead) -> tuple[SystemView, ...]:
-    return tuple(
-        SystemView(
-            name=system.name,
-            trials=system.trials,
-            failed=tuple((f.name, f.reason) for f in system.failed),
-            metrics=tuple(
-                (_TRIAL_METRICS.get(key, key), _over_trials(metric))
-                for key, metric in system.metrics.items()
-            ),
-        )
-        for system in document.systems
-    )
-
-
-def _baseline_checks(document: ResultRead) -> tuple[BaselineCheck, ...]:
-    if document.baseline is None:
-        return ()
-    gated = {id(c) for c in gated_comparisons(document)}
-    return tuple(
-        BaselineCheck(
-            name=c.name,
-            level=c.level,
-            metric=BASELINE_METRICS.get(c.metric, c.metric),
-            verdict=c.verdict,
-            figures=baseline_figures(c),
-            summary=c.summary,
-            gated=id(c) in gated,
-        )
-        for c in document.baseline.comparisons
+def _judged(document: ResultRead) -> frozenset[tuple[str, str]]:
+    """The baseline rows that are checks, as (row name, metric in words)."""
+    return frozenset(
+        (c.name + (" (system)" if c.level == "system" else ""), BASELINE_METRICS[c.metric])
+        for c in gated_comparisons(document)
+        if c.metric in BASELINE_METRICS
     )
 
 
@@ -459,7 +376,8 @@ def _baseline_checks(document: ResultRead) -> tuple[BaselineCheck, ...]:
 class ResultsView:
     """The report's figures and words without its plots: what CI files show too.
 
-    :func:`build_report_view` takes its verdicts, tables, intervals and shares from here, and
+    :func:`build_report_view` takes its verdicts, tables, intervals, shares, trials and
+    baseline sections from here, and
     ``junit.xml`` and ``summary.md`` (:mod:`exporters.ci`) render the same object, so a
     figure is computed and formatted once for all three.
 
@@ -476,11 +394,11 @@ class ResultsView:
         confidence: the intervals of the tables, the comparisons of estimates, NEES.
         warnings: (source, message) pairs.
         gate: the gate of the options' ``fail_on`` (None without conditions).
-        systems: the systems of trials (estimates naming a system).
-        system_comparisons: every two systems compared over their trials, a sentence each.
-        baseline: each estimate's and system's figures against the baseline's.
-        baseline_label: what the baseline is ("" without one).
-        baseline_notes: names without a counterpart, what reading the baseline found.
+        trials: the trials of each system (None without systems).
+        baseline: each estimate and system against the baseline (None without one).
+        judged: the baseline rows that are checks, as (row name, metric): the gate's
+            ``worse`` judges them (:func:`loceval.results.gate.gated_comparisons`); a
+            trial's own comparison is shown, not judged.
         estimate_systems: each estimate's system ("" when it is no trial).
     """
 
@@ -496,11 +414,9 @@ class ResultsView:
     confidence: ConfidenceView
     warnings: tuple[tuple[str, str], ...]
     gate: Gate | None = None
-    systems: tuple[SystemView, ...] = ()
-    system_comparisons: tuple[str, ...] = ()
-    baseline: tuple[BaselineCheck, ...] = ()
-    baseline_label: str = ""
-    baseline_notes: tuple[str, ...] = ()
+    trials: TrialsView | None = None
+    baseline: BaselineView | None = None
+    judged: frozenset[tuple[str, str]] = frozenset()
     estimate_systems: tuple[str, ...] = ()
 
     def figure(self, table: int, label: str, column: int, group: str = "translation") -> str:
@@ -528,6 +444,7 @@ def build_results_view(
     options: ExportOptions,
     *,
     map_figures: Mapping[int, int] | None = None,
+    trial_figures: tuple[int, ...] = (),
 ) -> ResultsView:
     """Compute and format the report's figures and words, without drawing anything.
 
@@ -536,6 +453,7 @@ def build_results_view(
         options: the title, the evaluation id and the gate's conditions.
         map_figures: per estimate the number of its error map in the report, where its
             verdict's stretches are numbered (none outside the report).
+        trial_figures: the numbers of the trials' box plots in the report (none outside).
     """
     estimates = result.estimates
     cfg = result.config
@@ -569,7 +487,6 @@ def build_results_view(
     figure_of = map_figures or {}
     document = read_result(result.to_dict())  # the systems and the baseline, read as written
     gate = judge_gate(document, options.fail_on) if options.fail_on else None
-    baseline = document.baseline
     return ResultsView(
         title=options.title,
         evaluation_id=options.evaluation_id,
@@ -586,11 +503,9 @@ def build_results_view(
         ),
         warnings=_warnings(result),
         gate=gate,
-        systems=_systems(document),
-        system_comparisons=tuple(c.summary for c in document.system_comparisons),
-        baseline=_baseline_checks(document),
-        baseline_label="" if baseline is None else baseline.label or baseline.source,
-        baseline_notes=() if baseline is None else baseline.notes,
+        trials=build_trials_view(result, trial_figures),
+        baseline=build_baseline_view(result),
+        judged=_judged(document),
         estimate_systems=tuple(e.system or "" for e in estimates),
     )
 
@@ -634,11 +549,13 @@ def build_report_view(
     maps = {
         k: figure_of[f"ate_path_{k}"] for k in range(len(estimates)) if f"ate_path_{k}" in figure_of
     }
-    results = build_results_view(result, options, map_figures=maps)
+    boxes = tuple(f.number for f in figures if f.key.startswith("trials_"))
+    results = build_results_view(result, options, map_figures=maps, trial_figures=boxes)
     ranging = build_ranging_view(result)
     map_view = build_map_view(result)
     warnings = results.warnings
     tables = results.tables
+    trials, baseline = results.trials, results.baseline
     return ReportView(
         title=results.title,
         evaluation_id=results.evaluation_id,
@@ -679,8 +596,14 @@ def build_report_view(
         ),
         map=map_view,
         contents=_contents(
-            ranging=ranging is not None, map_section=map_view is not None, warnings=len(warnings)
+            ranging=ranging is not None,
+            map_section=map_view is not None,
+            warnings=len(warnings),
+            trials=trials is not None,
+            baseline=baseline is not None,
         ),
+        trials=trials,
+        baseline=baseline,
         legend=scale_words(result),
         building=building_view(result),
     )

@@ -23,6 +23,9 @@ as ``difference = current - baseline`` (negative: better now):
   minus the baseline's RMSE, the MOVER combination of the trials' t-interval and the
   baseline's interval (the baseline taken as exact when it has none).
 
+Trials are compared only as their system: trial k now and trial k of the baseline are
+different runs, and pairing their poses would leave out the spread from run to run.
+
 The **verdict** is ``better`` (the interval wholly below 0), ``worse`` (wholly above),
 ``within_noise`` (it holds 0) or ``undetermined`` (no interval: too few trials, or neither
 pairs nor intervals).
@@ -403,7 +406,7 @@ def compare_with_baseline(result: EvaluationResult, baseline: Baseline) -> Basel
     notes = list(baseline.notes)
     matched = _estimates_against(result, entries, found, notes)
     matched |= _systems_against(result, entries, systems, found, notes)
-    unmatched = sorted({*entries, *systems} - matched)
+    unmatched = sorted({*entries, *systems} - matched - _trial_names(result))
     if unmatched:
         notes.append(
             f"The baseline's {', '.join(repr(n) for n in unmatched)} "
@@ -418,6 +421,13 @@ def compare_with_baseline(result: EvaluationResult, baseline: Baseline) -> Basel
     )
 
 
+def _trial_names(result: EvaluationResult) -> set[str]:
+    """The names of the trials now (a baseline's trial of the same name is no orphan)."""
+    return {f.name for f in result.failed_trials} | {
+        e.name for e in result.estimates if e.system is not None
+    }
+
+
 def _estimates_against(
     result: EvaluationResult,
     entries: Mapping[str, BaselineEntry],
@@ -427,10 +437,11 @@ def _estimates_against(
     pairing = _rpe_pairing(result)
     matched: set[str] = set()
     for e in result.estimates:
+        if e.system is not None:  # compared as its system, over all trials
+            continue
         entry = entries.get(e.name)
         if entry is None:
-            if e.system is None:
-                notes.append(f"{e.name!r} has no estimate of that name in the baseline.")
+            notes.append(f"{e.name!r} has no estimate of that name in the baseline.")
             continue
         matched.add(e.name)
         for metric in BASELINE_METRICS:

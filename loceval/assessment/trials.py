@@ -385,7 +385,7 @@ class SystemComparison:
         if self.verdict == "within_noise":
             return (
                 f"{self.a} vs {self.b}, {label}: median shift {d} (interval {lo} to {hi}, "
-                f"{trials}): within the noise."
+                f"{trials}, p = {self.p_value:.3g}): within the noise."
             )
         better, worse = (self.a, self.b) if self.verdict == "a_better" else (self.b, self.a)
         return (

@@ -338,7 +338,7 @@ def run_job(
             report(stage, _EVALUATE + (1.0 - _EVALUATE) * fraction)
 
         report("preparing the files", _EVALUATE)  # placing the paths comes before any file
-        title = f"{result.reference.name} vs {', '.join(e.name for e in result.estimates)}"
+        title = f"{result.reference.name} vs {', '.join(_compared(result))}"
         write_artifacts(
             result,
             out_dir,
@@ -349,6 +349,12 @@ def run_job(
         )
     report("done", 1.0)
     return result
+
+
+def _compared(result: EvaluationResult) -> list[str]:
+    """What the evaluation compares, for its title: each system once, then other estimates."""
+    systems = [f"{s.name} ({len(s.trials) + len(s.failed)} trials)" for s in result.systems]
+    return systems + [e.name for e in result.estimates if e.system is None]
 
 
 def _read_sources(

@@ -25,7 +25,7 @@
   // API's schema and the CLI's flags are made from. The form's fields take their bounds,
   // choices and help from it, and an option no field of the page holds gets one of its own.
   const OPTION_DOCS = new Map(JSON.parse(document.body.dataset.options || "[]").map((o) => [o.key, o]));
-  const FORM_GROUPS = new Set(["evaluation", "reading", "export", "map"]); // not ranging's
+  const FORM_GROUPS = new Set(["evaluation", "reading", "export", "map", "baseline"]); // not ranging's
 
   const state = {
     key: null,
@@ -713,11 +713,12 @@
     for (const row of document.querySelectorAll(".estimate-row")) {
       const value = row.querySelector(".estimate-select").value;
       const name = row.querySelector(".estimate-name").value.trim();
+      const system = row.querySelector(".estimate-system").value.trim();
       if (!value) {
         if (name) throw new Error(`Choose the source of the estimate named “${name}”.`);
         continue;
       }
-      estimates.push({ ...parseSource(value), name: name || null });
+      estimates.push({ ...parseSource(value), name: name || null, system: system || null });
     }
     if (!estimates.length) throw new Error("Choose at least one estimate trajectory.");
     return { reference: { ...parseSource(reference), name: null }, estimates, options: readOptions() };
@@ -842,7 +843,7 @@
       if (!input) continue;
       const words = doc.words.replace(/^the /, "");
       const label = words.charAt(0).toUpperCase() + words.slice(1);
-      const hint = doc.bounds || (doc.kind === "file" ? "an uploaded dataset" : "");
+      const hint = doc.key === "baseline" ? "an earlier evaluation" : doc.bounds || (doc.kind === "file" ? "an uploaded dataset" : "");
       fields.push(el("label", {
         className: doc.kind === "switch" ? "field field-switch" : "field",
         title: doc.help, dataset: { option: doc.key, label, kind: doc.kind, generated: "" },
@@ -854,6 +855,8 @@
 
   /** The input of an option made from its document (null: the page cannot offer its kind). */
   function otherOptionInput(doc) {
+    // The baseline is an earlier evaluation of this project (the history's succeeded ones).
+    if (doc.key === "baseline") return el("select", { className: "evaluation-choice" }, el("option", { value: "", text: NONE }));
     const shown = Array.isArray(doc.default) ? doc.default.join(", ") : doc.default;
     const placeholder = shown === null || shown === undefined ? (doc.example || "") : String(shown);
     switch (doc.kind) {
@@ -1407,21 +1410,106 @@
     return parts.join(", ");
   }
 
+  /** The result's systems of trials (each with its trials and failed trials), or []. */
+  function resultSystems(evaluation) {
+    const systems = evaluation.result && Array.isArray(evaluation.result.systems) ? evaluation.result.systems : [];
+    return systems.filter((s) => s && typeof s.name === "string");
+  }
+
+  /** A system's group row: its trials, failed trials and ATE/RPE over trials (median, interval). */
+  function systemRow(system, unit) {
+    const figures = [["ATE RMSE", "ate_rmse"], ["RPE RMSE", "rpe_rmse"]].map(([label, key]) => {
+      const m = system.metrics && system.metrics[key];
+      if (!m || m.unit !== "m") return null;
+      const interval = m.interval ? `, 95 % interval of the mean ${formatMetres(m.interval.low, unit)} to ${formatMetres(m.interval.high, unit)}` : ", too few trials for an interval";
+      return `${label} median ${formatMetres(m.median, unit)} (spread ${formatMetres(m.min, unit)} to ${formatMetres(m.max, unit)}${interval})`;
+    }).filter(Boolean);
+    const failed = (system.failed || []).length;
+    const count = `${(system.trials || []).length} trials${failed ? `, ${failed} failed` : ""}`;
+    return el("tr", { className: "system-row", dataset: { system: system.name } },
+      el("th", { scope: "rowgroup", colspan: "5" },
+        el("span", { className: "system-name", text: system.name }),
+        el("span", { className: "muted small", text: ` · ${count}` }),
+        figures.length ? el("div", { className: "muted small system-figures", text: figures.join(" · ") }) : null));
+  }
+
   function renderSummary(evaluation) {
     const body = $("summary-body");
     body.replaceChildren();
     const estimates = (evaluation.result && Array.isArray(evaluation.result.estimates)) ? evaluation.result.estimates : [];
     const unit = lengthUnit((evaluation.summary || []).flatMap((row) => [row.ate_rmse_m, row.rpe_rmse_m]));
-    (evaluation.summary || []).forEach((row, i) => {
+    const rows = (evaluation.summary || []).map((row, i) => ({ row, i, system: estimates[i] && estimates[i].system }));
+    // Trials are grouped under their system (the result's order), then the other estimates.
+    const ordered = [];
+    for (const system of resultSystems(evaluation)) {
+      ordered.push({ system });
+      ordered.push(...rows.filter((r) => r.system === system.name));
+      for (const failed of system.failed || []) ordered.push({ failed, of: system.name });
+    }
+    ordered.push(...rows.filter((r) => !r.system));
+    for (const item of ordered) {
+      if (item.system !== undefined && !item.row) {
+        body.append(systemRow(item.system, unit));
+        continue;
+      }
+      if (item.failed) {
+        body.append(el("tr", { className: "trial-row trial-failed", dataset: { system: item.of } },
+          el("th", { scope: "row", className: "name", text: item.failed.name }),
+          el("td", { colspan: "4", className: "muted", "data-label": "Failed" },
+            el("span", { className: "verdict verdict-fail", text: "FAILED TRIAL" }), ` ${item.failed.reason}`)));
+        continue;
+      }
+      const { row, i } = item;
       const facts = verdictFacts(estimates[i] && estimates[i].verdict);
-      body.append(el("tr", {},
+      body.append(el("tr", { className: item.system ? "trial-row" : null, dataset: item.system ? { system: item.system } : {} },
         el("th", { scope: "row", className: "name", text: row.name }),
         el("td", { className: "num ate", "data-label": "ATE RMSE", dataset: { valueM: String(row.ate_rmse_m) }, text: formatMetres(row.ate_rmse_m, unit) }),
         el("td", { className: "num", "data-label": "RPE RMSE", text: formatMetres(row.rpe_rmse_m, unit) }),
         el("td", { className: "num", "data-label": "Matched", text: typeof row.matched === "number" ? row.matched.toLocaleString() : "—" }),
         el("td", { className: "verdict-cell", "data-label": "Verdict" }, verdictBadge(row.verdict),
           facts ? el("div", { className: "muted small verdict-facts", text: facts }) : null)));
-    });
+    }
+    renderTrials(evaluation);
+    renderBaseline(evaluation);
+  }
+
+  /** The systems compared over all their trials, one sentence each. */
+  function renderTrials(evaluation) {
+    const comparisons = evaluation.result && Array.isArray(evaluation.result.system_comparisons) ? evaluation.result.system_comparisons : [];
+    const list = $("system-comparisons");
+    list.replaceChildren(...comparisons.map((c) => el("li", { dataset: { verdict: c.verdict }, text: c.summary })));
+    setHidden($("current-trials"), comparisons.length === 0);
+  }
+
+  const BASELINE_WORDS = { better: "BETTER", worse: "WORSE", within_noise: "WITHIN NOISE", undetermined: "UNDETERMINED" };
+  const BASELINE_CLASS = { better: "verdict-pass", worse: "verdict-fail", within_noise: "verdict-none", undetermined: "verdict-undecided" };
+
+  /** Each estimate and system against the baseline: difference, interval, verdict. */
+  function renderBaseline(evaluation) {
+    const baseline = evaluation.result && evaluation.result.baseline;
+    const holder = $("current-baseline");
+    if (!baseline || typeof baseline !== "object") {
+      setHidden(holder, true);
+      return;
+    }
+    const comparisons = Array.isArray(baseline.comparisons) ? baseline.comparisons : [];
+    const metres = comparisons.filter((c) => c.unit === "m");
+    const unit = lengthUnit(metres.flatMap((c) => [c.current, c.baseline]));
+    const signed = (m) => (typeof m === "number" && m > 0 ? "+" : "") + formatMetres(m, unit);
+    $("baseline-label").textContent = baseline.label || baseline.source || "";
+    $("baseline-body").replaceChildren(...metres.map((c) => el("tr", { dataset: { verdict: c.verdict, level: c.level } },
+      el("th", { scope: "row", className: "name", text: c.level === "system" ? `${c.name} (system)` : c.name }),
+      el("td", { "data-label": "Metric", text: c.metric === "ate_rmse" ? "ATE RMSE" : "RPE RMSE" }),
+      el("td", { className: "num", "data-label": "Now", text: formatMetres(c.current, unit) }),
+      el("td", { className: "num", "data-label": "Baseline", text: formatMetres(c.baseline, unit) }),
+      el("td", { className: "num", "data-label": "Difference", text: signed(c.difference) }),
+      el("td", { className: "num", "data-label": "95 % interval",
+        text: Array.isArray(c.interval) ? `${signed(c.interval[0])} to ${signed(c.interval[1])}${c.paired ? " (paired)" : ""}` : "—" }),
+      el("td", { className: "verdict-cell", "data-label": "Verdict" },
+        el("span", { className: `verdict ${BASELINE_CLASS[c.verdict] || "verdict-none"}`, text: BASELINE_WORDS[c.verdict] || c.verdict })))));
+    const notes = Array.isArray(baseline.notes) ? baseline.notes : [];
+    $("baseline-notes").replaceChildren(...notes.map((n) => el("li", { text: n })));
+    setHidden(holder, false);
   }
 
   function artifactUrl(evaluation, artifact) {
@@ -1625,6 +1713,7 @@
         headlineCell(evaluation),
         el("td", { className: "actions" }, open)));
     }
+    renderBaselineChoices(items);
     const empty = items.length === 0;
     setHidden($("history-table"), empty);
     setHidden($("history-empty"), !empty);
@@ -1633,6 +1722,16 @@
         text: `Showing the newest ${items.length} of ${count} evaluations.` })));
     }
     markHistoryRow();
+  }
+
+  /** Offer the succeeded evaluations of the history as the baseline (options.baseline). */
+  function renderBaselineChoices(items) {
+    const choices = items.filter((e) => e.status === "succeeded").map((e) => ({
+      value: e.id, text: `${formatTime(e.created_at)} · ${estimateNames(e).join(", ")} (${e.id.slice(0, 8)})`,
+    }));
+    for (const select of document.querySelectorAll("#other-options-grid select.evaluation-choice")) {
+      fillChoice(select, choices, NONE, NONE);
+    }
   }
 
   // --- schedules ---------------------------------------------------------------------------

@@ -120,16 +120,27 @@ def test_baseline_and_systems_tables() -> None:
         ["orb-1", "ORB"],
         ["orb-2", "ORB"],
     ]
-    assert systems[0][:3] == ["System", "Trials", "Failed trials"]
-    (orb,) = systems[1:]
-    assert orb[:3] == ["ORB", "2", "1"]
-    assert orb[3].startswith("2 trials, median ")
-    assert baseline[0] == ["Estimate or system", "Verdict", "Now against the baseline"]
-    verdicts = {(r[0], r[2].split()[0] + " " + r[2].split()[1]): r[1] for r in baseline[1:]}
+    assert systems[0] == [
+        "System", "Figure", "Trials", "Median", "Mean", "Std", "95 % interval"
+    ]  # fmt: skip
+    assert [row[:3] for row in systems[1:3]] == [
+        ["ORB", "ATE RMSE", "2 (1 failed)"],
+        ["ORB", "RPE RMSE", "2 (1 failed)"],
+    ]
+    assert systems[1][6] == "too few trials"
+    assert baseline[0] == [
+        "Estimate or system", "Figure", "Now", "Baseline", "Difference", "95 % interval",
+        "Verdict",
+    ]  # fmt: skip
+    verdicts = {(r[0], r[1]): r[6] for r in baseline[1:]}
     assert verdicts[("SLAM", "ATE RMSE")] == "❌ worse"
     assert verdicts[("VIO", "ATE RMSE")] == "✅ better"
     assert verdicts[("UWB", "ATE RMSE")] == "➖ within noise"
     assert verdicts[("ORB (system)", "ATE RMSE")] == "❔ undetermined"
+    assert not any(name.startswith("orb-") for name, _ in verdicts)  # the system's, not a trial's
+    slam = next(r for r in baseline[1:] if r[:2] == ["SLAM", "ATE RMSE"])
+    assert slam[4].startswith("+")
+    assert slam[5].endswith("(unpaired)")  # the factory keeps no errors.csv: unpaired
     assert "Against the baseline release-1.4" in headings(text)
     assert "Systems over their trials" in headings(text)
     assert "orb-3" in text  # the failed trial is named, not dropped
