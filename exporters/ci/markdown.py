@@ -110,7 +110,7 @@ def _baseline(view: ResultsView) -> list[str]:
     found = view.baseline
     if found is None:
         return []
-    lines = [f"### Against the baseline {markdown_text(found.label)}", ""]
+    lines = ["### Against the baseline", "", f"Baseline: {markdown_text(found.source)}.", ""]
     if found.rows:
         heads = ["Estimate or system", "Figure", "Now", "Baseline", "Difference", "95 % interval"]
         lines += [_row([*heads, "Verdict"]), _rule(2, len(heads) - 2) + " --- |"]

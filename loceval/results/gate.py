@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from loceval.assessment.baseline import BASELINE_METRICS
+from loceval.core.lengths import length_unit
 from loceval.errors import InputError
 from loceval.options import option
 from loceval.results.document import BaselineDifferenceRead, EstimateRead, ResultRead
@@ -164,27 +165,33 @@ def _verdict_reason(estimate: EstimateRead, fail_on: Sequence[str]) -> str | Non
     return f"{estimate.label} is undecided against the tolerance{bracket}"
 
 
-def _signed(value: float, unit: str) -> str:
-    return f"{value:+.3f} m" if unit == "m" else f"{value:+.3g} {unit}".rstrip()
-
-
 def baseline_figures(comparison: BaselineDifferenceRead) -> str:
     """Return a comparison with the baseline's figures in brackets' words.
 
-    ``ATE RMSE 0.142 m against 0.120 m, +0.022 m, paired 95 % interval +0.015 m to
-    +0.029 m`` (parts not written in the document are left out).
+    ``ATE RMSE 35.3 mm against 8.1 mm, +27.2 mm, paired 95 % interval +26.6 mm to +27.9 mm``
+    (lengths in one unit for the comparison, as the report prints a group of lengths:
+    :func:`loceval.core.lengths.length_unit`; parts not written in the document are left
+    out).
     """
     unit = comparison.unit
+    found = [
+        v for v in (comparison.current, comparison.baseline, comparison.difference) if v is not None
+    ]
+    found += list(comparison.interval or ())
+    scale = length_unit(found)
+
+    def amount(value: float, *, sign: str = "") -> str:
+        if unit == "m":
+            return f"{value * scale.per_metre:{sign}.{scale.decimals}f} {scale.symbol}"
+        return f"{value:{sign}.3g} {unit}".rstrip()
+
     parts = [BASELINE_METRICS.get(comparison.metric, comparison.metric)]
     if comparison.current is not None and comparison.baseline is not None:
-        parts[0] += (
-            f" {_signed(comparison.current, unit).lstrip('+')} against "
-            f"{_signed(comparison.baseline, unit).lstrip('+')}"
-        )
+        parts[0] += f" {amount(comparison.current)} against {amount(comparison.baseline)}"
     if comparison.difference is not None:
-        parts.append(_signed(comparison.difference, unit))
+        parts.append(amount(comparison.difference, sign="+"))
     if comparison.interval is not None:
-        low, high = (_signed(v, unit) for v in comparison.interval)
+        low, high = (amount(v, sign="+") for v in comparison.interval)
         kind = "paired" if comparison.paired else "unpaired"
         parts.append(f"{kind} 95 % interval {low} to {high}")
     return ", ".join(parts)

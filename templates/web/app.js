@@ -1471,6 +1471,7 @@
     }
     renderTrials(evaluation);
     renderBaseline(evaluation);
+    renderGate(evaluation);
   }
 
   /** The systems compared over all their trials, one sentence each. */
@@ -1509,6 +1510,24 @@
         el("span", { className: `verdict ${BASELINE_CLASS[c.verdict] || "verdict-none"}`, text: BASELINE_WORDS[c.verdict] || c.verdict })))));
     const notes = Array.isArray(baseline.notes) ? baseline.notes : [];
     $("baseline-notes").replaceChildren(...notes.map((n) => el("li", { text: n })));
+    setHidden(holder, false);
+  }
+
+  /** The gate of options.fail_on (what `loceval evaluate --fail-on` exits 3 for): passed or
+   * closed, and why; hidden without conditions. */
+  function renderGate(evaluation) {
+    const gate = evaluation.gate;
+    const holder = $("current-gate");
+    if (!gate || typeof gate !== "object") {
+      setHidden(holder, true);
+      return;
+    }
+    const status = $("gate-status");
+    status.textContent = gate.passed ? "PASSED" : "CLOSED";
+    status.className = `verdict ${gate.passed ? "verdict-pass" : "verdict-fail"}`;
+    $("gate-conditions").textContent = `fails on ${(gate.fail_on || []).join(", ")}`;
+    const reasons = Array.isArray(gate.reasons) ? gate.reasons : [];
+    $("gate-reasons").replaceChildren(...reasons.map((r) => el("li", { text: r })));
     setHidden(holder, false);
   }
 

@@ -141,6 +141,7 @@ def test_baseline_and_systems_tables() -> None:
     slam = next(r for r in baseline[1:] if r[:2] == ["SLAM", "ATE RMSE"])
     assert slam[4].startswith("+")
     assert slam[5].endswith("(unpaired)")  # the factory keeps no errors.csv: unpaired
-    assert "Against the baseline release-1.4" in headings(text)
+    assert "Against the baseline" in headings(text)
+    assert "Baseline: release-1.4 (a loceval result)." in text
     assert "Systems over their trials" in headings(text)
     assert "orb-3" in text  # the failed trial is named, not dropped
