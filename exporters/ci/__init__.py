@@ -1,7 +1,7 @@
 """What CI systems read: ``junit.xml`` (test reports) and ``summary.md`` (job summaries).
 
 Both render the report's figure-free view model
-(:func:`exporters.report.view.build_results_view`): the same verdicts, tables, intervals and
+(:func:`exporters.report.results.build_results_view`): the same verdicts, tables, intervals and
 comparisons as ``report.html``, so no figure is computed or formatted twice.
 
 - :func:`~exporters.ci.junit.export_junit_xml`: a test suite per estimate, a test case per

@@ -32,9 +32,9 @@ from dataclasses import dataclass, replace
 from typing import Final
 
 from exporters.options import ExportOptions
+from exporters.report.results import ResultsView, build_results_view
 from exporters.report.trials import BaselineRow
 from exporters.report.verdicts import VerdictView
-from exporters.report.view import ResultsView, build_results_view
 from loceval.core.display import display_text
 from loceval.evaluation import EvaluationResult
 

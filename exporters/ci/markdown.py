@@ -17,7 +17,7 @@ import re
 from typing import Final
 
 from exporters.options import ExportOptions
-from exporters.report.view import ResultsView, build_results_view
+from exporters.report.results import ResultsView, build_results_view
 from loceval.core.display import display_text
 from loceval.evaluation import EvaluationResult
 

@@ -26,13 +26,19 @@ from loceval.assessment.baseline import BASELINE_METRICS
 from loceval.core.lengths import length_unit
 from loceval.errors import InputError
 from loceval.options import option
-from loceval.results.document import BaselineDifferenceRead, EstimateRead, ResultRead
+from loceval.results.document import (
+    BaselineDifferenceRead,
+    EstimateRead,
+    ResultRead,
+    read_result,
+)
 
 __all__ = [
     "FAIL_ON",
     "Gate",
     "baseline_figures",
     "check_fail_on",
+    "gate_of_document",
     "gated_comparisons",
     "judge_gate",
     "parse_fail_on",
@@ -237,3 +243,17 @@ def judge_gate(result: ResultRead, fail_on: Sequence[str]) -> Gate:
     if "worse" in conditions:
         reasons += _baseline_reasons(result)
     return Gate(fail_on=conditions, reasons=tuple(reasons))
+
+
+def gate_of_document(document: object, fail_on: Sequence[str] | None) -> dict[str, object] | None:
+    """Return the gate of a stored result document as JSON (None without conditions).
+
+    What the service shows as an evaluation's ``gate``: :func:`judge_gate` of the document
+    as the command line judges its own result.
+
+    Raises:
+        InputError: the document is no result document, or a condition is unknown.
+    """
+    if not fail_on or document is None:
+        return None
+    return judge_gate(read_result(document), fail_on).to_dict()

@@ -16,8 +16,7 @@ from sqlalchemy.orm import Session, defer
 
 from exporters import ARTIFACTS
 from loceval.errors import InputError
-from loceval.results.document import read_result
-from loceval.results.gate import judge_gate
+from loceval.results.gate import gate_of_document
 from service.blobs import artifact_key
 from service.blobs.base import EVALUATIONS
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, JobStatus, get_owned, utcnow
@@ -483,21 +482,12 @@ def evaluation_public(
             "error": evaluation.error,
             "artifacts": artifacts,
             "result": evaluation.result if (shown and with_result) else None,
-            "gate": _gate(evaluation) if (succeeded and with_result) else None,
+            # the gate of options.fail_on, judged from the stored result as the CLI judges
+            "gate": gate_of_document(evaluation.result, request.get("options", {}).get("fail_on"))
+            if (succeeded and with_result)
+            else None,
         }
     )
-
-
-def _gate(evaluation: Evaluation) -> dict[str, object] | None:
-    """Return the gate of a succeeded evaluation's ``fail_on`` (None without conditions).
-
-    Judged from the stored result document as the CLI judges its result
-    (:func:`loceval.results.gate.judge_gate`), so both say the same.
-    """
-    fail_on = evaluation.request.get("options", {}).get("fail_on")
-    if not fail_on or evaluation.result is None:
-        return None
-    return judge_gate(read_result(evaluation.result), fail_on).to_dict()
 
 
 def list_evaluations(
