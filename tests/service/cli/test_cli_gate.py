@@ -172,3 +172,25 @@ def test_the_process_exits_3_as_a_ci_job_sees_it(files: dict[str, Path], tmp_pat
         "result.json",
         "summary.md",
     ]
+
+
+def test_worse_closes_the_gate_against_a_baseline(
+    files: dict[str, Path], capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """SLAM was steady in the baseline: lost now exits 3 for worse, steady again exits 0."""
+    baseline = tmp_path / "release"
+    code, _, err = _run(
+        capsys, files, "steady", args=["--name", "SLAM", "--out", str(baseline),
+                                        "--formats", "json,csv"],
+    )  # fmt: skip
+    assert code == 0, err
+    worse = ["--name", "SLAM", "--baseline", str(baseline), "--fail-on", "worse"]
+    code, out, _ = _run(capsys, files, "lost", args=worse)
+    assert code == 3
+    last = _last_line(out)
+    assert last.startswith("gate: SLAM is worse than the baseline (ATE RMSE ")
+    assert "; SLAM is worse than the baseline (RPE RMSE " in last
+    assert "paired 95 % interval +" in last  # errors.csv beside result.json pairs them
+    code, out, _ = _run(capsys, files, "steady", args=worse)
+    assert code == 0
+    assert _last_line(out) == "gate: passed (no estimate is worse than the baseline)"
