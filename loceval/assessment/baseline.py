@@ -8,7 +8,9 @@ the baseline's of the **same name**, on the RMSE of the ATE and of the RPE (tran
 as ``difference = current - baseline`` (negative: better now):
 
 - **paired** where both keep per-pose errors at shared stamps (our ``errors.csv``, evo's
-  ``error_array`` with ``timestamps``): the stamps are paired by nearest stamp within 10 ms
+  ``error_array`` with ``timestamps``) of the same reference recording (a loceval baseline
+  made against a reference of another SHA-256 never pairs: equal stamps of two recordings
+  are not the same instants): the stamps are paired by nearest stamp within 10 ms
   (evo's tolerance) and the interval is the paired circular block bootstrap of
   :func:`loceval.assessment.comparison.compare_errors` (what both runs share cancels). RPE
   errors pair only when both were made with the same RPE pairs (delta, unit, all pairs):
@@ -44,7 +46,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Final, Literal
 
 import numpy as np
@@ -127,6 +129,7 @@ class Baseline:
         estimates: its estimates.
         systems: its systems of trials.
         notes: what reading it found (an evo zip of a rotation metric left out...).
+        reference_sha256: the SHA-256 of the reference it was made against (None: unknown).
     """
 
     label: str
@@ -135,6 +138,7 @@ class Baseline:
     estimates: tuple[BaselineEntry, ...] = ()
     systems: tuple[BaselineSystem, ...] = ()
     notes: tuple[str, ...] = ()
+    reference_sha256: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -404,6 +408,17 @@ def compare_with_baseline(result: EvaluationResult, baseline: Baseline) -> Basel
     systems = {s.name: s for s in baseline.systems}
     found: list[BaselineDifference] = []
     notes = list(baseline.notes)
+    mine = _reference_sha256(result.inputs)
+    if (
+        baseline.reference_sha256 is not None
+        and mine is not None
+        and mine != baseline.reference_sha256
+    ):
+        notes.append(
+            "The baseline was made against another reference recording (its SHA-256 "
+            "differs), so no comparison with it is paired: the intervals are combined."
+        )
+        entries = {name: replace(e, series={}) for name, e in entries.items()}
     matched = _estimates_against(result, entries, found, notes)
     matched |= _systems_against(result, entries, systems, found, notes)
     unmatched = sorted({*entries, *systems} - matched - _trial_names(result))
@@ -419,6 +434,14 @@ def compare_with_baseline(result: EvaluationResult, baseline: Baseline) -> Basel
         differences=tuple(found),
         notes=tuple(notes),
     )
+
+
+def _reference_sha256(inputs: Sequence[Mapping[str, object]]) -> str | None:
+    """The SHA-256 of the reference among an evaluation's inputs, or None."""
+    for record in inputs:
+        if record.get("role") == "reference" and isinstance(record.get("sha256"), str):
+            return str(record["sha256"])
+    return None
 
 
 def _trial_names(result: EvaluationResult) -> set[str]:
@@ -549,7 +572,16 @@ def baseline_from_document(
         )
         for s in read.systems
     ]
-    return Baseline(label, "loceval", source, tuple(estimates), tuple(systems))
+    inputs = read.document.get("inputs")
+    records = [i for i in inputs if isinstance(i, Mapping)] if isinstance(inputs, list) else []
+    return Baseline(
+        label,
+        "loceval",
+        source,
+        tuple(estimates),
+        tuple(systems),
+        reference_sha256=_reference_sha256(records),
+    )
 
 
 def _mapping_of(value: object) -> Mapping[str, Any]:
