@@ -330,7 +330,7 @@ def _check_webhook(runtime: Runtime, url: str | None) -> None:
 def _check_baseline(runtime: Runtime, project_id: str, baseline: str | None) -> None:
     """A pinned baseline (``template.options.baseline``) is a succeeded evaluation of the project.
 
-    Every run compares its evaluation with it (:mod:`service.results.baseline`), and the
+    Every run compares its evaluation with it (:mod:`service.jobs.baseline`), and the
     run's summary shows each run against it.
 
     Raises:
@@ -339,7 +339,7 @@ def _check_baseline(runtime: Runtime, project_id: str, baseline: str | None) -> 
     """
     if baseline is None:
         return
-    from service.results.baseline import evaluation_baseline  # noqa: PLC0415
+    from service.jobs.baseline import evaluation_baseline  # noqa: PLC0415
 
     evaluation_baseline(runtime, project_id, baseline)
 

@@ -9,12 +9,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from loceval.assessment.trials import (
-    _u_null_cdf,
-    compare_systems,
-    median_interval,
-    summarise_trials,
-)
+from loceval.assessment.trial_comparison import _u_null_cdf, compare_systems
+from loceval.assessment.trials import median_interval, summarise_trials
 from loceval.errors import AssociationError, InputError
 from loceval.evaluation import EvaluationConfig, evaluate
 from loceval.trajectory import Trajectory
