@@ -89,8 +89,10 @@ class SystemComparison:
                 f"{trials}, p = {self.p_value:.3g}): within the noise."
             )
         better, worse = (self.a, self.b) if self.verdict == "a_better" else (self.b, self.a)
+        low, high = sorted(abs(v) for v in self.interval)
+        by, lo, hi = (_fmt(v, self.unit).lstrip("+") for v in (abs(self.difference), low, high))
         return (
-            f"{better}'s {label} is lower than {worse}'s over {trials}: shift {d} "
+            f"{better}'s {label} is lower than {worse}'s by {by} over {trials} "
             f"(interval {lo} to {hi}, p = {self.p_value:.3g})."
         )
 
