@@ -478,32 +478,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         exclusive_minimum=True,
         group="map",
     ),
-    OptionSpec(
-        "baseline",
-        OptionKind.FILE,
-        None,
-        "an earlier result to compare each estimate and system with, by name: a result.json "
-        "(errors.csv beside it pairs the errors), an --out folder, an evo result zip or a "
-        "folder of them (the API: the id of a succeeded evaluation)",
-        "the baseline",
-        "baseline",
-        "PATH",
-        max_length=500,
-        group="baseline",
-    ),
-    OptionSpec(
-        "min_trial_coverage",
-        OptionKind.NUMBER,
-        0.5,
-        "trials (estimates of a named system): the least share of the reference's duration "
-        "a trial must track; a trial tracking less failed (tracking lost) and is counted, "
-        "not averaged",
-        "the least trial coverage",
-        "min-trial-coverage",
-        "SHARE",
-        minimum=0.0,
-        maximum=1.0,
-    ),
+    *grammar.TRIAL_OPTIONS,
     OptionSpec(
         "min_excursion_s",
         OptionKind.NUMBER,

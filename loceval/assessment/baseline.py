@@ -3,12 +3,14 @@
 The baseline is an earlier evaluation of the same systems: a loceval ``result.json`` (with
 its ``errors.csv`` when at hand) or evo result zips (``evo_ape``/``evo_rpe
 --save_results``); the front doors read it into a :class:`Baseline`
-(``service.results.baseline``). Each estimate, and each system of trials, is compared with
+(``service.jobs.baseline``). Each estimate, and each system of trials, is compared with
 the baseline's of the **same name**, on the RMSE of the ATE and of the RPE (translation),
 as ``difference = current - baseline`` (negative: better now):
 
 - **paired** where both keep per-pose errors at shared stamps (our ``errors.csv``, evo's
-  ``error_array`` with ``timestamps``): the stamps are paired by nearest stamp within 10 ms
+  ``error_array`` with ``timestamps``) of the same reference recording (a loceval baseline
+  made against a reference of another SHA-256 never pairs: equal stamps of two recordings
+  are not the same instants): the stamps are paired by nearest stamp within 10 ms
   (evo's tolerance) and the interval is the paired circular block bootstrap of
   :func:`loceval.assessment.comparison.compare_errors` (what both runs share cancels). RPE
   errors pair only when both were made with the same RPE pairs (delta, unit, all pairs):
@@ -30,6 +32,11 @@ The **verdict** is ``better`` (the interval wholly below 0), ``worse`` (wholly a
 ``within_noise`` (it holds 0) or ``undetermined`` (no interval: too few trials, or neither
 pairs nor intervals).
 
+The comparison of a whole evaluation (:func:`loceval.results.baseline.compare_with_baseline`)
+and the readers of a baseline from a result document or evo zips live in
+:mod:`loceval.results.baseline`, a stage above the evaluation; this module holds the types
+and the statistics.
+
 Result document::
 
     baseline: {label, kind: loceval | evo, source,
@@ -43,32 +50,28 @@ Result document::
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Final, Literal
+from typing import Final, Literal
 
 import numpy as np
 
-from loceval.assessment.trials import MetricOverTrials, compare_systems
 from loceval.core.arrays import FloatArray, StampsNs
 from loceval.errors import LocevalError
 
-if TYPE_CHECKING:
-    from loceval.evaluation import EstimateResult, EvaluationResult
-    from loceval.readers.evo_result import ResultZip
-    from loceval.results.document import ResultRead
-
 __all__ = [
     "BASELINE_METRICS",
+    "MOVER_METHOD",
+    "PAIRED_METHOD",
     "Baseline",
     "BaselineComparison",
     "BaselineDifference",
     "BaselineEntry",
     "BaselineSystem",
-    "baseline_from_document",
-    "baseline_from_evo",
-    "compare_with_baseline",
+    "baseline_verdict",
+    "bootstrap_rmse_ci",
     "mover_interval",
+    "paired_difference",
 ]
 
 BASELINE_METRICS: Final[Mapping[str, str]] = {"ate_rmse": "ATE RMSE", "rpe_rmse": "RPE RMSE"}
@@ -76,8 +79,8 @@ BASELINE_METRICS: Final[Mapping[str, str]] = {"ate_rmse": "ATE RMSE", "rpe_rmse"
 
 Verdict = Literal["better", "worse", "within_noise", "undetermined"]
 _MAX_DT_S: Final = 0.01
-_PAIRED: Final = "paired block bootstrap of the RMSE difference on the shared stamps"
-_MOVER: Final = "unpaired: MOVER combination of the two RMSEs' 95 % intervals"
+PAIRED_METHOD: Final = "paired block bootstrap of the RMSE difference on the shared stamps"
+MOVER_METHOD: Final = "unpaired: MOVER combination of the two RMSEs' 95 % intervals"
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -127,6 +130,7 @@ class Baseline:
         estimates: its estimates.
         systems: its systems of trials.
         notes: what reading it found (an evo zip of a rotation metric left out...).
+        reference_sha256: the SHA-256 of the reference it was made against (None: unknown).
     """
 
     label: str
@@ -135,6 +139,7 @@ class Baseline:
     estimates: tuple[BaselineEntry, ...] = ()
     systems: tuple[BaselineSystem, ...] = ()
     notes: tuple[str, ...] = ()
+    reference_sha256: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -242,7 +247,8 @@ def _fmt(value: float, unit: str) -> str:
     return f"{value:+.3g}{'°' if unit == 'deg' else ' ' + unit}"
 
 
-def _verdict(interval: tuple[float, float] | None) -> Verdict:
+def baseline_verdict(interval: tuple[float, float] | None) -> Verdict:
+    """Better (interval below 0), worse (above), within noise (holds 0), undetermined (none)."""
     if interval is None:
         return "undetermined"
     lo, hi = interval
@@ -266,24 +272,8 @@ def mover_interval(
     return lo, hi
 
 
-def _rpe_pairing(result: EvaluationResult) -> str:
-    cfg = result.config
-    return (
-        f"{cfg.rpe_delta:g} {cfg.rpe_unit.value}, {'all' if cfg.rpe_all_pairs else 'consecutive'}"
-    )
-
-
-def _own_ci(e: EstimateResult, metric: str) -> tuple[float, float] | None:
-    """The estimate's 95 % interval of the RMSE (its assessment's, else bootstrapped here)."""
-    key = "ate_translation" if metric == "ate_rmse" else "rpe_translation"
-    found = None if e.assessment is None else e.assessment.intervals.get(key)
-    if found is not None and "rmse" in found.ci95:
-        lo, hi = found.ci95["rmse"]
-        return float(lo), float(hi)
-    return _bootstrap_ci(getattr(e, key).values)
-
-
-def _bootstrap_ci(errors: FloatArray) -> tuple[float, float] | None:
+def bootstrap_rmse_ci(errors: FloatArray) -> tuple[float, float] | None:
+    """The 95 % block-bootstrap interval of an error series' RMSE (None: fewer than 8)."""
     from loceval.assessment.uncertainty import interval_stats  # noqa: PLC0415  (scipy)
 
     try:
@@ -293,7 +283,7 @@ def _bootstrap_ci(errors: FloatArray) -> tuple[float, float] | None:
     return float(lo), float(hi)
 
 
-def _paired(
+def paired_difference(
     current: tuple[StampsNs, FloatArray],
     baseline: tuple[StampsNs, FloatArray],
     name: str,
@@ -323,283 +313,3 @@ def _paired(
         stamps, ec, stamps, eb, a=name, b="baseline", metric=ComparedMetric(metric)
     )
     return found.difference, found.ci95, found.n_common
-
-
-def _estimate_difference(
-    e: EstimateResult, entry: BaselineEntry, metric: str, pairing: str
-) -> BaselineDifference | None:
-    current_series = e.ate_translation if metric == "ate_rmse" else e.rpe_translation
-    if metric not in entry.rmse:
-        return None
-    current = current_series.stats.rmse
-    base = entry.rmse[metric]
-    unit = entry.units.get(metric, current_series.unit)
-    if unit != current_series.unit:
-        return None
-    series = entry.series.get(metric)
-    can_pair = series is not None and (metric == "ate_rmse" or entry.rpe_pairing == pairing)
-    if can_pair and series is not None:
-        paired = _paired((current_series.stamps_ns, current_series.values), series, e.name, metric)
-        if paired is not None:
-            d, interval, n = paired
-            return BaselineDifference(
-                e.name, "estimate", metric, unit, current, base, d, interval,
-                paired=True, n=n, method=_PAIRED, verdict=_verdict(interval),
-            )  # fmt: skip
-    own = _own_ci(e, metric)
-    theirs: tuple[float, float] | None = entry.ci95.get(metric)
-    if theirs is None and series is not None:
-        theirs = _bootstrap_ci(series[1])
-    combined = None if own is None or theirs is None else mover_interval(current, own, base, theirs)
-    return BaselineDifference(
-        e.name, "estimate", metric, unit, current, base, current - base, combined,
-        paired=False, n=len(current_series), method=_MOVER, verdict=_verdict(combined),
-    )  # fmt: skip
-
-
-def _system_difference(
-    name: str, mine: MetricOverTrials, base: BaselineSystem | BaselineEntry, metric: str
-) -> BaselineDifference | None:
-    if isinstance(base, BaselineSystem):
-        values = base.values.get(metric)
-        if values is None or base.units.get(metric, mine.unit) != mine.unit:
-            return None
-        found = compare_systems(
-            mine.values, values, a=name, b="baseline", metric=metric, unit=mine.unit
-        )
-        return BaselineDifference(
-            name, "system", metric, mine.unit, mine.median, float(np.median(values)),
-            found.difference, found.interval, paired=False, n=mine.n,
-            method="over all trials of both: " + found.method, verdict=_verdict(found.interval),
-        )  # fmt: skip
-    if metric not in base.rmse or base.units.get(metric, mine.unit) != mine.unit:
-        return None
-    value = base.rmse[metric]
-    interval = None
-    if mine.interval is not None:
-        own = (mine.interval.low, mine.interval.high)
-        theirs = base.ci95.get(metric, (value, value))
-        interval = mover_interval(mine.mean, own, value, theirs)
-    return BaselineDifference(
-        name, "system", metric, mine.unit, mine.mean, value, mine.mean - value, interval,
-        paired=False, n=mine.n,
-        method="the mean over trials against one baseline run: MOVER combination of the "
-        "trials' t-interval and the baseline's interval",
-        verdict=_verdict(interval),
-    )  # fmt: skip
-
-
-def compare_with_baseline(result: EvaluationResult, baseline: Baseline) -> BaselineComparison:
-    """Compare each estimate and system of ``result`` with the baseline's of the same name.
-
-    Args:
-        result: the evaluation now.
-        baseline: the earlier result.
-
-    Returns:
-        The differences with their intervals and verdicts, and notes on names without a
-        counterpart (see the module's docstring).
-    """
-    entries = {b.name: b for b in baseline.estimates}
-    systems = {s.name: s for s in baseline.systems}
-    found: list[BaselineDifference] = []
-    notes = list(baseline.notes)
-    matched = _estimates_against(result, entries, found, notes)
-    matched |= _systems_against(result, entries, systems, found, notes)
-    unmatched = sorted({*entries, *systems} - matched - _trial_names(result))
-    if unmatched:
-        notes.append(
-            f"The baseline's {', '.join(repr(n) for n in unmatched)} "
-            f"{'has' if len(unmatched) == 1 else 'have'} no counterpart now."
-        )
-    return BaselineComparison(
-        label=baseline.label,
-        kind=baseline.kind,
-        source=baseline.source,
-        differences=tuple(found),
-        notes=tuple(notes),
-    )
-
-
-def _trial_names(result: EvaluationResult) -> set[str]:
-    """The names of the trials now (a baseline's trial of the same name is no orphan)."""
-    return {f.name for f in result.failed_trials} | {
-        e.name for e in result.estimates if e.system is not None
-    }
-
-
-def _estimates_against(
-    result: EvaluationResult,
-    entries: Mapping[str, BaselineEntry],
-    found: list[BaselineDifference],
-    notes: list[str],
-) -> set[str]:
-    pairing = _rpe_pairing(result)
-    matched: set[str] = set()
-    for e in result.estimates:
-        if e.system is not None:  # compared as its system, over all trials
-            continue
-        entry = entries.get(e.name)
-        if entry is None:
-            notes.append(f"{e.name!r} has no estimate of that name in the baseline.")
-            continue
-        matched.add(e.name)
-        for metric in BASELINE_METRICS:
-            difference = _estimate_difference(e, entry, metric, pairing)
-            if difference is not None:
-                found.append(difference)
-    return matched
-
-
-def _systems_against(
-    result: EvaluationResult,
-    entries: Mapping[str, BaselineEntry],
-    systems: Mapping[str, BaselineSystem],
-    found: list[BaselineDifference],
-    notes: list[str],
-) -> set[str]:
-    matched: set[str] = set()
-    for system in result.systems:
-        base: BaselineSystem | BaselineEntry | None = systems.get(system.name) or entries.get(
-            system.name
-        )
-        if base is None:
-            notes.append(f"The system {system.name!r} has no counterpart in the baseline.")
-            continue
-        matched.add(system.name)
-        for metric in BASELINE_METRICS:
-            mine = system.metrics.get(metric)
-            if mine is None:
-                continue
-            difference = _system_difference(system.name, mine, base, metric)
-            if difference is not None:
-                found.append(difference)
-    return matched
-
-
-def baseline_from_parts(
-    *,
-    label: str,
-    kind: Literal["loceval", "evo"],
-    source: str,
-    estimates: Sequence[BaselineEntry] = (),
-    systems: Sequence[BaselineSystem] = (),
-    notes: Sequence[str] = (),
-) -> Baseline:
-    """Return a :class:`Baseline` (a convenience for readers that gather its parts)."""
-    return Baseline(label, kind, source, tuple(estimates), tuple(systems), tuple(notes))
-
-
-SeriesOf = Callable[[str, str], "tuple[StampsNs, FloatArray] | None"]
-"""Called with an estimate's name and a metric key: its per-pose errors, or None."""
-
-
-def _pairing_of(options: Mapping[str, Any]) -> str | None:
-    delta, unit, every = (
-        options.get("rpe_delta"),
-        options.get("rpe_unit"),
-        options.get("rpe_all_pairs"),
-    )
-    if not isinstance(delta, int | float) or not isinstance(unit, str):
-        return None
-    return f"{delta:g} {unit}, {'all' if every else 'consecutive'}"
-
-
-def baseline_from_document(
-    read: ResultRead, *, label: str, source: str, series_of: SeriesOf | None = None
-) -> Baseline:
-    """Return the baseline held by a loceval result document.
-
-    Args:
-        read: the document, read (:func:`loceval.results.document.read_result`).
-        label: how reports name the baseline.
-        source: where it came from.
-        series_of: the per-pose errors of an estimate (from its ``errors.csv``), if at hand.
-
-    Returns:
-        Its estimates (RMSE, 95 % interval, per-pose errors) and systems (per-trial values).
-    """
-    options = _mapping_of(read.document.get("options"))
-    pairing = _pairing_of(options)
-    estimates = []
-    for e in read.estimates:
-        rmse: dict[str, float] = {}
-        ci95: dict[str, tuple[float, float]] = {}
-        series: dict[str, tuple[StampsNs, FloatArray]] = {}
-        for metric, kind in (("ate_rmse", "ate"), ("rpe_rmse", "rpe")):
-            value = e.rmse_m(kind)  # type: ignore[arg-type]
-            if value is None:
-                continue
-            rmse[metric] = value
-            block = e.block(kind)  # type: ignore[arg-type]
-            written = None if block is None or block.ci95 is None else block.ci95.get("rmse")
-            if isinstance(written, Sequence) and len(written) == 2:
-                ci95[metric] = (float(written[0]), float(written[1]))
-            found = None if series_of is None else series_of(e.label, metric)
-            if found is not None and found[0].size:
-                series[metric] = found
-        estimates.append(
-            BaselineEntry(e.label, rmse, ci95, series, pairing, dict.fromkeys(rmse, "m"))
-        )
-    systems = [
-        BaselineSystem(
-            s.name,
-            {k: np.asarray(m.values, dtype=np.float64) for k, m in s.metrics.items() if m.values},
-            {k: m.unit for k, m in s.metrics.items()},
-        )
-        for s in read.systems
-    ]
-    return Baseline(label, "loceval", source, tuple(estimates), tuple(systems))
-
-
-def _mapping_of(value: object) -> Mapping[str, Any]:
-    return value if isinstance(value, Mapping) else {}
-
-
-def baseline_from_evo(
-    zips: Sequence[tuple[str, ResultZip]], *, label: str, source: str
-) -> Baseline:
-    """Return the baseline held by evo result zips (one system and metric per zip).
-
-    A zip of APE or RPE of the translation in metres (``trans_part``, ``point_distance``)
-    gives its system's ATE or RPE RMSE and, with ``timestamps``, its per-pose errors
-    (evo's RPE pairs are evo's own: compared unpaired). Other zips are noted and left out.
-
-    Args:
-        zips: ``(system name, zip)`` of each zip.
-        label: how reports name the baseline.
-        source: where it came from.
-    """
-    rmse: dict[str, dict[str, float]] = {}
-    series: dict[str, dict[str, tuple[StampsNs, FloatArray]]] = {}
-    ci95: dict[str, dict[str, tuple[float, float]]] = {}
-    notes = []
-    for name, result in zips:
-        value = result.stats.get("rmse")
-        if result.metric is None or not result.translation_m or value is None:
-            notes.append(
-                f"The evo result {result.path.name!r} ({result.title or 'no title'}) is no "
-                "translation error in metres; it is left out of the baseline."
-            )
-            continue
-        metric = "ate_rmse" if result.metric == "ape" else "rpe_rmse"
-        rmse.setdefault(name, {})[metric] = value
-        found = result.error_series()
-        if found is not None:
-            series.setdefault(name, {})[metric] = found
-        elif (errors := result.arrays.get("error_array")) is not None and errors.size >= 8:
-            lo_hi = _bootstrap_ci(errors)  # no stamps: its own interval, for MOVER
-            if lo_hi is not None:
-                ci95.setdefault(name, {})[metric] = lo_hi
-    estimates = tuple(
-        BaselineEntry(
-            name,
-            values,
-            ci95.get(name, {}),
-            series.get(name, {}),
-            "evo",  # evo's RPE pairs: never paired with loceval's
-            dict.fromkeys(values, "m"),
-        )
-        for name, values in rmse.items()
-    )
-    return Baseline(label, "evo", source, estimates, (), tuple(notes))

@@ -23,7 +23,8 @@ alignment, an unreadable file), or one that tracked less of the reference's dura
 the evaluation's ``min_trial_coverage`` (tracking lost; too few matched poses). A failed
 trial does not enter the system's figures and does not stop the other trials' evaluation.
 
-**Systems are compared over all their trials** (:func:`compare_systems`): the two-sided
+**Systems are compared over all their trials**
+(:func:`loceval.assessment.trial_comparison.compare_systems`): the two-sided
 Mann-Whitney rank-sum test of the per-trial RMSEs (scipy, exact for small samples) and the
 Hodges-Lehmann estimate of the shift ``A - B`` (the median of all pairwise differences)
 with its distribution-free interval (Moses): the pairwise differences' order statistics
@@ -62,24 +63,27 @@ from typing import Final
 
 import numpy as np
 
-from loceval.core.arrays import FloatArray
+from loceval.core.arrays import FloatArray, StampsNs
+from loceval.core.gaps import gap_threshold_ns
 from loceval.errors import InputError
+from loceval.metrics.pose_errors import ErrorSeries
 
 __all__ = [
     "MIN_TRIALS_FOR_INTERVAL",
     "TRIAL_METRICS",
     "FailedTrial",
     "MetricOverTrials",
-    "SystemComparison",
     "SystemTrials",
     "TrialFigures",
     "TrialInterval",
-    "compare_all_systems",
-    "compare_systems",
+    "finite_values",
+    "group_evaluated_trials",
     "group_trials",
     "mean_interval",
     "median_interval",
     "summarise_trials",
+    "tracked_share",
+    "trial_figures",
 ]
 
 TRIAL_METRICS: Final[Mapping[str, str]] = {
@@ -98,12 +102,6 @@ LEVEL: Final = 0.95
 
 _T_METHOD: Final = "Student t interval of the mean over trials"
 _ORDER_METHOD: Final = "order-statistic interval of the median (binomial, distribution-free)"
-_MOSES_METHOD: Final = (
-    "Mann-Whitney rank-sum test of the per-trial RMSEs; Hodges-Lehmann shift with its "
-    "Moses interval"
-)
-_EXACT_LIMIT: Final = 2500
-"""Largest ``m * n`` whose Mann-Whitney null distribution is counted exactly."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -244,7 +242,12 @@ class SystemTrials:
         }
 
 
-def _finite_values(values: Sequence[float] | FloatArray, what: str) -> FloatArray:
+def finite_values(values: Sequence[float] | FloatArray, what: str) -> FloatArray:
+    """Return one finite value per trial as a (n,) array.
+
+    Raises:
+        InputError: no values, a NaN or inf, or not 1-D; ``what`` names them.
+    """
     x = np.asarray(values, dtype=np.float64)
     if x.ndim != 1 or x.size == 0 or not np.isfinite(x).all():
         msg = f"{what}: give one finite value per trial (got {x.size} values, or NaN/inf)."
@@ -260,7 +263,7 @@ def mean_interval(values: Sequence[float] | FloatArray) -> TrialInterval | None:
     """
     from scipy import stats  # noqa: PLC0415  (scipy loads on use)
 
-    x = _finite_values(values, "The interval of the mean")
+    x = finite_values(values, "The interval of the mean")
     n = x.size
     if n < MIN_TRIALS_FOR_INTERVAL:
         return None
@@ -281,7 +284,7 @@ def median_interval(values: Sequence[float] | FloatArray) -> TrialInterval | Non
     """
     from scipy import stats  # noqa: PLC0415
 
-    x = np.sort(_finite_values(values, "The interval of the median"))
+    x = np.sort(finite_values(values, "The interval of the median"))
     n = x.size
     k = np.arange(1, n // 2 + 1)
     coverage = 1.0 - 2.0 * stats.binom.cdf(k - 1, n, 0.5)
@@ -309,7 +312,7 @@ def summarise_trials(
     Raises:
         InputError: no values, or a NaN/inf.
     """
-    x = _finite_values(values, f"{TRIAL_METRICS.get(metric, metric)} over trials")
+    x = finite_values(values, f"{TRIAL_METRICS.get(metric, metric)} over trials")
     n = x.size
     q1, median, q3 = (float(q) for q in np.percentile(x, [25.0, 50.0, 75.0]))
     note = None
@@ -334,178 +337,6 @@ def summarise_trials(
         median_interval=median_interval(x),
         note=note,
     )
-
-
-@dataclass(frozen=True, slots=True)
-class SystemComparison:
-    """Two systems compared over all their trials on one metric.
-
-    Attributes:
-        a: system A.
-        b: system B.
-        metric: the key (:data:`TRIAL_METRICS`).
-        unit: the metric's unit.
-        difference: Hodges-Lehmann shift ``A - B`` (median of the pairwise differences of
-            per-trial values; negative: A lower, better).
-        interval: its distribution-free (Moses) interval, or None (too few trials).
-        confidence: the interval's exact coverage (≥ 0.95), or None.
-        p_value: two-sided Mann-Whitney p-value.
-        n_a: A's trials.
-        n_b: B's trials.
-        verdict: ``a_better`` (interval below 0), ``b_better`` (above 0), ``within_noise``
-            or ``too_few_trials`` (no 95 % interval exists for these counts).
-        method: how it is made, in words.
-    """
-
-    a: str
-    b: str
-    metric: str
-    unit: str
-    difference: float
-    interval: tuple[float, float] | None
-    confidence: float | None
-    p_value: float
-    n_a: int
-    n_b: int
-    verdict: str
-    method: str = _MOSES_METHOD
-
-    @property
-    def summary(self) -> str:
-        """One sentence for the report."""
-        label = TRIAL_METRICS.get(self.metric, self.metric)
-        d = _fmt(self.difference, self.unit)
-        trials = f"{self.n_a} against {self.n_b} trials"
-        if self.interval is None:
-            return (
-                f"{self.a} vs {self.b}, {label}: median shift {d} over {trials}, too few "
-                "trials for a 95 % interval."
-            )
-        lo, hi = (_fmt(v, self.unit) for v in self.interval)
-        if self.verdict == "within_noise":
-            return (
-                f"{self.a} vs {self.b}, {label}: median shift {d} (interval {lo} to {hi}, "
-                f"{trials}, p = {self.p_value:.3g}): within the noise."
-            )
-        better, worse = (self.a, self.b) if self.verdict == "a_better" else (self.b, self.a)
-        return (
-            f"{better}'s {label} is lower than {worse}'s over {trials}: shift {d} "
-            f"(interval {lo} to {hi}, p = {self.p_value:.3g})."
-        )
-
-    def to_dict(self) -> dict[str, object]:
-        """Return the document's comparison block (see the module's docstring)."""
-        return {
-            "a": self.a,
-            "b": self.b,
-            "metric": self.metric,
-            "unit": self.unit,
-            "difference": self.difference,
-            "interval": None if self.interval is None else list(self.interval),
-            "confidence": self.confidence,
-            "p_value": self.p_value,
-            "n_a": self.n_a,
-            "n_b": self.n_b,
-            "verdict": self.verdict,
-            "method": self.method,
-            "summary": self.summary,
-        }
-
-
-def _fmt(value: float, unit: str) -> str:
-    if unit == "m" and abs(value) < 1.0:
-        return f"{value * 100:+.1f} cm"
-    if unit == "m":
-        return f"{value:+.3f} m"
-    return f"{value:+.3g}{'°' if unit == 'deg' else ' ' + unit}"
-
-
-def _u_null_cdf(m: int, n: int) -> FloatArray:
-    """Return ``P(U <= u)`` for ``u = 0..m*n`` under the null (no ties), by counting.
-
-    The number of rankings with ``U = u`` is the coefficient of ``q^u`` in the Gaussian
-    binomial ``[m+n choose m]_q``; it is built by the recurrence
-    ``c(i, j) = c(i-1, j) shifted by j + c(i, j-1)`` over the table of (i, j), each cell a
-    polynomial (array) in ``u``: ``O(m n · m n)`` additions, small for trials.
-    """
-    size = m * n + 1
-    prev = [np.zeros(size) for _ in range(n + 1)]  # row i-1 (i = 0: only U = 0)
-    for j in range(n + 1):
-        prev[j][0] = 1.0
-    for _ in range(1, m + 1):
-        row = [np.zeros(size) for _ in range(n + 1)]
-        row[0][0] = 1.0
-        for j in range(1, n + 1):
-            row[j] = row[j - 1].copy()
-            row[j][j:] += prev[j][: size - j]
-        prev = row
-    counts = prev[n]
-    cdf: FloatArray = np.cumsum(counts) / counts.sum()
-    return cdf
-
-
-def _moses_rank(m: int, n: int) -> tuple[int, float] | None:
-    """Return ``(k, confidence)`` of the Moses interval ``[D_(k), D_(mn+1-k)]``, or None."""
-    alpha_half = (1.0 - LEVEL) / 2
-    if m * n <= _EXACT_LIMIT:
-        cdf = _u_null_cdf(m, n)
-        ok = np.flatnonzero(cdf <= alpha_half + 1e-12)
-        if ok.size == 0:
-            return None
-        u = int(ok[-1])  # P(U <= u) <= 2.5 %: k - 1 = u
-        return u + 1, float(1.0 - 2.0 * cdf[u])
-    from scipy import stats  # noqa: PLC0415
-
-    z = float(stats.norm.ppf(1.0 - alpha_half))
-    k = math.floor(m * n / 2 - z * math.sqrt(m * n * (m + n + 1) / 12.0))
-    return (k, LEVEL) if k >= 1 else None
-
-
-def compare_systems(
-    values_a: Sequence[float] | FloatArray,
-    values_b: Sequence[float] | FloatArray,
-    *,
-    a: str,
-    b: str,
-    metric: str,
-    unit: str,
-) -> SystemComparison:
-    """Compare two systems over all their trials (see the module's docstring).
-
-    Args:
-        values_a: (m,) A's value per trial.
-        values_b: (n,) B's value per trial.
-        a: A's name.
-        b: B's name.
-        metric: the key (:data:`TRIAL_METRICS`).
-        unit: the values' unit.
-
-    Returns:
-        The Hodges-Lehmann shift A - B, its Moses interval, the rank-sum p-value, a verdict.
-
-    Raises:
-        InputError: a system without trials, or NaN/inf.
-    """
-    from scipy import stats  # noqa: PLC0415
-
-    x = _finite_values(values_a, f"{a!r}'s {metric}")
-    y = _finite_values(values_b, f"{b!r}'s {metric}")
-    m, n = x.size, y.size
-    diffs = np.sort((x[:, None] - y[None, :]).ravel())
-    shift = float(np.median(diffs))
-    if m * n == 1 or (np.ptp(np.concatenate([x, y])) == 0.0):
-        p_value = 1.0
-    else:
-        p_value = float(stats.mannwhitneyu(x, y, alternative="two-sided").pvalue)
-    rank = _moses_rank(m, n)
-    if rank is None:
-        return SystemComparison(
-            a, b, metric, unit, shift, None, None, p_value, m, n, "too_few_trials"
-        )
-    k, confidence = rank
-    lo, hi = float(diffs[k - 1]), float(diffs[m * n - k])
-    verdict = "a_better" if hi < 0.0 else "b_better" if lo > 0.0 else "within_noise"
-    return SystemComparison(a, b, metric, unit, shift, (lo, hi), confidence, p_value, m, n, verdict)
 
 
 @dataclass(frozen=True, slots=True)
@@ -564,18 +395,71 @@ def group_trials(
     return tuple(out)
 
 
-def compare_all_systems(systems: Sequence[SystemTrials]) -> tuple[SystemComparison, ...]:
-    """Compare every two systems (A before B, in order) on each metric both have in one unit."""
-    found = []
-    for i, sa in enumerate(systems):
-        for sb in systems[i + 1 :]:
-            for key, ma in sa.metrics.items():
-                mb = sb.metrics.get(key)
-                if mb is None or mb.unit != ma.unit:
-                    continue
-                found.append(
-                    compare_systems(
-                        ma.values, mb.values, a=sa.name, b=sb.name, metric=key, unit=ma.unit
-                    )
+def tracked_share(reference_ns: StampsNs, matched_ns: StampsNs, *, min_gap_ns: int) -> float:
+    """Return the share of the reference's duration a trial tracked, 0..1.
+
+    The intervals between its matched stamps that are no gap (:func:`gap_threshold_ns` of
+    the matched stamps, floored at ``min_gap_ns``) count as tracked; vectorised.
+
+    Args:
+        reference_ns: (N,) the reference's stamps.
+        matched_ns: (M,) the trial's matched stamps (on the reference's clock), increasing.
+        min_gap_ns: the evaluation's maximum gap, nanoseconds.
+    """
+    span = int(reference_ns[-1]) - int(reference_ns[0])
+    if span <= 0 or matched_ns.shape[0] < 2:
+        return 0.0
+    steps = np.diff(matched_ns)
+    limit = gap_threshold_ns(matched_ns, min_gap_ns=min_gap_ns)
+    return min(1.0, float(steps[steps <= limit].sum()) / span)
+
+
+def trial_figures(name: str, system: str, series: Mapping[str, ErrorSeries | None]) -> TrialFigures:
+    """Return a trial's headline figures: the RMSE of each error series it has.
+
+    Args:
+        name: the estimate's name.
+        system: its system.
+        series: the error series of each metric key (None: the trial has none, e.g. no
+            rotation for a position-only system).
+    """
+    values, units = {}, {}
+    for key, found in series.items():
+        if found is not None and len(found):
+            values[key], units[key] = found.stats.rmse, found.unit
+    return TrialFigures(name, system, values, units)
+
+
+def group_evaluated_trials(
+    trials: Sequence[tuple[TrialFigures, float]],
+    failed: list[FailedTrial],
+    *,
+    min_coverage: float,
+) -> tuple[SystemTrials, ...]:
+    """Group evaluated trials; one that tracked less than ``min_coverage`` is a failed trial.
+
+    Args:
+        trials: each trial's figures and the share of the run it tracked
+            (:func:`tracked_share`).
+        failed: the trials that failed already; those that tracked too little are added.
+        min_coverage: the least share of the run a trial must track.
+
+    Returns:
+        The systems (:func:`group_trials`).
+    """
+    counted = []
+    for figures, coverage in trials:
+        if coverage < min_coverage:
+            failed.append(
+                FailedTrial(
+                    figures.name,
+                    figures.system,
+                    "trial.tracking_lost",
+                    f"It tracked {coverage:.0%} of the reference's duration, less than the "
+                    f"{min_coverage:.0%} a trial needs (tracking lost or too few matched "
+                    f"poses); its figures are shown but not counted for {figures.system}.",
                 )
-    return tuple(found)
+            )
+            continue
+        counted.append(figures)
+    return group_trials(counted, failed)

@@ -180,7 +180,7 @@ def _baseline(args: argparse.Namespace) -> Baseline | None:
     """Return the baseline ``--baseline`` names, read (None without one)."""
     if args.baseline is None:
         return None
-    from service.results.baseline import read_baseline  # noqa: PLC0415
+    from service.jobs.baseline import read_baseline  # noqa: PLC0415
 
     return read_baseline(args.baseline)
 

@@ -99,7 +99,9 @@ def create_evaluation(
         if map_ref is not None:
             _check_map(datasets[map_ref.dataset_id], map_ref.selector, options)
         check_options(options)
-        _check_trials(runtime, project_id, body)
+        from service.jobs.baseline import check_trials  # noqa: PLC0415
+
+        check_trials(runtime, project_id, body)
         evaluation = Evaluation(
             project_id=project_id,
             kind=TRAJECTORY,
@@ -273,22 +275,6 @@ def _check_map(dataset: Dataset, selector: str | None, options: EvaluationOption
     if options.building is None:
         msg = "A map is measured against the building's plan; give options.building too."
         raise InputError(msg, option="map")
-
-
-def _check_trials(runtime: Runtime, project_id: str, body: EvaluationCreate) -> None:
-    """The reference is no trial; a baseline is a succeeded evaluation of the project.
-
-    Raises:
-        InputError: the reference names a system, or the baseline has not succeeded.
-        NotFoundError: no baseline evaluation of that id in the project.
-    """
-    if body.reference.system is not None:
-        msg = "reference.system: the reference is the ground truth, not a trial; leave it out."
-        raise InputError(msg)
-    if body.options.baseline is not None:
-        from service.results.baseline import evaluation_baseline  # noqa: PLC0415
-
-        evaluation_baseline(runtime, project_id, body.options.baseline)
 
 
 def check_options(options: EvaluationOptions) -> None:

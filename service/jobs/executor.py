@@ -26,6 +26,7 @@ from loceval.results.document import read_result
 from service.adapters import DATABASE_ERRORS
 from service.blobs.base import EVALUATIONS
 from service.db import Dataset, Evaluation, JobStatus
+from service.jobs.baseline import evaluation_baseline
 from service.jobs.evaluations import visits_dataset_id
 from service.jobs.kinds import EVALUATION, request_kind
 from service.jobs.limits import Limits, run_limited
@@ -47,7 +48,6 @@ from service.jobs.runner import (
     run_job,
 )
 from service.jobs.tracking import tracked_job
-from service.results.baseline import evaluation_baseline
 from service.runtime import Runtime, load_target
 from service.schemas.evaluations import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
 

@@ -397,7 +397,7 @@ def _run_trajectories(job: TrajectoryJob, report: ProgressCallback) -> Evaluatio
         failed_trials=failed,
     )
     if job.baseline is not None:
-        from loceval.assessment.baseline import compare_with_baseline  # noqa: PLC0415
+        from loceval.results.baseline import compare_with_baseline  # noqa: PLC0415
 
         report("comparing with the baseline", _EVALUATE)
         result = replace(result, baseline=compare_with_baseline(result, job.baseline))

@@ -1443,8 +1443,16 @@
     const ordered = [];
     for (const system of resultSystems(evaluation)) {
       ordered.push({ system });
-      ordered.push(...rows.filter((r) => r.system === system.name));
-      for (const failed of system.failed || []) ordered.push({ failed, of: system.name });
+      const trials = rows.filter((r) => r.system === system.name);
+      for (const failed of system.failed || []) {
+        // A trial that lost tracking keeps its figures (shown, not counted): its row says so.
+        const shown = trials.find((r) => r.row.name === failed.name);
+        if (shown) shown.failed = failed;
+      }
+      ordered.push(...trials);
+      for (const failed of system.failed || []) {
+        if (!trials.some((r) => r.row.name === failed.name)) ordered.push({ failed, of: system.name });
+      }
     }
     ordered.push(...rows.filter((r) => !r.system));
     for (const item of ordered) {
@@ -1452,7 +1460,7 @@
         body.append(systemRow(item.system, unit));
         continue;
       }
-      if (item.failed) {
+      if (item.failed && !item.row) {
         body.append(el("tr", { className: "trial-row trial-failed", dataset: { system: item.of } },
           el("th", { scope: "row", className: "name", text: item.failed.name }),
           el("td", { colspan: "4", className: "muted", "data-label": "Failed" },
@@ -1461,13 +1469,16 @@
       }
       const { row, i } = item;
       const facts = verdictFacts(estimates[i] && estimates[i].verdict);
-      body.append(el("tr", { className: item.system ? "trial-row" : null, dataset: item.system ? { system: item.system } : {} },
+      const rowClass = item.failed ? "trial-row trial-failed" : item.system ? "trial-row" : null;
+      body.append(el("tr", { className: rowClass, dataset: item.system ? { system: item.system } : {} },
         el("th", { scope: "row", className: "name", text: row.name }),
         el("td", { className: "num ate", "data-label": "ATE RMSE", dataset: { valueM: String(row.ate_rmse_m) }, text: formatMetres(row.ate_rmse_m, unit) }),
         el("td", { className: "num", "data-label": "RPE RMSE", text: formatMetres(row.rpe_rmse_m, unit) }),
         el("td", { className: "num", "data-label": "Matched", text: typeof row.matched === "number" ? row.matched.toLocaleString() : "—" }),
         el("td", { className: "verdict-cell", "data-label": "Verdict" }, verdictBadge(row.verdict),
-          facts ? el("div", { className: "muted small verdict-facts", text: facts }) : null)));
+          facts ? el("div", { className: "muted small verdict-facts", text: facts }) : null,
+          item.failed ? el("div", { className: "muted small" },
+            el("span", { className: "verdict verdict-fail", text: "FAILED TRIAL" }), ` ${item.failed.reason}`) : null)));
     }
     renderTrials(evaluation);
     renderBaseline(evaluation);

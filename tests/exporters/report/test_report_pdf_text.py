@@ -113,7 +113,7 @@ def _tf_chain(tmp_path: Path) -> EvaluationResult:
 
 def _trials_and_baseline() -> EvaluationResult:
     """2 systems of 3 trials (and one failed) against a baseline of 3 systems."""
-    from loceval.assessment.baseline import baseline_from_document, compare_with_baseline
+    from loceval.results.baseline import baseline_from_document, compare_with_baseline
     from loceval.results.document import read_result
 
     rng = np.random.default_rng(41)

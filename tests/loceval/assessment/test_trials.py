@@ -9,12 +9,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from loceval.assessment.trials import (
-    _u_null_cdf,
-    compare_systems,
-    median_interval,
-    summarise_trials,
-)
+from loceval.assessment.trial_comparison import _u_null_cdf, compare_systems
+from loceval.assessment.trials import median_interval, summarise_trials
 from loceval.errors import AssociationError, InputError
 from loceval.evaluation import EvaluationConfig, evaluate
 from loceval.trajectory import Trajectory
@@ -108,7 +104,9 @@ def test_systems_compared_over_trials():
     assert found.confidence == pytest.approx(1 - 2 * 4 / 252)
     assert found.p_value == pytest.approx(2 / 252)
     assert found.verdict == "a_better"
-    assert found.summary.startswith("orb's ATE RMSE is lower than vins's over 5 against 5")
+    assert found.summary.startswith(
+        "orb's ATE RMSE is lower than vins's by 2.0 cm over 5 against 5"
+    )
     swapped = compare_systems(b, a, a="vins", b="orb", metric="ate_rmse", unit="m")
     assert swapped.verdict == "b_better"
 

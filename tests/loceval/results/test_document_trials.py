@@ -6,9 +6,9 @@ from dataclasses import replace
 
 import pytest
 
-from loceval.assessment.baseline import baseline_from_document, compare_with_baseline
 from loceval.errors import InputError
 from loceval.evaluation import EvaluationConfig, evaluate
+from loceval.results.baseline import baseline_from_document, compare_with_baseline
 from loceval.results.document import read_result
 from tests.factories import make_trajectory, perturb
 

@@ -12,14 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from loceval.assessment.baseline import (
+from loceval.assessment.baseline import mover_interval
+from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
+from loceval.readers.evo_result import read_result_zip
+from loceval.results.baseline import (
     baseline_from_document,
     baseline_from_evo,
     compare_with_baseline,
-    mover_interval,
 )
-from loceval.evaluation import EvaluationConfig, EvaluationResult, evaluate
-from loceval.readers.evo_result import read_result_zip
 from loceval.results.document import read_result
 from tests.factories import make_trajectory, perturb
 

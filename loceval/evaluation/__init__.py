@@ -11,24 +11,23 @@ import numpy as np
 
 from loceval._version import __version__
 from loceval.assessment.spaces import Building, locate_verdict
+from loceval.assessment.trial_comparison import SystemComparison, compare_all_systems
 from loceval.assessment.trials import (
     FailedTrial,
-    SystemComparison,
     SystemTrials,
-    TrialFigures,
-    compare_all_systems,
-    group_trials,
+    group_evaluated_trials,
+    tracked_share,
+    trial_figures,
 )
 from loceval.assessment.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
-from loceval.calibration.offsets import DeviceSource, OffsetCheck, check_offsets, parse_offset
+from loceval.calibration.offsets import OffsetCheck, check_offsets, parse_offset
 from loceval.core.arrays import IntArray
 from loceval.core.gaps import gap_threshold_ns, path_breaks
-from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError, LocevalError
+from loceval.evaluation.config import EvaluationConfig
 from loceval.metrics.excursions import Excursion, find_excursions
 from loceval.metrics.pose_errors import (
     ErrorSeries,
-    RPEUnit,
     WorstPose,
     compute_ate,
     compute_drift,
@@ -37,14 +36,8 @@ from loceval.metrics.pose_errors import (
     rpe_pairs,
     share_within,
 )
-from loceval.options import DEFAULT_THRESHOLDS_M, check_option, choice_default, number_default
-from loceval.registration.alignment import Alignment, AlignMethod, AlignWindow, align
-from loceval.registration.association import (
-    Association,
-    AssociationMethod,
-    associate,
-    association_notes,
-)
+from loceval.registration.alignment import Alignment, AlignMethod, align
+from loceval.registration.association import Association, associate, association_notes
 from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
@@ -68,132 +61,8 @@ __all__ = [
 
 _NS_PER_S = 1_000_000_000
 
-_RPE_UNIT_WORDS = {RPEUnit.FRAMES: "frames", RPEUnit.METRES: "metres", RPEUnit.SECONDS: "seconds"}
-
-_DEFAULT_ASSOCIATION = AssociationMethod(choice_default("association"))
-_DEFAULT_ALIGN = AlignMethod(choice_default("align"))
-_DEFAULT_RPE_UNIT = RPEUnit(choice_default("rpe_unit"))
-
 ProgressCallback = Callable[[str, float], None]
 """Called with a stage name and the fraction of the evaluation done (0..1)."""
-
-
-@dataclass(frozen=True, slots=True)
-class EvaluationConfig:
-    """Every option of an evaluation (the CLI's and the service's options).
-
-    Attributes:
-        association: how poses are matched in time.
-        max_dt_s: nearest matching's tolerance, seconds.
-        max_gap_s: longest reference interval bridged by interpolation, seconds.
-        time_offset_s: added to every estimate's stamps, seconds.
-        align: the alignment method.
-        align_first: the leading window that estimates the alignment.
-        calibrate_at_s: for ``calibrate``, seconds after the first matched pose.
-        reference_offset: rigid-body -> sensor offset applied to the reference poses.
-        rpe_delta: RPE step.
-        rpe_unit: what the RPE step counts.
-        rpe_all_pairs: every pose starts an RPE pair (default: consecutive segments).
-        thresholds_m: distances for the "share within" figures.
-        tolerance: the application tolerance for the verdict, if any.
-        worst_count: how many greatest errors to list.
-        no_ci: skip the confidence intervals and comparisons (their ``ci95`` is null).
-        reference_sigma_m: the reference's own per-axis standard deviation, metres.
-        auto_time_offset: apply the time offset estimated from the motion.
-        clock_drift_ppm: how fast the estimates' clocks run against the reference's, ppm,
-            applied with the time offset at each estimate's first pose.
-        auto_clock_drift: apply the clock drift (and steps) estimated from the motion.
-        auto_device: apply the device offset estimated from the motion to the reference.
-        reference_offset_source: ``urdf`` (a URDF or ``/tf_static``) or ``given``.
-        planar: measure position errors in x-y only (each matched estimate pose takes
-            the reference's height after alignment), for 2D systems.
-        min_excursion_s: the shortest reference loss that is an excursion, seconds.
-        min_trial_coverage: the least share of the reference's duration a trial (an
-            estimate of a named system) must track; less is a failed trial (tracking lost).
-    """
-
-    association: AssociationMethod = _DEFAULT_ASSOCIATION
-    max_dt_s: float = number_default("max_dt_s")
-    max_gap_s: float = number_default("max_gap_s")
-    time_offset_s: float = number_default("time_offset_s")
-    align: AlignMethod = _DEFAULT_ALIGN
-    align_first: AlignWindow = field(default_factory=AlignWindow)
-    calibrate_at_s: float | None = None
-    reference_offset: SimilarityTransform | None = None
-    rpe_delta: float = number_default("rpe_delta")
-    rpe_unit: RPEUnit = _DEFAULT_RPE_UNIT
-    rpe_all_pairs: bool = False
-    thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
-    tolerance: Tolerance | None = None
-    worst_count: int = round(number_default("worst"))
-    no_ci: bool = False
-    reference_sigma_m: float | None = None
-    auto_time_offset: bool = False
-    auto_device: bool = False
-    reference_offset_source: DeviceSource = "given"
-    planar: bool = False
-    min_excursion_s: float = number_default("min_excursion_s")
-    clock_drift_ppm: float = number_default("clock_drift_ppm")
-    auto_clock_drift: bool = False
-    min_trial_coverage: float = number_default("min_trial_coverage")
-
-    def __post_init__(self) -> None:
-        """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
-
-        Raises:
-            InputError: a value out of bounds; the error carries the option's key.
-        """
-        check_option("max_dt_s", self.max_dt_s, unit="seconds")
-        if self.max_gap_s < 1e-9:  # the table's minimum, in the unit a user thinks in
-            msg = f"The maximum gap must be at least 1 ns, got {self.max_gap_s!r} s."
-            raise InputError(msg, option="max_gap_s")
-        check_option("max_gap_s", self.max_gap_s, unit="seconds")
-        check_option("time_offset_s", self.time_offset_s, unit="seconds")
-        check_option("clock_drift_ppm", self.clock_drift_ppm, unit="ppm")
-        if self.calibrate_at_s is not None:
-            check_option("calibrate_at_s", self.calibrate_at_s, unit="seconds")
-        check_option("rpe_delta", self.rpe_delta, unit=_RPE_UNIT_WORDS[self.rpe_unit])
-        for threshold in self.thresholds_m:
-            check_option("thresholds_m", threshold, unit="metres")
-        check_option("worst", self.worst_count)
-        check_option("min_excursion_s", self.min_excursion_s, unit="seconds")
-        check_option("min_trial_coverage", self.min_trial_coverage)
-        if self.reference_sigma_m is not None:
-            check_option("reference_sigma_m", self.reference_sigma_m, unit="metres")
-        if self.auto_device and self.reference_offset is not None:
-            msg = "Give the device offset or have it estimated from the motion, not both."
-            raise InputError(msg, option="device")
-
-    def to_dict(self) -> dict[str, object]:
-        """Return the options as JSON (for the report's provenance)."""
-        return {
-            "association": self.association.value,
-            "max_dt_s": self.max_dt_s,
-            "max_gap_s": self.max_gap_s,
-            "time_offset_s": self.time_offset_s,
-            "align": self.align.value,
-            "align_first": str(self.align_first),
-            "calibrate_at_s": self.calibrate_at_s,
-            "reference_offset": None
-            if self.reference_offset is None
-            else self.reference_offset.to_dict(),
-            "rpe_delta": self.rpe_delta,
-            "rpe_unit": self.rpe_unit.value,
-            "rpe_all_pairs": self.rpe_all_pairs,
-            "thresholds_m": list(self.thresholds_m),
-            "tolerance": None
-            if self.tolerance is None
-            else {"distance_m": self.tolerance.distance_m, "share": self.tolerance.share},
-            "no_ci": self.no_ci,
-            "reference_sigma_m": self.reference_sigma_m,
-            "auto_time_offset": self.auto_time_offset,
-            "auto_device": self.auto_device,
-            "planar": self.planar,
-            "min_excursion_s": self.min_excursion_s,
-            "clock_drift_ppm": self.clock_drift_ppm,
-            "auto_clock_drift": self.auto_clock_drift,
-            "min_trial_coverage": self.min_trial_coverage,
-        }
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -427,13 +296,23 @@ def evaluate(
                 FailedTrial(estimate.name or f"estimate {k + 1}", system, err.code, str(err))
             )
             continue
-        one = replace(one, system=system, coverage=_coverage(reference, one, config))
-        results.append(one)
+        tracked = tracked_share(
+            reference.stamps_ns, one.association.reference.stamps_ns, min_gap_ns=min_gap_ns
+        )
+        results.append(replace(one, system=system, coverage=tracked))
     if not results:
         reasons = "; ".join(f"{f.name}: {f.reason}" for f in failed)
         msg = f"Every trial failed, so there is nothing to evaluate ({reasons})."
         raise InputError(msg)
-    trial_systems = _trial_systems(results, failed, config)
+    trial_systems = group_evaluated_trials(
+        [
+            (trial_figures(e.name, e.system, _series_of(e)), e.coverage or 0.0)
+            for e in results
+            if e.system is not None
+        ],
+        failed,
+        min_coverage=config.min_trial_coverage,
+    )
     comparisons = None
     comparison_notes: tuple[str, ...] = ()
     if not config.no_ci:
@@ -463,53 +342,14 @@ def evaluate(
     )
 
 
-def _coverage(reference: Trajectory, one: EstimateResult, config: EvaluationConfig) -> float:
-    """Return the share of the reference's duration the estimate tracked, 0..1.
-
-    The matched stamps' intervals no longer than a gap (:func:`gap_threshold_ns` of the
-    matched stamps, floored at ``max_gap_s``) count as tracked; vectorised.
-    """
-    span = int(reference.stamps_ns[-1]) - int(reference.stamps_ns[0])
-    stamps = one.association.reference.stamps_ns
-    if span <= 0 or stamps.shape[0] < 2:
-        return 0.0
-    steps = np.diff(stamps)
-    limit = gap_threshold_ns(stamps, min_gap_ns=round(config.max_gap_s * _NS_PER_S))
-    return min(1.0, float(steps[steps <= limit].sum()) / span)
-
-
-def _trial_systems(
-    results: Sequence[EstimateResult], failed: list[FailedTrial], config: EvaluationConfig
-) -> tuple[SystemTrials, ...]:
-    """Group the trials; a trial that tracked too little of the run is a failed trial."""
-    figures = []
-    for e in results:
-        if e.system is None:
-            continue
-        coverage = 0.0 if e.coverage is None else e.coverage
-        if coverage < config.min_trial_coverage:
-            failed.append(
-                FailedTrial(
-                    e.name,
-                    e.system,
-                    "trial.tracking_lost",
-                    f"It tracked {coverage:.0%} of the reference's duration, less than the "
-                    f"{config.min_trial_coverage:.0%} a trial needs (tracking lost or too few "
-                    "matched poses); its figures are shown but not counted for "
-                    f"{e.system}.",
-                )
-            )
-            continue
-        values = {
-            "ate_rmse": e.ate_translation.stats.rmse,
-            "rpe_rmse": e.rpe_translation.stats.rmse,
-        }
-        units = {"ate_rmse": e.ate_translation.unit, "rpe_rmse": e.rpe_translation.unit}
-        for key, series in (("ate_rot_rmse", e.ate_rotation), ("rpe_rot_rmse", e.rpe_rotation)):
-            if series is not None and len(series):
-                values[key], units[key] = series.stats.rmse, series.unit
-        figures.append(TrialFigures(e.name, e.system, values, units))
-    return group_trials(figures, failed)
+def _series_of(e: EstimateResult) -> dict[str, ErrorSeries | None]:
+    """The error series of each trial metric (:data:`~loceval.assessment.trials.TRIAL_METRICS`)."""
+    return {
+        "ate_rmse": e.ate_translation,
+        "rpe_rmse": e.rpe_translation,
+        "ate_rot_rmse": e.ate_rotation,
+        "rpe_rot_rmse": e.rpe_rotation,
+    }
 
 
 def _evaluate_one(

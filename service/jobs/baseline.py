@@ -17,16 +17,18 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from loceval.assessment.baseline import Baseline, baseline_from_document, baseline_from_evo
+from loceval.assessment.baseline import Baseline
 from loceval.core.arrays import FloatArray, StampsNs
 from loceval.errors import InputError, LocevalError
 from loceval.readers.evo_result import is_result_zip, read_result_zip
+from loceval.results.baseline import baseline_from_document, baseline_from_evo
 from loceval.results.document import read_result
 
 if TYPE_CHECKING:
     from service.runtime import Runtime
+    from service.schemas.evaluations import EvaluationCreate
 
-__all__ = ["evaluation_baseline", "read_baseline"]
+__all__ = ["check_trials", "evaluation_baseline", "read_baseline"]
 
 _COLUMNS = {"ate_rmse": "ate_m", "rpe_rmse": "rpe_m"}
 
@@ -139,3 +141,17 @@ def evaluation_baseline(runtime: Runtime, project_id: str, evaluation_id: str) -
         source=f"evaluation:{evaluation.id}",
         series_of=_series_from_csv(data),
     )
+
+
+def check_trials(runtime: Runtime, project_id: str, body: EvaluationCreate) -> None:
+    """The reference is no trial; a baseline is a succeeded evaluation of the project.
+
+    Raises:
+        InputError: the reference names a system, or the baseline has not succeeded.
+        NotFoundError: no baseline evaluation of that id in the project.
+    """
+    if body.reference.system is not None:
+        msg = "reference.system: the reference is the ground truth, not a trial; leave it out."
+        raise InputError(msg)
+    if body.options.baseline is not None:
+        evaluation_baseline(runtime, project_id, body.options.baseline)
