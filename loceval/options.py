@@ -230,21 +230,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         pattern=grammar.TOLERANCE_PATTERN,
         example="0.10@95",
     ),
-    OptionSpec(
-        "fail_on",
-        OptionKind.NAMES,
-        None,
-        "the gate: exit 3 (the API: gate.passed false) when an estimate's tolerance verdict "
-        "is fail or undecided, or it is worse than the baseline; any of fail, undecided, "
-        "worse, comma-separated or repeated",
-        "the gate's conditions",
-        "fail-on",
-        "fail,undecided,worse",
-        choices=("fail", "undecided", "worse"),
-        min_length=1,
-        max_length=3,
-        group="export",
-    ),
+    *grammar.GATE_OPTIONS,
     OptionSpec(
         "worst",
         OptionKind.INTEGER,

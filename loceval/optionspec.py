@@ -16,6 +16,7 @@ from typing import Final
 __all__ = [
     "ALIGN_FIRST_PATTERN",
     "CRS_PATTERN",
+    "GATE_OPTIONS",
     "OFFSET_PATTERN",
     "SITE_PATTERN",
     "TAG_OFFSET_PATTERN",
@@ -357,3 +358,24 @@ TRIAL_OPTIONS: Final[tuple[OptionSpec, ...]] = (
 The table splices them in at their place; they are written here, beside the specification,
 because the table's module is at the length every module keeps to.
 """
+
+
+GATE_OPTIONS: Final[tuple[OptionSpec, ...]] = (
+    OptionSpec(
+        "fail_on",
+        OptionKind.NAMES,
+        None,
+        "the gate: exit 3 (the API: gate.passed false) when an estimate's tolerance verdict "
+        "is fail or undecided, or it is worse than the baseline; any of fail, undecided, "
+        "worse, comma-separated or repeated",
+        "the gate's conditions",
+        "fail-on",
+        "fail,undecided,worse",
+        choices=("fail", "undecided", "worse"),
+        min_length=1,
+        max_length=3,
+        group="export",
+    ),
+)
+"""The gate's option (issue 41), in :data:`loceval.options.OPTIONS` after the tolerance whose
+verdict it judges; kept here, beside the trials' options, so the table stays one screenful."""

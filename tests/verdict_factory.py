@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from loceval.assessment.baseline import baseline_from_document, compare_with_baseline
 from loceval.assessment.trials import FailedTrial
 from loceval.evaluation import EvaluationConfig, EvaluationResult, Tolerance, evaluate
+from loceval.results.baseline import baseline_from_document, compare_with_baseline
 from loceval.results.document import read_result
 from loceval.trajectory import Trajectory
 from tests.factories import make_trajectory, perturb, write_tum

@@ -89,6 +89,14 @@ def _mapping(value: object) -> Mapping[str, Any] | None:
     return value if isinstance(value, Mapping) else None
 
 
+def _pair(value: object) -> tuple[float, float] | None:
+    """A written ``[low, high]`` of two finite numbers, else None."""
+    if not isinstance(value, Sequence) or isinstance(value, str | bytes) or len(value) != 2:
+        return None
+    low, high = _finite(value[0]), _finite(value[1])
+    return None if low is None or high is None else (low, high)
+
+
 @dataclass(frozen=True, slots=True)
 class StatsBlock:
     """One statistics block: an error series' :class:`ErrorStats`, and its 95 % intervals.

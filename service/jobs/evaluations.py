@@ -444,6 +444,7 @@ def evaluation_public(
     succeeded = evaluation.status == JobStatus.SUCCEEDED
     # A running evaluation shows what it has made so far (result.json first, then each file).
     shown = succeeded or evaluation.status == JobStatus.RUNNING
+    document = evaluation.result if (shown and with_result) else None  # its gate as the CLI's
     artifacts = None
     if shown and evaluation.artifacts is not None:
         artifacts = [
@@ -467,11 +468,8 @@ def evaluation_public(
             "summary": evaluation.summary if shown else None,
             "error": evaluation.error,
             "artifacts": artifacts,
-            "result": evaluation.result if (shown and with_result) else None,
-            # the gate of options.fail_on, judged from the stored result as the CLI judges
-            "gate": gate_of_document(evaluation.result, request.get("options", {}).get("fail_on"))
-            if (succeeded and with_result)
-            else None,
+            "result": document,
+            "gate": gate_of_document(document, request.get("options", {}).get("fail_on")),
         }
     )
 

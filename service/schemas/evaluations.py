@@ -523,8 +523,8 @@ class EvaluationPublic(BaseModel):
     )
     gate: GatePublic | None = Field(
         default=None,
-        description="the gate of options.fail_on, once the evaluation succeeded (GET of one "
-        "evaluation only; null without fail_on)",
+        description="the gate of options.fail_on, judged from result as the CLI judges its own "
+        "(GET of one evaluation only, once result is there; null without fail_on)",
     )
 
 
