@@ -104,11 +104,11 @@ def _check_shown(page: Any, live_server: Any, evaluation_id: str, tmp_path: Path
 
 
 def _form_with_trials(page: Any, live_server: Any, baseline_id: str) -> None:
-    """The form: two estimate rows of one system, and the earlier evaluation as baseline."""
+    """The form (on the same page, the key entered): two estimate rows of one system, and
+    the earlier evaluation as baseline."""
     from playwright.sync_api import expect
 
-    page.goto(f"{live_server.url}/")
-    _enter_key(page, live_server.api_key)
+    shown = page.locator("#current-card").get_attribute("data-evaluation-id")
     _choose(page.locator("#reference-select"), "groundtruth")
     _choose(page.locator(".estimate-select").first, "v2-ORB-SLAM3-1")
     page.locator(".estimate-system").first.fill("ORB-SLAM3")
@@ -118,6 +118,7 @@ def _form_with_trials(page: Any, live_server: Any, baseline_id: str) -> None:
     page.locator("#other-options").evaluate("d => { if (d.tagName === 'DETAILS') d.open = true; }")
     _choose(page.locator("#other-options-grid select.evaluation-choice"), baseline_id[:8])
     page.click("#start-button")
+    expect(page.locator("#current-card")).not_to_have_attribute("data-evaluation-id", shown or "")
     formed = wait_until_succeeded(page)
     with live_server.client() as client:
         result = client.get(f"/api/v1/evaluations/{formed}").json()["result"]
