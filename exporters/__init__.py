@@ -108,6 +108,9 @@ ARTIFACTS: Final[Mapping[str, ArtifactSpec]] = {
         ArtifactSpec("paths.ifc", "application/x-step", "exporters.cad.ifc:export_ifc", "cad"),
         # one self-contained page: the interactive 3D and plan viewer (templates/viewer)
         ArtifactSpec("viewer.html", "text/html", "exporters.viewer:export_viewer_html", "all"),
+        # what CI systems read (exporters.ci): a JUnit XML test report, a Markdown summary
+        ArtifactSpec("junit.xml", "application/xml", "exporters.ci:export_junit_xml", "report"),
+        ArtifactSpec("summary.md", "text/markdown", "exporters.ci:export_summary_md", "report"),
     )
 }
 """Every artifact, by file name, in the order they are written."""
@@ -132,6 +135,9 @@ ARTIFACT_ALIASES: Final[Mapping[str, str]] = {
     "gltf": "paths.glb",
     "ifc": "paths.ifc",
     "viewer": "viewer.html",
+    "junit": "junit.xml",
+    "markdown": "summary.md",
+    "md": "summary.md",
 }
 """Format names a user may give instead of file names (``dxf`` for ``paths.dxf``)."""
 

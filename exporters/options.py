@@ -56,6 +56,9 @@ class ExportOptions:
             evaluation in (``"EPSG:25832"``), if any; the IFC then carries the site
             transform as its map conversion.
         front_door: the front door that made the files (how the report names options).
+        fail_on: the gate's conditions (``fail``, ``undecided``, ``worse``): ``junit.xml``
+            counts an undecided verdict as a failure only when ``undecided`` is one, and
+            ``summary.md`` states the gate.
     """
 
     units: Units = _DEFAULT_UNITS
@@ -68,6 +71,7 @@ class ExportOptions:
     crs: str | None = None
     building_up: UpAxis = UpAxis.FORMAT
     front_door: FrontDoor = FrontDoor.CLI
+    fail_on: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         """Make the title plain one-line text; check that the CRS reads ``AUTHORITY:CODE``.

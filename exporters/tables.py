@@ -33,7 +33,13 @@ from exporters.options import ExportOptions
 from loceval.core.arrays import FloatArray, StampsNs
 from loceval.evaluation import EstimateResult, EvaluationResult
 
-__all__ = ["ERRORS_CSV_COLUMNS", "errors_csv_chunks", "export_errors_csv", "read_ate_series"]
+__all__ = [
+    "ERRORS_CSV_COLUMNS",
+    "errors_csv_chunks",
+    "export_errors_csv",
+    "read_ate_series",
+    "read_error_series",
+]
 
 ERRORS_CSV_COLUMNS: Final = (
     "estimate",
@@ -255,3 +261,42 @@ def read_ate_series(data: bytes, name: str) -> tuple[StampsNs, FloatArray]:
     stamps = np.loadtxt(io.BytesIO(block), delimiter=",", usecols=0, dtype=np.int64, ndmin=1)
     ate = np.loadtxt(io.BytesIO(block), delimiter=",", usecols=ate_column, ndmin=1)
     return stamps, ate
+
+
+def read_error_series(data: bytes, name: str, column: str) -> tuple[StampsNs, FloatArray]:
+    """Read one estimate's errors of one column (``ate_m``, ``rpe_m``) from ``errors.csv``.
+
+    Rows whose cell is empty (no RPE pair starts there) are left out; vectorised as
+    :func:`read_ate_series`.
+
+    Args:
+        data: the file's bytes.
+        name: the estimate's name, as in the file's first column.
+        column: ``ate_m``, ``ate_deg``, ``rpe_m`` or ``rpe_deg``.
+
+    Returns:
+        ``(stamps_ns, errors)``, (N,) each, in the file's order; empty without rows.
+
+    Raises:
+        ValueError: the file is not an ``errors.csv`` of this layout, or no such column.
+    """
+    if column not in ERRORS_CSV_COLUMNS[-4:]:
+        msg = f"No error column {column!r} in errors.csv."
+        raise ValueError(msg)
+    header, _, body = data.partition(b"\n")
+    if header.decode("utf-8", "replace").strip() != ",".join(ERRORS_CSV_COLUMNS):
+        msg = "Not an errors.csv of loceval: its header differs."
+        raise ValueError(msg)
+    prefix = _csv_cell(name) + b","
+    lines = np.asarray(body.split(b"\n"), dtype=np.bytes_)
+    mine = lines[np.char.startswith(lines, prefix)]
+    if not mine.size:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
+    block = b"\n".join(mine.tolist()).replace(b"\n" + prefix, b"\n")[len(prefix) :]
+    index = ERRORS_CSV_COLUMNS.index(column) - 1
+    stamps = np.loadtxt(io.BytesIO(block), delimiter=",", usecols=0, dtype=np.int64, ndmin=1)
+    values = np.atleast_1d(
+        np.genfromtxt(io.BytesIO(block), delimiter=",", usecols=[index], dtype=np.float64)
+    )
+    keep = np.isfinite(values)
+    return stamps[keep], values[keep]

@@ -246,6 +246,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         example="0.10@95",
         label="Tolerance",
     ),
+    *grammar.GATE_OPTIONS,
     OptionSpec(
         "worst",
         OptionKind.INTEGER,
@@ -499,6 +500,7 @@ OPTIONS: Final[tuple[OptionSpec, ...]] = (
         group="map",
         label="Clutter distance (m)",
     ),
+    *grammar.TRIAL_OPTIONS,
     OptionSpec(
         "min_excursion_s",
         OptionKind.NUMBER,

@@ -16,10 +16,12 @@ from typing import Final
 __all__ = [
     "ALIGN_FIRST_PATTERN",
     "CRS_PATTERN",
+    "GATE_OPTIONS",
     "OFFSET_PATTERN",
     "SITE_PATTERN",
     "TAG_OFFSET_PATTERN",
     "TOLERANCE_PATTERN",
+    "TRIAL_OPTIONS",
     "AlignMethod",
     "AssociationMethod",
     "OptionKind",
@@ -349,3 +351,59 @@ _SECONDS: Final = r"0*([1-9][0-9]{0,8}(\.[0-9]*)?|0?\.[0-9]*[1-9][0-9]*|10000000
 ALIGN_FIRST_PATTERN: Final = rf"^( *(0*[1-9][0-9]*|{_SECONDS} *s) *)?$"
 CRS_PATTERN: Final = r"^[A-Za-z][A-Za-z0-9_.\-]*:[A-Za-z0-9_.\-]+$"
 """AUTHORITY:CODE, e.g. EPSG:25832 (the exporters' own check, spelled the same)."""
+
+
+TRIAL_OPTIONS: Final[tuple[OptionSpec, ...]] = (
+    OptionSpec(
+        "baseline",
+        OptionKind.FILE,
+        None,
+        "an earlier result to compare each estimate and system with, by name: a result.json "
+        "(errors.csv beside it pairs the errors), the folder an earlier evaluation wrote, an "
+        "evo result zip or a folder of them (the API: the id of a succeeded evaluation)",
+        "the baseline",
+        "baseline",
+        "PATH",
+        max_length=500,
+        group="baseline",
+    ),
+    OptionSpec(
+        "min_trial_coverage",
+        OptionKind.NUMBER,
+        0.5,
+        "trials (estimates of a named system): the least share of the reference's duration "
+        "a trial must track; a trial tracking less failed (tracking lost) and is counted, "
+        "not averaged",
+        "the least trial coverage",
+        "min-trial-coverage",
+        "SHARE",
+        minimum=0.0,
+        maximum=1.0,
+    ),
+)
+"""The rows of :data:`loceval.options.OPTIONS` about trials and the baseline (issue 41).
+
+The table splices them in at their place; they are written here, beside the specification,
+because the table's module is at the length every module keeps to.
+"""
+
+
+GATE_OPTIONS: Final[tuple[OptionSpec, ...]] = (
+    OptionSpec(
+        "fail_on",
+        OptionKind.NAMES,
+        None,
+        "the gate: exit 3 (the API: gate.passed false) when an estimate's tolerance verdict "
+        "is fail or undecided, or it is worse than the baseline; any of fail, undecided, "
+        "worse, comma-separated or repeated",
+        "the gate's conditions",
+        "fail-on",
+        "fail,undecided,worse",
+        choices=("fail", "undecided", "worse"),
+        min_length=1,
+        max_length=3,
+        group="export",
+    ),
+)
+"""The gate's option (issue 41), in :data:`loceval.options.OPTIONS` after the tolerance whose
+verdict it judges; kept here, beside the trials' options, so the table stays one screenful."""

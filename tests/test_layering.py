@@ -103,7 +103,7 @@ STAGES: Final[tuple[tuple[str, ...], ...]] = (
     ("exporters.cad",),
     ("exporters.plots", "exporters.viewer"),
     ("exporters.report",),
-    ("exporters.summary", "exporters.checkpoints"),
+    ("exporters.summary", "exporters.checkpoints", "exporters.ci"),
     ("exporters",),
 )
 """The stages of the data flow, lowest first: a module imports only modules of its own stage

@@ -9,6 +9,7 @@ from exporters.plots.mapplan import plot_map, plot_map_history
 from exporters.plots.maps import is_3d, plot_ate_path, plot_overlay_xy, plot_side_views
 from exporters.plots.ranging import plot_ranging
 from exporters.plots.series import plot_ate_over_time, plot_error_cdf, plot_rpe_over_time
+from exporters.plots.trials import plot_trials
 from loceval.core.arrays import FloatArray
 from loceval.evaluation import EvaluationResult
 
@@ -43,6 +44,7 @@ def render_plots(
     plots.append(plot_ate_over_time(result, max_points=max_points, formats=formats))
     plots.append(plot_rpe_over_time(result, max_points=max_points, formats=formats))
     plots.append(plot_error_cdf(result, max_points=max_points, formats=formats))
+    plots.extend(plot_trials(result, formats=formats))
     if is_3d(result):
         plots.append(plot_side_views(result, max_points=max_points, formats=formats))
     plots.extend(plot_ranging(result, max_points=max_points, formats=formats))

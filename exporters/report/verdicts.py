@@ -62,6 +62,9 @@ class VerdictView:
     """The unit of the stretches' largest errors (one group: :mod:`loceval.core.lengths`)."""
     spaces: bool = False
     """Whether the building names the space of any stretch (the table's room column)."""
+    figures: str = ""
+    """The verdict's figures in one line: ``87.2 % within 0.1 m (95 % interval 85.0–89.1 %,
+    95 % required)`` ("" without a tolerance)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,6 +125,13 @@ def verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> Ve
         )
     tol = verdict.tolerance
     share_pct = verdict.share_within * 100
+    interval = ""
+    if verdict.share_ci95 is not None:
+        lo, hi = verdict.share_ci95
+        interval = f"95 % interval {lo * 100:.1f}–{hi * 100:.1f} %, "
+    figures = (
+        f"{share_pct:.1f} % within {tol.distance_m:g} m ({interval}{tol.share * 100:g} % required)"
+    )
     if verdict.passed:
         headline = (
             f"{name} meets the tolerance: {share_pct:.1f} % of its poses are within "
@@ -189,6 +199,7 @@ def verdict_view(result: EvaluationResult, k: int, map_figure: int | None) -> Ve
         ),
         error_unit=unit.symbol,
         spaces=any(v.space for v in span_views),
+        figures=figures,
     )
 
 

@@ -2,7 +2,9 @@
 
 :func:`build_report_view` turns an :class:`~loceval.evaluation.EvaluationResult` into a
 :class:`ReportView` (statistics tables, verdicts, inputs, options, alignment, the greatest
-errors, numbered figures); the templates only loop over it.
+errors, numbered figures); the templates only loop over it. Its figures and words that need
+no drawing (tables, verdicts, intervals, trials, baseline, warnings) come from
+:func:`exporters.report.results.build_results_view`, which the CI files render too.
 """
 
 from __future__ import annotations
@@ -19,13 +21,12 @@ from exporters.plots import (
     REFERENCE_COLOUR,
     ImageFormat,
     Plot,
-    describe_rpe_step,
     estimate_colour,
 )
 from exporters.plots.clock import plot_clock_correlation, plot_clock_drift
 from exporters.plots.figure import FigureView, number_figures
 from exporters.report.clocks import ClockSection, build_clock_section
-from exporters.report.confidence import ConfidenceView, build_confidence_view
+from exporters.report.confidence import ConfidenceView
 from exporters.report.figures import ReportPlots, render_report_plots
 from exporters.report.mapsection import MapView, build_map_view
 from exporters.report.provenance import (
@@ -36,15 +37,16 @@ from exporters.report.provenance import (
     trajectory_rows,
 )
 from exporters.report.ranging import RangingView, build_ranging_view
-from exporters.report.verdicts import (
-    BuildingView,
-    VerdictView,
-    building_view,
-    verdict_view,
+from exporters.report.results import (
+    ResultsView,
+    StatsTable,
+    build_results_view,
+    unbroken_arrows,
 )
+from exporters.report.trials import BaselineView, TrialsView
+from exporters.report.verdicts import BuildingView, VerdictView, building_view
 from loceval.core.lengths import MM_BELOW_M, LengthUnit, length_unit
 from loceval.evaluation import EvaluationResult
-from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.options import option
 
 __all__ = [
@@ -52,7 +54,9 @@ __all__ = [
     "MM_BELOW_M",
     "LengthUnit",
     "ReportView",
+    "ResultsView",
     "build_report_view",
+    "build_results_view",
     "length_unit",
 ]
 
@@ -60,48 +64,7 @@ BEST_MARK: Final = "★"
 """Marks the lowest value of a statistics row (with bold, so it survives grey print)."""
 
 _NS_PER_S = 1_000_000_000
-_STAT_ROWS: Final = (
-    ("RMSE", "rmse"),
-    ("MEAN", "mean"),
-    ("MEDIAN", "median"),
-    ("STD", "std"),
-    ("MIN", "min"),
-    ("MAX", "max"),
-)
-"""The framework paper's Tables 1-2 rows (it omits the median; the issue asks for it)."""
-
-
 _TIMES_NOTE: Final = "Times in this report are seconds since the first pose of the reference."
-
-
-@dataclass(frozen=True, slots=True)
-class Cell:
-    """One value of a statistics table, formatted with its unit, and whether it is best."""
-
-    text: str
-    best: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class StatsRow:
-    """A row of a statistics table: ``RMSE``, ``MEAN``, ... with one cell per estimate."""
-
-    label: str
-    cells: tuple[Cell, ...]
-
-
-@dataclass(frozen=True, slots=True)
-class StatsTable:
-    """The framework paper's table layout: metrics down, estimates across."""
-
-    number: int
-    title: str
-    note: str
-    columns: tuple[str, ...]
-    groups: tuple[tuple[str, tuple[StatsRow, ...]], ...]
-    marks_best: bool
-    length: LengthUnit | None = None
-    """The unit of the translation rows (their intervals are printed in it too)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -191,69 +154,10 @@ class ReportView:
     """What the error colours mean: the tolerance in words (every figure and the viewer)."""
     building: BuildingView | None = None
     """The building model the paths were placed on, its spaces and warnings."""
-
-
-def _fmt(value: float, decimals: int = 3) -> str:
-    return f"{value:.{decimals}f}"
-
-
-def _stats_rows(
-    series: Sequence[ErrorSeries | None], unit: str, *, mark: bool, scale: LengthUnit | None = None
-) -> tuple[StatsRow, ...]:
-    stats: list[ErrorStats | None] = [None if s is None else s.stats for s in series]
-    rows = []
-    for label, attr in _STAT_ROWS:
-        printed = [
-            None
-            if st is None
-            else (_fmt if scale is None else scale.format)(float(getattr(st, attr)))
-            for st in stats
-        ]
-        # Best is decided on the printed values, so equal-looking numbers are marked alike.
-        numbers = [float(t) for t in printed if t is not None]
-        best = min(numbers) if numbers else None
-        cells = tuple(
-            Cell("—") if text is None else Cell(f"{text}{unit}", best=mark and float(text) == best)
-            for text in printed
-        )
-        rows.append(StatsRow(label=label, cells=cells))
-    return tuple(rows)
-
-
-def _stats_table(
-    result: EvaluationResult,
-    *,
-    number: int,
-    title: str,
-    note: str,
-    translation: Sequence[ErrorSeries],
-    rotation: Sequence[ErrorSeries | None],
-) -> StatsTable:
-    mark = len(result.estimates) > 1
-    columns = tuple(
-        f"{estimate_name(e, k)} (n = {len(t):,})"
-        for k, (e, t) in enumerate(zip(result.estimates, translation, strict=True))
-    )
-    unit = length_unit(float(getattr(t.stats, attr)) for t in translation for _, attr in _STAT_ROWS)
-    groups: list[tuple[str, tuple[StatsRow, ...]]] = [
-        ("translation", _stats_rows(translation, f" {unit.symbol}", mark=mark, scale=unit))
-    ]
-    if any(r is not None for r in rotation):
-        groups.append(("rotation", _stats_rows(rotation, "°", mark=mark)))
-    in_unit = (
-        f" Translation in millimetres: every value of this table is below {MM_BELOW_M:g} m."
-        if unit.symbol == "mm"
-        else ""
-    )
-    return StatsTable(
-        number=number,
-        title=title,
-        note=note + in_unit,
-        columns=columns,
-        groups=tuple(groups),
-        marks_best=mark,
-        length=unit,
-    )
+    trials: TrialsView | None = None
+    """The trials of each system (:mod:`exporters.report.trials`); None without systems."""
+    baseline: BaselineView | None = None
+    """Each estimate and system against the baseline; None without a baseline."""
 
 
 def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
@@ -276,23 +180,6 @@ def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
     return tuple(tables)
 
 
-def unbroken_arrows(text: str) -> str:
-    """Return ``text`` with each `` -> `` (a tf chain's link) as an arrow no line splits."""
-    return text.replace(" -> ", "\u00a0→\u00a0")
-
-
-def _warnings(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
-    ref_name = result.reference.name or "reference"
-    out = [(f"{ref_name} (reference)", w) for w in result.reference_warnings]
-    for k, e in enumerate(result.estimates):
-        out.extend((estimate_name(e, k), w) for w in e.warnings)
-    # Why two estimates were not compared is about the pair, not about the reference.
-    out.extend(("comparison of estimates", w) for w in result.comparison_notes)
-    if result.building is not None:  # how the model is placed: an up axis, the site
-        out.extend(("building model", w) for w in result.building.warnings)
-    return tuple((about, unbroken_arrows(w)) for about, w in out)
-
-
 def _notes(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
     """Information about how the inputs were read (a tf chain's links): no warnings."""
     ref_name = result.reference.name or "reference"
@@ -313,18 +200,9 @@ def _tolerance_hint(front_door: FrontDoor) -> tuple[str, str]:
     ), f" in the {field_name} field of the page (options.{spec.key} in the API)"
 
 
-def _summary(result: EvaluationResult) -> str:
-    ref = result.reference
-    names = [estimate_name(e, k) for k, e in enumerate(result.estimates)]
-    listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
-    span = "no times (poses numbered)" if ref.indexed else f"{ref.duration_s:.1f} s"
-    return (
-        f"{listed} against {ref.name or 'the reference'} (ground truth): "
-        f"{len(ref):,} reference poses, {span}, {ref.length_m:.1f} m of path."
-    )
-
-
-def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple[str, str], ...]:
+def _contents(
+    *, ranging: bool, map_section: bool, warnings: int, trials: bool = False, baseline: bool = False
+) -> tuple[tuple[str, str], ...]:
     """Every section of the report, in order, as (anchor, title) for the contents list."""
     return tuple(
         entry
@@ -332,6 +210,8 @@ def _contents(*, ranging: bool, map_section: bool, warnings: int) -> tuple[tuple
             (("verdict", "Verdict"), True),
             (("evaluated", "What was evaluated"), True),
             (("statistics", "Error statistics"), True),
+            (("trials", "Trials of each system"), trials),
+            (("baseline", "Against the baseline"), baseline),
             (("ranging", "Ranging"), ranging),
             (("map", "The map against the building plan"), map_section),
             (("viewer", "Interactive view"), True),
@@ -380,49 +260,26 @@ def build_report_view(
     figures = number_figures(rendered, image_format)
     figure_of = {f.key: f.number for f in figures}
     estimates = result.estimates
-    cfg = result.config
-    tables = (
-        _stats_table(
-            result,
-            number=1,
-            title="Absolute Trajectory Error (ATE)",
-            note="Distance between each aligned estimate pose and the ground truth at the same "
-            "time.",
-            translation=[e.ate_translation for e in estimates],
-            rotation=[e.ate_rotation for e in estimates],
-        ),
-        _stats_table(
-            result,
-            number=2,
-            title="Relative Pose Error (RPE)",
-            note=f"Error of the motion over each step of {describe_rpe_step(cfg)} "
-            "(drift per step).",
-            translation=[e.rpe_translation for e in estimates],
-            rotation=[e.rpe_rotation for e in estimates],
-        ),
-    )
+    maps = {
+        k: figure_of[f"ate_path_{k}"] for k in range(len(estimates)) if f"ate_path_{k}" in figure_of
+    }
+    boxes = tuple(f.number for f in figures if f.key.startswith("trials_"))
+    results = build_results_view(result, options, map_figures=maps, trial_figures=boxes)
     ranging = build_ranging_view(result)
     map_view = build_map_view(result)
-    warnings = _warnings(result)
-    shares = tuple(
-        (
-            f"≤ {t:g} m",
-            tuple(f"{100.0 * e.within.get(t, float('nan')):.1f} %" for e in estimates),
-        )
-        for t in cfg.thresholds_m
-    )
+    warnings = results.warnings
+    tables = results.tables
+    trials, baseline = results.trials, results.baseline
     return ReportView(
-        title=options.title,
-        evaluation_id=options.evaluation_id,
-        created_at=result.created_at,
+        title=results.title,
+        evaluation_id=results.evaluation_id,
+        created_at=results.created_at,
         loceval_version=result.loceval_version,
-        summary=_summary(result),
-        tolerance=None if cfg.tolerance is None else str(cfg.tolerance),
-        verdicts=tuple(
-            verdict_view(result, k, figure_of.get(f"ate_path_{k}")) for k in range(len(estimates))
-        ),
-        shares=shares,
-        estimate_names=tuple(estimate_name(e, k) for k, e in enumerate(estimates)),
+        summary=results.summary,
+        tolerance=results.tolerance,
+        verdicts=results.verdicts,
+        shares=results.shares,
+        estimate_names=results.estimate_names,
         estimate_colours=tuple(estimate_colour(k) for k in range(len(estimates))),
         reference_colour=REFERENCE_COLOUR,
         inputs=input_rows(result),
@@ -434,10 +291,7 @@ def build_report_view(
         worst=_worst(result),
         warnings=warnings,
         notes=_notes(result),
-        confidence=build_confidence_view(
-            result,
-            {(t.number, "translation"): t.length.format for t in tables if t.length is not None},
-        ),
+        confidence=results.confidence,
         clocks=build_clock_section(
             result,
             number=len(figures) + 1,
@@ -456,8 +310,14 @@ def build_report_view(
         ),
         map=map_view,
         contents=_contents(
-            ranging=ranging is not None, map_section=map_view is not None, warnings=len(warnings)
+            ranging=ranging is not None,
+            map_section=map_view is not None,
+            warnings=len(warnings),
+            trials=trials is not None,
+            baseline=baseline is not None,
         ),
+        trials=trials,
+        baseline=baseline,
         legend=scale_words(result),
         building=building_view(result),
     )

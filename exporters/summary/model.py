@@ -23,6 +23,7 @@ from loceval.metrics.repeatability import finite_positions, path_deviations
 from loceval.results.document import EstimateRead, read_result
 
 __all__ = [
+    "BaselineLine",
     "RepeatabilityRow",
     "SummaryInput",
     "SummaryRun",
@@ -65,6 +66,25 @@ class SystemFigures:
     verdict: Literal["pass", "fail"] | None
 
 
+@dataclass(frozen=True, slots=True)
+class BaselineLine:
+    """One estimate's or system's figure in one run against the schedule's pinned baseline.
+
+    Attributes:
+        name: the estimate or system (``orb (system)``).
+        metric: ``ATE RMSE`` or ``RPE RMSE``.
+        difference_m: now minus baseline, metres (negative: better now).
+        interval_m: its 95 % interval, or None.
+        verdict: ``better``, ``worse``, ``within_noise`` or ``undetermined``.
+    """
+
+    name: str
+    metric: str
+    difference_m: float | None
+    interval_m: tuple[float, float] | None
+    verdict: str
+
+
 def _aware_utc(value: dt.datetime, what: str) -> dt.datetime:
     if value.tzinfo is None or value.utcoffset() is None:
         msg = f"{what} must be timezone-aware (UTC), got {value.isoformat()}."
@@ -103,6 +123,9 @@ class SummaryRun:
             ``"evo"`` (an uploaded result zip of evo_ape/evo_rpe, taken as evo wrote it).
         source_note: what the figures are when they are not loceval's own (the zip's
             metric, pose relation and alignment, and what it lacks), one sentence.
+        baseline: the run's figures against its evaluation's baseline (a schedule's pinned
+            evaluation), in metres; empty without a baseline.
+        baseline_label: the baseline's name ("" without one).
     """
 
     dataset: str
@@ -117,6 +140,8 @@ class SummaryRun:
     reference_t_s: NDArray[np.float64] | None = None
     source: Literal["loceval", "evo"] = "loceval"
     source_note: str | None = None
+    baseline: tuple[BaselineLine, ...] = ()
+    baseline_label: str = ""
 
     def __post_init__(self) -> None:
         """Check the status and the path's shape; keep the date in UTC.
@@ -194,6 +219,20 @@ class SummaryRun:
             reference_t_s=reference_t_s,
             duration_s=read.reference_duration_s,
             recorded_at_is_upload=recorded_at_is_upload,
+            baseline=()
+            if read.baseline is None
+            else tuple(
+                BaselineLine(
+                    name=c.name + (" (system)" if c.level == "system" else ""),
+                    metric="ATE RMSE" if c.metric == "ate_rmse" else "RPE RMSE",
+                    difference_m=c.difference,
+                    interval_m=c.interval,
+                    verdict=c.verdict,
+                )
+                for c in read.baseline.comparisons
+                if c.unit == "m"
+            ),
+            baseline_label="" if read.baseline is None else read.baseline.label,
         )
 
 

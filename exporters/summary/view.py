@@ -176,6 +176,71 @@ class SummaryView:
     repeatability: tuple[RepeatabilityView, ...]
     repeatability_lead: str
     best_mark: str = BEST_MARK
+    baseline: BaselineSection | None = None
+    """Each run against the schedule's pinned baseline; None when no run has one."""
+
+
+@dataclass(frozen=True, slots=True)
+class BaselineRowView:
+    """One run's estimate or system against the baseline, formatted."""
+
+    date: str
+    dataset: str
+    name: str
+    metric: str
+    difference: str
+    interval: str
+    verdict: str
+    status: str
+
+
+@dataclass(frozen=True, slots=True)
+class BaselineSection:
+    """The summary's "Against the baseline" section: each run's figures against it."""
+
+    label: str
+    rows: tuple[BaselineRowView, ...]
+    note: str = (
+        "Difference = the run minus the baseline, metres (negative: better now), with its 95 % "
+        "interval (paired on shared stamps, otherwise the two intervals combined); better or "
+        "worse: the whole interval is below or above 0; within noise: it holds 0."
+    )
+
+
+_BASELINE_WORDS: Final = {
+    "better": "better",
+    "worse": "worse",
+    "within_noise": "within noise",
+    "undetermined": "undetermined",
+}
+
+
+def _signed(value: float | None) -> str:
+    return _DASH if value is None else f"{value:+.3f}"
+
+
+def _baseline_section(runs: Sequence[SummaryRun]) -> BaselineSection | None:
+    with_baseline = [r for r in runs if r.baseline]
+    if not with_baseline:
+        return None
+    labels = sorted({r.baseline_label for r in with_baseline if r.baseline_label})
+    rows = tuple(
+        BaselineRowView(
+            date=date_text(r.recorded_at),
+            dataset=r.dataset,
+            name=line.name,
+            metric=line.metric,
+            difference=_signed(line.difference_m),
+            interval=_DASH
+            if line.interval_m is None
+            else f"{_signed(line.interval_m[0])} to {_signed(line.interval_m[1])}",
+            verdict=_BASELINE_WORDS.get(line.verdict, line.verdict),
+            status=line.verdict,
+        )
+        for r in with_baseline
+        for line in r.baseline
+    )
+    return BaselineSection(label=", ".join(labels), rows=rows)
 
 
 def _m(value: float | None) -> str:
@@ -458,4 +523,5 @@ def build_summary_view(
         paths_figure=figure_of.get("paths_xy"),
         repeatability=_repeatability_view(rep_rows),
         repeatability_lead=_repeatability_lead(rep_rows, len(runs)),
+        baseline=_baseline_section(runs),
     )

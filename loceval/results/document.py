@@ -11,6 +11,13 @@ warnings of the reference and of each estimate. No caller digs in the dict: a ke
 writers rename reads as missing here, and the round trip of every kind of document
 (``tests/loceval/results``) fails instead of a figure quietly becoming None.
 
+Trials and the baseline (issue 41) are read here too: ``estimates[k].system``, the
+``systems`` (:class:`SystemRead`: trials, failed trials, each metric over the trials with
+its intervals), the ``system_comparisons`` and the ``baseline`` object
+(:class:`BaselineRead`: each difference with its verdict). Their fields are described in
+:mod:`loceval.assessment.trials` and :mod:`loceval.assessment.baseline`; a document from
+before them reads as no systems, no comparisons and no baseline.
+
 A document may lack what its kind or its age leaves out (a control-point estimate has no
 RPE; documents from before the intervals carry no ``ci95`` and a verdict without
 ``outcome``): those read as None. What is not a result document at all (no list of
@@ -26,12 +33,29 @@ from typing import Any, Final, Literal
 
 from loceval.errors import InputError
 from loceval.metrics.pose_errors import ErrorStats
+from loceval.results.trials import (
+    BaselineDifferenceRead,
+    BaselineRead,
+    FailedTrialRead,
+    IntervalRead,
+    SystemComparisonRead,
+    SystemRead,
+    TrialMetricRead,
+    objects,
+)
 
 __all__ = [
     "STAT_NAMES",
+    "BaselineDifferenceRead",
+    "BaselineRead",
     "EstimateRead",
+    "FailedTrialRead",
+    "IntervalRead",
     "ResultRead",
     "StatsBlock",
+    "SystemComparisonRead",
+    "SystemRead",
+    "TrialMetricRead",
     "VerdictRead",
     "read_result",
 ]
@@ -63,6 +87,14 @@ def _count(value: object) -> int | None:
 
 def _mapping(value: object) -> Mapping[str, Any] | None:
     return value if isinstance(value, Mapping) else None
+
+
+def _pair(value: object) -> tuple[float, float] | None:
+    """A written ``[low, high]`` of two finite numbers, else None."""
+    if not isinstance(value, Sequence) or isinstance(value, str | bytes) or len(value) != 2:
+        return None
+    low, high = _finite(value[0]), _finite(value[1])
+    return None if low is None or high is None else (low, high)
 
 
 @dataclass(frozen=True, slots=True)
@@ -124,10 +156,19 @@ class VerdictRead:
         passed: whether the estimate meets the tolerance (False when undecided).
         outcome: ``pass``, ``fail`` or ``undecided`` (documents before the intervals carry
             only ``passed``: pass or fail).
+        share_within: the share of poses within the tolerance's distance, 0-1 (None: not
+            written).
+        tolerance_m: the tolerance's distance, metres (None: not written).
+        required_share: the share the tolerance requires, 0-1 (None: not written).
+        ci95: the 95 % interval of ``share_within`` (None: intervals off or not written).
     """
 
     passed: bool
     outcome: Outcome
+    share_within: float | None = None
+    tolerance_m: float | None = None
+    required_share: float | None = None
+    ci95: tuple[float, float] | None = None
 
     @classmethod
     def read(cls, verdict: object, where: str = "verdict") -> VerdictRead | None:
@@ -141,12 +182,20 @@ class VerdictRead:
         if found is None or not isinstance(passed, bool):
             return None
         written = found.get("outcome")
-        if written in _OUTCOMES:
-            return cls(passed, _OUTCOMES[written])
-        if "ci95" in found:  # written since the intervals: the outcome is always there
+        known = _OUTCOMES.get(written) if isinstance(written, str) else None
+        if known is None and "ci95" in found:  # written since the intervals: always there
             msg = f"{where} of the result document has no outcome (pass, fail or undecided)."
             raise InputError(msg)
-        return cls(passed, "pass" if passed else "fail")  # before the intervals: from passed
+        # before the intervals (no outcome written): the outcome from passed
+        outcome = known or ("pass" if passed else "fail")
+        return cls(
+            passed,
+            outcome,
+            share_within=_finite(found.get("share_within")),
+            tolerance_m=_finite(found.get("tolerance_m")),
+            required_share=_finite(found.get("required_share")),
+            ci95=_pair(found.get("ci95")),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -164,6 +213,7 @@ class EstimateRead:
         verdict: the tolerance verdict (None: no tolerance).
         warnings: what the pipeline warned of for this estimate.
         document: the estimate as written (for blocks a caller passes on whole).
+        system: the system it is a trial of (None: not a trial).
     """
 
     index: int
@@ -176,6 +226,7 @@ class EstimateRead:
     verdict: VerdictRead | None
     warnings: tuple[str, ...]
     document: Mapping[str, Any]
+    system: str | None = None
 
     @property
     def label(self) -> str:
@@ -224,7 +275,12 @@ class EstimateRead:
             verdict=VerdictRead.read(found.get("verdict"), f"estimates[{index}].verdict"),
             warnings=_texts(found.get("warnings")),
             document=found,
+            system=_text(found.get("system")),
         )
+
+
+def _text(value: object) -> str | None:
+    return value if isinstance(value, str) else None
 
 
 def _texts(value: object) -> tuple[str, ...]:
@@ -246,6 +302,9 @@ class ResultRead:
         section_warnings: the warnings of the document's other parts, by part (``map``,
             ``ranging``), when it has them.
         document: the document as written.
+        systems: the systems of trials (empty: no estimate named a system).
+        system_comparisons: every two systems compared over their trials.
+        baseline: the comparison with a baseline (None: no baseline given).
     """
 
     kind: Literal["trajectory", "control_points"]
@@ -255,6 +314,14 @@ class ResultRead:
     estimates: tuple[EstimateRead, ...]
     section_warnings: Mapping[str, tuple[str, ...]]
     document: Mapping[str, Any]
+    systems: tuple[SystemRead, ...] = ()
+    system_comparisons: tuple[SystemComparisonRead, ...] = ()
+    baseline: BaselineRead | None = None
+
+    @property
+    def failed_trials(self) -> tuple[tuple[str, FailedTrialRead], ...]:
+        """Every failed trial as ``(system, trial)``, system by system."""
+        return tuple((s.name, f) for s in self.systems for f in s.failed)
 
     def warnings(self) -> list[tuple[str, str]]:
         """Every warning of the document as ``(where, text)``, in the document's order.
@@ -293,4 +360,9 @@ def read_result(document: object) -> ResultRead:
             if (section := _mapping(found.get(part))) is not None
         },
         document=found,
+        systems=tuple(SystemRead.read(s) for s in objects(found.get("systems"))),
+        system_comparisons=tuple(
+            SystemComparisonRead.read(c) for c in objects(found.get("system_comparisons"))
+        ),
+        baseline=BaselineRead.read(found.get("baseline")),
     )

@@ -7,6 +7,8 @@ The message is scrubbed of loceval's temporary folders (:func:`service.redact.sc
 printed without control characters (:func:`service.cli.output.emit`).
 A reader that closes the pipe early (``| head``) ends the command quietly (exit 141).
 Anything else is a bug: the traceback is printed and the exit code is 2.
+An evaluation whose gate closes (``--fail-on fail,undecided,worse``: a condition holds)
+exits 3, its last line saying why (:func:`service.cli.evaluate.gate_exit`); 0 is done.
 
 Each command lives in its own module, imported only when that command runs: ``loceval
 --help`` loads the parser and the options table, not numpy, pydantic or the service.

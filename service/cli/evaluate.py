@@ -6,6 +6,7 @@ builders as the API's options (:mod:`service.jobs.options`).
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterator, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TYPE_CHECKING
@@ -14,6 +15,7 @@ from loceval.errors import InputError
 from loceval.evaluation import EvaluationResult
 from loceval.readers import TrajectoryFormat, parse_source
 from service.cli.output import emit
+from service.cli.parser import EXIT_GATE
 from service.jobs.mapjob import map_source
 from service.jobs.options import (
     artifact_names,
@@ -22,6 +24,7 @@ from service.jobs.options import (
     config_from_options,
     device_offset,
     export_from_options,
+    fail_on_from_options,
     is_auto,
 )
 from service.jobs.runner import (
@@ -37,10 +40,12 @@ if TYPE_CHECKING:
     import argparse
 
     from exporters.options import ExportOptions
+    from loceval.assessment.baseline import Baseline
+    from loceval.checkpoint_evaluation import CheckpointEvaluation
     from loceval.core.geometry import SimilarityTransform
     from loceval.readers import SourceSpec
 
-__all__ = ["export_options", "run_demo", "run_evaluate"]
+__all__ = ["export_options", "gate_exit", "run_demo", "run_evaluate"]
 
 
 def export_options(args: argparse.Namespace) -> ExportOptions | None:
@@ -68,6 +73,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             f"{len(args.name)} names."
         )
         raise InputError(msg)
+    systems = _systems(args)
     export = export_options(args)
     plan = export
     if args.map is not None and plan is None:  # --json without --out still needs the plan
@@ -90,8 +96,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
                 provenance("reference", ref_spec),
             ),
             estimates=[
-                JobSource(spec, name, provenance("estimate", spec))
-                for spec, name in zip(est_specs, names, strict=True)
+                JobSource(spec, name, provenance("estimate", spec), system=system)
+                for spec, name, system in zip(est_specs, names, systems, strict=True)
             ],
             config=config,
             stamp=args.stamp,
@@ -100,6 +106,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             visits=_visits_source(args.visits),
             checkpoints=checkpoints_from_options(args),
             the_map=the_map,
+            baseline=_baseline(args),
         )
         result = run_job(job, args.out)
     if isinstance(result, EvaluationResult) and args.building is not None:
@@ -108,10 +115,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
         # the stretches' rooms and the building's warnings, as result.json has them
         placed = export or export_from_options(args, front_door="cli", building=args.building)
         result = placed_on_building(result, placed)
+    document = None
     if args.json:
         from exporters.cad.jsondoc import finite_json  # noqa: PLC0415
 
-        print(finite_json(result.to_dict()))  # noqa: T201
+        document = result.to_dict()
+        print(finite_json(document))  # noqa: T201
     elif isinstance(result, EvaluationResult):
         from service.cli.tables import format_tables  # noqa: PLC0415
 
@@ -122,7 +131,58 @@ def run_evaluate(args: argparse.Namespace) -> int:
         emit(format_checkpoint_tables(result))
     if not args.json and args.out is not None:
         emit(f"\nArtifacts written to {args.out}")
-    return 0
+    return gate_exit(result, args, document=document)
+
+
+def gate_exit(
+    result: EvaluationResult | CheckpointEvaluation,
+    args: argparse.Namespace,
+    *,
+    document: Mapping[str, object] | None = None,
+) -> int:
+    """Judge the gate of ``--fail-on``, print its line last, and return the exit code.
+
+    The code is 0, or :data:`~service.cli.parser.EXIT_GATE` (3) when a condition holds;
+    without ``--fail-on`` nothing is printed. The line goes to stdout after the tables, and
+    to stderr with ``--json`` (stdout then holds only the document).
+
+    Args:
+        result: the evaluation.
+        args: the parsed arguments (``fail_on``, ``json``).
+        document: ``result.to_dict()`` when it is already made.
+    """
+    fail_on = fail_on_from_options(args)
+    if not fail_on:
+        return 0
+    from loceval.results.document import read_result  # noqa: PLC0415
+    from loceval.results.gate import judge_gate  # noqa: PLC0415
+
+    gate = judge_gate(read_result(document or result.to_dict()), fail_on)
+    sys.stdout.flush()  # the line comes last, after everything printed before it
+    emit(gate.line(), file=sys.stderr if args.json else None)
+    return 0 if gate.passed else EXIT_GATE
+
+
+def _systems(args: argparse.Namespace) -> list[str | None]:
+    """Return each estimate's system from ``--system`` (given once per estimate, or never)."""
+    if not args.system:
+        return [None] * len(args.estimates)
+    if len(args.system) != len(args.estimates):
+        msg = (
+            f"Give --system once per estimate, in order like --name ('' for an estimate of "
+            f"no system): {len(args.estimates)} estimates but {len(args.system)} systems."
+        )
+        raise InputError(msg)
+    return [s.strip() or None for s in args.system]
+
+
+def _baseline(args: argparse.Namespace) -> Baseline | None:
+    """Return the baseline ``--baseline`` names, read (None without one)."""
+    if args.baseline is None:
+        return None
+    from service.jobs.baseline import read_baseline  # noqa: PLC0415
+
+    return read_baseline(args.baseline)
 
 
 class _PendingProvenance(Mapping[str, object]):

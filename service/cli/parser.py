@@ -23,10 +23,12 @@ from loceval.options import AUTO, OPTIONS, OptionKind, OptionSpec
 from service.cli.evo.hints import EVALUATE_EPILOG, unknown_arguments_message
 from service.cli.evo.parser import add_evo_commands
 
-__all__ = ["EXIT_BUG", "EXIT_INPUT", "build_parser", "names", "numbers"]
+__all__ = ["EXIT_BUG", "EXIT_GATE", "EXIT_INPUT", "build_parser", "names", "numbers"]
 
 EXIT_INPUT = 1
 EXIT_BUG = 2
+EXIT_GATE = 3
+"""The gate closed: ``--fail-on`` named a condition that holds (the last line says which)."""
 
 _DESCRIPTION = (
     "The loceval command line: evaluate, ape, rpe, res, ranging, inspect, demo, report, serve, "
@@ -95,6 +97,26 @@ def names(text: str) -> list[str] | None:
     return parsed or None
 
 
+class _Names(argparse.Action):
+    """A list of names, comma-separated or the flag repeated (``--fail-on fail --fail-on worse``).
+
+    The first use replaces the table's default; each further use adds its names.
+    """
+
+    def __call__(
+        self,
+        _parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: str | Sequence[Any] | None,
+        _option_string: str | None = None,
+    ) -> None:
+        current = getattr(namespace, self.dest, None)
+        given = list(values or ())
+        if isinstance(current, list):  # given before on this command line: add to it
+            given = current + [n for n in given if n not in current]
+        setattr(namespace, self.dest, given or None)
+
+
 def _number_or_auto(text: str) -> float | str:
     """Parse a number of seconds, or ``auto`` (estimated from the data)."""
     if text.strip().lower() == AUTO:
@@ -147,7 +169,7 @@ def add_option(parser: argparse.ArgumentParser, spec: OptionSpec) -> None:
     elif kind is OptionKind.NUMBERS:
         common["type"] = numbers
     elif kind is OptionKind.NAMES:
-        common["type"] = names
+        common.update(type=names, action=_Names)
     elif kind in {OptionKind.FILE, OptionKind.MATRIX, OptionKind.DEVICE}:
         common["type"] = _path_or_auto if spec.auto else Path
     parser.add_argument(spec.flag, **common)
@@ -200,6 +222,15 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
     ev.add_argument(
         "--name", action="append", default=[], help="estimate name, once per estimate in order"
     )
+    ev.add_argument(
+        "--system",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="the system an estimate is a trial (a run) of, once per estimate in order like "
+        "--name ('' for an estimate of no system); trials of one system are grouped, "
+        "summarised (median, mean, spread, interval over trials) and compared",
+    )
     ev.add_argument("--reference-name", default=None, help="name of the reference")
     ev.add_argument(
         "--format",
@@ -224,7 +255,9 @@ def _add_result_flags(parser: argparse.ArgumentParser) -> None:
     )
 
 
-RANGING_SKIPPED: Final = frozenset({"offset", "device", "map", "map_estimate", "clutter_m"})
+RANGING_SKIPPED: Final = frozenset(
+    {"offset", "device", "map", "map_estimate", "clutter_m", "baseline", "min_trial_coverage"}
+)
 """Evaluation options ``loceval ranging`` does not take (the tag offset says where the tag is)."""
 
 

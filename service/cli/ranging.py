@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
-from service.cli.evaluate import export_options
+from service.cli.evaluate import export_options, gate_exit
 from service.cli.output import emit
 from service.jobs.options import (
     artifact_names,
@@ -68,8 +68,9 @@ def run_ranging(args: argparse.Namespace) -> int:
     if args.json:
         from exporters.cad.jsondoc import finite_json  # noqa: PLC0415
 
-        print(finite_json(result.to_dict()))  # noqa: T201
-        return 0
+        document = result.to_dict()
+        print(finite_json(document))  # noqa: T201
+        return gate_exit(result, args, document=document)
     from service.cli.tables import format_tables  # noqa: PLC0415
 
     if result.ranging is not None:
@@ -78,7 +79,7 @@ def run_ranging(args: argparse.Namespace) -> int:
     emit(format_tables(result))
     if args.out is not None:
         emit(f"\nArtifacts written to {args.out}")
-    return 0
+    return gate_exit(result, args)
 
 
 def format_ranging_table(ranging: RangingResult) -> str:

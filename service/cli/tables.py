@@ -9,6 +9,7 @@ from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.core.lengths import LengthUnit, length_unit
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats, RPEUnit
+from service.cli.trials import trial_lines
 
 __all__ = ["format_checkpoint_tables", "format_tables"]
 
@@ -53,6 +54,7 @@ def format_tables(result: EvaluationResult) -> str:
     lines += _block(
         "Comparisons (95 % intervals)", [("", c.summary) for c in result.comparisons or ()]
     )
+    lines += trial_lines(result)
     lines += _block(
         "Inputs",
         [("reference", n) for n in result.reference.notes]

@@ -16,6 +16,7 @@ from sqlalchemy.orm import Session, defer
 
 from exporters import ARTIFACTS
 from loceval.errors import InputError
+from loceval.results.gate import gate_of_document
 from service.blobs import artifact_key
 from service.blobs.base import EVALUATIONS, download_filename
 from service.db import ACTIVE_STATUSES, Dataset, Evaluation, JobStatus, get_owned, utcnow
@@ -100,6 +101,9 @@ def create_evaluation(
         if map_ref is not None:
             _check_map(datasets[map_ref.dataset_id], map_ref.selector, options)
         check_options(options)
+        from service.jobs.baseline import check_trials  # noqa: PLC0415
+
+        check_trials(runtime, project_id, body)
         evaluation = Evaluation(
             project_id=project_id,
             kind=TRAJECTORY,
@@ -442,6 +446,7 @@ def evaluation_public(
     succeeded = evaluation.status == JobStatus.SUCCEEDED
     # A running evaluation shows what it has made so far (result.json first, then each file).
     shown = succeeded or evaluation.status == JobStatus.RUNNING
+    document = evaluation.result if (shown and with_result) else None  # its gate as the CLI's
     artifacts = None
     if shown and evaluation.artifacts is not None:
         artifacts = [
@@ -467,7 +472,8 @@ def evaluation_public(
             "summary": evaluation.summary if shown else None,
             "error": evaluation.error,
             "artifacts": artifacts,
-            "result": evaluation.result if (shown and with_result) else None,
+            "result": document,
+            "gate": gate_of_document(document, request.get("options", {}).get("fail_on")),
         }
     )
 

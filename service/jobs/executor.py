@@ -26,6 +26,7 @@ from loceval.results.document import read_result
 from service.adapters import DATABASE_ERRORS
 from service.blobs.base import EVALUATIONS
 from service.db import Dataset, Evaluation, JobStatus
+from service.jobs.baseline import evaluation_baseline
 from service.jobs.evaluations import visits_dataset_id
 from service.jobs.kinds import EVALUATION, request_kind
 from service.jobs.limits import Limits, run_limited
@@ -274,6 +275,9 @@ def trajectory_job(
         visits=visits,
         checkpoints=checkpoints_from_options(options),
         the_map=the_map,
+        baseline=None
+        if options.baseline is None
+        else evaluation_baseline(runtime, project_id, options.baseline),
     )
 
 
@@ -367,4 +371,11 @@ def _source(
         provenance = file_provenance(role, spec, sha256=dataset.sha256, size=dataset.size_bytes)
     provenance.update(path=dataset.filename, dataset_id=dataset.id)
     name = ref.name or ref.selector or Path(dataset.filename).stem
-    return JobSource(spec, str(name), provenance, display_path=dataset.filename, remote=remote)
+    return JobSource(
+        spec,
+        str(name),
+        provenance,
+        display_path=dataset.filename,
+        remote=remote,
+        system=ref.system if role == "estimate" else None,
+    )

@@ -42,6 +42,7 @@ __all__ = [
     "config_from_options",
     "device_offset",
     "export_from_options",
+    "fail_on_from_options",
     "is_auto",
     "offset_or_none",
     "option_values",
@@ -189,6 +190,7 @@ def config_from_options(
     auto_time = is_auto(values["time_offset_s"])
     auto_drift = is_auto(values["clock_drift_ppm"])
     check_option("clutter_m", values["clutter_m"], unit="metres")  # the map's, checked as early
+    fail_on_from_options(values)  # a gate that could never close fails before the evaluation
     checkpoints_from_options(values)  # control-point options fail as fast as the others
     # The options that are not one field each: auto values, the offset's two sources, a name.
     special: dict[str, Callable[[], Any]] = {
@@ -210,6 +212,27 @@ def config_from_options(
             if value is not None or entry.default is None:  # not given: the field's default
                 given[entry.name] = value
     return EvaluationConfig(**given)
+
+
+def fail_on_from_options(options: object) -> tuple[str, ...]:
+    """Return the gate's conditions, checked against what the evaluation can judge.
+
+    ``fail`` and ``undecided`` need a tolerance, ``worse`` a baseline
+    (:func:`loceval.results.gate.check_fail_on`).
+
+    Raises:
+        InputError: an unknown condition, or one the evaluation cannot judge.
+    """
+    from loceval.results.gate import check_fail_on, parse_fail_on  # noqa: PLC0415  (numpy)
+
+    values = option_values(options)
+    fail_on = parse_fail_on(values.get("fail_on"))
+    check_fail_on(
+        fail_on,
+        tolerance=bool(values.get("tolerance")),
+        baseline=values.get("baseline") is not None,
+    )
+    return fail_on
 
 
 def check_device_choice(values: OptionValues, *, front_door: str) -> None:
@@ -317,6 +340,7 @@ def export_from_options(
         crs=typed_value("crs", values["crs"]),
         building_up=UpAxis(values["building_up"]),
         front_door=FrontDoor(front_door),
+        fail_on=fail_on_from_options(values),
     )
     check_options(export)
     return export

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, overload
 
+from loceval.assessment.trials import FailedTrial
 from loceval.checkpoints.config import CheckpointConfig
 from loceval.errors import InputError, LocevalError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, ProgressCallback, evaluate
@@ -33,6 +34,7 @@ from loceval.trajectory import Trajectory
 if TYPE_CHECKING:
     from exporters import ArtifactCallback
     from exporters.options import ExportOptions
+    from loceval.assessment.baseline import Baseline
     from loceval.checkpoint_evaluation import CheckpointEvaluation
     from loceval.controlpoints import ControlPoints, Visits
     from loceval.radio_evaluation import RangingConfig
@@ -70,6 +72,7 @@ class JobSource:
             service shows the uploaded file name, not its folders on the server).
         remote: a bag read by position where it is stored (an MCAP file in a bucket)
             instead of ``spec.path``, which then only names it.
+        system: the system this estimate is a trial of (None: not a trial).
     """
 
     spec: SourceSpec
@@ -77,6 +80,7 @@ class JobSource:
     provenance: Mapping[str, object] = field(default_factory=dict)
     display_path: str | None = None
     remote: RemoteFile | None = None
+    system: str | None = None
 
     def read(self, *, stamp: str) -> Trajectory:
         """Read the trajectory, naming the file by ``display_path`` when given."""
@@ -177,10 +181,12 @@ class TrajectoryJob(_JobBase):
     Attributes:
         estimates: the systems under evaluation.
         map: the robot's occupancy grid map to measure against the building plan.
+        baseline: an earlier result each estimate and system is compared with.
     """
 
     estimates: Sequence[JobSource]
     map: MapSource | None = None
+    baseline: Baseline | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -225,6 +231,7 @@ def evaluation_job(
     visits: JobSource | None = None,
     checkpoints: CheckpointConfig | None = None,
     the_map: MapSource | None = None,
+    baseline: Baseline | None = None,
 ) -> TrajectoryJob | ControlPointJob:
     """Return the job of ``loceval evaluate`` and ``POST /evaluations``: its kind by its reference.
 
@@ -236,6 +243,12 @@ def evaluation_job(
             reference, or a map beside a control-point survey.
     """
     if is_control_points(reference.spec):
+        if baseline is not None or any(e.system for e in estimates):
+            msg = (
+                "Trials and a baseline compare trajectory evaluations, and the reference is "
+                "a control-point survey; leave --system and --baseline out."
+            )
+            raise InputError(msg, option="baseline")
         if the_map is not None:
             msg = (
                 "A map is measured along an evaluated trajectory, and the reference is a "
@@ -266,6 +279,7 @@ def evaluation_job(
         formats=formats,
         estimates=estimates,
         map=the_map,
+        baseline=baseline,
     )
 
 
@@ -324,7 +338,7 @@ def run_job(
             report(stage, _EVALUATE + (1.0 - _EVALUATE) * fraction)
 
         report("preparing the files", _EVALUATE)  # placing the paths comes before any file
-        title = f"{result.reference.name} vs {', '.join(e.name for e in result.estimates)}"
+        title = f"{result.reference.name} vs {', '.join(_compared(result))}"
         write_artifacts(
             result,
             out_dir,
@@ -335,6 +349,12 @@ def run_job(
         )
     report("done", 1.0)
     return result
+
+
+def _compared(result: EvaluationResult) -> list[str]:
+    """What the evaluation compares, for its title: each system once, then other estimates."""
+    systems = [f"{s.name} ({len(s.trials) + len(s.failed)} trials)" for s in result.systems]
+    return systems + [e.name for e in result.estimates if e.system is None]
 
 
 def _read_sources(
@@ -351,14 +371,36 @@ def _read_sources(
 def _run_trajectories(job: TrajectoryJob, report: ProgressCallback) -> EvaluationResult:
     """Read the reference and the estimates, evaluate, and measure the map if one is given."""
     sources = [job.reference, *job.estimates]
-    trajectories = _read_sources(sources, job.stamp, report)
+    (reference,) = _read_sources([job.reference], job.stamp, report)
+    estimates: list[Trajectory] = []
+    systems: list[str | None] = []
+    failed: list[FailedTrial] = []
+    for k, source in enumerate(job.estimates):
+        report(f"reading {source.name}", _READ * (k + 1) / len(sources))
+        if source.system is None:
+            estimates.append(source.read(stamp=job.stamp))
+            systems.append(None)
+            continue
+        try:  # a trial that cannot be read failed; the other trials go on
+            estimates.append(source.read(stamp=job.stamp))
+        except LocevalError as err:
+            failed.append(FailedTrial(source.name, source.system, err.code, str(err)))
+            continue
+        systems.append(source.system)
     result = evaluate(
-        trajectories[0],
-        trajectories[1:],
+        reference,
+        estimates,
         job.config,
         inputs=[dict(s.provenance) for s in sources],
         progress=_evaluating(report),
+        systems=systems,
+        failed_trials=failed,
     )
+    if job.baseline is not None:
+        from loceval.results.baseline import compare_with_baseline  # noqa: PLC0415
+
+        report("comparing with the baseline", _EVALUATE)
+        result = replace(result, baseline=compare_with_baseline(result, job.baseline))
     if job.map is not None:
         from service.jobs.mapjob import measure_map  # noqa: PLC0415  (CAD libraries)
 

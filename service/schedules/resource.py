@@ -333,6 +333,23 @@ def _check_webhook(runtime: Runtime, url: str | None) -> None:
         check_webhook_url(url, AllowList.parse(runtime.settings.webhook_allow))
 
 
+def _check_baseline(runtime: Runtime, project_id: str, baseline: str | None) -> None:
+    """A pinned baseline (``template.options.baseline``) is a succeeded evaluation of the project.
+
+    Every run compares its evaluation with it (:mod:`service.jobs.baseline`), and the
+    run's summary shows each run against it.
+
+    Raises:
+        NotFoundError: no such evaluation in the project.
+        InputError: it has not succeeded.
+    """
+    if baseline is None:
+        return
+    from service.jobs.baseline import evaluation_baseline  # noqa: PLC0415
+
+    evaluation_baseline(runtime, project_id, baseline)
+
+
 def create_schedule(runtime: Runtime, project_id: str, body: ScheduleCreate) -> Schedule:
     """Check and record a new schedule; it fires first at the cron's next time.
 
@@ -344,6 +361,7 @@ def create_schedule(runtime: Runtime, project_id: str, body: ScheduleCreate) -> 
     """
     check_cron(body.cron, body.timezone)
     check_options(body.template.options)
+    _check_baseline(runtime, project_id, body.template.options.baseline)
     check_evo_results(runtime, project_id, body.selection.evo_results)
     _check_webhook(runtime, body.webhook_url)
     now = utcnow()
@@ -395,6 +413,7 @@ def update_schedule(
     check_cron(cron, timezone)
     if body.template is not None:
         check_options(body.template.options)
+        _check_baseline(runtime, project_id, body.template.options.baseline)
     if body.selection is not None:
         check_evo_results(runtime, project_id, body.selection.evo_results)
     _check_webhook(runtime, changes.get("webhook_url"))

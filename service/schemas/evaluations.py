@@ -35,6 +35,7 @@ __all__ = [
     "EvaluationOptions",
     "EvaluationPublic",
     "EvaluationsPublic",
+    "GatePublic",
     "OptionPublic",
     "OptionsPublic",
     "Problem",
@@ -72,6 +73,11 @@ class SourceRef(Strict):
     )
     name: Annotated[str, Field(min_length=1, max_length=120)] | None = Field(
         default=None, description="name in the report (default: selector or file name)"
+    )
+    system: Annotated[str, Field(min_length=1, max_length=120), Printable] | None = Field(
+        default=None,
+        description="estimates only: the system this estimate is a trial (a run) of; the "
+        "estimates of one system are grouped, summarised over their trials and compared",
     )
 
 
@@ -245,7 +251,11 @@ def _other_than_auto(spec: OptionSpec) -> str:
 
 def _fields(group: str) -> dict[str, Any]:
     """Return ``create_model``'s fields of the API's options of a group of the table."""
-    wanted = {"ranging"} if group == "ranging" else {"evaluation", "reading", "export", "map"}
+    wanted = (
+        {"ranging"}
+        if group == "ranging"
+        else {"evaluation", "reading", "export", "map", "baseline"}
+    )
     return {
         spec.key: (_annotation(spec), _field(spec.key))
         for spec in OPTIONS
@@ -470,6 +480,19 @@ class SummaryRow(BaseModel):
     verdict: Literal["pass", "fail", "undecided"] | None
 
 
+class GatePublic(BaseModel):
+    """The gate of ``options.fail_on``: what a CI job checks before it lets a change through."""
+
+    passed: bool = Field(description="no condition of fail_on holds (the CLI exits 0; else 3)")
+    fail_on: list[Literal["fail", "undecided", "worse"]] = Field(
+        description="the conditions judged, in the order fail, undecided, worse"
+    )
+    reasons: list[str] = Field(
+        description="one sentence per estimate and condition that holds, with the figures",
+        examples=[["ORB-SLAM3 fails the tolerance (87.2 % within 0.10 m, needs 95 %)"]],
+    )
+
+
 class ArtifactPublic(BaseModel):
     """A downloadable file of a succeeded evaluation."""
 
@@ -502,6 +525,11 @@ class EvaluationPublic(BaseModel):
     result: dict[str, Any] | None = Field(
         default=None, description="the CLI's --json document (GET of one evaluation only)"
     )
+    gate: GatePublic | None = Field(
+        default=None,
+        description="the gate of options.fail_on, judged from result as the CLI judges its own "
+        "(GET of one evaluation only, once result is there; null without fail_on)",
+    )
 
 
 class EvaluationsPublic(BaseModel):
@@ -532,7 +560,7 @@ class OptionPublic(BaseModel):
     min_length: int | None
     pattern: str | None
     example: str | None
-    group: Literal["evaluation", "reading", "export", "map", "ranging"] = Field(
+    group: Literal["evaluation", "reading", "export", "map", "baseline", "ranging"] = Field(
         description="ranging: only POST /ranging takes it"
     )
     auto: bool = Field(description='the value may also be "auto" (estimated from the data)')

@@ -27,7 +27,7 @@
   // The readers' formats and what each file holds, from the server (<body data-formats>).
   const READ_FORMATS = JSON.parse(document.body.dataset.formats || "[]");
   const OPTION_DOCS = new Map(JSON.parse(document.body.dataset.options || "[]").map((o) => [o.key, o]));
-  const FORM_GROUPS = new Set(["evaluation", "reading", "export", "map"]); // not ranging's
+  const FORM_GROUPS = new Set(["evaluation", "reading", "export", "map", "baseline"]); // not ranging's
 
   const state = {
     key: null,
@@ -736,11 +736,12 @@
     for (const row of document.querySelectorAll(".estimate-row")) {
       const value = row.querySelector(".estimate-select").value;
       const name = row.querySelector(".estimate-name").value.trim();
+      const system = row.querySelector(".estimate-system").value.trim();
       if (!value) {
         if (name) throw new Error(`Choose the source of the estimate named “${name}”.`);
         continue;
       }
-      estimates.push({ ...parseSource(value), name: name || null });
+      estimates.push({ ...parseSource(value), name: name || null, system: system || null });
     }
     if (!estimates.length) throw new Error("Choose at least one estimate trajectory.");
     return { reference: { ...parseSource(reference), name: null }, estimates, options: readOptions() };
@@ -864,7 +865,7 @@
       const input = otherOptionInput(doc);
       if (!input) continue;
       const label = doc.label; // a short name; the help is the field's tooltip
-      const hint = doc.bounds_hint || (doc.kind === "file" ? "an uploaded dataset" : "");
+      const hint = doc.key === "baseline" ? "an earlier evaluation" : doc.bounds_hint || (doc.kind === "file" ? "an uploaded dataset" : "");
       fields.push(el("label", {
         className: doc.kind === "switch" ? "field field-switch" : "field",
         title: doc.help, dataset: { option: doc.key, label, kind: doc.kind, generated: "" },
@@ -876,6 +877,8 @@
 
   /** The input of an option made from its document (null: the page cannot offer its kind). */
   function otherOptionInput(doc) {
+    // The baseline is an earlier evaluation of this project (the history's succeeded ones).
+    if (doc.key === "baseline") return el("select", { className: "evaluation-choice" }, el("option", { value: "", text: NONE }));
     const shown = Array.isArray(doc.default) ? doc.default.join(", ") : doc.default;
     const placeholder = shown === null || shown === undefined ? (doc.example || "") : String(shown);
     switch (doc.kind) {
@@ -1430,21 +1433,136 @@
     return parts.join(", ");
   }
 
+  /** The result's systems of trials (each with its trials and failed trials), or []. */
+  function resultSystems(evaluation) {
+    const systems = evaluation.result && Array.isArray(evaluation.result.systems) ? evaluation.result.systems : [];
+    return systems.filter((s) => s && typeof s.name === "string");
+  }
+
+  /** A system's group row: its trials, failed trials and ATE/RPE over trials (median, interval). */
+  function systemRow(system, unit) {
+    const figures = [["ATE RMSE", "ate_rmse"], ["RPE RMSE", "rpe_rmse"]].map(([label, key]) => {
+      const m = system.metrics && system.metrics[key];
+      if (!m || m.unit !== "m") return null;
+      const interval = m.interval ? `, 95 % interval of the mean ${formatMetres(m.interval.low, unit)} to ${formatMetres(m.interval.high, unit)}` : ", too few trials for an interval";
+      return `${label} median ${formatMetres(m.median, unit)} (spread ${formatMetres(m.min, unit)} to ${formatMetres(m.max, unit)}${interval})`;
+    }).filter(Boolean);
+    const failed = (system.failed || []).length;
+    const count = `${(system.trials || []).length} trials${failed ? `, ${failed} failed` : ""}`;
+    return el("tr", { className: "system-row", dataset: { system: system.name } },
+      el("th", { scope: "rowgroup", colspan: "5" },
+        el("span", { className: "system-name", text: system.name }),
+        el("span", { className: "muted small", text: ` · ${count}` }),
+        figures.length ? el("div", { className: "muted small system-figures", text: figures.join(" · ") }) : null));
+  }
+
   function renderSummary(evaluation) {
     const body = $("summary-body");
     body.replaceChildren();
     const estimates = (evaluation.result && Array.isArray(evaluation.result.estimates)) ? evaluation.result.estimates : [];
     const unit = lengthUnit((evaluation.summary || []).flatMap((row) => [row.ate_rmse_m, row.rpe_rmse_m]));
-    (evaluation.summary || []).forEach((row, i) => {
+    const rows = (evaluation.summary || []).map((row, i) => ({ row, i, system: estimates[i] && estimates[i].system }));
+    // Trials are grouped under their system (the result's order), then the other estimates.
+    const ordered = [];
+    for (const system of resultSystems(evaluation)) {
+      ordered.push({ system });
+      const trials = rows.filter((r) => r.system === system.name);
+      for (const failed of system.failed || []) {
+        // A trial that lost tracking keeps its figures (shown, not counted): its row says so.
+        const shown = trials.find((r) => r.row.name === failed.name);
+        if (shown) shown.failed = failed;
+      }
+      ordered.push(...trials);
+      for (const failed of system.failed || []) {
+        if (!trials.some((r) => r.row.name === failed.name)) ordered.push({ failed, of: system.name });
+      }
+    }
+    ordered.push(...rows.filter((r) => !r.system));
+    for (const item of ordered) {
+      if (item.system !== undefined && !item.row) {
+        body.append(systemRow(item.system, unit));
+        continue;
+      }
+      if (item.failed && !item.row) {
+        body.append(el("tr", { className: "trial-row trial-failed", dataset: { system: item.of } },
+          el("th", { scope: "row", className: "name", text: item.failed.name }),
+          el("td", { colspan: "4", className: "muted", "data-label": "Failed" },
+            el("span", { className: "verdict verdict-fail", text: "FAILED TRIAL" }), ` ${item.failed.reason}`)));
+        continue;
+      }
+      const { row, i } = item;
       const facts = verdictFacts(estimates[i] && estimates[i].verdict);
-      body.append(el("tr", {},
+      const rowClass = item.failed ? "trial-row trial-failed" : item.system ? "trial-row" : null;
+      body.append(el("tr", { className: rowClass, dataset: item.system ? { system: item.system } : {} },
         el("th", { scope: "row", className: "name", text: row.name }),
         el("td", { className: "num ate", "data-label": "ATE RMSE", dataset: { valueM: String(row.ate_rmse_m) }, text: formatMetres(row.ate_rmse_m, unit) }),
         el("td", { className: "num", "data-label": "RPE RMSE", text: formatMetres(row.rpe_rmse_m, unit) }),
         el("td", { className: "num", "data-label": "Matched", text: typeof row.matched === "number" ? row.matched.toLocaleString() : "—" }),
         el("td", { className: "verdict-cell", "data-label": "Verdict" }, verdictBadge(row.verdict),
-          facts ? el("div", { className: "muted small verdict-facts", text: facts }) : null)));
-    });
+          facts ? el("div", { className: "muted small verdict-facts", text: facts }) : null,
+          item.failed ? el("div", { className: "muted small" },
+            el("span", { className: "verdict verdict-fail", text: "FAILED TRIAL" }), ` ${item.failed.reason}`) : null)));
+    }
+    renderTrials(evaluation);
+    renderBaseline(evaluation);
+    renderGate(evaluation);
+  }
+
+  /** The systems compared over all their trials, one sentence each. */
+  function renderTrials(evaluation) {
+    const comparisons = evaluation.result && Array.isArray(evaluation.result.system_comparisons) ? evaluation.result.system_comparisons : [];
+    const list = $("system-comparisons");
+    list.replaceChildren(...comparisons.map((c) => el("li", { dataset: { verdict: c.verdict }, text: c.summary })));
+    setHidden($("current-trials"), comparisons.length === 0);
+  }
+
+  const BASELINE_WORDS = { better: "BETTER", worse: "WORSE", within_noise: "WITHIN NOISE", undetermined: "UNDETERMINED" };
+  const BASELINE_CLASS = { better: "verdict-pass", worse: "verdict-fail", within_noise: "verdict-none", undetermined: "verdict-undecided" };
+
+  /** Each estimate and system against the baseline: difference, interval, verdict. */
+  function renderBaseline(evaluation) {
+    const baseline = evaluation.result && evaluation.result.baseline;
+    const holder = $("current-baseline");
+    if (!baseline || typeof baseline !== "object") {
+      setHidden(holder, true);
+      return;
+    }
+    const comparisons = Array.isArray(baseline.comparisons) ? baseline.comparisons : [];
+    const metres = comparisons.filter((c) => c.unit === "m");
+    const unit = lengthUnit(metres.flatMap((c) => [c.current, c.baseline]));
+    const signed = (m) => (typeof m === "number" && m > 0 ? "+" : "") + formatMetres(m, unit);
+    $("baseline-label").textContent = baseline.label || baseline.source || "";
+    $("baseline-body").replaceChildren(...metres.map((c) => el("tr", { dataset: { verdict: c.verdict, level: c.level } },
+      el("th", { scope: "row", className: "name", text: c.level === "system" ? `${c.name} (system)` : c.name }),
+      el("td", { "data-label": "Metric", text: c.metric === "ate_rmse" ? "ATE RMSE" : "RPE RMSE" }),
+      el("td", { className: "num", "data-label": "Now", text: formatMetres(c.current, unit) }),
+      el("td", { className: "num", "data-label": "Baseline", text: formatMetres(c.baseline, unit) }),
+      el("td", { className: "num", "data-label": "Difference", text: signed(c.difference) }),
+      el("td", { className: "num", "data-label": "95 % interval",
+        text: Array.isArray(c.interval) ? `${signed(c.interval[0])} to ${signed(c.interval[1])}${c.paired ? " (paired)" : ""}` : "—" }),
+      el("td", { className: "verdict-cell", "data-label": "Verdict" },
+        el("span", { className: `verdict ${BASELINE_CLASS[c.verdict] || "verdict-none"}`, text: BASELINE_WORDS[c.verdict] || c.verdict })))));
+    const notes = Array.isArray(baseline.notes) ? baseline.notes : [];
+    $("baseline-notes").replaceChildren(...notes.map((n) => el("li", { text: n })));
+    setHidden(holder, false);
+  }
+
+  /** The gate of options.fail_on (what `loceval evaluate --fail-on` exits 3 for): passed or
+   * closed, and why; hidden without conditions. */
+  function renderGate(evaluation) {
+    const gate = evaluation.gate;
+    const holder = $("current-gate");
+    if (!gate || typeof gate !== "object") {
+      setHidden(holder, true);
+      return;
+    }
+    const status = $("gate-status");
+    status.textContent = gate.passed ? "PASSED" : "CLOSED";
+    status.className = `verdict ${gate.passed ? "verdict-pass" : "verdict-fail"}`;
+    $("gate-conditions").textContent = `fails on ${(gate.fail_on || []).join(", ")}`;
+    const reasons = Array.isArray(gate.reasons) ? gate.reasons : [];
+    $("gate-reasons").replaceChildren(...reasons.map((r) => el("li", { text: r })));
+    setHidden(holder, false);
   }
 
   function artifactUrl(evaluation, artifact) {
@@ -1648,6 +1766,7 @@
         headlineCell(evaluation),
         el("td", { className: "actions" }, open)));
     }
+    renderBaselineChoices(items);
     const empty = items.length === 0;
     setHidden($("history-table"), empty);
     setHidden($("history-empty"), !empty);
@@ -1656,6 +1775,16 @@
         text: `Showing the newest ${items.length} of ${count} evaluations.` })));
     }
     markHistoryRow();
+  }
+
+  /** Offer the succeeded evaluations of the history as the baseline (options.baseline). */
+  function renderBaselineChoices(items) {
+    const choices = items.filter((e) => e.status === "succeeded").map((e) => ({
+      value: e.id, text: `${formatTime(e.created_at)} · ${estimateNames(e).join(", ")} (${e.id.slice(0, 8)})`,
+    }));
+    for (const select of document.querySelectorAll("#other-options-grid select.evaluation-choice")) {
+      fillChoice(select, choices, NONE, NONE);
+    }
   }
 
   // --- schedules ---------------------------------------------------------------------------

@@ -111,7 +111,38 @@ def _tf_chain(tmp_path: Path) -> EvaluationResult:
     return evaluate(reference, [estimate])
 
 
+def _trials_and_baseline() -> EvaluationResult:
+    """2 systems of 3 trials (and one failed) against a baseline of 3 systems."""
+    from loceval.results.baseline import baseline_from_document, compare_with_baseline
+    from loceval.results.document import read_result
+
+    rng = np.random.default_rng(41)
+    truth = walk(rng, n=1500)
+
+    def trials(levels: dict[str, float]) -> tuple[list[Trajectory], list[str | None]]:
+        found, systems = [], []
+        for system, sigma in levels.items():
+            for k in range(3):
+                found.append(noisy(rng, truth, every=3, sigma=sigma * (1 + 0.05 * k), drift=0.0,
+                                   name=f"{system}-{k + 1}"))  # fmt: skip
+                systems.append(system)
+        return found, systems
+
+    config = EvaluationConfig(no_ci=True)
+    old, old_systems = trials({"ORB": 0.02, "VINS": 0.03, "RTAB": 0.05})
+    before = evaluate(truth, old, config, systems=old_systems)
+    baseline = baseline_from_document(read_result(before.to_dict()), label="v1.2", source="-")
+    now, systems = trials({"ORB": 0.04, "VINS": 0.03})  # RTAB: the baseline's only
+    lost = replace(now[0], name="ORB-lost")
+    lost = Trajectory(
+        lost.stamps_ns[:40], lost.positions_xyz[:40], lost.quat_xyzw[:40], name="ORB-lost"
+    )
+    result = evaluate(truth, [*now, lost], config, systems=[*systems, "ORB"])
+    return replace(result, baseline=compare_with_baseline(result, baseline))
+
+
 CASES: dict[str, tuple[Callable[[Path], EvaluationResult], FrontDoor, bool]] = {
+    "trials, baseline, figures": (lambda _: _trials_and_baseline(), FrontDoor.CLI, True),
     # name: (evaluation, front door, whether its figures are drawn: their captions)
     "two failing, inputs, figures": (lambda _: _two_failing(), FrontDoor.CLI, True),
     "no tolerance, the service's words": (

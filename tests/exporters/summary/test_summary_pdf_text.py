@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import datetime as dt
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -30,13 +31,31 @@ from exporters.summary import (
     render_summary_view_pdf,
 )
 from exporters.summary.evo import evo_summary_run
+from exporters.summary.model import BaselineLine
 from loceval.readers.evo_result import read_result_zip
 from tests.checkpoint_factory import survey_evaluation
 from tests.exporters._pdf_text import text_differences
 from tests.exporters.summary.test_summary import _failed, _loop, _run, _summary, _week_runs
 from tests.exporters.summary.test_summary_evo import EVO, MONDAY
 
+
+def _against_baseline() -> SummaryInput:
+    """Runs of a schedule with a pinned baseline: each run's systems against it."""
+    runs = _week_runs(np.random.default_rng(6), count=3)
+    lines = (
+        BaselineLine("RTAB-Map", "ATE RMSE", 0.012, (0.004, 0.02), "worse"),
+        BaselineLine("ISAAC", "ATE RMSE", -0.001, (-0.006, 0.004), "within_noise"),
+        BaselineLine("ISAAC", "RPE RMSE", -0.004, None, "undetermined"),
+    )
+    runs = [
+        r if r.status == "failed" else replace(r, baseline=lines, baseline_label="evaluation ev-7")
+        for r in runs
+    ]
+    return _summary(runs)
+
+
 SUMMARIES: dict[str, Callable[[], SummaryInput]] = {
+    "runs against a pinned baseline": _against_baseline,
     "a week, two systems, one failed": lambda: _summary(_week_runs(np.random.default_rng(5))),
     "nothing matched": lambda: _summary([]),
     "every run failed": lambda: _summary([_failed(0), _failed(1, "No estimate topic.")]),

@@ -533,6 +533,8 @@ def test_all_artifacts(api: Api, datasets: tuple[str, str]) -> None:
         "paths.glb": ("model/gltf-binary", "attachment"),
         "paths.ifc": ("application/x-step", "attachment"),
         "viewer.html": ("text/html", "attachment"),
+        "junit.xml": ("application/xml", "attachment"),
+        "summary.md": ("text/markdown", "attachment"),
     }
     listed = {a["name"]: a for a in evaluation["artifacts"]}
     assert list(listed) == list(expected)

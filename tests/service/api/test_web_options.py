@@ -39,6 +39,8 @@ KEPT_FILES = [
     "report.html",
     "paths.dxf",
     "viewer.html",
+    "junit.xml",
+    "summary.md",
 ]
 
 

@@ -82,6 +82,10 @@ CASES = [
     Case("solve", "nlls,minmax", ["nlls", "minmax"], accepted=True),
     Case("solve", "minmax", ["minmax"], accepted=True),
     Case("solve", "trilateration", ["trilateration"], accepted=False),
+    # the gate's conditions: a word that is none, and conditions without the tolerance and
+    # the baseline they judge (a gate that could never close), refused alike
+    Case("fail_on", "failed", ["failed"], accepted=False),
+    Case("fail_on", "fail,worse", ["fail", "worse"], accepted=False),
 ]
 """Values of every option with a grammar; ``accepted`` is the answer all three give."""
 

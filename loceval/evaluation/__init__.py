@@ -11,16 +11,23 @@ import numpy as np
 
 from loceval._version import __version__
 from loceval.assessment.spaces import Building, locate_verdict
+from loceval.assessment.trial_comparison import SystemComparison, compare_all_systems
+from loceval.assessment.trials import (
+    FailedTrial,
+    SystemTrials,
+    group_evaluated_trials,
+    tracked_share,
+    trial_figures,
+)
 from loceval.assessment.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
-from loceval.calibration.offsets import DeviceSource, OffsetCheck, check_offsets, parse_offset
+from loceval.calibration.offsets import OffsetCheck, check_offsets, parse_offset
 from loceval.core.arrays import IntArray
 from loceval.core.gaps import gap_threshold_ns, path_breaks
-from loceval.core.geometry import SimilarityTransform
-from loceval.errors import InputError
+from loceval.errors import InputError, LocevalError
+from loceval.evaluation.config import EvaluationConfig
 from loceval.metrics.excursions import Excursion, find_excursions
 from loceval.metrics.pose_errors import (
     ErrorSeries,
-    RPEUnit,
     WorstPose,
     compute_ate,
     compute_drift,
@@ -29,18 +36,13 @@ from loceval.metrics.pose_errors import (
     rpe_pairs,
     share_within,
 )
-from loceval.options import DEFAULT_THRESHOLDS_M, check_option, choice_default, number_default
-from loceval.registration.alignment import Alignment, AlignMethod, AlignWindow, align
-from loceval.registration.association import (
-    Association,
-    AssociationMethod,
-    associate,
-    association_notes,
-)
+from loceval.registration.alignment import Alignment, AlignMethod, align
+from loceval.registration.association import Association, associate, association_notes
 from loceval.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from loceval.assessment.assess import Assessment
+    from loceval.assessment.baseline import BaselineComparison
     from loceval.assessment.comparison import Comparison
     from loceval.assessment.uncertainty import IntervalStats
     from loceval.maps import MapEvaluation
@@ -59,127 +61,8 @@ __all__ = [
 
 _NS_PER_S = 1_000_000_000
 
-_RPE_UNIT_WORDS = {RPEUnit.FRAMES: "frames", RPEUnit.METRES: "metres", RPEUnit.SECONDS: "seconds"}
-
-_DEFAULT_ASSOCIATION = AssociationMethod(choice_default("association"))
-_DEFAULT_ALIGN = AlignMethod(choice_default("align"))
-_DEFAULT_RPE_UNIT = RPEUnit(choice_default("rpe_unit"))
-
 ProgressCallback = Callable[[str, float], None]
 """Called with a stage name and the fraction of the evaluation done (0..1)."""
-
-
-@dataclass(frozen=True, slots=True)
-class EvaluationConfig:
-    """Every option of an evaluation (the CLI's and the service's options).
-
-    Attributes:
-        association: how poses are matched in time.
-        max_dt_s: nearest matching's tolerance, seconds.
-        max_gap_s: longest reference interval bridged by interpolation, seconds.
-        time_offset_s: added to every estimate's stamps, seconds.
-        align: the alignment method.
-        align_first: the leading window that estimates the alignment.
-        calibrate_at_s: for ``calibrate``, seconds after the first matched pose.
-        reference_offset: rigid-body -> sensor offset applied to the reference poses.
-        rpe_delta: RPE step.
-        rpe_unit: what the RPE step counts.
-        rpe_all_pairs: every pose starts an RPE pair (default: consecutive segments).
-        thresholds_m: distances for the "share within" figures.
-        tolerance: the application tolerance for the verdict, if any.
-        worst_count: how many greatest errors to list.
-        no_ci: skip the confidence intervals and comparisons (their ``ci95`` is null).
-        reference_sigma_m: the reference's own per-axis standard deviation, metres.
-        auto_time_offset: apply the time offset estimated from the motion.
-        clock_drift_ppm: how fast the estimates' clocks run against the reference's, ppm,
-            applied with the time offset at each estimate's first pose.
-        auto_clock_drift: apply the clock drift (and steps) estimated from the motion.
-        auto_device: apply the device offset estimated from the motion to the reference.
-        reference_offset_source: ``urdf`` (a URDF or ``/tf_static``) or ``given``.
-        planar: measure position errors in x-y only (each matched estimate pose takes
-            the reference's height after alignment), for 2D systems.
-        min_excursion_s: the shortest reference loss that is an excursion, seconds.
-    """
-
-    association: AssociationMethod = _DEFAULT_ASSOCIATION
-    max_dt_s: float = number_default("max_dt_s")
-    max_gap_s: float = number_default("max_gap_s")
-    time_offset_s: float = number_default("time_offset_s")
-    align: AlignMethod = _DEFAULT_ALIGN
-    align_first: AlignWindow = field(default_factory=AlignWindow)
-    calibrate_at_s: float | None = None
-    reference_offset: SimilarityTransform | None = None
-    rpe_delta: float = number_default("rpe_delta")
-    rpe_unit: RPEUnit = _DEFAULT_RPE_UNIT
-    rpe_all_pairs: bool = False
-    thresholds_m: tuple[float, ...] = DEFAULT_THRESHOLDS_M
-    tolerance: Tolerance | None = None
-    worst_count: int = round(number_default("worst"))
-    no_ci: bool = False
-    reference_sigma_m: float | None = None
-    auto_time_offset: bool = False
-    auto_device: bool = False
-    reference_offset_source: DeviceSource = "given"
-    planar: bool = False
-    min_excursion_s: float = number_default("min_excursion_s")
-    clock_drift_ppm: float = number_default("clock_drift_ppm")
-    auto_clock_drift: bool = False
-
-    def __post_init__(self) -> None:
-        """Check the values against the bounds of :data:`loceval.options.OPTIONS`.
-
-        Raises:
-            InputError: a value out of bounds; the error carries the option's key.
-        """
-        check_option("max_dt_s", self.max_dt_s, unit="seconds")
-        if self.max_gap_s < 1e-9:  # the table's minimum, in the unit a user thinks in
-            msg = f"The maximum gap must be at least 1 ns, got {self.max_gap_s!r} s."
-            raise InputError(msg, option="max_gap_s")
-        check_option("max_gap_s", self.max_gap_s, unit="seconds")
-        check_option("time_offset_s", self.time_offset_s, unit="seconds")
-        check_option("clock_drift_ppm", self.clock_drift_ppm, unit="ppm")
-        if self.calibrate_at_s is not None:
-            check_option("calibrate_at_s", self.calibrate_at_s, unit="seconds")
-        check_option("rpe_delta", self.rpe_delta, unit=_RPE_UNIT_WORDS[self.rpe_unit])
-        for threshold in self.thresholds_m:
-            check_option("thresholds_m", threshold, unit="metres")
-        check_option("worst", self.worst_count)
-        check_option("min_excursion_s", self.min_excursion_s, unit="seconds")
-        if self.reference_sigma_m is not None:
-            check_option("reference_sigma_m", self.reference_sigma_m, unit="metres")
-        if self.auto_device and self.reference_offset is not None:
-            msg = "Give the device offset or have it estimated from the motion, not both."
-            raise InputError(msg, option="device")
-
-    def to_dict(self) -> dict[str, object]:
-        """Return the options as JSON (for the report's provenance)."""
-        return {
-            "association": self.association.value,
-            "max_dt_s": self.max_dt_s,
-            "max_gap_s": self.max_gap_s,
-            "time_offset_s": self.time_offset_s,
-            "align": self.align.value,
-            "align_first": str(self.align_first),
-            "calibrate_at_s": self.calibrate_at_s,
-            "reference_offset": None
-            if self.reference_offset is None
-            else self.reference_offset.to_dict(),
-            "rpe_delta": self.rpe_delta,
-            "rpe_unit": self.rpe_unit.value,
-            "rpe_all_pairs": self.rpe_all_pairs,
-            "thresholds_m": list(self.thresholds_m),
-            "tolerance": None
-            if self.tolerance is None
-            else {"distance_m": self.tolerance.distance_m, "share": self.tolerance.share},
-            "no_ci": self.no_ci,
-            "reference_sigma_m": self.reference_sigma_m,
-            "auto_time_offset": self.auto_time_offset,
-            "auto_device": self.auto_device,
-            "planar": self.planar,
-            "min_excursion_s": self.min_excursion_s,
-            "clock_drift_ppm": self.clock_drift_ppm,
-            "auto_clock_drift": self.auto_clock_drift,
-        }
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -206,6 +89,9 @@ class EstimateResult:
         offsets: the time and device offsets given, estimated and applied.
         excursions: the stretches outside the tracked room (:mod:`loceval.metrics.excursions`).
         notes: what the evaluation found that asks nothing of the user (the clock check).
+        system: the system this estimate is a trial of (None: not a trial).
+        coverage: the share of the reference's duration it tracked (matched poses no
+            farther apart than a gap), 0..1.
     """
 
     estimate: Trajectory
@@ -226,6 +112,8 @@ class EstimateResult:
     offsets: OffsetCheck | None = None
     excursions: tuple[Excursion, ...] = ()
     notes: tuple[str, ...] = ()
+    system: str | None = None
+    coverage: float | None = None
 
     @property
     def name(self) -> str:
@@ -265,6 +153,17 @@ class EvaluationResult:
     building: Building | None = None
     """The building model the paths were placed on: its spaces and warnings
     (:func:`loceval.assessment.spaces.on_building`), once an exporter placed them."""
+    systems: tuple[SystemTrials, ...] = ()
+    """The systems whose trials the estimates are (:mod:`loceval.assessment.trials`)."""
+    system_comparisons: tuple[SystemComparison, ...] = ()
+    """Every two systems compared over all their trials."""
+    baseline: BaselineComparison | None = None
+    """Each estimate and system against an earlier result (:mod:`loceval.assessment.baseline`)."""
+
+    @property
+    def failed_trials(self) -> tuple[FailedTrial, ...]:
+        """Return every failed trial, system by system."""
+        return tuple(f for s in self.systems for f in s.failed)
 
     def with_building(self, building: Building) -> EvaluationResult:
         """Return the result placed on ``building``: each stretch in its space, kept.
@@ -317,6 +216,9 @@ class EvaluationResult:
             if self.comparisons is None
             else [c.to_dict() for c in self.comparisons],
             "comparison_notes": list(self.comparison_notes),
+            "systems": [s.to_dict() for s in self.systems],
+            "system_comparisons": [c.to_dict() for c in self.system_comparisons],
+            "baseline": None if self.baseline is None else self.baseline.to_dict(),
         }
 
 
@@ -327,8 +229,15 @@ def evaluate(
     *,
     inputs: Sequence[Mapping[str, object]] = (),
     progress: ProgressCallback | None = None,
+    systems: Sequence[str | None] | None = None,
+    failed_trials: Sequence[FailedTrial] = (),
 ) -> EvaluationResult:
     """Evaluate one or more estimates against a reference.
+
+    Estimates that name a system are its trials (:mod:`loceval.assessment.trials`): a trial
+    whose evaluation raises a :class:`~loceval.errors.LocevalError`, or that tracks less than
+    ``config.min_trial_coverage`` of the reference's duration, is a failed trial, counted
+    under its system; the others go on. An estimate of no system raises as before.
 
     Args:
         reference: the ground truth.
@@ -336,6 +245,8 @@ def evaluate(
         config: the options; defaults as on the CLI.
         inputs: provenance of the input files (path, sha256, bytes) for the result.
         progress: called with (stage, fraction done).
+        systems: the system of each estimate (None: not a trial), as long as ``estimates``.
+        failed_trials: trials that failed before the evaluation (an unreadable file).
 
     Returns:
         The evaluation result.
@@ -347,7 +258,11 @@ def evaluate(
         MetricError: a metric cannot be computed (RPE delta too long).
     """
     config = config or EvaluationConfig()
-    if not estimates:
+    systems = list(systems) if systems is not None else [None] * len(estimates)
+    if len(systems) != len(estimates):
+        msg = f"Give a system per estimate: {len(estimates)} estimates, {len(systems)} systems."
+        raise InputError(msg)
+    if not estimates and not failed_trials:
         msg = "Give at least one estimate to evaluate against the reference."
         raise InputError(msg)
     report = progress or (lambda _stage, _fraction: None)
@@ -368,18 +283,47 @@ def evaluate(
             "evaluated."
         )
     results = []
-    for k, estimate in enumerate(estimates):
+    failed = list(failed_trials)
+    for k, (estimate, system) in enumerate(zip(estimates, systems, strict=True)):
         report(f"evaluating {estimate.name or k}", k / len(estimates))
-        results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
+        if system is None:
+            results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
+            continue
+        try:  # a trial that fails is counted under its system; the others go on
+            one = _evaluate_one(reference, estimate, config, recorded=recorded)
+        except LocevalError as err:
+            failed.append(
+                FailedTrial(estimate.name or f"estimate {k + 1}", system, err.code, str(err))
+            )
+            continue
+        tracked = tracked_share(
+            reference.stamps_ns, one.association.reference.stamps_ns, min_gap_ns=min_gap_ns
+        )
+        results.append(replace(one, system=system, coverage=tracked))
+    if not results:
+        reasons = "; ".join(f"{f.name}: {f.reason}" for f in failed)
+        msg = f"Every trial failed, so there is nothing to evaluate ({reasons})."
+        raise InputError(msg)
+    trial_systems = group_evaluated_trials(
+        [
+            (trial_figures(e.name, e.system, _series_of(e)), e.coverage or 0.0)
+            for e in results
+            if e.system is not None
+        ],
+        failed,
+        min_coverage=config.min_trial_coverage,
+    )
     comparisons = None
     comparison_notes: tuple[str, ...] = ()
     if not config.no_ci:
         from loceval.assessment.assess import compare_estimates  # noqa: PLC0415  (scipy)
 
+        # trials are compared system against system over all their trials, not pairwise
         found, notes = compare_estimates(
             [
                 (e.name or f"estimate {k + 1}", e.ate_translation, e.rpe_translation)
                 for k, e in enumerate(results)
+                if e.system is None
             ]
         )
         comparisons, comparison_notes = tuple(found), tuple(notes)
@@ -393,7 +337,19 @@ def evaluate(
         inputs=tuple(inputs),
         comparisons=comparisons,
         comparison_notes=comparison_notes,
+        systems=trial_systems,
+        system_comparisons=compare_all_systems(trial_systems),
     )
+
+
+def _series_of(e: EstimateResult) -> dict[str, ErrorSeries | None]:
+    """The error series of each trial metric (:data:`~loceval.assessment.trials.TRIAL_METRICS`)."""
+    return {
+        "ate_rmse": e.ate_translation,
+        "rpe_rmse": e.rpe_translation,
+        "ate_rot_rmse": e.ate_rotation,
+        "rpe_rot_rmse": e.rpe_rotation,
+    }
 
 
 def _evaluate_one(
@@ -552,6 +508,8 @@ def _estimate_dict(e: EstimateResult, config: EvaluationConfig, t0: int) -> dict
     matched = e.association
     return {
         "name": e.estimate.name,
+        "system": e.system,
+        "coverage": e.coverage,
         "source": e.estimate.source,
         "poses": len(e.estimate),
         "duration_s": e.estimate.duration_s,
