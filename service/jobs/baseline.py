@@ -144,14 +144,13 @@ def evaluation_baseline(runtime: Runtime, project_id: str, evaluation_id: str) -
 
 
 def check_trials(runtime: Runtime, project_id: str, body: EvaluationCreate) -> None:
-    """The reference is no trial; a baseline is a succeeded evaluation of the project.
+    """Check that a baseline is a succeeded evaluation of the project.
+
+    The reference is no trial: its schema has no `system` (a 422 names `reference.system`).
 
     Raises:
-        InputError: the reference names a system, or the baseline has not succeeded.
+        InputError: the baseline has not succeeded.
         NotFoundError: no baseline evaluation of that id in the project.
     """
-    if body.reference.system is not None:
-        msg = "reference.system: the reference is the ground truth, not a trial; leave it out."
-        raise InputError(msg)
     if body.options.baseline is not None:
         evaluation_baseline(runtime, project_id, body.options.baseline)

@@ -49,7 +49,13 @@ from service.jobs.runner import (
 )
 from service.jobs.tracking import tracked_job
 from service.runtime import Runtime, load_target
-from service.schemas.evaluations import DeviceOffset, EvaluationCreate, RangingCreate, SourceRef
+from service.schemas.evaluations import (
+    DeviceOffset,
+    EstimateRef,
+    EvaluationCreate,
+    RangingCreate,
+    SourceRef,
+)
 
 __all__ = [
     "ReadyArtifacts",
@@ -377,5 +383,5 @@ def _source(
         provenance,
         display_path=dataset.filename,
         remote=remote,
-        system=ref.system if role == "estimate" else None,
+        system=ref.system if isinstance(ref, EstimateRef) else None,
     )

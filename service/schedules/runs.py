@@ -17,7 +17,7 @@ import logging
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any, Final
+from typing import Any, Final, TypeVar
 
 import numpy as np
 from sqlalchemy import select, update
@@ -33,7 +33,7 @@ from service.jobs.tracking import ProgressWriter, tracked_job
 from service.runtime import Runtime
 from service.schedules.resource import SUMMARY_ARTIFACTS, describe_selection, select_datasets
 from service.schedules.summaries import summary_files
-from service.schemas.evaluations import EvaluationCreate, SourceRef
+from service.schemas.evaluations import EstimateRef, EvaluationCreate, SourceRef
 from service.schemas.schedules import (
     EvaluationTemplate,
     EvoResultRef,
@@ -75,6 +75,10 @@ _NS: Final = 1_000_000_000
 
 class WebhookNotDeliveredError(Exception):
     """A webhook attempt failed; raised inside the queue task so that the queue retries it."""
+
+
+_Ref = TypeVar("_Ref", bound=SourceRef)
+"""A reference or an estimate of a run's request."""
 
 
 def execute_schedule_run(runtime: Runtime, run_id: str) -> None:
@@ -233,8 +237,8 @@ def _evaluate_all(
         if not per_run:
             options = options.model_copy(update={"formats": ["result.json"]})
         body = EvaluationCreate(
-            reference=_source_ref(template.reference, dataset),
-            estimates=[_source_ref(e, dataset) for e in template.estimates],
+            reference=_source_ref(template.reference, dataset, SourceRef),
+            estimates=[_source_ref(e, dataset, EstimateRef) for e in template.estimates],
             options=options,
         )
         try:
@@ -270,9 +274,9 @@ def _evaluate_all(
     return rows, summary_runs
 
 
-def _source_ref(entry: TemplateSource, recording: Dataset) -> SourceRef:
+def _source_ref(entry: TemplateSource, recording: Dataset, kind: type[_Ref]) -> _Ref:
     """Return the template's source in a recording, or in its fixed dataset (a survey)."""
-    return SourceRef(
+    return kind(
         dataset_id=entry.dataset_id or recording.id, selector=entry.selector, name=entry.name
     )
 

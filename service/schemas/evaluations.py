@@ -31,6 +31,7 @@ __all__ = [
     "DatasetUploaded",
     "DatasetsPublic",
     "DeviceOffset",
+    "EstimateRef",
     "EvaluationCreate",
     "EvaluationOptions",
     "EvaluationPublic",
@@ -74,10 +75,15 @@ class SourceRef(Strict):
     name: Annotated[str, Field(min_length=1, max_length=120)] | None = Field(
         default=None, description="name in the report (default: selector or file name)"
     )
+
+
+class EstimateRef(SourceRef):
+    """An estimate in an uploaded dataset, and the system it may be a trial of."""
+
     system: Annotated[str, Field(min_length=1, max_length=120), Printable] | None = Field(
         default=None,
-        description="estimates only: the system this estimate is a trial (a run) of; the "
-        "estimates of one system are grouped, summarised over their trials and compared",
+        description="the system this estimate is a trial (a run) of; the estimates of one "
+        "system are grouped, summarised over their trials and compared",
     )
 
 
@@ -347,7 +353,7 @@ class EvaluationCreate(Strict):
     """A new evaluation: a reference, the estimates, and options."""
 
     reference: SourceRef
-    estimates: Annotated[list[SourceRef], Field(min_length=1, max_length=20)]
+    estimates: Annotated[list[EstimateRef], Field(min_length=1, max_length=20)]
     options: EvaluationOptions = Field(default_factory=EvaluationOptions)
 
 
@@ -517,7 +523,7 @@ class EvaluationPublic(BaseModel):
     started_at: dt.datetime | None
     finished_at: dt.datetime | None
     reference: SourceRef
-    estimates: list[SourceRef]
+    estimates: list[EstimateRef]
     options: dict[str, Any]
     summary: list[SummaryRow] | None = None
     error: Problem | None = None

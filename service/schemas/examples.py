@@ -104,7 +104,7 @@ EVALUATION: Final[dict[str, Any]] = {
     "started_at": "2026-11-29T08:26:09.992607Z",
     "finished_at": "2026-11-29T08:26:21.614718Z",
     "reference": {"dataset_id": _REFERENCE_ID, "selector": None, "name": None},
-    "estimates": [SOURCE],
+    "estimates": [{**SOURCE, "system": None}],
     "options": {"align": "se3", "tolerance": "0.10@95", "units": "mm"},
     "summary": [SUMMARY_ROW],
     "error": None,
@@ -271,6 +271,7 @@ BY_SCHEMA: Final[dict[str, dict[str, Any]]] = {
     "SchedulePublic": SCHEDULE,
     "ScheduleRunPublic": SCHEDULE_RUN,
     "ScheduleWithSecret": SCHEDULE_WITH_SECRET,
+    "EstimateRef": {**SOURCE, "system": None},
     "SourceRef": SOURCE,
     "SummaryRow": SUMMARY_ROW,
 }

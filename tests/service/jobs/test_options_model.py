@@ -26,7 +26,17 @@ from service.jobs.options import (
 from service.schemas.base import NO_NUL
 from service.schemas.evaluations import EvaluationOptions, RangingOptions
 
-CLI_ONLY = {"help", "name", "reference_name", "format", "json", "out", "device_from", "device_to"}
+CLI_ONLY = {
+    "help",
+    "name",
+    "system",
+    "reference_name",
+    "format",
+    "json",
+    "out",
+    "device_from",
+    "device_to",
+}
 """The evaluate command's own arguments: how to run, not how to evaluate."""
 
 RANGING_CLI_ONLY = {"help", "anchors", "ranges", "reference_name", "format", "json", "out"}
