@@ -18,7 +18,7 @@ import pytest
 
 from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
-from loceval.maps import FREE, OCCUPIED, OccupancyGrid, evaluate_map_source
+from loceval.maps import OccupancyGrid, evaluate_map_source
 from loceval.readers.rosbag.grid import kept_indices
 from tests.mapfactory import Distortion, draw_map, office_plan, write_map_bag
 
