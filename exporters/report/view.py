@@ -43,6 +43,7 @@ from exporters.report.verdicts import (
     verdict_view,
 )
 from loceval.core.lengths import MM_BELOW_M, LengthUnit, length_unit
+from loceval.core.quantities import ARROW, ARROW_BACK
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.options import option
@@ -277,8 +278,10 @@ def _worst(result: EvaluationResult) -> tuple[WorstTable, ...]:
 
 
 def unbroken_arrows(text: str) -> str:
-    """Return ``text`` with each `` -> `` (a tf chain's link) as an arrow no line splits."""
-    return text.replace(" -> ", "\u00a0→\u00a0")
+    """Return ``text`` with each arrow of a tf chain bound to its frames (no line splits)."""
+    return text.replace(f" {ARROW} ", f"\u00a0{ARROW}\u00a0").replace(
+        f" {ARROW_BACK} ", f"\u00a0{ARROW_BACK}\u00a0"
+    )
 
 
 def _warnings(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
@@ -303,24 +306,31 @@ def _notes(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
 
 
 def _tolerance_hint(front_door: FrontDoor) -> tuple[str, str]:
-    """Return how to give a tolerance at ``front_door``: the example and where it goes."""
+    """Return how to give a tolerance at ``front_door``: the example and what follows it.
+
+    What follows is the example's meaning, then (page and API) where it goes: "such as
+    0.10@95 (95 % of poses within 0.10 m) in the Tolerance field of the page or as
+    options.tolerance in the API", one bracket (issue 44 found two in a row).
+    """
     spec = option("tolerance")
+    example = str(spec.example)
+    metres, _, percent = example.partition("@")
+    meaning = f" ({percent} % of poses within {metres} m)"
     if front_door is FrontDoor.CLI:
-        return f"{spec.flag} {spec.example}", ""
+        return f"{spec.flag} {example}", meaning
     field_name = spec.words.removeprefix("the ").capitalize()
-    return str(
-        spec.example
-    ), f" in the {field_name} field of the page (options.{spec.key} in the API)"
+    return example, (
+        f"{meaning} in the {field_name} field of the page or as options.{spec.key} in the API"
+    )
 
 
 def _summary(result: EvaluationResult) -> str:
     ref = result.reference
     names = [estimate_name(e, k) for k, e in enumerate(result.estimates)]
     listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
-    span = "no times (poses numbered)" if ref.indexed else f"{ref.duration_s:.1f} s"
     return (
         f"{listed} against {ref.name or 'the reference'} (ground truth): "
-        f"{len(ref):,} reference poses, {span}, {ref.length_m:.1f} m of path."
+        f"{len(ref):,} reference poses, {ref.span_words}, {ref.length_m:.1f} m of path."
     )
 
 

@@ -88,4 +88,3 @@ def _about(
 def fail(parser: argparse.ArgumentParser, message: str) -> NoReturn:
     """Print ``PROG: error: MESSAGE`` as one line and exit with :data:`EXIT_INPUT`."""
     parser.exit(EXIT_INPUT, f"{parser.prog}: error: {message}\n")
-
