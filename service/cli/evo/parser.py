@@ -129,7 +129,8 @@ def _common(parser: argparse.ArgumentParser, *, rpe: bool) -> None:
     )  # fmt: skip
     out.add_argument(
         "--save_plot", type=Path, default=None, metavar="PATH",
-        help="write the report into this folder (its suffix dropped)",
+        help="write the plots as evo does: PATH.pdf one PDF of both, PATH.png (.svg ...) "
+        "PATH_raw.png and PATH_map.png, no suffix PNG",
     )  # fmt: skip
     out.add_argument(
         "--save_results", type=Path, default=None, metavar="FILE.zip",
