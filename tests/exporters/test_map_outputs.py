@@ -192,7 +192,7 @@ def test_the_3dm_and_glb_mark_the_excursion_like_the_dxf(result: EvaluationResul
     gltf = pygltflib.GLTF2.load_from_bytes(render_artifact("paths.glb", result, options))
     (node,) = [n for n in gltf.nodes if n.name == "excursions"]
     (primitive,) = gltf.meshes[node.mesh].primitives
-    assert primitive.mode == pygltflib.LINE_STRIP
+    assert primitive.mode == pygltflib.LINES
     assert gltf.accessors[primitive.attributes.POSITION].count == len(dxf_xyz)
     (record,) = node.extras["excursions"]
     assert record["label"] == label
