@@ -60,7 +60,7 @@ def write_error_plots(
     suffix = path.suffix.lower()
     if suffix and suffix not in IMAGE_SUFFIXES:
         msg = (
-            f"--save_plot {path.name}: {suffix} is no plot format; use one of "
+            f"The plot {path.name}: {suffix} is no plot format; use one of "
             f"{', '.join(IMAGE_SUFFIXES)} (or no suffix for PNG)."
         )
         raise InputError(msg)
