@@ -9,8 +9,8 @@ Issue 44 found "9.4 +/- 0.3 ms" beside "-9.39 ± 0.34 ms", "<=" and "->" in the 
   (:data:`ASCII_SPELLINGS`) only on a terminal whose encoding lacks them;
 - a value with its uncertainty through :func:`plus_minus` (``"9.4 ± 0.3 ms"``): the
   value to the places of its sigma's significant digits (:func:`decimals_for`);
-- a duration through :func:`format_duration` (``"161 ms"``, ``"12.3 s"``, ``"4540 s"``):
-  three significant digits, milliseconds under a second.
+- a duration through :func:`format_duration` (``"161 ms"``, ``"12.3 s"``, ``"3 s"``,
+  ``"4540 s"``): three significant digits at most, milliseconds under a second.
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def plus_minus(
 
 
 def format_duration(seconds: float) -> str:
-    """Return a duration to three significant digits: ``"161 ms"``, ``"1.50 s"``, ``"4540 s"``.
+    """Return a duration to three significant digits: ``"161 ms"``, ``"1.5 s"``, ``"4540 s"``.
 
     Milliseconds under a second; whole seconds from 100 s on (no "4.54e+03 s").
     """
@@ -102,9 +102,12 @@ def format_duration(seconds: float) -> str:
 
 
 def _three_digits(value: float) -> str:
-    """Three significant digits in fixed notation (0.00161 -> ``0.00161``, 161.2 -> ``161``)."""
+    """Three significant digits in fixed notation, no trailing zero (161.2 -> ``161``, 3 -> ``3``).
+
+    0.00161 -> ``0.00161``, 12.34 -> ``12.3``, 1.50 -> ``1.5``, 9.996 -> ``10``.
+    """
     decimals = max(0, 2 - math.floor(math.log10(abs(value))))
     text = f"{value:.{decimals}f}"
     if float(text) != 0 and abs(float(text)) >= 10 ** (3 - decimals):  # 9.996 -> "10.00"
         text = f"{value:.{max(0, decimals - 1)}f}"
-    return text
+    return text.rstrip("0").rstrip(".") if "." in text else text

@@ -33,7 +33,7 @@ def test_the_excursion_drift_is_a_share_of_the_distance_outside() -> None:
     (line,) = [line.strip() for line in text.splitlines() if "out of the room" in line]
     drift_pct = DRIFT_PER_M * 100
     assert line == (
-        f"slam: out of the room for 45.0 s over {path_m:.1f} m: error 0.000 m on leaving → "
+        f"slam: out of the room for 45 s over {path_m:.1f} m: error 0.000 m on leaving → "
         f"{DRIFT_PER_M * path_m:.3f} m at re-entry, drift {drift_pct:.2f} % of the distance "
         "travelled outside"
     )
