@@ -167,9 +167,9 @@ def test_trimesh_reads_every_path(two_estimates: EvaluationResult, validate: Val
     data = gltf.export_glb(two_estimates, ExportOptions(evaluation_id="ev-42"))
     model = load(data)
     scene = trimesh.load(io.BytesIO(data), file_type="glb")
-    for mesh in model.meshes:
-        if mesh.primitives[0].mode != pygltflib.LINES:
-            continue
+    paths = [m for m in model.meshes if m.name in {*NAMES, "RTAB-Map ATE", "ISAAC ATE"}]
+    assert len(paths) == 5
+    for mesh in paths:
         counts = [model.accessors[p.attributes.POSITION].count for p in mesh.primitives]
         names = [mesh.name] + [f"{mesh.name}_{k}" for k in range(1, len(counts))]
         for name, count in zip(names, counts, strict=True):
@@ -178,7 +178,6 @@ def test_trimesh_reads_every_path(two_estimates: EvaluationResult, validate: Val
             assert len(path.vertices) == count
             assert len(path.entities) == 1  # one polyline, not count - 1 pieces
             np.testing.assert_array_equal(path.entities[0].points, np.arange(count))
-    assert {m.name for m in model.meshes} >= {*NAMES, "RTAB-Map ATE", "ISAAC ATE"}
     assert validate(data)["issues"]["numErrors"] == 0
 
 
