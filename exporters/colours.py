@@ -22,6 +22,7 @@ import numpy as np
 from loceval.core.arrays import FloatArray
 from loceval.core.display import display_text
 from loceval.core.lengths import LengthUnit, length_unit
+from loceval.core.quantities import AT_MOST
 from loceval.evaluation import EvaluationResult
 
 RGB: TypeAlias = tuple[int, int, int]
@@ -150,9 +151,9 @@ def ate_bins(thresholds_m: Sequence[float]) -> tuple[ATEBin, ...]:
 
 
 def _bin_label(low_m: float, high_m: float, *, first: bool) -> str:
-    """Return a bin's legend text: ``<= 0.05 m`` (the first), ``0.05-0.1 m`` or ``> 0.15 m``."""
+    """Return a bin's legend text: ``≤ 0.05 m`` (the first), ``0.05-0.1 m`` or ``> 0.15 m``."""
     if first:
-        return f"<= {high_m:g} m"
+        return f"{AT_MOST} {high_m:g} m"
     if math.isinf(high_m):
         return f"> {low_m:g} m"
     return f"{low_m:g}-{high_m:g} m"

@@ -11,8 +11,12 @@ from loceval.core.display import display_text
 from loceval.core.gaps import tracking_losses
 from loceval.core.geometry import SimilarityTransform, skew
 from loceval.core.quantiles import median
+from loceval.core.quantities import format_duration
 from loceval.core.rotation import Rotation
 from loceval.errors import TrajectoryError
+
+NO_TIMES = "no timestamps (poses numbered)"
+"""What a trajectory without times spans (a KITTI file without its times file)."""
 
 __all__ = ["MAX_COORDINATE_M", "MAX_OFFSET_M", "MAX_SPAN_S", "MIN_POSES", "Trajectory"]
 
@@ -288,6 +292,15 @@ class Trajectory:
             jac[:, :3, 3:] = -skew(lever_m)
             cov = jac @ self.cov6 @ jac.transpose(0, 2, 1)
         return replace(self, positions_xyz=positions, quat_xyzw=quat, cov6=cov)
+
+    @property
+    def span_words(self) -> str:
+        """The time it spans for a sentence (``"12.3 s"``), or that it has no times.
+
+        A KITTI file without its times file is numbered, not stamped: ``"no timestamps
+        (poses numbered)"``, never its pose count read as seconds (issue 44).
+        """
+        return NO_TIMES if self.indexed else format_duration(self.duration_s)
 
     @property
     def loss_words(self) -> str:

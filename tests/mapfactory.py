@@ -182,3 +182,43 @@ def write_map_server(
         encoding="utf-8",
     )
     return yaml
+
+
+def _message(types: object, grid: OccupancyGrid, stamp_s: int) -> object:
+    """A nav_msgs/msg/OccupancyGrid of a grid (ROS values: -1, 0, 100)."""
+    t = types  # the typestore's types
+    values = np.full(grid.states.shape, -1, dtype=np.int8)
+    values[grid.states == FREE] = 0
+    values[grid.states == OCCUPIED] = 100
+    yaw = grid.origin_yaw_rad
+    pose = t["geometry_msgs/msg/Pose"](  # type: ignore[index]
+        position=t["geometry_msgs/msg/Point"](x=grid.origin_xy[0], y=grid.origin_xy[1], z=0.0),  # type: ignore[index]
+        orientation=t["geometry_msgs/msg/Quaternion"](  # type: ignore[index]
+            x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
+        ),
+    )
+    stamp = t["builtin_interfaces/msg/Time"](sec=stamp_s, nanosec=0)  # type: ignore[index]
+    info = t["nav_msgs/msg/MapMetaData"](  # type: ignore[index]
+        map_load_time=stamp,
+        resolution=grid.resolution_m,
+        width=grid.shape[1],
+        height=grid.shape[0],
+        origin=pose,
+    )
+    header = t["std_msgs/msg/Header"](stamp=stamp, frame_id="map")  # type: ignore[index]
+    return t["nav_msgs/msg/OccupancyGrid"](header=header, info=info, data=values.ravel())  # type: ignore[index]
+
+
+def write_map_bag(folder: Path, grids: list[tuple[int, OccupancyGrid]]) -> Path:
+    """Write a ROS 2 bag ``folder/run`` whose ``/map`` topic holds the grids at their seconds."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    bag = folder / "run"
+    with Writer(bag, version=9) as writer:
+        conn = writer.add_connection("/map", "nav_msgs/msg/OccupancyGrid", typestore=store)
+        for stamp_s, grid in grids:  # a handful of maps
+            raw = store.serialize_cdr(_message(store.types, grid, stamp_s), conn.msgtype)
+            writer.write(conn, stamp_s * 1_000_000_000, raw)
+    return bag

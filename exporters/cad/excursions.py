@@ -17,6 +17,7 @@ import numpy as np
 
 from exporters.cad.placement import Placement
 from loceval.core.arrays import FloatArray
+from loceval.core.quantities import ARROW
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.excursions import Excursion
 
@@ -65,13 +66,13 @@ class ExcursionPath:
 
 
 def excursion_label(name: str, excursion: Excursion) -> str:
-    """Return ``"<name> excursion: 45 s, 45 m, error 0.00 -> 0.22 m"`` (``-``: not measured)."""
+    """Return ``"<name> excursion: 45 s, 45 m, error 0.00 → 0.22 m"`` (``-``: not measured)."""
     before = "-" if excursion.error_before_m is None else f"{excursion.error_before_m:.2f}"
     after = "-" if excursion.error_after_m is None else f"{excursion.error_after_m:.2f}"
     duration = (excursion.end_ns - excursion.start_ns) / _NS_PER_S
     return (
         f"{name} excursion: {duration:.0f} s, {excursion.path_length_m:.0f} m, "
-        f"error {before} -> {after} m"
+        f"error {before} {ARROW} {after} m"
     )
 
 

@@ -1,8 +1,8 @@
-"""glTF 2.0 binary (GLB) export: a node per trajectory, its ATE colours, markers; LINE_STRIP.
+"""glTF 2.0 binary (GLB) export: a node per trajectory, its ATE colours, markers; indexed LINES.
 
 Nodes, named from the trajectories (the scene from the evaluation's title):
 
-- ``<name>``: the path in its palette colour, one ``LINE_STRIP`` primitive per continuous
+- ``<name>``: the path in its palette colour, one ``LINES`` primitive per continuous
   piece (a path breaks at tracking loss instead of crossing it with a chord);
 - ``<name> ATE`` (estimates): the path in the report's ATE colours as vertex colours
   (``COLOR_0``, linear RGB; colour runs of one piece share a duplicated joint vertex, so
@@ -10,7 +10,7 @@ Nodes, named from the trajectories (the scene from the evaluation's title):
 - ``<name> markers`` (estimates) and ``tracking loss``: empty nodes whose children sit at the
   greatest errors and at each tracking loss, named by their labels;
 - ``map walls`` (with a measured map): the wall cells as points coloured by their distance
-  to the plan; ``excursions``: one purple ``LINE_STRIP`` per stretch outside the tracked
+  to the plan; ``excursions``: one purple ``LINES`` primitive per stretch outside the tracked
   room (:mod:`exporters.cad.excursions`), its label and figures in the node's extras.
 
 Conventions (glTF 2.0 §3.4): distances are metres and +Y is up, whatever the CAD units say
@@ -23,8 +23,10 @@ with ``b`` the base point (the reference's bounding-box centre in model coordina
 to whole metres).
 Positions are float32 and local (model metres minus ``b``), so a path 500 km from the
 model origin keeps millimetre precision; the offset lives in the node matrix, written in
-full double precision in the JSON. Primitives are ``LINE_STRIP`` (mode 3), not ``LINES``:
-importers turn each ``LINES`` pair into its own curve.
+full double precision in the JSON. Primitives are ``LINES`` (mode 1) indexed as a polyline
+(0 1, 1 2, ...), not ``LINE_STRIP`` (mode 3): trimesh, the mission's mesh library, skips
+strips and loads indexed lines as one Path3D polyline per piece; three.js' GLTFLoader
+draws them as LineSegments; the Khronos validator accepts both (issue 44).
 
 A building model (OBJ, PLY, STL, GLB or IFC, read by :func:`exporters.cad.building.read_building`)
 joins the same scene as a ``TRIANGLES`` mesh. OBJ, PLY and STL are taken to be in model
@@ -154,7 +156,7 @@ def _add_map(scene: _SceneBuilder, placement: Placement) -> None:
 
 
 def _add_excursions(scene: _SceneBuilder, placement: Placement) -> None:
-    """Add ``excursions``: a purple LINE_STRIP per path outside the tracked room, labelled."""
+    """Add ``excursions``: a purple polyline per path outside the tracked room, labelled."""
     placed = placed_excursions(placement)
     if not placed:
         return
@@ -200,6 +202,21 @@ class _SceneBuilder(GlbScene):
         self.gltf.accessors.append(accessor)
         return len(self.gltf.accessors) - 1
 
+    def _segments(self, count: int) -> int:
+        """Add the indices of a polyline of ``count`` vertices as LINES (0 1, 1 2, ...)."""
+        pairs = np.repeat(np.arange(count, dtype=np.uint32), 2)[1:-1]
+        view = self.view(pairs.tobytes(), pygltflib.ELEMENT_ARRAY_BUFFER)
+        accessor = pygltflib.Accessor(
+            bufferView=view,
+            componentType=pygltflib.UNSIGNED_INT,
+            count=len(pairs),
+            type=pygltflib.SCALAR,
+            min=[int(pairs.min())],
+            max=[int(pairs.max())],
+        )
+        self.gltf.accessors.append(accessor)
+        return len(self.gltf.accessors) - 1
+
     def _node(self, name: str, mesh: pygltflib.Mesh, extras: dict[str, object]) -> None:
         self.gltf.meshes.append(mesh)
         self.gltf.nodes.append(
@@ -217,7 +234,7 @@ class _SceneBuilder(GlbScene):
         extras: dict[str, object],
         colours: list[NDArray[np.float32]] | None = None,
     ) -> None:
-        """Add a path: a LINE_STRIP per piece (vertex colours if given), material, node."""
+        """Add a path: an indexed LINES polyline per piece (vertex colours if given), node."""
         material = self.unlit_material(name, rgba)
         primitives = []
         for k, positions in enumerate(pieces):  # one primitive per continuous piece
@@ -227,8 +244,9 @@ class _SceneBuilder(GlbScene):
             primitives.append(
                 pygltflib.Primitive(
                     attributes=attributes,
+                    indices=self._segments(len(positions)),
                     material=material,
-                    mode=pygltflib.LINE_STRIP,
+                    mode=pygltflib.LINES,
                 )
             )
         self._node(name, pygltflib.Mesh(name=name, primitives=primitives), extras)

@@ -23,6 +23,7 @@ from exporters.plots.figure import (
 )
 from loceval.calibration.clock import TimeOffsetEstimate
 from loceval.calibration.drift import ClockDrift
+from loceval.core.quantities import plus_minus
 from loceval.evaluation import EvaluationResult
 
 __all__ = ["ZOOM_S", "drift_checked", "plot_clock_correlation", "plot_clock_drift"]
@@ -155,7 +156,8 @@ def plot_clock_drift(
             fitted.varying_s(stamps) * 1e3,
             color=colour,
             linewidth=1.2,
-            label=f"fitted: {drift.rate_ppm:+.2f} +/- {drift.sigma_rate_ppm:.2f} ppm"
+            label="fitted: "
+            + plus_minus(drift.rate_ppm, drift.sigma_rate_ppm, "ppm", sign=True)
             + (
                 f", {len(drift.steps)} step{'s' if len(drift.steps) > 1 else ''}"
                 if drift.steps

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from exporters.plots.figure import FigureView, ImageFormat, Plot
 from loceval.calibration.drift import SIGNIFICANT_Z, describe_rate, describe_step
 from loceval.calibration.offsets import OffsetCheck
+from loceval.core.quantities import plus_minus
 from loceval.evaluation import EstimateResult, EvaluationConfig, EvaluationResult
 
 __all__ = [
@@ -97,8 +98,8 @@ def drift_words(e: EstimateResult, config: EvaluationConfig) -> str:
 def _ms(value_s: float | None, sigma_s: float | None = None) -> str:
     if value_s is None:
         return _NONE
-    pm = "" if sigma_s is None else f" ± {sigma_s * 1e3:.2f}"
-    return f"{value_s * 1e3:+.2f}{pm} ms"
+    sigma_ms = None if sigma_s is None else sigma_s * 1e3
+    return plus_minus(value_s * 1e3, sigma_ms, "ms", sign=True, places=2)
 
 
 def _given_time(result: EvaluationResult) -> str:
@@ -160,8 +161,8 @@ def _drift_rows(result: EvaluationResult, check: OffsetCheck | None) -> tuple[st
         applied = _NONE if check is None else f"{check.clock_drift_ppm:+g} ppm"
         return (given, "not checked", _NONE, applied)
     steps = "; ".join(
-        f"{s.size_s * 1e3:+.1f} ± {s.sigma_size_s * 1e3:.1f} ms at "
-        f"{s.at_s:.2f} ± {s.sigma_at_s:.2f} s"
+        f"{plus_minus(s.size_s * 1e3, s.sigma_size_s * 1e3, 'ms', sign=True)} at "
+        f"{plus_minus(s.at_s, s.sigma_at_s, 's')}"
         for s in drift.steps
     )
     applied = f"{clock.rate_ppm:+.2f} ppm" if clock.rate_ppm != 0.0 else "none"
@@ -169,7 +170,7 @@ def _drift_rows(result: EvaluationResult, check: OffsetCheck | None) -> tuple[st
         applied += f" and {len(drift.steps)} step{'s' if len(drift.steps) > 1 else ''}"
     return (
         given,
-        f"{drift.rate_ppm:+.2f} ± {drift.sigma_rate_ppm:.2f} ppm",
+        plus_minus(drift.rate_ppm, drift.sigma_rate_ppm, "ppm", sign=True),
         steps or "none",
         applied,
     )

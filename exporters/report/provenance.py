@@ -106,7 +106,7 @@ def input_rows(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:
 
 def _duration(trajectory: Trajectory) -> str:
     """The time a trajectory spans, or that it has no times (poses numbered, no stamps)."""
-    return "no times" if trajectory.indexed else f"{trajectory.duration_s:.1f} s"
+    return trajectory.span_words
 
 
 def trajectory_rows(result: EvaluationResult) -> tuple[Mapping[str, str], ...]:

@@ -28,6 +28,7 @@ from exporters.report.trials import (
 from exporters.report.verdicts import VerdictView, verdict_view
 from loceval.assessment.baseline import BASELINE_METRICS
 from loceval.core.lengths import MM_BELOW_M, LengthUnit, length_unit
+from loceval.core.quantities import ARROW, ARROW_BACK
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats
 from loceval.results.document import ResultRead, read_result
@@ -147,8 +148,10 @@ def _stats_table(
 
 
 def unbroken_arrows(text: str) -> str:
-    """Return ``text`` with each `` -> `` (a tf chain's link) as an arrow no line splits."""
-    return text.replace(" -> ", "\u00a0→\u00a0")
+    """Return ``text`` with each arrow of a tf chain bound to its frames (no line splits)."""
+    return text.replace(f" {ARROW} ", f"\u00a0{ARROW}\u00a0").replace(
+        f" {ARROW_BACK} ", f"\u00a0{ARROW_BACK}\u00a0"
+    )
 
 
 def _warnings(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
@@ -167,10 +170,9 @@ def _summary(result: EvaluationResult) -> str:
     ref = result.reference
     names = [estimate_name(e, k) for k, e in enumerate(result.estimates)]
     listed = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
-    span = "no times (poses numbered)" if ref.indexed else f"{ref.duration_s:.1f} s"
     return (
         f"{listed} against {ref.name or 'the reference'} (ground truth): "
-        f"{len(ref):,} reference poses, {span}, {ref.length_m:.1f} m of path."
+        f"{len(ref):,} reference poses, {ref.span_words}, {ref.length_m:.1f} m of path."
     )
 
 

@@ -190,14 +190,22 @@ def _notes(result: EvaluationResult) -> tuple[tuple[str, str], ...]:
 
 
 def _tolerance_hint(front_door: FrontDoor) -> tuple[str, str]:
-    """Return how to give a tolerance at ``front_door``: the example and where it goes."""
+    """Return how to give a tolerance at ``front_door``: the example and what follows it.
+
+    What follows is the example's meaning, then (page and API) where it goes: "such as
+    0.10@95 (95 % of poses within 0.10 m) in the Tolerance field of the page or as
+    options.tolerance in the API", one bracket (issue 44 found two in a row).
+    """
     spec = option("tolerance")
+    example = str(spec.example)
+    metres, _, percent = example.partition("@")
+    meaning = f" ({percent} % of poses within {metres} m)"
     if front_door is FrontDoor.CLI:
-        return f"{spec.flag} {spec.example}", ""
+        return f"{spec.flag} {example}", meaning
     field_name = spec.words.removeprefix("the ").capitalize()
-    return str(
-        spec.example
-    ), f" in the {field_name} field of the page (options.{spec.key} in the API)"
+    return example, (
+        f"{meaning} in the {field_name} field of the page or as options.{spec.key} in the API"
+    )
 
 
 def _contents(

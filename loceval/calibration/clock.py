@@ -66,6 +66,7 @@ from loceval.calibration.motion import (
 )
 from loceval.core.arrays import FloatArray
 from loceval.core.geometry import compose_quat, conjugate_quat
+from loceval.core.quantities import plus_minus
 from loceval.errors import AlignmentError, AssociationError, InputError
 from loceval.registration.alignment import align_umeyama
 from loceval.registration.association import DEFAULT_MAX_GAP_NS
@@ -189,13 +190,14 @@ class TimeOffsetEstimate:
 
 
 def describe_offset(offset_s: float, sigma_s: float | None = None) -> str:
-    """Words for an offset: ``"the estimate lags the ground truth by 45.2 +/- 0.3 ms"``."""
-    ms = abs(offset_s) * 1e3
-    pm = "" if sigma_s is None else f" +/- {sigma_s * 1e3:.1f}"
+    """Words for an offset: ``"the estimate lags the ground truth by 45.2 ± 0.3 ms"``."""
     if offset_s == 0.0:
         return "the estimate's clock agrees with the ground truth's"
     verb = "lags" if offset_s < 0 else "leads"
-    return f"the estimate {verb} the ground truth by {ms:.1f}{pm} ms"
+    sigma_ms = None if sigma_s is None else sigma_s * 1e3
+    return (
+        f"the estimate {verb} the ground truth by {plus_minus(abs(offset_s) * 1e3, sigma_ms, 'ms')}"
+    )
 
 
 def estimate_time_offset(

@@ -77,6 +77,7 @@ from loceval.calibration.clockmodel import (
 from loceval.calibration.common import NS_PER_S, PoseSampler
 from loceval.calibration.motion import DriftSignals
 from loceval.core.arrays import BoolArray, FloatArray
+from loceval.core.quantities import plus_minus
 from loceval.errors import InputError
 from loceval.options import option
 from loceval.trajectory import Trajectory
@@ -316,26 +317,18 @@ def _step(line: Line, k: int, stamp_ns: int, span: tuple[float, float]) -> Clock
 
 
 def describe_rate(rate_ppm: float, sigma_ppm: float | None = None) -> str:
-    """Words for a rate: ``"runs 50.02 +/- 0.03 ppm fast"``."""
-    pm = "" if sigma_ppm is None else f" +/- {_digits(sigma_ppm)}"
+    """Words for a rate: ``"runs 50.02 ± 0.03 ppm fast"``."""
     way = "fast" if rate_ppm >= 0 else "slow"
-    return f"runs {_digits(abs(rate_ppm), sigma_ppm)}{pm} ppm {way}"
+    return f"runs {plus_minus(abs(rate_ppm), sigma_ppm, 'ppm', places=2)} {way}"
 
 
 def describe_step(step: ClockStep) -> str:
-    """Words for a step: ``"at 300.02 +/- 0.01 s its clock jumped ahead by 80.0 +/- 0.2 ms"``."""
+    """Words for a step: ``"at 300.02 ± 0.01 s its clock jumped ahead by 80.0 ± 0.2 ms"``."""
     way = "ahead" if step.size_s < 0 else "back"
     return (
-        f"at {step.at_s:.2f} +/- {step.sigma_at_s:.2f} s its clock jumped {way} by "
-        f"{abs(step.size_s) * 1e3:.1f} +/- {step.sigma_size_s * 1e3:.1f} ms"
+        f"at {plus_minus(step.at_s, step.sigma_at_s, 's')} its clock jumped {way} by "
+        f"{plus_minus(abs(step.size_s) * 1e3, step.sigma_size_s * 1e3, 'ms')}"
     )
-
-
-def _digits(value: float, sigma: float | None = None) -> str:
-    """A value with two significant digits of its sigma (or of itself)."""
-    basis = sigma if sigma is not None and sigma > 0 else abs(value)
-    places = 2 if basis <= 0 else max(0, min(4, 1 - math.floor(math.log10(basis))))
-    return f"{value:.{places}f}"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -23,6 +23,7 @@ from loceval.assessment.verdict import FailingSpan, Tolerance, Verdict, toleranc
 from loceval.calibration.offsets import OffsetCheck, check_offsets, parse_offset
 from loceval.core.arrays import IntArray
 from loceval.core.gaps import gap_threshold_ns, path_breaks
+from loceval.core.quantities import ARROW, format_duration
 from loceval.errors import InputError, LocevalError
 from loceval.evaluation.config import EvaluationConfig
 from loceval.metrics.excursions import Excursion, find_excursions
@@ -270,7 +271,7 @@ def evaluate(
     recorded = reference
     if config.reference_offset is not None:
         reference = reference.with_body_offset(config.reference_offset)
-        ref_notes.append("Device offset applied to the reference (rigid body -> sensor).")
+        ref_notes.append(f"Device offset applied to the reference (rigid body {ARROW} sensor).")
     min_gap_ns = round(config.max_gap_s * _NS_PER_S)
     gaps = reference.tracking_losses(min_gap_ns)
     if gaps:
@@ -278,9 +279,8 @@ def evaluate(
         ref_gap_s = gap_threshold_ns(reference.stamps_ns, min_gap_ns=min_gap_ns) / _NS_PER_S
         ref_notes.append(
             f"The reference has {len(gaps)} {'gap' if len(gaps) == 1 else 'gaps'} longer than "
-            f"{ref_gap_s:g} s "
-            f"({reference.loss_words}; longest {longest:.3f} s); estimate poses in them are not "
-            "evaluated."
+            f"{format_duration(ref_gap_s)} ({reference.loss_words}; longest "
+            f"{format_duration(longest)}); estimate poses in them are not evaluated."
         )
     results = []
     failed = list(failed_trials)
@@ -390,10 +390,10 @@ def _evaluate_one(
         own_loss = estimate.loss_words.replace("tracking loss", "its own tracking loss")
         notes.append(
             f"The estimate itself has {len(own_gaps)} {'gap' if len(own_gaps) == 1 else 'gaps'} "
-            f"longer than {own_gap_s:g} s "
-            f"({own_loss}; the longest, {(end - start) / _NS_PER_S:.2f} s, starts "
-            f"{abs(after_s):.2f} s {'after' if after_s >= 0 else 'before'} the reference's "
-            "first pose)."
+            f"longer than {format_duration(own_gap_s)} "
+            f"({own_loss}; the longest, {format_duration((end - start) / _NS_PER_S)}, starts "
+            f"{format_duration(abs(after_s))} {'after' if after_s >= 0 else 'before'} the "
+            "reference's first pose)."
         )
     alignment = align(
         matched.reference,

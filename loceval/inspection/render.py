@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 from typing import Final
 
+from loceval.core.quantities import ARROW, format_duration
 from loceval.inspection.model import NS, Inspection, SourceInspection
 
 __all__ = ["render_inspection_text"]
@@ -40,7 +41,7 @@ def _bag_lines(insp: Inspection) -> list[str]:
     lines = [
         f"{insp.path}  ({insp.storage_format}{', zipped' if insp.archive else ''})",
         (
-            f"  {insp.message_count} messages, {insp.duration_s:.3f} s: "
+            f"  {insp.message_count} messages, {format_duration(insp.duration_s)}: "
             f"{_stamp_text(insp.start_ns)} .. {_stamp_text(insp.end_ns)}"
         ),
         "",
@@ -115,7 +116,7 @@ def _summary(insp: Inspection, single: SourceInspection) -> list[tuple[str, str]
         rows += [
             ("start", _stamp_text(single.first_stamp_ns)),
             ("end", _stamp_text(single.last_stamp_ns)),
-            ("duration", f"{single.duration_s:.3f} s"),
+            ("duration", format_duration(single.duration_s)),
             ("rate", f"{single.rate_hz:.1f} Hz"),
         ]
     if single.length_m is not None:
@@ -146,7 +147,7 @@ def _urdf_lines(insp: Inspection) -> list[str]:
     if not insp.links:
         lines.append("  (none)")
     lines += ["", "joints:"]
-    lines.extend(f"  {j.name}  ({j.joint_type}): {j.parent} -> {j.child}" for j in insp.joints)
+    lines.extend(f"  {j.name}  ({j.joint_type}): {j.parent} {ARROW} {j.child}" for j in insp.joints)
     if not insp.joints:
         lines.append("  (none)")
     lines += ["", "trajectory sources: none (a URDF describes the device, use it as offset)"]

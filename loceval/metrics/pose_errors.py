@@ -313,7 +313,7 @@ def compute_rpe(
         msg = (
             f"The RPE delta {delta:g} {unit.value} is longer than the matched trajectory "
             f"({len(reference)} poses, {reference.length_m:.2f} m, "
-            f"{reference.duration_s:.2f} s); choose a smaller RPE delta."
+            f"{reference.span_words}); choose a smaller RPE delta."
         )
         raise MetricError(msg, option="rpe_delta")
     stamps = reference.stamps_ns[i]

@@ -32,6 +32,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from loceval.core.arrays import FloatArray, IntArray
+from loceval.core.quantities import format_duration
 from loceval.errors import AssociationError, InputError
 from loceval.metrics.pose_errors import ErrorSeries
 from loceval.readers.radio import Ranges
@@ -354,7 +355,7 @@ def evaluate_ranging(
     if dropped_gap:
         notes.append(
             f"{dropped_gap} of {total} ranges fall in reference gaps longer than "
-            f"{max_gap_ns / _NS_PER_S:g} s (tracking loss) and were not evaluated."
+            f"{format_duration(max_gap_ns / _NS_PER_S)} (tracking loss) and were not evaluated."
         )
     if unused:
         notes.append(f"{len(unused)} of {k} anchors have no evaluated range: {', '.join(unused)}.")

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
 from loceval.errors import InputError, ReaderError
+from loceval.readers._common import keeping_duplicate_stamps
 from loceval.readers.csv import CSV_KEYS, read_csv
 from loceval.readers.sniff import sniff_format
 from loceval.readers.source import SourceSpec, TrajectoryFormat, parse_source, refuse_special_file
@@ -30,6 +31,7 @@ if TYPE_CHECKING:
 __all__ = [
     "SourceSpec",
     "TrajectoryFormat",
+    "keeping_duplicate_stamps",
     "parse_source",
     "read_csv",
     "read_euroc",

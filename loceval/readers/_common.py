@@ -1,6 +1,17 @@
-"""What every reader does once it has raw arrays: validate, normalize, sort, de-duplicate."""
+"""What every reader does once it has raw arrays: validate, normalize, sort, de-duplicate.
+
+A repeated stamp is dropped (the first pose kept) unless the reading runs inside
+:func:`keeping_duplicate_stamps`: evo's command lines (``loceval ape``/``rpe``) keep every
+pose as evo does, each repeat then stamped 1 ns after the pose before it so that a
+trajectory's stamps stay strictly increasing (issue 44: EuRoC's V102 estimate repeats 4
+stamps, and evo's statistics count those poses).
+"""
 
 from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+from contextvars import ContextVar
 
 import numpy as np
 
@@ -8,10 +19,33 @@ from loceval.core.arrays import FloatArray, IntArray, StampsNs
 from loceval.errors import ReaderError
 from loceval.trajectory import MAX_COORDINATE_M, MIN_POSES, Trajectory
 
-__all__ = ["QUAT_NORM_TOLERANCE", "build_trajectory", "seconds_to_ns"]
+__all__ = [
+    "QUAT_NORM_TOLERANCE",
+    "build_trajectory",
+    "keeping_duplicate_stamps",
+    "seconds_to_ns",
+]
 
 QUAT_NORM_TOLERANCE = 1e-3
 """Quaternions whose norm is within this of 1 are normalized; others are rejected."""
+
+
+_KEEP_DUPLICATES: ContextVar[bool] = ContextVar("loceval_keep_duplicate_stamps", default=False)
+
+
+@contextlib.contextmanager
+def keeping_duplicate_stamps() -> Iterator[None]:
+    """Within it, readers keep a pose whose stamp repeats the one before (as evo does).
+
+    Each repeat is stamped 1 ns after the pose before it (the second of three equal stamps
+    1 ns later, the third 2 ns) and a warning says so; where that would reach the next
+    distinct stamp, the repeats are dropped as usual.
+    """
+    token = _KEEP_DUPLICATES.set(True)
+    try:
+        yield
+    finally:
+        _KEEP_DUPLICATES.reset(token)
 
 
 def seconds_to_ns(seconds: FloatArray) -> StampsNs:
@@ -140,6 +174,15 @@ def _sorted_unique(
     if n > 1:
         keep = np.concatenate(([True], np.diff(stamps_ns) != 0))
         dropped = int(n - keep.sum())
+        if dropped and _KEEP_DUPLICATES.get():
+            nudged = _nudged(stamps_ns, keep)
+            if nudged is not None:
+                notes.append(
+                    f"{where}: {dropped} {'pose repeats' if dropped == 1 else 'poses repeat'} "
+                    "the stamp of the pose before; kept as evo keeps them (each stamped 1 ns "
+                    "after the one before)."
+                )
+                return nudged, positions_xyz, quat_xyzw, cov6
         if dropped:
             stamps_ns, positions_xyz = stamps_ns[keep], positions_xyz[keep]
             quat_xyzw = None if quat_xyzw is None else quat_xyzw[keep]
@@ -149,6 +192,19 @@ def _sorted_unique(
                 "stamp dropped (first one kept)."
             )
     return stamps_ns, positions_xyz, quat_xyzw, cov6
+
+
+def _nudged(stamps_ns: StampsNs, first: np.ndarray) -> StampsNs | None:
+    """Stamp each repeat 1 ns after the pose before it; None if that reaches the next stamp.
+
+    Args:
+        stamps_ns: (N,) sorted stamps with repeats.
+        first: (N,) True where a stamp differs from the one before (a run of repeats starts).
+    """
+    index = np.arange(stamps_ns.shape[0])
+    run_start = np.maximum.accumulate(np.where(first, index, 0))
+    nudged: StampsNs = stamps_ns + (index - run_start)
+    return nudged if bool((np.diff(nudged) > 0).all()) else None
 
 
 def _reject_nonfinite(values: FloatArray, lines: IntArray, *, where: str, what: str) -> None:

@@ -25,6 +25,7 @@ import numpy as np
 
 from loceval.core.arrays import BoolArray, FloatArray, StampsNs
 from loceval.core.geometry import SimilarityTransform, slerp_pairs
+from loceval.core.quantities import ARROW, ARROW_BACK
 from loceval.errors import ReaderError
 
 __all__ = [
@@ -85,7 +86,7 @@ class TfLink:
         m = stamps.shape[0]
         if m == 0 or translations.shape != (m, 3) or quats.shape != (m, 4):
             msg = (
-                f"tf link {self.parent!r} -> {self.child!r} needs (M,) stamps with M >= 1, "
+                f"tf link {self.parent!r} {ARROW} {self.child!r} needs (M,) stamps with M >= 1, "
                 f"(M, 3) translations and (M, 4) quaternions, got {stamps.shape!r}, "
                 f"{translations.shape!r} and {quats.shape!r}; pass one row per sample."
             )
@@ -96,7 +97,7 @@ class TfLink:
         invalid = int(m - valid.sum())
         if invalid == m:
             msg = (
-                f"tf link {self.parent!r} -> {self.child!r} holds only NaN, inf or zero-"
+                f"tf link {self.parent!r} {ARROW} {self.child!r} holds only NaN, inf or zero-"
                 "quaternion samples; fix the publisher or pick a chain without this link."
             )
             raise ReaderError(msg)
@@ -128,8 +129,8 @@ class TfLink:
 
     @property
     def name(self) -> str:
-        """Return ``"parent -> child"``."""
-        return f"{self.parent} -> {self.child}"
+        """Return ``"parent → child"``."""
+        return f"{self.parent} {ARROW} {self.child}"
 
     @property
     def median_interval_ns(self) -> int:
@@ -337,16 +338,16 @@ def find_chain(buffer: TfBuffer, parent: str, child: str) -> tuple[ChainStep, ..
 
 
 def describe_chain(steps: tuple[ChainStep, ...]) -> str:
-    """Return a chain as ``"map -> odom -> base_link"`` (``<-`` marks an inverted link)."""
+    """Return a chain as ``"map → odom → base_link"`` (``←`` marks an inverted link)."""
     if not steps:
         return "(identity)"
     first = steps[0]
     parts = [first.link.child if first.inverted else first.link.parent]
     for step in steps:
         if step.inverted:
-            parts.append(f"<- {step.link.parent}")
+            parts.append(f"{ARROW_BACK} {step.link.parent}")
         else:
-            parts.append(f"-> {step.link.child}")
+            parts.append(f"{ARROW} {step.link.child}")
     return " ".join(parts)
 
 
@@ -484,7 +485,7 @@ def _ancestors(buffer: TfBuffer, frame: str) -> list[str]:
         parent = links[0].parent
         if parent in seen:
             msg = (
-                f"The tf links form a loop through {parent!r} ({' -> '.join(reversed(chain))}"
+                f"The tf links form a loop through {parent!r} ({f' {ARROW} '.join(reversed(chain))}"
                 "); fix the publishers so that the frames form a tree."
             )
             raise ReaderError(msg)

@@ -22,6 +22,7 @@ import numpy as np
 from loceval.core.arrays import FloatArray, IntArray, StampsNs
 from loceval.core.gaps import gap_threshold_ns
 from loceval.core.geometry import slerp_pairs
+from loceval.core.quantities import format_duration
 from loceval.errors import AssociationError
 from loceval.options import AssociationMethod, number_default
 from loceval.trajectory import Trajectory
@@ -246,7 +247,8 @@ def association_notes(matched: Association, total: int, loss: str = "tracking lo
     if matched.dropped_gap:
         note = (
             f"{matched.dropped_gap} of {total} estimate poses fall in reference gaps longer "
-            f"than {matched.max_gap_ns / _NS_PER_S:g} s ({loss}) and were not evaluated."
+            f"than {format_duration(matched.max_gap_ns / _NS_PER_S)} ({loss}) and were not "
+            "evaluated."
         )
         if matched.dropped_gap > total // 2:
             note += (
@@ -258,6 +260,6 @@ def association_notes(matched: Association, total: int, loss: str = "tracking lo
     if matched.dropped_unmatched:
         notes.append(
             f"{matched.dropped_unmatched} of {total} estimate poses have no reference pose "
-            f"within {matched.max_dt_ns / _NS_PER_S:g} s and were not evaluated."
+            f"within {format_duration(matched.max_dt_ns / _NS_PER_S)} and were not evaluated."
         )
     return notes

@@ -16,6 +16,7 @@ from loceval.evaluation import EvaluationResult
 from loceval.readers import TrajectoryFormat, parse_source
 from service.cli.output import emit
 from service.cli.parser import EXIT_GATE
+from service.cli.progress import terminal_progress
 from service.jobs.mapjob import map_source
 from service.jobs.options import (
     artifact_names,
@@ -84,7 +85,10 @@ def run_evaluate(args: argparse.Namespace) -> int:
     names = args.name or unique_names([default_name(s) for s in est_specs])
     # The checksums are computed in a thread while the files are read (hashlib and file
     # reads release the GIL); the evaluation reads the records after the files.
-    with ThreadPoolExecutor(max_workers=1) as hashing:
+    with (
+        ThreadPoolExecutor(max_workers=1) as hashing,
+        terminal_progress(quiet=args.json) as progress,
+    ):
 
         def provenance(role: str, spec: SourceSpec) -> Mapping[str, object]:
             return _PendingProvenance(hashing.submit(file_provenance, role, spec))
@@ -108,7 +112,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             the_map=the_map,
             baseline=_baseline(args),
         )
-        result = run_job(job, args.out)
+        result = run_job(job, args.out, progress)
     if isinstance(result, EvaluationResult) and args.building is not None:
         from exporters.cad.spaces import placed_on_building  # noqa: PLC0415  (CAD libraries)
 

@@ -20,20 +20,18 @@ from typing import Any, Final, NoReturn
 from loceval import __version__
 from loceval.errors import InputError
 from loceval.options import AUTO, OPTIONS, OptionKind, OptionSpec
-from service.cli.evo.hints import EVALUATE_EPILOG, unknown_arguments_message
+from service.cli.evo.hints import EVALUATE_EPILOG, evo_hint
 from service.cli.evo.parser import add_evo_commands
+from service.cli.usage import EXIT_INPUT, fail, unknown_arguments
 
 __all__ = ["EXIT_BUG", "EXIT_GATE", "EXIT_INPUT", "build_parser", "names", "numbers"]
 
-EXIT_INPUT = 1
 EXIT_BUG = 2
 EXIT_GATE = 3
 """The gate closed: ``--fail-on`` named a condition that holds (the last line says which)."""
 
-_DESCRIPTION = (
-    "The loceval command line: evaluate, ape, rpe, res, ranging, inspect, demo, report, serve, "
-    "worker, keys."
-)
+_DESCRIPTION = "The loceval command line: {commands}."
+"""The top-level description; its list of commands is read from the parser (issue 44)."""
 
 
 class _Parser(argparse.ArgumentParser):
@@ -51,14 +49,15 @@ class _Parser(argparse.ArgumentParser):
     def parse_known_args(  # type: ignore[override]
         self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
     ) -> tuple[argparse.Namespace, list[str]]:
-        """Parse; a command with ``unknown_message`` reports unknown arguments with its usage.
+        """Parse; an argument nobody took is one error line naming the nearest valid flag.
 
-        Without it argparse hands them up to ``loceval``, which prints the top-level usage.
+        Each command answers for its own arguments (``loceval evaluate: error: unknown
+        option --algin; did you mean --align?``), not argparse's top-level usage; a command
+        with ``flag_hint`` says what it calls evo's flags.
         """
         parsed, extras = super().parse_known_args(args, namespace)
-        explain = getattr(self, "unknown_message", None)
-        if extras and explain is not None:
-            self.error(explain(extras))
+        if extras:
+            fail(self, unknown_arguments(self, extras, hint=getattr(self, "flag_hint", None)))
         return parsed, extras
 
 
@@ -182,7 +181,7 @@ def add_option(parser: argparse.ArgumentParser, spec: OptionSpec) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of every subcommand."""
-    parser = _Parser(prog="loceval", description=_DESCRIPTION)
+    parser = _Parser(prog="loceval")
     parser.add_argument("--version", action="version", version=f"loceval {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     _add_evaluate(sub)
@@ -202,6 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_ranging(sub)
     _add_report(sub)
     _add_service(sub)
+    parser.description = _DESCRIPTION.format(commands=", ".join(sub.choices))
     return parser
 
 
@@ -216,7 +216,7 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
         ),
     )
     ev.epilog = EVALUATE_EPILOG
-    ev.unknown_message = unknown_arguments_message
+    ev.flag_hint = evo_hint
     ev.add_argument("reference", help="the ground truth source")
     ev.add_argument("estimates", nargs="+", metavar="estimate", help="estimate sources")
     ev.add_argument(

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 from loceval.readers import SourceSpec, TrajectoryFormat, parse_source
 from service.cli.evaluate import export_options, gate_exit
 from service.cli.output import emit
+from service.cli.progress import terminal_progress
 from service.jobs.options import (
     artifact_names,
     config_from_options,
@@ -64,7 +65,8 @@ def run_ranging(args: argparse.Namespace) -> int:
             ),
         ),
     )
-    result = run_job(job, args.out)
+    with terminal_progress(quiet=args.json) as progress:
+        result = run_job(job, args.out, progress)
     if args.json:
         from exporters.cad.jsondoc import finite_json  # noqa: PLC0415
 

@@ -7,6 +7,7 @@ from typing import Any, cast
 
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.core.lengths import LengthUnit, length_unit
+from loceval.core.quantities import ARROW, AT_MOST, format_duration
 from loceval.evaluation import EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries, ErrorStats, RPEUnit
 from service.cli.trials import trial_lines
@@ -20,7 +21,7 @@ _ROWS = (("RMSE", "rmse"), ("MEAN", "mean"), ("MEDIAN", "median"), ("STD", "std"
 def format_tables(result: EvaluationResult) -> str:
     """Return the framework paper's Tables 1-2 layout: one column per estimate."""
     ref = result.reference
-    head = f"Reference {ref.name!r}: {len(ref)} poses, {ref.duration_s:.1f} s, "
+    head = f"Reference {ref.name!r}: {len(ref)} poses, {ref.span_words}, "
     lines = [head + f"{ref.length_m:.1f} m ({ref.source})"]
     for e in result.estimates:
         scale = e.alignment.transform
@@ -43,7 +44,7 @@ def format_tables(result: EvaluationResult) -> str:
     lines += ["", "Share of poses within (ATE)"]
     for t in result.config.thresholds_m:
         shares = [f"{e.within[t] * 100:.1f} %" for e in result.estimates]
-        lines.append(_row(f"<= {t:g} m", shares))
+        lines.append(_row(f"{AT_MOST} {t:g} m", shares))
     drifts = [_stats(e.drift) for e in result.estimates]
     if any(d is not None for d in drifts):
         cells = ["-" if d is None else f"{d.mean:.2f} %" for d in drifts]
@@ -146,16 +147,27 @@ def _verdict_lines(result: EvaluationResult) -> list[str]:
 
 
 def _excursion_lines(result: EvaluationResult) -> list[str]:
-    """One line per excursion: "out of the room for 45 s, 38 m: 0.02 -> 0.21 m, 0.50 %"."""
+    """One line per excursion, its drift per metre travelled outside as a percentage.
+
+    ``"out of the room for 45.0 s over 45.0 m: error 0.000 m on leaving → 0.225 m at
+    re-entry, drift 0.50 % of the distance travelled outside"``: the percentage is the
+    error's change over the excursion's own path (issue 44 read "0.06 % of the path" as a
+    share of the whole run's path).
+    """
     lines = []
     for e in result.estimates:
         for x in e.excursions:  # a few per run
-            before = "-" if x.error_before_m is None else f"{x.error_before_m:.2f}"
-            after = "-" if x.error_after_m is None else f"{x.error_after_m:.2f}"
-            drift = "" if x.drift_per_m is None else f", {x.drift_per_m * 100:.2f} % of the path"
+            before = "-" if x.error_before_m is None else f"{x.error_before_m:.3f} m"
+            after = "-" if x.error_after_m is None else f"{x.error_after_m:.3f} m"
+            drift = (
+                ""
+                if x.drift_per_m is None
+                else f", drift {x.drift_per_m * 100:.2f} % of the distance travelled outside"
+            )
             lines.append(
-                f"{e.name}: out of the room for {(x.end_ns - x.start_ns) / 1e9:.0f} s, "
-                f"{x.path_length_m:.0f} m: {after} m at re-entry after {before} m on leaving{drift}"
+                f"{e.name}: out of the room for {format_duration((x.end_ns - x.start_ns) / 1e9)} "
+                f"over {x.path_length_m:.1f} m: error {before} on leaving {ARROW} {after} at "
+                f"re-entry{drift}"
             )
     return ["", "Excursions", *(f"  {line}" for line in lines)] if lines else []
 

@@ -9,6 +9,7 @@ topic's messages are judged one by one (:mod:`loceval.maps.history`).
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -42,7 +43,7 @@ class MapSource:
 
 
 def map_source(
-    source: str | None,
+    source: str | os.PathLike[str] | None,
     plan: ExportOptions | None,
     *,
     estimate: str | None,
@@ -50,6 +51,10 @@ def map_source(
     display: str | None = None,
 ) -> MapSource | None:
     """Check the map options together: a map needs a plan; an estimate name needs a map.
+
+    ``source`` is read the same way from both front doors: the CLI's ``--map`` (a path,
+    ``run.mcap@/map`` included) and the API's dataset file with its selector, both as text
+    (:func:`loceval.maps.reading.split_bag_source` tells a file from ``BAG@TOPIC``).
 
     Raises:
         InputError: a map without a building plan, or a map estimate without a map.
@@ -65,7 +70,7 @@ def map_source(
             "--building PLAN.dxf or a model to cut; the API: options.building)."
         )
         raise InputError(msg, option="map")
-    return MapSource(source, plan, estimate, clutter_m, display)
+    return MapSource(os.fspath(source), plan, estimate, clutter_m, display)
 
 
 def measure_map(result: EvaluationResult, source: MapSource) -> MapEvaluation:

@@ -72,7 +72,7 @@ def test_the_dxf_has_map_and_excursion_layers(result: EvaluationResult) -> None:
     assert walls + clutter == len(found.cells_xy)
     assert clutter == found.clutter_cells
     (label,) = msp.query('TEXT[layer=="excursions"]')
-    assert label.dxf.text == "slam excursion: 45 s, 45 m, error 0.00 -> 0.22 m"
+    assert label.dxf.text == "slam excursion: 45 s, 45 m, error 0.00 → 0.22 m"
     assert len(msp.query('POLYLINE[layer=="excursions"]')) == 1
 
 
@@ -161,7 +161,7 @@ def test_the_ifc_has_the_map_and_excursions_and_validates(result: EvaluationResu
     assert sum(counts.values()) == len(found.cells_xy)
     assert counts["map clutter"] == found.clutter_cells
     (excursion,) = by_type["excursion"]
-    assert excursion.Name == "slam excursion: 45 s, 45 m, error 0.00 -> 0.22 m"
+    assert excursion.Name == "slam excursion: 45 s, 45 m, error 0.00 → 0.22 m"
     drift = ifcopenshell.util.element.get_psets(excursion)["Loceval_Excursion"]
     (expected,) = result.estimates[0].excursions
     assert drift["DriftPerMetre"] == pytest.approx(expected.drift_per_m)
@@ -177,7 +177,7 @@ def test_the_3dm_and_glb_mark_the_excursion_like_the_dxf(result: EvaluationResul
     doc = ezdxf.read(io.StringIO(render_artifact("paths.dxf", result, options).decode()))
     (polyline,) = doc.modelspace().query('POLYLINE[layer=="excursions"]')
     dxf_xyz = np.array([v.dxf.location for v in polyline.vertices])
-    label = "slam excursion: 45 s, 45 m, error 0.00 -> 0.22 m"
+    label = "slam excursion: 45 s, 45 m, error 0.00 → 0.22 m"
 
     model = rhino3dm.File3dm.FromByteArray(render_artifact("paths.3dm", result, options))
     (layer,) = [k for k, layer in enumerate(model.Layers) if layer.Name == "excursions"]
@@ -192,7 +192,7 @@ def test_the_3dm_and_glb_mark_the_excursion_like_the_dxf(result: EvaluationResul
     gltf = pygltflib.GLTF2.load_from_bytes(render_artifact("paths.glb", result, options))
     (node,) = [n for n in gltf.nodes if n.name == "excursions"]
     (primitive,) = gltf.meshes[node.mesh].primitives
-    assert primitive.mode == pygltflib.LINE_STRIP
+    assert primitive.mode == pygltflib.LINES
     assert gltf.accessors[primitive.attributes.POSITION].count == len(dxf_xyz)
     (record,) = node.extras["excursions"]
     assert record["label"] == label
@@ -210,7 +210,7 @@ def test_the_viewer_scene_has_the_excursion_the_dxf_draws(result: EvaluationResu
     scene = viewer_scene(result, options)
     (shown,) = scene["excursions"]  # type: ignore[misc]
     assert shown["path"] == 1
-    assert shown["label"] == "slam excursion: 45 s, 45 m, error 0.00 -> 0.22 m"
+    assert shown["label"] == "slam excursion: 45 s, 45 m, error 0.00 → 0.22 m"
     xyz = np.array(shown["xyz"]).reshape(-1, 3) + np.array(scene["base"])
     np.testing.assert_allclose(xyz, dxf_xyz, atol=1e-4)  # the viewer rounds to 0.1 mm
     assert shown["drift_per_m"] == result.estimates[0].excursions[0].drift_per_m
@@ -222,7 +222,7 @@ def test_the_report_shows_the_map_over_time(
     """A bag topic's messages: one table row each (the unjudged one with its reason), a plot."""
     from exporters.plots.mapplan import MAP_HISTORY_KEY, plot_map_history
     from loceval.maps import OccupancyGrid, evaluate_map_source
-    from tests.loceval.maps.test_map_history import _write_bag
+    from tests.mapfactory import write_map_bag
 
     plan = office_plan()
     rng = np.random.default_rng(3)
@@ -231,7 +231,7 @@ def test_the_report_shows_the_map_over_time(
         for s, k in ((30, 0.995), (60, 0.99))
     ]
     empty = OccupancyGrid(np.full(grids[0][1].shape, -1, dtype=np.int8), 0.05)
-    bag = _write_bag(tmp_path_factory.mktemp("bag"), [(10, empty), *grids])
+    bag = write_map_bag(tmp_path_factory.mktemp("bag"), [(10, empty), *grids])
     t0 = int(result.reference.stamps_ns[0])
     found = evaluate_map_source(f"{bag}@/map", plan, SimilarityTransform.identity(), t0_ns=t0)
     with_history = replace(result, map=found)

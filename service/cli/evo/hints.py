@@ -8,10 +8,9 @@ pure Python: the parser imports it without numpy.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Final
 
-__all__ = ["EVALUATE_EPILOG", "EVO_EQUIVALENTS", "unknown_arguments_message"]
+__all__ = ["EVALUATE_EPILOG", "EVO_EQUIVALENTS", "evo_hint"]
 
 EVALUATE_EPILOG: Final = (
     "evo's command lines (evo_ape tum gt.txt est.txt -as) run as `loceval ape` and "
@@ -48,26 +47,15 @@ EVO_EQUIVALENTS: Final[dict[str, str]] = {
 """evo's flag -> what ``loceval evaluate`` calls the same thing."""
 
 
-def _flag(argument: str) -> str:
-    """Return the flag of ``--flag=value``."""
-    return argument.split("=", 1)[0]
+def evo_hint(flag: str) -> str | None:
+    """Return what ``loceval evaluate`` calls evo's ``flag``, or None for a flag evo lacks.
 
-
-def unknown_arguments_message(extras: Sequence[str]) -> str:
-    """Return argparse's "unrecognized arguments" message, with the loceval names of evo's flags.
-
-    Args:
-        extras: the arguments ``loceval evaluate`` did not recognise, in order.
+    The one-line message of an unknown argument (:func:`service.cli.usage.unknown_arguments`)
+    says it in place of the nearest option: ``-as`` is no typo of ``--align``.
     """
-    message = f"unrecognized arguments: {' '.join(extras)}"
-    hints = [
-        f"evo's {_flag(a)} is {EVO_EQUIVALENTS[_flag(a)]}"
-        for a in extras
-        if _flag(a) in EVO_EQUIVALENTS
-    ]
-    if not hints:
-        return message
+    if flag not in EVO_EQUIVALENTS:
+        return None
     return (
-        f"{message}. In loceval evaluate, {'; '.join(hints)}. "
-        "Or keep evo's command line: loceval ape tum GT EST -as (and loceval rpe)."
+        f"evo's {flag} is {EVO_EQUIVALENTS[flag]} in loceval evaluate, or keep evo's "
+        "command line: loceval ape tum GT EST -as (and loceval rpe)"
     )

@@ -25,7 +25,7 @@ from loceval.metrics.relations import (
     rpe_series,
     scale_only,
 )
-from loceval.readers import SourceSpec, TrajectoryFormat
+from loceval.readers import SourceSpec, TrajectoryFormat, keeping_duplicate_stamps
 from loceval.registration.alignment import AlignMethod, AlignWindow
 from loceval.registration.association import AssociationMethod
 from loceval.registration.stamps import match_nearest_seconds
@@ -266,14 +266,20 @@ def _run(args: argparse.Namespace, *, rpe: bool) -> EvoRun:
     config = _config(args, method)
     # evo's --t_start/--t_end select reference poses; estimate poses match them within
     # --t_max_diff (so one may lie just outside the window).
-    reference = _window(ref_source.read(stamp="header"), args.t_start, args.t_end)
-    estimate = est_source.read(stamp="header")
+    with keeping_duplicate_stamps():  # evo keeps a pose whose stamp repeats; so do its commands
+        reference = _window(ref_source.read(stamp="header"), args.t_start, args.t_end)
+        estimate = est_source.read(stamp="header")
     matched_ref, matched_est, note = _matched(reference, estimate, args)
     if args.correct_scale and not args.align and not args.align_origin:
         matched_est = scale_only(matched_ref, matched_est, poses=config.align_first.poses)
     inputs = [dict(ref_source.provenance), dict(est_source.provenance)]
     result = evaluate(matched_ref, [matched_est], config, inputs=inputs)
-    notes = [*reference.warnings, *([note] if note else []), *_gap_notes(reference)]
+    notes = [
+        *reference.warnings,
+        *estimate.warnings,
+        *([note] if note else []),
+        *_gap_notes(reference),
+    ]
     # The core saw the matched poses only: its gaps are the estimate's; the full
     # reference's are named above.
     kept = [w for w in result.reference_warnings if not w.startswith("The reference has")]
@@ -376,10 +382,28 @@ def _report(run: EvoRun, args: argparse.Namespace) -> int:
         path = write_result_zip(run, args.save_results)
         if not args.silent:
             emit(f"Results written to {path}")
-    if args.plot or args.save_plot is not None:
-        path = _write_report(run, args.save_plot)
+    if args.save_plot is not None:
+        for path in _write_plots(run, args.save_plot):
+            emit(f"Plot written to {path}", file=sys.stdout)
+    if args.plot:
+        path = _write_report(run)
         emit(f"Report written to {path}", file=sys.stdout)
     return 0
+
+
+def _write_plots(run: EvoRun, save_plot: Path) -> tuple[Path, ...]:
+    """Write evo's two figures at ``--save_plot`` (its suffix the format, as evo)."""
+    from exporters.plots.evo import write_error_plots  # noqa: PLC0415  (matplotlib)
+
+    return write_error_plots(
+        save_plot,
+        title=run.title,
+        label=str(run.info["label"]),
+        series=run.series,
+        at_pose=run.pairs_second,
+        reference=run.reference,
+        estimate=run.estimate,
+    )
 
 
 def _verbose(run: EvoRun) -> str:
@@ -394,14 +418,11 @@ def _verbose(run: EvoRun) -> str:
     )
 
 
-def _write_report(run: EvoRun, save_plot: Path | None) -> Path:
-    """Write loceval's report beside ``--save_plot`` (its suffix dropped) or in the cwd."""
+def _write_report(run: EvoRun) -> Path:
+    """Write loceval's report (``-p``: no window to show evo's plots in) in the cwd."""
     from exporters import ExportOptions, write_artifacts  # noqa: PLC0415
 
-    if save_plot is not None:
-        folder = save_plot.with_suffix("") if save_plot.suffix else save_plot
-    else:
-        folder = Path.cwd() / f"loceval_{run.metric}_report"
+    folder = Path.cwd() / f"loceval_{run.metric}_report"
     title = f"{run.metric.upper()}: {run.result.reference.name} vs {run.result.estimates[0].name}"
     options = ExportOptions(evaluation_id=folder.name, title=title)
     written = write_artifacts(run.result, folder, options, names=["report.html"])

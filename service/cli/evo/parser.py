@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Final
 
+from service.cli.usage import EXIT_INPUT, fail, unknown_arguments
+
 __all__ = ["FORMATS", "RELATIONS", "UNSUPPORTED", "add_evo_commands"]
 
 FORMATS: Final = ("tum", "kitti", "euroc", "bag", "bag2", "mcap")
@@ -23,9 +25,6 @@ RELATIONS: Final = ("full", "trans_part", "rot_part", "angle_deg", "angle_rad", 
 
 DELTA_UNITS: Final = ("f", "d", "r", "m")
 """frames, degrees, radians, metres (evo's ``--delta_unit``)."""
-
-_EXIT_INPUT: Final = 1
-"""The exit code of bad input (``service.cli.parser.EXIT_INPUT``, not imported: a cycle)."""
 
 UNSUPPORTED: Final[dict[str, str]] = {
     "--plot_mode": "the report draws plan and side views",
@@ -55,27 +54,23 @@ class _EvoParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> Any:  # noqa: ANN401  (NoReturn on argparse's side)
         self.print_usage(sys.stderr)
-        self.exit(_EXIT_INPUT, f"{self.prog}: error: {message}\n")
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {message}\n")
 
     def parse_known_args(  # type: ignore[override]
         self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
     ) -> tuple[argparse.Namespace, list[str]]:
-        """Parse; an argument nobody took is an error naming it (and why, for evo's own)."""
+        """Parse; an argument nobody took is one error line naming it (and why, for evo's own)."""
         parsed, extras = super().parse_known_args(args, namespace)
         if extras and getattr(self, "strict", False):
-            self.error(_unknown(extras))
+            fail(self, unknown_arguments(self, extras, hint=_unsupported))
         return parsed, extras
 
 
-def _unknown(extras: Sequence[str]) -> str:
-    for argument in extras:
-        flag = argument.split("=", 1)[0]
-        if flag in UNSUPPORTED:
-            return f"evo's {flag} is not supported by loceval: {UNSUPPORTED[flag]}."
-    flags = [a for a in extras if a.startswith("-")]
-    if flags:
-        return f"unrecognized argument {flags[0]} (see --help for the flags evo's users know)"
-    return f"unrecognized arguments: {' '.join(extras)}"
+def _unsupported(flag: str) -> str | None:
+    """Return why loceval does not take evo's ``flag``, or None for a flag evo lacks too."""
+    if flag not in UNSUPPORTED:
+        return None
+    return f"evo's {flag} is not supported by loceval: {UNSUPPORTED[flag]}"
 
 
 def _common(parser: argparse.ArgumentParser, *, rpe: bool) -> None:
@@ -134,7 +129,8 @@ def _common(parser: argparse.ArgumentParser, *, rpe: bool) -> None:
     )  # fmt: skip
     out.add_argument(
         "--save_plot", type=Path, default=None, metavar="PATH",
-        help="write the report into this folder (its suffix dropped)",
+        help="write the plots as evo does: PATH.pdf one PDF of both, PATH.png (.svg ...) "
+        "PATH_raw.png and PATH_map.png, no suffix PNG",
     )  # fmt: skip
     out.add_argument(
         "--save_results", type=Path, default=None, metavar="FILE.zip",

@@ -60,7 +60,7 @@ def expected_y_up_m(result: EvaluationResult, options: ExportOptions) -> list[np
 
 
 def test_nodes_meshes_materials(two_estimates: EvaluationResult):
-    """A node, mesh and material per trajectory first, named, LINE_STRIP, palette colour."""
+    """A node, mesh and material per trajectory first, named, LINES, palette colour."""
     model = load(gltf.export_glb(two_estimates, ExportOptions(evaluation_id="ev-42")))
     names = [n.name for n in model.nodes]
     assert names[:5] == [*NAMES, "RTAB-Map ATE", "ISAAC ATE"]
@@ -76,8 +76,10 @@ def test_nodes_meshes_materials(two_estimates: EvaluationResult):
     )
     for node, mesh in zip(model.nodes[:3], model.meshes[:3], strict=True):
         (primitive,) = mesh.primitives
-        assert primitive.mode == pygltflib.LINE_STRIP
+        assert primitive.mode == pygltflib.LINES
         acc = model.accessors[primitive.attributes.POSITION]
+        pairs = accessor(model, primitive.indices).ravel()  # the polyline: 0 1, 1 2, ...
+        np.testing.assert_array_equal(pairs, np.repeat(np.arange(acc.count), 2)[1:-1])
         assert acc.componentType == pygltflib.FLOAT
         assert acc.type == pygltflib.VEC3
         data = accessor(model, primitive.attributes.POSITION)
@@ -137,19 +139,46 @@ def test_always_metres(two_estimates: EvaluationResult):
 
 
 def test_trimesh_reads_the_building_back(tmp_path: Path, two_estimates: EvaluationResult):
-    """trimesh reads the scene and its building (trimesh 5 skips LINE_STRIP primitives)."""
+    """trimesh reads the scene and its building, beside the paths."""
     path = tmp_path / "building.stl"
     trimesh.creation.box(extents=(4000.0, 3000.0, 2500.0)).export(path)
     data = gltf.export_glb(two_estimates, ExportOptions(building=path))
     scene = trimesh.load(io.BytesIO(data), file_type="glb")
-    assert list(scene.geometry) == ["building"]
+    assert "building" in scene.geometry
+    (node,) = scene.graph.geometry_nodes["building"]
+    placed = scene.geometry["building"].copy().apply_transform(scene.graph[node][0])
     # local geometry is Z-up model metres minus the base point; the node matrix adds the
     # base point back and turns it Y-up in the scene
     base = place_evaluation(two_estimates, ExportOptions()).base_point_m
     local = scene.geometry["building"].bounds
     box = np.array([[-2.0, -1.5, -1.25], [2.0, 1.5, 1.25]])
     np.testing.assert_allclose(local, box - base, atol=1e-6)
-    np.testing.assert_allclose(scene.bounds, [[-2.0, -1.25, -1.5], [2.0, 1.25, 1.5]], atol=1e-6)
+    np.testing.assert_allclose(placed.bounds, [[-2.0, -1.25, -1.5], [2.0, 1.25, 1.5]], atol=1e-6)
+
+
+def test_trimesh_reads_every_path(two_estimates: EvaluationResult, validate: Validator) -> None:
+    """trimesh loads each path as a Path3D with all its vertices; the validator finds no error.
+
+    Issue 44, item 12: the paths were LINE_STRIP primitives, which trimesh 5 skips, so
+    paths.glb opened empty in the mission's own mesh library. LINES (indexed 0 1, 1 2, ...)
+    load in trimesh as one polyline per piece, and three.js' GLTFLoader draws them as
+    LineSegments.
+    """
+    data = gltf.export_glb(two_estimates, ExportOptions(evaluation_id="ev-42"))
+    model = load(data)
+    scene = trimesh.load(io.BytesIO(data), file_type="glb")
+    paths = [m for m in model.meshes if m.name in {*NAMES, "RTAB-Map ATE", "ISAAC ATE"}]
+    assert len(paths) == 5
+    for mesh in paths:
+        counts = [model.accessors[p.attributes.POSITION].count for p in mesh.primitives]
+        names = [mesh.name] + [f"{mesh.name}_{k}" for k in range(1, len(counts))]
+        for name, count in zip(names, counts, strict=True):
+            path = scene.geometry[name]
+            assert isinstance(path, trimesh.path.Path3D), name
+            assert len(path.vertices) == count
+            assert len(path.entities) == 1  # one polyline, not count - 1 pieces
+            np.testing.assert_array_equal(path.entities[0].points, np.arange(count))
+    assert validate(data)["issues"]["numErrors"] == 0
 
 
 @pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl", ".glb"])

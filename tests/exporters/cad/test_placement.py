@@ -179,7 +179,7 @@ class TestNamesAndColours:
     def test_ate_bins(self):
         """Thresholds give bins from green to red with readable labels."""
         bins = ate_bins((0.10, 0.05, 0.15))
-        assert [b.label for b in bins] == ["<= 0.05 m", "0.05-0.1 m", "0.1-0.15 m", "> 0.15 m"]
+        assert [b.label for b in bins] == ["≤ 0.05 m", "0.05-0.1 m", "0.1-0.15 m", "> 0.15 m"]
         assert bins[0].color_rgb[1] > bins[0].color_rgb[0]
         assert bins[-1].color_rgb[0] > bins[-1].color_rgb[1]
 

@@ -243,7 +243,7 @@ def test_warnings_are_listed(rng: np.random.Generator) -> None:
     warnings = html_tables(html)["table" + str(len(html_tables(html)) - 1)]
     text = " ".join(" ".join(row) for row in warnings)
     assert "OptiTrack (reference)" in text
-    assert "gaps longer than 0.1 s" in text
+    assert "gaps longer than 100 ms" in text
     assert "fall in reference gaps" in text
 
 

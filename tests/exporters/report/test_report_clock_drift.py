@@ -38,17 +38,17 @@ def test_rows_words_and_plot_of_a_drift_not_applied(drifting: EvaluationResult) 
     rows = _rows(section.rows)
     assert rows["Clock drift given"] == "+0 ppm"
     found = re.fullmatch(
-        r"([-+]\d+\.\d+) ± (\d+\.\d+) ppm", rows["Clock drift estimated (1 sigma)"]
+        r"([-+]\d+(?:\.\d+)?) ± (\d+(?:\.\d+)?) ppm", rows["Clock drift estimated (1 sigma)"]
     )
     assert found is not None
     rate, sigma = float(found[1]), float(found[2])
     assert abs(rate + 300.0) <= 3 * sigma
     step = rows["Clock steps found (offset change at time)"]
-    assert re.fullmatch(r"-(39|40)\.\d ± 0\.\d ms at (79|80)\.\d\d ± 0\.\d\d s", step)
+    assert re.fullmatch(r"-(39|40)\.\d ± 0\.\d ms at (79|80)\.\d+ ± 0\.\d+ s", step)
     assert rows["Clock drift applied"] == "none"
     ((name, words), *_rest) = section.drift
     assert name == "estimate"
-    assert re.match(r"Its clock runs 29\d\.\d+ \+/- \d+\.\d+ ppm slow", words)
+    assert re.match(r"Its clock runs 29\d(\.\d+)? ± \d+(\.\d+)? ppm slow", words)
     assert "ppm slow against the ground truth's" in words
     assert re.search(r"its clock jumped ahead by (39|40)\.\d", words)
     assert words.endswith("This was not corrected: one offset was applied to the whole run.")

@@ -82,9 +82,8 @@ def _map_with_history(tmp_path: Path) -> EvaluationResult:
     from loceval.core.geometry import SimilarityTransform
     from loceval.maps import OccupancyGrid, evaluate_map_source
     from loceval.registration.alignment import AlignWindow
-    from tests.loceval.maps.test_map_history import _write_bag
     from tests.loceval.metrics.test_excursions import _run
-    from tests.mapfactory import Distortion, draw_map, office_plan
+    from tests.mapfactory import Distortion, draw_map, office_plan, write_map_bag
 
     reference, estimate, _ = _run()
     config = EvaluationConfig(align_first=AlignWindow.parse("19s"), no_ci=True)
@@ -96,7 +95,7 @@ def _map_with_history(tmp_path: Path) -> EvaluationResult:
         for s, k in ((30, 0.995), (60, 0.99))
     ]
     empty = OccupancyGrid(np.full(grids[0][1].shape, -1, dtype=np.int8), 0.05)
-    bag = _write_bag(tmp_path, [(10, empty), *grids])
+    bag = write_map_bag(tmp_path, [(10, empty), *grids])
     t0 = int(result.reference.stamps_ns[0])
     found = evaluate_map_source(f"{bag}@/map", plan, SimilarityTransform.identity(), t0_ns=t0)
     return replace(result, map=found)

@@ -80,7 +80,7 @@ def test_given_offset_that_data_contradict_warns(rng: np.random.Generator) -> No
     (warning,) = [w for w in found.warnings if "disagree" in w]
     assert "the estimate lags the ground truth by 45." in warning
     assert "you gave 0.0 ms" in warning
-    assert " +/- 0." in warning
+    assert " ± 0." in warning
 
 
 def test_given_offset_that_data_confirm_is_quiet(rng: np.random.Generator) -> None:
@@ -150,7 +150,7 @@ def test_to_dict_is_the_contract(rng: np.random.Generator) -> None:
 def test_describe_offset_words() -> None:
     """Negative offsets lag, positive ones lead, with the sigma in ms."""
     assert (
-        describe_offset(-0.0452, 0.0003) == "the estimate lags the ground truth by 45.2 +/- 0.3 ms"
+        describe_offset(-0.0452, 0.0003) == "the estimate lags the ground truth by 45.20 ± 0.30 ms"
     )
     assert describe_offset(0.010) == "the estimate leads the ground truth by 10.0 ms"
 

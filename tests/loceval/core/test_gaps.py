@@ -81,7 +81,7 @@ def test_nav2_amcl_is_matched_and_has_one_loss(public_data: Path) -> None:
     assert len(own) == 1
     assert "1 gap" in own[0]
     assert "longer than 3 s" in own[0]
-    assert "9.30 s, starts 5.71 s before the reference's first pose" in own[0]
+    assert "9.3 s, starts 5.71 s before the reference's first pose" in own[0]
     # The reference (tf map -> odom -> base_link, 2502 poses at 36 ms) keeps its 3 real losses.
     assert len(result.to_dict()["reference"]["gaps"]) == 3  # type: ignore[index]
     # AMCL as the reference: the odometry is interpolated between AMCL's poses, not dropped.

@@ -78,7 +78,7 @@ def test_lists_topics_tree_and_sources(tmp_path, records, fmt):
     assert "/camera/image" not in sources
     assert sources["/amcl_pose"].pose_count == 12
     assert sources["/plan"].pose_count == 90
-    assert sources["tf:map:base_link"].description == "map -> odom -> base_link"
+    assert sources["tf:map:base_link"].description == "map → odom → base_link"
     assert insp.duration_s > 4.0
 
 
@@ -227,7 +227,7 @@ class TestPublicData:
         sources = {c.selector: c for c in insp.candidates}
         assert sources["/amcl_pose"].pose_count == 135
         assert sources["/odom"].pose_count == 2639
-        assert sources["tf:map:base_link"].description == "map -> odom -> base_link"
+        assert sources["tf:map:base_link"].description == "map → odom → base_link"
         assert insp.frames[0].frame == "map"
 
     def test_nav2_lists_the_robot_chain_first(self, public_data):

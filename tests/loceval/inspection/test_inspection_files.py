@@ -172,7 +172,7 @@ def test_urdf_lists_links_and_joints(tmp_path):
     ]
     assert data["sources"] == []
     text = render_inspection_text(insp)
-    assert "mount  (fixed): rigid_body -> camera_link" in text
+    assert "mount  (fixed): rigid_body → camera_link" in text
 
 
 def test_urdf_by_kind_and_refused_when_not_urdf(tmp_path):

@@ -11,7 +11,6 @@ with its reason, and a topic of more messages than the limit is subsampled with 
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -19,52 +18,13 @@ import pytest
 
 from loceval.core.geometry import SimilarityTransform
 from loceval.errors import InputError
-from loceval.maps import FREE, OCCUPIED, OccupancyGrid, evaluate_map_source
+from loceval.maps import OccupancyGrid, evaluate_map_source
 from loceval.readers.rosbag.grid import kept_indices
-from tests.mapfactory import Distortion, draw_map, office_plan
+from tests.mapfactory import Distortion, draw_map, office_plan, write_map_bag
 
 NS = 1_000_000_000
 SCALES = (1.000, 0.995, 0.990, 0.985)
 T0_NS = 5 * NS  # the reference's first stamp: the history's times are seconds since it
-
-
-def _message(types: object, grid: OccupancyGrid, stamp_s: int) -> object:
-    """A nav_msgs/msg/OccupancyGrid of a grid (ROS values: -1, 0, 100)."""
-    t = types  # the typestore's types
-    values = np.full(grid.states.shape, -1, dtype=np.int8)
-    values[grid.states == FREE] = 0
-    values[grid.states == OCCUPIED] = 100
-    yaw = grid.origin_yaw_rad
-    pose = t["geometry_msgs/msg/Pose"](  # type: ignore[index]
-        position=t["geometry_msgs/msg/Point"](x=grid.origin_xy[0], y=grid.origin_xy[1], z=0.0),  # type: ignore[index]
-        orientation=t["geometry_msgs/msg/Quaternion"](  # type: ignore[index]
-            x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
-        ),
-    )
-    stamp = t["builtin_interfaces/msg/Time"](sec=stamp_s, nanosec=0)  # type: ignore[index]
-    info = t["nav_msgs/msg/MapMetaData"](  # type: ignore[index]
-        map_load_time=stamp,
-        resolution=grid.resolution_m,
-        width=grid.shape[1],
-        height=grid.shape[0],
-        origin=pose,
-    )
-    header = t["std_msgs/msg/Header"](stamp=stamp, frame_id="map")  # type: ignore[index]
-    return t["nav_msgs/msg/OccupancyGrid"](header=header, info=info, data=values.ravel())  # type: ignore[index]
-
-
-def _write_bag(folder: Path, grids: list[tuple[int, OccupancyGrid]]) -> Path:
-    from rosbags.rosbag2 import Writer
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_HUMBLE)
-    bag = folder / "run"
-    with Writer(bag, version=9) as writer:
-        conn = writer.add_connection("/map", "nav_msgs/msg/OccupancyGrid", typestore=store)
-        for stamp_s, grid in grids:  # a handful of maps
-            raw = store.serialize_cdr(_message(store.types, grid, stamp_s), conn.msgtype)
-            writer.write(conn, stamp_s * NS, raw)
-    return bag
 
 
 @pytest.fixture(scope="module", name="plan")
@@ -81,7 +41,7 @@ def _bag(tmp_path_factory: pytest.TempPathFactory, plan: np.ndarray) -> Path:
         for k, s in enumerate(SCALES)
     ]
     empty = OccupancyGrid(np.full(grids[0][1].shape, -1, dtype=np.int8), 0.02, source="gen")
-    return _write_bag(tmp_path_factory.mktemp("maps"), [(5, empty), *grids])
+    return write_map_bag(tmp_path_factory.mktemp("maps"), [(5, empty), *grids])
 
 
 def test_each_message_is_judged_and_the_drift_shows(bag: Path, plan: np.ndarray) -> None:
@@ -130,7 +90,7 @@ def test_a_topic_whose_last_map_is_empty_is_refused(tmp_path: Path, plan: np.nda
     """The last message is the map judged: an empty last map is the evaluation's error."""
     good = draw_map(plan, Distortion(), resolution_m=0.05, rng=np.random.default_rng(1))
     empty = OccupancyGrid(np.full(good.shape, -1, dtype=np.int8), 0.05, source="gen")
-    bag = _write_bag(tmp_path, [(1, good), (2, empty)])
+    bag = write_map_bag(tmp_path, [(1, good), (2, empty)])
     with pytest.raises(InputError, match="no occupied cell"):
         evaluate_map_source(f"{bag}@/map", plan, SimilarityTransform.identity())
 

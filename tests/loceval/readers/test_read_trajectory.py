@@ -233,3 +233,24 @@ def test_large_tum_file_uses_the_c_parser(tmp_path, rng, monkeypatch):
     read = read_trajectory(f"tum:{path}")
     assert len(read) == lines
     np.testing.assert_allclose(read.positions_xyz[-1], table[-1, 1:4])
+
+
+def test_repeated_stamps_kept_only_as_evo_keeps_them(tmp_path: Path) -> None:
+    """A repeated stamp: dropped by default; kept 1 ns apart inside keeping_duplicate_stamps."""
+    from loceval.readers import keeping_duplicate_stamps, read_tum
+
+    rows = [(0.0, 0.0), (0.1, 1.0), (0.1, 2.0), (0.1, 3.0), (0.2, 4.0), (0.3, 5.0)]
+    path = tmp_path / "rep.txt"
+    path.write_text("".join(f"{t} {x} 0 0 0 0 0 1\n" for t, x in rows))
+    dropped = read_tum(path)
+    assert dropped.positions_xyz[:, 0].tolist() == [0.0, 1.0, 4.0, 5.0]
+    assert any("2 poses with a duplicate stamp dropped" in w for w in dropped.warnings)
+    with keeping_duplicate_stamps():
+        kept = read_tum(path)
+    assert kept.positions_xyz[:, 0].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0, 5.0]
+    assert (kept.stamps_ns - dropped.stamps_ns[0]).tolist() == [
+        0, 100_000_000, 100_000_001, 100_000_002, 200_000_000, 300_000_000,
+    ]  # fmt: skip
+    said = "2 poses repeat the stamp of the pose before; kept as evo"
+    assert any(said in w for w in kept.warnings)
+    assert len(read_tum(path)) == 4  # the setting ends with its block

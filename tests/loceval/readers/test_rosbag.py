@@ -272,7 +272,7 @@ class TestTf:
         assert (traj.frame_id, traj.child_frame_id) == ("map", "camera")
         assert traj.source == f"{bag.name}@tf:map:camera"
         # The chain is information (issue 30, item 12): a note, not a warning.
-        assert any("map -> odom -> base_link -> camera" in n for n in traj.notes)
+        assert any("map → odom → base_link → camera" in n for n in traj.notes)
         assert any(f"{expected.dropped} of" in w for w in traj.warnings)
 
     def test_containers_agree(self, tmp_path, tf_setup):
@@ -354,7 +354,7 @@ class TestTf:
         """A static offset through a /tf link is refused."""
         records, _ = tf_setup
         bag = write(tmp_path, records, fmt="mcap")
-        with pytest.raises(ReaderError, match="odom -> base_link"):
+        with pytest.raises(ReaderError, match="odom → base_link"):
             read_bag_static_transform(bag, "odom", "camera")
 
     def test_static_transform_without_tf(self, tmp_path, poses):
@@ -632,7 +632,7 @@ class TestErrors:
             bf.link_transforms("odom", "base_link", late)
         )
         bag = write(tmp_path, records, fmt="mcap")
-        with pytest.raises(ReaderError, match=r"only 0 of 10 poses.*time ranges: map -> odom"):
+        with pytest.raises(ReaderError, match=r"only 0 of 10 poses.*time ranges: map → odom"):
             read_bag_trajectory(bag, "tf:map:base_link")
 
     def test_path_with_receive_stamps(self, tmp_path, poses):
@@ -750,7 +750,7 @@ class TestPublicData:
         assert ros2.quat_xyzw is not None
         np.testing.assert_allclose(ros1.quat_xyzw, ros2.quat_xyzw, atol=1e-9)
         # The chain is information, not a warning (issue 30 item 12).
-        assert any("base_footprint -> base_link" in n for n in ros1.notes)
+        assert any("base_footprint → base_link" in n for n in ros1.notes)
         assert not ros1.warnings
 
     def test_tf_example_static_link_applied(self, public_data):

@@ -96,12 +96,12 @@ class TestTfLink:
 
     def test_rejects_bad_shapes(self):
         """Mismatched array shapes are a ReaderError naming the link."""
-        with pytest.raises(ReaderError, match="'a' -> 'b'"):
+        with pytest.raises(ReaderError, match="'a' → 'b'"):
             TfLink("a", "b", np.array([1, 2]), np.zeros((2, 3)), np.zeros((3, 4)))
 
     def test_rejects_a_link_without_any_valid_sample(self):
         """A link whose every quaternion is zero cannot be used: a ReaderError naming it."""
-        with pytest.raises(ReaderError, match="'a' -> 'b' holds only NaN, inf or zero"):
+        with pytest.raises(ReaderError, match="'a' → 'b' holds only NaN, inf or zero"):
             TfLink("a", "b", np.array([1]), np.zeros((1, 3)), np.zeros((1, 4)))
 
     def test_drops_and_counts_invalid_samples(self):
@@ -177,15 +177,15 @@ class TestFindChain:
         """A chain goes up to the common ancestor and down again."""
         steps = find_chain(robot, "camera", "wheel")
         assert [(s.link.name, s.inverted) for s in steps] == [
-            ("base_link -> camera", True),
-            ("base_link -> wheel", False),
+            ("base_link → camera", True),
+            ("base_link → wheel", False),
         ]
-        assert describe_chain(steps) == "camera <- base_link -> wheel"
+        assert describe_chain(steps) == "camera ← base_link → wheel"
 
     def test_down_from_root(self, robot):
         """A chain from the root walks every link forwards."""
         assert describe_chain(find_chain(robot, "map", "camera")) == (
-            "map -> odom -> base_link -> camera"
+            "map → odom → base_link → camera"
         )
 
     def test_leading_slash_ignored(self, robot):
@@ -333,5 +333,5 @@ class TestComposeStaticChain:
 
     def test_dynamic_link_refused(self, robot):
         """A chain with a /tf link is no fixed offset; the link is named."""
-        with pytest.raises(ReaderError, match="odom -> base_link"):
+        with pytest.raises(ReaderError, match="odom → base_link"):
             compose_static_chain(robot, "odom", "camera")

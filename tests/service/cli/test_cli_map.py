@@ -13,7 +13,13 @@ import pytest
 from loceval.core.geometry import SimilarityTransform
 from service.cli import main
 from tests.factories import make_trajectory, write_tum
-from tests.mapfactory import Distortion, draw_map, office_plan, write_map_server
+from tests.mapfactory import (
+    Distortion,
+    draw_map,
+    office_plan,
+    write_map_bag,
+    write_map_server,
+)
 
 YAW_DEG = 30.0
 SHIFT = (2.0, -1.0)
@@ -52,6 +58,7 @@ def _recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     map_dist = Distortion(yaw_deg=YAW_DEG, translation=SHIFT)
     grid = draw_map(plan, map_dist, resolution_m=0.05, rng=rng, noise_m=0.003)
     yaml = write_map_server(folder / "map", grid)
+    bag = write_map_bag(folder / "bag", [(1, grid), (2, grid)])
     zipped = folder / "map.zip"
     with zipfile.ZipFile(zipped, "w", zipfile.ZIP_DEFLATED) as archive:
         archive.write(yaml, "map.yaml")
@@ -61,6 +68,7 @@ def _recording(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
         "estimate": write_tum(folder / "slam.txt", estimate),
         "yaml": yaml,
         "zip": zipped,
+        "bag": bag,
         "dxf": write_dxf_plan(folder / "plan.dxf", plan),
         "folder": folder,
     }
@@ -103,6 +111,25 @@ def test_the_map_is_placed_by_the_alignment_and_measured(
     assert abs(found["fit"]["rigid"]["rotation_deg"]) < 0.05
     assert abs(found["fit"]["similarity"]["scale"] - 1.0) < 2e-3
     assert doc["estimates"][0]["excursions"] == []
+
+
+def test_a_map_from_a_bag_topic_as_over_the_api(
+    recording: dict[str, Path], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--map BAG@/map`` reads the topic's maps, as the API's dataset and selector (issue 44, 17).
+
+    On main it ended in an internal error: the path was handed on where text was read.
+    """
+    code, out, err = _run(
+        capsys, "evaluate", str(recording["reference"]), str(recording["estimate"]),
+        "--map", f"{recording['bag']}@/map", "--building", str(recording["dxf"]),
+        "--no-ci", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    found = json.loads(out)["map"]
+    assert len(found["history"]) == 2
+    assert found["wall_distance_m"]["rmse"] < 0.025
+    assert found["plan_coverage"] > 0.95
 
 
 def test_the_map_estimate_must_name_an_estimate(

@@ -92,7 +92,7 @@ def test_cli_default_clock_is_checked(
     notes = doc["warnings"]
     assert isinstance(notes, list)
     assert any(
-        re.search(r"lags the ground truth by 4\d\.\d \+/- 0\.\d ms .*you gave 0\.0 ms", w)
+        re.search(r"lags the ground truth by 4\d\.\d+ ± 0\.\d+ ms .*you gave 0\.0 ms", w)
         for w in notes
     )
 
