@@ -281,13 +281,25 @@ def _has_tag(tag: str, dialect: str) -> ColumnElement[bool]:
     return exists(select(literal(1)).select_from(values).where(column("value") == tag))
 
 
-def list_datasets(
-    runtime: Runtime, project_id: str, *, tag: str | None, limit: int, offset: int
+def list_datasets(  # noqa: PLR0913  (the query's filters and page, by keyword)
+    runtime: Runtime,
+    project_id: str,
+    *,
+    tag: str | None,
+    limit: int,
+    offset: int,
+    sha256: str | None = None,
 ) -> tuple[Sequence[Dataset], int]:
-    """Return a page of the project's datasets, newest first, and how many there are."""
+    """Return a page of the project's datasets, newest first, and how many there are.
+
+    ``sha256`` keeps the dataset holding those bytes (at most one per project): a client
+    asks whether the service holds a file before uploading it.
+    """
     where: list[ColumnElement[bool]] = [Dataset.project_id == project_id]
     if tag is not None:
         where.append(_has_tag(tag, runtime.engine.dialect.name))
+    if sha256 is not None:
+        where.append(Dataset.sha256 == sha256.lower())
     with runtime.sessions() as session:
         count = session.scalar(select(func.count()).select_from(Dataset).where(*where))
         rows = session.scalars(
