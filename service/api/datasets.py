@@ -121,6 +121,7 @@ async def create_dataset(
 def read_datasets(
     runtime: RuntimeDep,
     project_id: ProjectDep,
+    *,
     tag: Annotated[str | None, Query(max_length=50, pattern=NO_NUL)] = None,
     sha256: Annotated[
         str | None,

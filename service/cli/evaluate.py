@@ -40,7 +40,7 @@ if TYPE_CHECKING:
     from loceval.core.geometry import SimilarityTransform
     from loceval.readers import SourceSpec
 
-__all__ = ["export_options", "run_demo", "run_evaluate"]
+__all__ = ["check_names", "export_options", "run_demo", "run_evaluate"]
 
 
 def export_options(args: argparse.Namespace) -> ExportOptions | None:
@@ -62,12 +62,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     """Evaluate the estimates against the reference; print tables or JSON; write artifacts."""
     config = config_from_options(args, front_door="cli", device_transform=_device_file_offset(args))
     default_format = TrajectoryFormat(args.format) if args.format else None
-    if args.name and len(args.name) != len(args.estimates):
-        msg = (
-            f"Give --name once per estimate: {len(args.estimates)} estimates but "
-            f"{len(args.name)} names."
-        )
-        raise InputError(msg)
+    check_names(args)
     export = export_options(args)
     plan = export
     if args.map is not None and plan is None:  # --json without --out still needs the plan
@@ -123,6 +118,20 @@ def run_evaluate(args: argparse.Namespace) -> int:
     if not args.json and args.out is not None:
         emit(f"\nArtifacts written to {args.out}")
     return 0
+
+
+def check_names(args: argparse.Namespace) -> None:
+    """``--name`` is given once per estimate, or not at all (``loceval submit``'s rule too).
+
+    Raises:
+        InputError: as many names as estimates are not given.
+    """
+    if args.name and len(args.name) != len(args.estimates):
+        msg = (
+            f"Give --name once per estimate: {len(args.estimates)} estimates but "
+            f"{len(args.name)} names."
+        )
+        raise InputError(msg)
 
 
 class _PendingProvenance(Mapping[str, object]):

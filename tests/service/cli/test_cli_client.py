@@ -1,0 +1,246 @@
+"""``loceval upload`` and ``loceval submit`` against a real ``loceval serve`` (the site laptop).
+
+The server is a real ``loceval serve`` subprocess (``tests/service/conftest.py``); the cut
+connections are a loopback proxy (:mod:`tests.harness.proxy`). Each command runs as a
+subprocess with the key in ``LOCEVAL_API_KEY`` and its own cache folder (``XDG_CACHE_HOME``),
+where tuspy keeps the address of an unfinished upload.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import httpx2 as httpx
+import pytest
+
+from tests.conftest import public_data
+from tests.harness.ports import free_port
+from tests.harness.proxy import cutting_proxy
+from tests.service.conftest import REPO, LiveServer, cli
+
+pytestmark = [pytest.mark.slow]
+
+GROUNDTRUTH = "fr2_desk_groundtruth.txt"
+ESTIMATE = "fr2_desk_ORB.txt"
+OPTIONS = ("--align", "sim3", "--formats", "json")  # ORB-SLAM monocular: scale unknown
+MIB = 1 << 20
+
+
+def _run(
+    *args: str, server: LiveServer | None, cache: Path, key: str | None = None
+) -> subprocess.CompletedProcess[str]:
+    """Run ``loceval ARGS`` with the server's key (or ``key``) and its own cache folder."""
+    env = {**os.environ, "XDG_CACHE_HOME": str(cache)}
+    env["LOCEVAL_API_KEY"] = key if key is not None else (server.api_key if server else "")
+    return subprocess.run(
+        [sys.executable, "-m", "service.cli", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=REPO,
+        timeout=600,
+        check=False,
+    )
+
+
+def _one_line_error(proc: subprocess.CompletedProcess[str]) -> str:
+    """The command failed with exit 1 and one line ``loceval: error: ...`` (no traceback)."""
+    assert proc.returncode == 1, (proc.returncode, proc.stdout, proc.stderr)
+    lines = [line for line in proc.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("loceval: error: "), proc.stderr
+    assert "Traceback" not in proc.stderr
+    return lines[0]
+
+
+def _api(server: LiveServer, path: str, **params: Any) -> Any:
+    response = httpx.get(
+        f"{server.url}/api/v1{path}",
+        params=params,
+        headers={"Authorization": f"Bearer {server.api_key}"},
+        timeout=60,
+    )
+    response.raise_for_status()
+    return response.json()
+
+
+def _post_dataset(server: LiveServer, path: Path) -> dict[str, Any]:
+    """Upload a file with the plain ``POST /datasets`` (as curl would)."""
+    with path.open("rb") as stream:
+        response = httpx.post(
+            f"{server.url}/api/v1/datasets",
+            files={"file": (path.name, stream)},
+            headers={"Authorization": f"Bearer {server.api_key}"},
+            timeout=120,
+        )
+    response.raise_for_status()
+    document: dict[str, Any] = response.json()
+    return document
+
+
+def _without_run(document: dict[str, Any]) -> dict[str, Any]:
+    """The result document without what differs between two runs: its id and times."""
+
+    def strip(value: Any) -> Any:
+        if isinstance(value, dict):
+            return {
+                k: strip(v)
+                for k, v in value.items()
+                if k not in {"evaluation_id", "id", "created_at", "generated_at", "run_id"}
+                and not k.endswith(("_at", "_time_s", "elapsed_s"))
+            }
+        if isinstance(value, list):
+            return [strip(v) for v in value]
+        return value
+
+    return strip(document)  # type: ignore[no-any-return]
+
+
+# --- errors: one line, exit 1 ---------------------------------------------------------------
+
+
+def test_unreachable_server_is_one_line_exit_1(tmp_path: Path) -> None:
+    """No server at the address: upload and submit say so in one line and exit 1."""
+    data = public_data()
+    url = f"http://127.0.0.1:{free_port()}"
+    for args in (
+        ("upload", str(data / GROUNDTRUTH), "--server", url),
+        ("submit", str(data / GROUNDTRUTH), str(data / ESTIMATE), "--server", url),
+    ):
+        line = _one_line_error(_run(*args, server=None, cache=tmp_path, key="lcv_x"))
+        assert f"Cannot reach the loceval service at {url}" in line
+
+
+def test_wrong_key_and_refused_option_are_one_line_exit_1(
+    live_server: LiveServer, tmp_path: Path
+) -> None:
+    """A key the server refuses (401) and an option it refuses (422): one line, exit 1."""
+    data = public_data()
+    files = (str(data / GROUNDTRUTH), str(data / ESTIMATE))
+    wrong = _run(
+        "submit", *files, "--server", live_server.url, server=live_server, cache=tmp_path,
+        key="lcv_" + "x" * 43,
+    )  # fmt: skip
+    assert "refused the API key (401)" in _one_line_error(wrong)
+    wrong_upload = _run(
+        "upload", files[0], "--server", live_server.url, server=live_server, cache=tmp_path,
+        key="lcv_" + "x" * 43,
+    )  # fmt: skip
+    assert "refused the API key (401)" in _one_line_error(wrong_upload)
+    for path in files:  # held already: the refusal is the option's, not an upload's
+        _post_dataset(live_server, Path(path))
+    refused = _run(
+        "submit", *files, "--tolerance", "fast please", "--server", live_server.url,
+        server=live_server, cache=tmp_path,
+    )  # fmt: skip
+    line = _one_line_error(refused)
+    assert "tolerance" in line
+    assert "fast please" in line
+
+
+# --- the upload: resumable -----------------------------------------------------------------
+
+
+def _random_file(path: Path, size: int) -> Path:
+    path.write_bytes(os.urandom(size))
+    return path
+
+
+def test_upload_continues_after_cut_connections(live_server: LiveServer, tmp_path: Path) -> None:
+    """Connections cut at 30, 60 and 90 %: the upload continues from the server's offset.
+
+    The dataset holds the file's bytes (its SHA-256), and the proxy carried at most one part
+    again per cut (not the whole file).
+    """
+    size, part = 6 * MIB, 1 * MIB
+    path = _random_file(tmp_path / "camera.bin", size)
+    cuts = [int(size * f) for f in (0.3, 0.6, 0.9)]
+    port = int(live_server.url.rsplit(":", 1)[1])
+    with cutting_proxy(port, cuts) as proxy:
+        proc = _run(
+            "upload", str(path), "--server", proxy.url, "--chunk-mib", "1", "--json",
+            server=live_server, cache=tmp_path / "cache",
+        )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert proxy.cut_at == cuts
+    (dataset,) = json.loads(proc.stdout)
+    assert dataset["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+    assert dataset["size_bytes"] == size
+    assert proxy.sent <= size + len(cuts) * part + 256 * 1024  # headers and HEADs besides
+
+
+def test_upload_run_again_continues_where_it_stopped(
+    live_server: LiveServer, tmp_path: Path
+) -> None:
+    """The network goes for good at 50 %: exit 1 saying to run again; the next run continues.
+
+    The second run finds the upload's address in the cache folder (tuspy's URL storage) and
+    sends only the rest: the two runs together carry less than 1.3 times the file.
+    """
+    size = 6 * MIB
+    path = _random_file(tmp_path / "bag.mcap", size)
+    cache = tmp_path / "cache"
+    port = int(live_server.url.rsplit(":", 1)[1])
+    with cutting_proxy(port, [size // 2], stay_down=True) as proxy:
+        first = _run(
+            "upload", str(path), "--server", proxy.url, "--chunk-mib", "1",
+            server=live_server, cache=cache,
+        )  # fmt: skip
+        assert "run the same command again" in _one_line_error(first)
+        assert list(cache.glob("loceval/uploads.json"))
+        proxy.allow()
+        second = _run(
+            "upload", str(path), "--server", proxy.url, "--chunk-mib", "1", "--json",
+            server=live_server, cache=cache,
+        )  # fmt: skip
+    assert second.returncode == 0, second.stderr
+    (dataset,) = json.loads(second.stdout)
+    assert dataset["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+    assert proxy.sent < 1.3 * size
+    # the plain lines: id, name, kind
+    third = _run("upload", str(path), "--server", live_server.url, "--quiet",
+                 server=live_server, cache=cache)  # fmt: skip
+    assert third.returncode == 0, third.stderr
+    assert third.stdout.split() == [dataset["id"], dataset["name"], dataset["kind"]]
+
+
+# --- submit: the public fr2_desk pair end to end -------------------------------------------
+
+
+def test_submit_writes_the_result_of_evaluate_and_uploads_once(
+    live_server: LiveServer, tmp_path: Path
+) -> None:
+    """``loceval submit`` on fr2_desk writes ``loceval evaluate``'s result.json (but id, times).
+
+    A second submit of the same files uploads nothing: the server holds both by SHA-256.
+    """
+    data = public_data()
+    files = (str(data / GROUNDTRUTH), str(data / ESTIMATE))
+    cli("evaluate", *files, *OPTIONS, "--out", str(tmp_path / "local"))
+    proc = _run(
+        "submit", *files, *OPTIONS, "--out", str(tmp_path / "remote"),
+        "--server", live_server.url, server=live_server, cache=tmp_path / "cache",
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.count("uploaded as dataset") == 2, proc.stderr
+    assert "Artifacts written to" in proc.stdout
+    local = json.loads((tmp_path / "local" / "result.json").read_text(encoding="utf-8"))
+    remote = json.loads((tmp_path / "remote" / "result.json").read_text(encoding="utf-8"))
+    assert _without_run(remote) == _without_run(local)
+    assert _api(live_server, "/datasets")["count"] == 2
+
+    again = _run(
+        "submit", *files, *OPTIONS, "--json", "--server", live_server.url,
+        server=live_server, cache=tmp_path / "cache",
+    )  # fmt: skip
+    assert again.returncode == 0, again.stderr
+    assert "uploaded as dataset" not in again.stderr
+    assert again.stderr.count("held by the service") == 2, again.stderr
+    assert _api(live_server, "/datasets")["count"] == 2
+    assert _without_run(json.loads(again.stdout))["estimates"] == _without_run(local)["estimates"]
