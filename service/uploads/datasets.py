@@ -281,7 +281,7 @@ def _has_tag(tag: str, dialect: str) -> ColumnElement[bool]:
     return exists(select(literal(1)).select_from(values).where(column("value") == tag))
 
 
-def list_datasets(  # noqa: PLR0913  (the query's filters and page, by keyword)
+def list_datasets(
     runtime: Runtime,
     project_id: str,
     *,

@@ -102,7 +102,7 @@ def test_datasets_filter_by_tag_and_page_in_sql(
 
 def test_datasets_by_sha256(tmp_path: Path) -> None:
     """?sha256= finds the project's dataset of those bytes (any case), else none; bad: 422."""
-    import hashlib  # noqa: PLC0415
+    import hashlib
 
     other = _TUM + b"3 3 0 0 0 0 0 1\n"
     with open_api(tmp_path) as api:
