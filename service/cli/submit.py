@@ -12,6 +12,7 @@ one-line error and exit 1, as in ``loceval evaluate`` (both end in :func:`servic
 
 from __future__ import annotations
 
+import re
 import sys
 import time
 from pathlib import Path
@@ -30,9 +31,10 @@ if TYPE_CHECKING:
 
     from loceval.readers import SourceSpec
 
-__all__ = ["api_options", "run_submit"]
+__all__ = ["api_options", "flags_named", "run_submit"]
 
 _POLL_S: Final = 0.5
+_API_OPTION: Final = re.compile(r"\boptions\.(\w+)")
 _DATASET_OPTIONS: Final = frozenset({"building", "map", "device", "visits", "site_matrix"})
 """The options whose CLI value is a local file (the API: an uploaded dataset or the matrix)."""
 
@@ -61,7 +63,10 @@ def run_submit(args: argparse.Namespace) -> int:
             ],
             "options": api_options(args, held),
         }
-        evaluation = server.json("POST", "/evaluations", json=body)
+        try:
+            evaluation = server.json("POST", "/evaluations", json=body)
+        except InputError as err:  # the API names options.KEY; the CLI names its flags
+            raise err.reworded(flags_named(str(err))) from None
         evaluation = _follow(server, evaluation, quiet=args.quiet)
         if evaluation["status"] != "succeeded":
             error = evaluation.get("error") or {}
@@ -78,6 +83,12 @@ def run_submit(args: argparse.Namespace) -> int:
             if args.out is not None:
                 emit(f"\nArtifacts written to {args.out}")
     return 0
+
+
+def flags_named(text: str) -> str:
+    """Return the service's message with each ``options.KEY`` named by its flag (``--max-dt``)."""
+    flags = {spec.key: spec.flag for spec in OPTIONS if spec.cli}
+    return _API_OPTION.sub(lambda m: flags.get(m.group(1), m.group(0)), text)
 
 
 def _check_source(spec: SourceSpec) -> None:
