@@ -1,7 +1,7 @@
 """``loceval upload FILE... --server URL``: resumable uploads into a loceval service (tus 1.0).
 
 The official Python client of the protocol, tuspy, sends each file in parts to the service's
-``/api/v1/uploads``; a part the connection drops is sent again from the offset the server
+``/api/v1/uploads``, each with its checksum; a part the connection drops is sent again from the offset the server
 holds (a few tries, then the command stops with a one-line error). Each upload's address is
 kept in ``uploads.json`` in the user's cache folder (tuspy's URL storage) under the file's
 fingerprint (its size and first 64 KiB), the server and the key's project, so running the same
@@ -133,6 +133,7 @@ def upload_file(server: Server, path: Path, options: UploadOptions) -> dict[str,
                 store_url=True,
                 url_storage=storage,
                 fingerprinter=fingerprinter,
+                upload_checksum=True,  # each part's SHA-1: a damaged part is refused (460)
             )
 
         try:

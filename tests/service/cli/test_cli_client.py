@@ -17,8 +17,10 @@ from pathlib import Path
 from typing import Any
 
 import httpx2 as httpx
+import numpy as np
 import pytest
 
+from tests.factories import write_large_tum
 from tests.harness.ports import free_port
 from tests.harness.proxy import cutting_proxy
 from tests.service.conftest import REPO, LiveServer, cli
@@ -146,19 +148,17 @@ def test_wrong_key_and_refused_option_are_one_line_exit_1(
 # --- the upload: resumable -----------------------------------------------------------------
 
 
-def _random_file(path: Path, size: int) -> Path:
-    path.write_bytes(os.urandom(size))
-    return path
-
-
-def test_upload_continues_after_cut_connections(live_server: LiveServer, tmp_path: Path) -> None:
+def test_upload_continues_after_cut_connections(
+    live_server: LiveServer, tmp_path: Path, rng: np.random.Generator
+) -> None:
     """Connections cut at 30, 60 and 90 %: the upload continues from the server's offset.
 
     The dataset holds the file's bytes (its SHA-256), and the proxy carried at most one part
     again per cut (not the whole file).
     """
-    size, part = 6 * MIB, 1 * MIB
-    path = _random_file(tmp_path / "camera.bin", size)
+    part = 1 * MIB
+    path = write_large_tum(tmp_path / "walk.txt", 6 * MIB, rng)
+    size = path.stat().st_size
     cuts = [int(size * f) for f in (0.3, 0.6, 0.9)]
     port = int(live_server.url.rsplit(":", 1)[1])
     with cutting_proxy(port, cuts) as proxy:
@@ -175,15 +175,15 @@ def test_upload_continues_after_cut_connections(live_server: LiveServer, tmp_pat
 
 
 def test_upload_run_again_continues_where_it_stopped(
-    live_server: LiveServer, tmp_path: Path
+    live_server: LiveServer, tmp_path: Path, rng: np.random.Generator
 ) -> None:
     """The network goes for good at 50 %: exit 1 saying to run again; the next run continues.
 
     The second run finds the upload's address in the cache folder (tuspy's URL storage) and
     sends only the rest: the two runs together carry less than 1.3 times the file.
     """
-    size = 6 * MIB
-    path = _random_file(tmp_path / "bag.mcap", size)
+    path = write_large_tum(tmp_path / "walk.txt", 6 * MIB, rng)
+    size = path.stat().st_size
     cache = tmp_path / "cache"
     port = int(live_server.url.rsplit(":", 1)[1])
     with cutting_proxy(port, [size // 2], stay_down=True) as proxy:
