@@ -14,6 +14,7 @@ from loceval.errors import InputError
 from loceval.evaluation import EvaluationResult
 from loceval.readers import TrajectoryFormat, parse_source
 from service.cli.output import emit
+from service.cli.parser import check_names
 from service.jobs.mapjob import map_source
 from service.jobs.options import (
     artifact_names,
@@ -40,7 +41,7 @@ if TYPE_CHECKING:
     from loceval.core.geometry import SimilarityTransform
     from loceval.readers import SourceSpec
 
-__all__ = ["check_names", "export_options", "run_demo", "run_evaluate"]
+__all__ = ["export_options", "run_demo", "run_evaluate"]
 
 
 def export_options(args: argparse.Namespace) -> ExportOptions | None:
@@ -118,20 +119,6 @@ def run_evaluate(args: argparse.Namespace) -> int:
     if not args.json and args.out is not None:
         emit(f"\nArtifacts written to {args.out}")
     return 0
-
-
-def check_names(args: argparse.Namespace) -> None:
-    """``--name`` is given once per estimate, or not at all (``loceval submit``'s rule too).
-
-    Raises:
-        InputError: as many names as estimates are not given.
-    """
-    if args.name and len(args.name) != len(args.estimates):
-        msg = (
-            f"Give --name once per estimate: {len(args.estimates)} estimates but "
-            f"{len(args.name)} names."
-        )
-        raise InputError(msg)
 
 
 class _PendingProvenance(Mapping[str, object]):

@@ -28,6 +28,7 @@ __all__ = [
     "EXIT_INPUT",
     "add_evaluation_arguments",
     "build_parser",
+    "check_names",
     "names",
     "numbers",
 ]
@@ -81,6 +82,20 @@ class _FormatNames:
         from loceval.readers.source import TrajectoryFormat  # noqa: PLC0415
 
         return iter([f.value for f in TrajectoryFormat])
+
+
+def check_names(args: argparse.Namespace) -> None:
+    """``--name`` is given once per estimate, or not at all (``loceval submit``'s rule too).
+
+    Raises:
+        InputError: as many names as estimates are not given.
+    """
+    if args.name and len(args.name) != len(args.estimates):
+        msg = (
+            f"Give --name once per estimate: {len(args.estimates)} estimates but "
+            f"{len(args.name)} names."
+        )
+        raise InputError(msg)
 
 
 def numbers(text: str) -> tuple[float, ...]:

@@ -19,12 +19,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from loceval.errors import InputError
-from loceval.options import OPTIONS, OptionKind
-from service.cli.evaluate import check_names
+from loceval.options import AUTO, OPTIONS, OptionKind
 from service.cli.output import emit
+from service.cli.parser import check_names
 from service.cli.remote import Server, file_sha256, server_from_args
 from service.cli.upload import UploadOptions, chunk_bytes, upload_file
-from service.jobs.options import is_auto
 
 if TYPE_CHECKING:
     import argparse
@@ -177,7 +176,7 @@ def api_options(args: argparse.Namespace, held: _Datasets) -> dict[str, Any]:
 
 def _file_option(key: str, value: object, args: argparse.Namespace, held: _Datasets) -> object:
     """Return the API's value of an option whose CLI value names a local file."""
-    if is_auto(value):
+    if value == AUTO:
         return value
     if key == "site_matrix":
         from exporters.cad.site import read_site_matrix  # noqa: PLC0415
