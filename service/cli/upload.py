@@ -2,9 +2,9 @@
 
 The official Python client of the protocol, tuspy, sends each file in parts to the service's
 ``/api/v1/uploads``, each with its checksum; a part the connection drops is sent again from
-the offset the server holds (a few tries, then the command stops with a one-line error). Each upload's address is
-kept in ``uploads.json`` in the user's cache folder (tuspy's URL storage) under the file's
-fingerprint (its size and first 64 KiB), the server and the key's project, so running the same
+the offset the server holds (a few tries, then the command stops with a one-line error).
+Each upload's address is kept in ``uploads.json`` in the user's cache folder (tuspy's URL
+storage) under the file's fingerprint (its size and first 64 KiB), the server and the key's project, so running the same
 command again continues an interrupted upload instead of starting over. A finished upload is
 a dataset, printed as ``id  name  kind`` (with ``--json``: the dataset documents).
 """
