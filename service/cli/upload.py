@@ -4,9 +4,10 @@ The official Python client of the protocol, tuspy, sends each file in parts to t
 ``/api/v1/uploads``, each with its checksum; a part the connection drops is sent again from
 the offset the server holds (a few tries, then the command stops with a one-line error).
 Each upload's address is kept in ``uploads.json`` in the user's cache folder (tuspy's URL
-storage) under the file's fingerprint (its size and first 64 KiB), the server and the key's project, so running the same
-command again continues an interrupted upload instead of starting over. A finished upload is
-a dataset, printed as ``id  name  kind`` (with ``--json``: the dataset documents).
+storage) under the file's fingerprint (its size and first 64 KiB), the server and the key's
+project, so running the same command again continues an interrupted upload instead of
+starting over. A finished upload is a dataset, printed as ``id  name  kind`` (with
+``--json``: the dataset documents).
 """
 
 from __future__ import annotations
@@ -206,8 +207,11 @@ def _raise_tus(err: Exception, server: Server, path: Path) -> None:
 def _cause(err: BaseException) -> str:
     """Return the innermost reason of a tuspy error in a few words."""
     inner: BaseException = err
-    while inner.args and isinstance(inner.args[0], BaseException):
-        inner = inner.args[0]
+    while True:
+        nested = [a for a in inner.args if isinstance(a, BaseException)]
+        if not nested:
+            break
+        inner = nested[-1]
     text = str(inner).strip() or type(inner).__name__
     return text if len(text) <= 160 else text[:157] + "..."
 

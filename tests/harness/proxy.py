@@ -24,7 +24,11 @@ _BLOCK = 64 * 1024
 
 
 class CuttingProxy:
-    """Forward a free loopback port to ``127.0.0.1:target``, cutting at byte counts."""
+    """Forward a free loopback port to ``127.0.0.1:target``, cutting at byte counts.
+
+    ``target`` may be set after the proxy starts (a server told the proxy's address as its
+    public one starts after it).
+    """
 
     def __init__(self, target: int, cuts: Sequence[int] = (), *, stay_down: bool = False) -> None:
         self.target = target

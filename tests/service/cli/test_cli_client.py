@@ -8,11 +8,13 @@ where tuspy keeps the address of an unfinished upload.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +24,8 @@ import pytest
 
 from tests.factories import write_large_tum
 from tests.harness.ports import free_port
-from tests.harness.proxy import cutting_proxy
-from tests.service.conftest import REPO, LiveServer, cli
+from tests.harness.proxy import CuttingProxy, cutting_proxy
+from tests.service.conftest import REPO, LiveServer, cli, running_server
 
 pytestmark = [pytest.mark.slow]
 
@@ -148,9 +150,20 @@ def test_wrong_key_and_refused_option_are_one_line_exit_1(
 # --- the upload: resumable -----------------------------------------------------------------
 
 
-def test_upload_continues_after_cut_connections(
-    live_server: LiveServer, tmp_path: Path, rng: np.random.Generator
-) -> None:
+@contextlib.contextmanager
+def _behind_proxy(
+    data_dir: Path, cuts: list[int], *, stay_down: bool = False
+) -> Iterator[tuple[LiveServer, CuttingProxy]]:
+    """A server whose public address is a cutting proxy (the upload addresses point at it)."""
+    with (
+        cutting_proxy(0, cuts, stay_down=stay_down) as proxy,
+        running_server(data_dir, env={"LOCEVAL_PUBLIC_URL": proxy.url}) as server,
+    ):
+        proxy.target = int(server.url.rsplit(":", 1)[1])
+        yield server, proxy
+
+
+def test_upload_continues_after_cut_connections(tmp_path: Path, rng: np.random.Generator) -> None:
     """Connections cut at 30, 60 and 90 %: the upload continues from the server's offset.
 
     The dataset holds the file's bytes (its SHA-256), and the proxy carried at most one part
@@ -160,11 +173,10 @@ def test_upload_continues_after_cut_connections(
     path = write_large_tum(tmp_path / "walk.txt", 6 * MIB, rng)
     size = path.stat().st_size
     cuts = [int(size * f) for f in (0.3, 0.6, 0.9)]
-    port = int(live_server.url.rsplit(":", 1)[1])
-    with cutting_proxy(port, cuts) as proxy:
+    with _behind_proxy(tmp_path / "data", cuts) as (server, proxy):
         proc = _run(
             "upload", str(path), "--server", proxy.url, "--chunk-mib", "1", "--json",
-            server=live_server, cache=tmp_path / "cache",
+            server=server, cache=tmp_path / "cache",
         )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert proxy.cut_at == cuts
@@ -175,7 +187,7 @@ def test_upload_continues_after_cut_connections(
 
 
 def test_upload_run_again_continues_where_it_stopped(
-    live_server: LiveServer, tmp_path: Path, rng: np.random.Generator
+    tmp_path: Path, rng: np.random.Generator
 ) -> None:
     """The network goes for good at 50 %: exit 1 saying to run again; the next run continues.
 
@@ -185,26 +197,25 @@ def test_upload_run_again_continues_where_it_stopped(
     path = write_large_tum(tmp_path / "walk.txt", 6 * MIB, rng)
     size = path.stat().st_size
     cache = tmp_path / "cache"
-    port = int(live_server.url.rsplit(":", 1)[1])
-    with cutting_proxy(port, [size // 2], stay_down=True) as proxy:
+    with _behind_proxy(tmp_path / "data", [size // 2], stay_down=True) as (server, proxy):
         first = _run(
-            "upload", str(path), "--server", proxy.url, "--chunk-mib", "1",
-            server=live_server, cache=cache,
+            "upload", str(path), "--server", proxy.url, "--chunk-mib", "1", "--quiet",
+            server=server, cache=cache,
         )  # fmt: skip
         assert "run the same command again" in _one_line_error(first)
         assert list(cache.glob("loceval/uploads.json"))
         proxy.allow()
         second = _run(
             "upload", str(path), "--server", proxy.url, "--chunk-mib", "1", "--json",
-            server=live_server, cache=cache,
+            server=server, cache=cache,
         )  # fmt: skip
-    assert second.returncode == 0, second.stderr
-    (dataset,) = json.loads(second.stdout)
-    assert dataset["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
-    assert proxy.sent < 1.3 * size
-    # the plain lines: id, name, kind
-    third = _run("upload", str(path), "--server", live_server.url, "--quiet",
-                 server=live_server, cache=cache)  # fmt: skip
+        assert second.returncode == 0, second.stderr
+        (dataset,) = json.loads(second.stdout)
+        assert dataset["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+        assert proxy.sent < 1.3 * size
+        # the plain lines: id, name, kind
+        third = _run("upload", str(path), "--server", proxy.url, "--quiet",
+                     server=server, cache=cache)  # fmt: skip
     assert third.returncode == 0, third.stderr
     assert third.stdout.split() == [dataset["id"], dataset["name"], dataset["kind"]]
 
