@@ -53,7 +53,7 @@ def run_submit(args: argparse.Namespace) -> int:
     upload = UploadOptions(chunk_bytes=chunk_bytes(args.chunk_mib), progress=not args.quiet)
     with server_from_args(args.server) as server:
         server.json("GET", "/datasets", params={"limit": 1})  # the server and the key, first
-        held = _Datasets(server, upload, quiet=args.quiet or args.json)
+        held = _Datasets(server, upload, quiet=args.quiet)  # stderr: --json's stdout stays clean
         body = {
             "reference": _source(held, ref_spec, args.reference_name),
             "estimates": [
@@ -204,7 +204,12 @@ def _follow(server: Server, evaluation: dict[str, Any], *, quiet: bool) -> dict[
 
     url = f"/evaluations/{evaluation['id']}"
     with tqdm(
-        total=100, unit="%", desc="evaluation", disable=quiet, file=sys.stderr, leave=True
+        total=100,
+        desc="queued",
+        disable=quiet,
+        file=sys.stderr,
+        leave=True,
+        bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}",
     ) as bar:
         while evaluation["status"] in {"queued", "running"}:
             time.sleep(_POLL_S)

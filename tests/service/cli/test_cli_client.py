@@ -25,7 +25,7 @@ import pytest
 from tests.factories import write_large_tum
 from tests.harness.ports import free_port
 from tests.harness.proxy import CuttingProxy, cutting_proxy
-from tests.service.conftest import REPO, LiveServer, cli, running_server
+from tests.service.conftest import REPO, LiveServer, running_server
 
 pytestmark = [pytest.mark.slow]
 
@@ -36,7 +36,11 @@ MIB = 1 << 20
 
 
 def _run(
-    *args: str, server: LiveServer | None, cache: Path, key: str | None = None
+    *args: str,
+    server: LiveServer | None,
+    cache: Path,
+    key: str | None = None,
+    cwd: Path = REPO,
 ) -> subprocess.CompletedProcess[str]:
     """Run ``loceval ARGS`` with the server's key (or ``key``) and its own cache folder."""
     env = {**os.environ, "XDG_CACHE_HOME": str(cache)}
@@ -46,7 +50,7 @@ def _run(
         capture_output=True,
         text=True,
         env=env,
-        cwd=REPO,
+        cwd=cwd,
         timeout=600,
         check=False,
     )
@@ -87,22 +91,21 @@ def _post_dataset(server: LiveServer, path: Path) -> dict[str, Any]:
     return document
 
 
+_RUN_KEYS = frozenset({"evaluation_id", "created_at"})
+"""What differs between two runs of the same evaluation: its id and time."""
+_SERVICE_PROVENANCE = frozenset({"dataset_id", "format"})
+"""What the service adds to each input's record: the dataset, and the format it recognised at
+upload (``loceval evaluate`` records the format as given: none, sniffed)."""
+
+
 def _without_run(document: dict[str, Any]) -> dict[str, Any]:
-    """The result document without what differs between two runs: its id and times."""
-
-    def strip(value: Any) -> Any:
-        if isinstance(value, dict):
-            return {
-                k: strip(v)
-                for k, v in value.items()
-                if k not in {"evaluation_id", "id", "created_at", "generated_at", "run_id"}
-                and not k.endswith(("_at", "_time_s", "elapsed_s"))
-            }
-        if isinstance(value, list):
-            return [strip(v) for v in value]
-        return value
-
-    return strip(document)  # type: ignore[no-any-return]
+    """The result document without the run's id and times and the service's input records."""
+    kept = {k: v for k, v in document.items() if k not in _RUN_KEYS}
+    kept["inputs"] = [
+        {k: v for k, v in item.items() if k not in _SERVICE_PROVENANCE}
+        for item in document.get("inputs", [])
+    ]
+    return kept
 
 
 # --- errors: one line, exit 1 ---------------------------------------------------------------
@@ -230,12 +233,16 @@ def test_submit_writes_the_result_of_evaluate_and_uploads_once(
 
     A second submit of the same files uploads nothing: the server holds both by SHA-256.
     """
-    data = public_data
-    files = (str(data / GROUNDTRUTH), str(data / ESTIMATE))
-    cli("evaluate", *files, *OPTIONS, "--out", str(tmp_path / "local"))
+    files = (GROUNDTRUTH, ESTIMATE)  # both run in the data folder: the same paths recorded
+    local_run = _run(
+        "evaluate", *files, *OPTIONS, "--out", str(tmp_path / "local"),
+        server=None, cache=tmp_path / "cache", cwd=public_data,
+    )  # fmt: skip
+    assert local_run.returncode == 0, local_run.stderr
     proc = _run(
         "submit", *files, *OPTIONS, "--out", str(tmp_path / "remote"),
         "--server", live_server.url, server=live_server, cache=tmp_path / "cache",
+        cwd=public_data,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr.count("uploaded as dataset") == 2, proc.stderr
@@ -247,10 +254,10 @@ def test_submit_writes_the_result_of_evaluate_and_uploads_once(
 
     again = _run(
         "submit", *files, *OPTIONS, "--json", "--server", live_server.url,
-        server=live_server, cache=tmp_path / "cache",
+        server=live_server, cache=tmp_path / "cache", cwd=public_data,
     )  # fmt: skip
     assert again.returncode == 0, again.stderr
     assert "uploaded as dataset" not in again.stderr
     assert again.stderr.count("held by the service") == 2, again.stderr
     assert _api(live_server, "/datasets")["count"] == 2
-    assert _without_run(json.loads(again.stdout))["estimates"] == _without_run(local)["estimates"]
+    assert _without_run(json.loads(again.stdout)) == _without_run(local)
