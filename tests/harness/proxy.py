@@ -4,7 +4,8 @@
 towards it; when that count first passes each of ``cuts`` (bytes), it closes the connection
 that carried them, both ways, as a dropped Wi-Fi link would. ``refuse()`` makes it close every
 new connection at once (the network stays gone; ``stay_down`` does so after the first cut);
-``allow()`` lets them through again.
+``allow()`` lets them through again. ``bytes_per_s`` makes the way towards the server a slow
+uplink (a site's Wi-Fi), so that a browser's upload can be caught midway.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import socket
 import threading
+import time
 from collections.abc import Iterator, Sequence
 from types import TracebackType
 from typing import Self
@@ -21,6 +23,7 @@ from tests.harness.ports import free_port
 __all__ = ["CuttingProxy", "cutting_proxy"]
 
 _BLOCK = 64 * 1024
+_SLOW_BLOCK = 16 * 1024
 
 
 class CuttingProxy:
@@ -30,8 +33,16 @@ class CuttingProxy:
     public one starts after it).
     """
 
-    def __init__(self, target: int, cuts: Sequence[int] = (), *, stay_down: bool = False) -> None:
+    def __init__(
+        self,
+        target: int,
+        cuts: Sequence[int] = (),
+        *,
+        stay_down: bool = False,
+        bytes_per_s: float | None = None,
+    ) -> None:
         self.target = target
+        self.bytes_per_s = bytes_per_s  # a slow uplink: bytes towards the server per second
         self.stay_down = stay_down  # after a cut, refuse every connection until allow()
         self.port = free_port()
         self.cuts = sorted(cuts)
@@ -100,11 +111,14 @@ class CuttingProxy:
             ).start()
 
     def _pipe(self, source: socket.socket, sink: socket.socket, *, counted: bool) -> None:
+        slow = counted and self.bytes_per_s is not None
         try:
-            while block := source.recv(_BLOCK):
+            while block := source.recv(_SLOW_BLOCK if slow else _BLOCK):
                 if counted and self._cut_due(len(block)):
                     break
                 sink.sendall(block)
+                if slow and self.bytes_per_s:
+                    time.sleep(len(block) / self.bytes_per_s)
         except OSError:
             pass
         finally:
@@ -134,10 +148,14 @@ def _close(sock: socket.socket) -> None:
 
 @contextlib.contextmanager
 def cutting_proxy(
-    target: int, cuts: Sequence[int] = (), *, stay_down: bool = False
+    target: int,
+    cuts: Sequence[int] = (),
+    *,
+    stay_down: bool = False,
+    bytes_per_s: float | None = None,
 ) -> Iterator[CuttingProxy]:
     """Run a :class:`CuttingProxy` for the ``with`` block."""
-    proxy = CuttingProxy(target, cuts, stay_down=stay_down)
+    proxy = CuttingProxy(target, cuts, stay_down=stay_down, bytes_per_s=bytes_per_s)
     try:
         yield proxy
     finally:

@@ -1,10 +1,11 @@
 """The page's resumable uploads (tus-js-client) in a real Chromium against a real server.
 
 The vendored tus-js-client is checked against its pinned version and sums. Then the page
-uploads a recording large enough to be caught midway (Chromium's upload throttled through
-the DevTools protocol): the network goes away (``context.set_offline``) and comes back, and
-the upload completes with the file's bytes; a reload midway, then choosing the same file,
-continues the upload from the server's offset instead of sending the file again.
+uploads a recording large enough to be caught midway (through a loopback proxy that is a
+slow uplink, :mod:`tests.harness.proxy`): the network goes away (``context.set_offline``)
+and comes back, and the upload completes with the file's bytes; a reload midway, then
+choosing the same file, continues the upload from the server's offset instead of sending
+the file again.
 Screenshots at 1200 and 420 px are left in the test's tmp_path.
 """
 
@@ -23,13 +24,14 @@ from service.api.web import TUS_JS_CLIENT_DIR
 from tests.factories import write_large_tum
 from tests.harness.processes import REPO
 from tests.service.api.test_web_browser import _enter_key, browser, page
+from tests.service.conftest import server_behind_proxy
 
 pytestmark = [pytest.mark.slow]
 
 __all__ = ["browser", "page"]  # the fixtures, imported for this module's tests
 
 MIB = 1 << 20
-UPLOAD_BYTES_PER_S = 3 * MIB  # throttled, so that a 20 MB upload takes seconds
+UPLOAD_BYTES_PER_S = 3 * MIB  # a slow uplink: a 24 MB upload takes seconds
 VENDOR = REPO / "templates" / TUS_JS_CLIENT_DIR
 
 
@@ -53,22 +55,6 @@ def test_the_page_serves_tus_js_client_offline(live_server: Any) -> None:
     assert response.status_code == 200
     assert response.headers["content-type"].startswith("text/javascript")
     assert response.content == (VENDOR / "tus.min.js").read_bytes()
-
-
-def _throttle(page: Any, bytes_per_s: int) -> Any:
-    """Throttle the page's uploads (DevTools protocol); return the session."""
-    session = page.context.new_cdp_session(page)
-    session.send("Network.enable")
-    session.send(
-        "Network.emulateNetworkConditions",
-        {
-            "offline": False,
-            "latency": 0,
-            "downloadThroughput": -1,
-            "uploadThroughput": bytes_per_s,
-        },
-    )
-    return session
 
 
 def _patches(page: Any) -> list[int]:
@@ -103,16 +89,22 @@ def _dataset_of(live_server: Any, path: Path) -> dict[str, Any]:
 
 
 def test_upload_survives_a_lost_network_and_a_reload(
-    page: Any, live_server: Any, tmp_path: Path, rng: np.random.Generator
+    page: Any, tmp_path: Path, rng: np.random.Generator
 ) -> None:
     """Offline midway, then online: the upload completes. Reload midway: the same file resumes."""
+    with server_behind_proxy(tmp_path / "data", bytes_per_s=UPLOAD_BYTES_PER_S) as (server, proxy):
+        _lost_network_and_reload(page, server, proxy.url, tmp_path, rng)
+
+
+def _lost_network_and_reload(
+    page: Any, live_server: Any, url: str, tmp_path: Path, rng: np.random.Generator
+) -> None:
     from playwright.sync_api import expect
 
     page.set_viewport_size({"width": 1200, "height": 900})
-    page.goto(f"{live_server.url}/")
+    page.goto(f"{url}/")
     _enter_key(page, live_server.api_key)
     expect(page.locator("#app")).to_be_visible()
-    _throttle(page, UPLOAD_BYTES_PER_S)
 
     # 1. the network goes away midway and comes back
     first = write_large_tum(tmp_path / "walk-offline.txt", 20 * MIB, rng)
@@ -139,7 +131,6 @@ def test_upload_survives_a_lost_network_and_a_reload(
     # 2. a reload midway; choosing the same file again continues it
     second = write_large_tum(tmp_path / "walk-reload.txt", 20 * MIB, rng)
     size = second.stat().st_size
-    _throttle(page, UPLOAD_BYTES_PER_S)
     page.set_input_files("#file-input", second)
     page.wait_for_function(
         "() => { const li = document.querySelector('#upload-list li');"
@@ -149,7 +140,6 @@ def test_upload_survives_a_lost_network_and_a_reload(
     )
     page.reload()
     expect(page.locator("#app")).to_be_visible()  # the key is remembered
-    _throttle(page, UPLOAD_BYTES_PER_S)
     offsets = _patches(page)
     page.set_input_files("#file-input", second)
     item = page.locator("#upload-list li").first

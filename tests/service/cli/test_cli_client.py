@@ -8,13 +8,11 @@ where tuspy keeps the address of an unfinished upload.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import os
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -24,8 +22,7 @@ import pytest
 
 from tests.factories import write_large_tum
 from tests.harness.ports import free_port
-from tests.harness.proxy import CuttingProxy, cutting_proxy
-from tests.service.conftest import REPO, LiveServer, running_server
+from tests.service.conftest import REPO, LiveServer, server_behind_proxy
 
 pytestmark = [pytest.mark.slow]
 
@@ -153,19 +150,6 @@ def test_wrong_key_and_refused_option_are_one_line_exit_1(
 # --- the upload: resumable -----------------------------------------------------------------
 
 
-@contextlib.contextmanager
-def _behind_proxy(
-    data_dir: Path, cuts: list[int], *, stay_down: bool = False
-) -> Iterator[tuple[LiveServer, CuttingProxy]]:
-    """A server whose public address is a cutting proxy (the upload addresses point at it)."""
-    with (
-        cutting_proxy(0, cuts, stay_down=stay_down) as proxy,
-        running_server(data_dir, env={"LOCEVAL_PUBLIC_URL": proxy.url}) as server,
-    ):
-        proxy.target = int(server.url.rsplit(":", 1)[1])
-        yield server, proxy
-
-
 def test_upload_continues_after_cut_connections(tmp_path: Path, rng: np.random.Generator) -> None:
     """Connections cut at 30, 60 and 90 %: the upload continues from the server's offset.
 
@@ -176,7 +160,7 @@ def test_upload_continues_after_cut_connections(tmp_path: Path, rng: np.random.G
     path = write_large_tum(tmp_path / "walk.txt", 6 * MIB, rng)
     size = path.stat().st_size
     cuts = [int(size * f) for f in (0.3, 0.6, 0.9)]
-    with _behind_proxy(tmp_path / "data", cuts) as (server, proxy):
+    with server_behind_proxy(tmp_path / "data", cuts) as (server, proxy):
         proc = _run(
             "upload", str(path), "--server", proxy.url, "--chunk-mib", "1", "--json",
             server=server, cache=tmp_path / "cache",
@@ -200,7 +184,7 @@ def test_upload_run_again_continues_where_it_stopped(
     path = write_large_tum(tmp_path / "walk.txt", 6 * MIB, rng)
     size = path.stat().st_size
     cache = tmp_path / "cache"
-    with _behind_proxy(tmp_path / "data", [size // 2], stay_down=True) as (server, proxy):
+    with server_behind_proxy(tmp_path / "data", [size // 2], stay_down=True) as (server, proxy):
         first = _run(
             "upload", str(path), "--server", proxy.url, "--chunk-mib", "1", "--quiet",
             server=server, cache=cache,
