@@ -642,22 +642,25 @@ async def _stream(
 
 
 def settle(runtime: Runtime, project_id: str, upload_id: str) -> TusUpload:
-    """Return an upload; one that is complete but no dataset yet (a crash) becomes one now.
+    """Return an upload as it stands; a complete one that is no dataset yet becomes one now.
 
-    The lock is waited for briefly: a request still writing leaves the row as it is.
+    A request cut off a moment ago may still be recording what it received: its lock is
+    waited for (a few seconds), so the offset answered is the one to continue from. A
+    complete upload without a dataset is one whose process died at its last byte.
 
     Raises:
         NotFoundError: no such upload in the project.
     """
     row = find_upload(runtime, project_id, upload_id)
-    if row.offset < row.length or row.dataset_id is not None or row.error is not None:
+    if row.dataset_id is not None or row.error is not None:
         return row
     lock = _Lock(runtime, upload_id)
     try:
-        if lock.acquire(1.0):
+        if lock.acquire():  # a request cut off is still recording what it received
             row = find_upload(runtime, project_id, upload_id)
-            with contextlib.suppress(LocevalError):  # recorded in the row's error
-                _settle(runtime, row)
+            if row.offset == row.length and row.dataset_id is None and row.error is None:
+                with contextlib.suppress(LocevalError):  # recorded in the row's error
+                    _settle(runtime, row)
     finally:
         lock.release()
     return row
