@@ -42,6 +42,11 @@ class CuttingProxy:
         self._open: set[socket.socket] = set()
         self._closed = threading.Event()
 
+    def cut_at(self, counts: Iterable[int]) -> None:
+        """Cut the connection when the bytes sent towards the target reach each count."""
+        with self._lock:
+            self._pending = sorted(counts)
+
     @property
     def url(self) -> str:
         """The proxy's address."""
