@@ -44,8 +44,9 @@ from typing import Any, Final
 
 import anyio
 import anyio.to_thread
-from sqlalchemy import select, text, update
+from sqlalchemy import Engine, create_engine, select, text, update
 from sqlalchemy.engine import Connection
+from sqlalchemy.pool import NullPool
 
 from loceval.errors import LocevalError
 from service.blobs.resumable import ResumableParts, ResumableWriter, resumable_parts
@@ -94,6 +95,11 @@ _BATCH_BYTES: Final = 1 << 20
 _WAIT_S: Final = 5.0  # how long a request waits for another one's lock on the upload
 _SWEEP_BATCH: Final = 200
 _KEY: Final = re.compile(r"[A-Za-z0-9!#$%&'*+.^_`|~-]+")
+
+_lock_engines: dict[str, Engine] = {}
+"""An engine per database whose connections hold the uploads' advisory locks: apart from the
+runtime's pool, so uploads in progress never take the connections the requests need."""
+_lock_engines_lock = threading.Lock()
 
 _digests: dict[str, tuple[int, Any]] = {}
 """The SHA-256 of each upload this process received from its first byte: (offset, hash)."""
@@ -239,7 +245,7 @@ class _Lock:
     def _try(self) -> bool:
         if self._postgres:
             if self._connection is None:
-                self._connection = self.runtime.engine.connect()
+                self._connection = _lock_engine(self.runtime.engine).connect()
             taken = bool(
                 self._connection.scalar(text("SELECT pg_try_advisory_lock(:k)"), {"k": self._key})
             )
@@ -277,6 +283,15 @@ class _Lock:
                 self.path.unlink(missing_ok=True)
             os.close(self._fd)
             self._fd = None
+
+
+def _lock_engine(engine: Engine) -> Engine:
+    """Return the engine of the advisory locks on ``engine``'s database (one connection each)."""
+    url = engine.url.render_as_string(hide_password=False)
+    with _lock_engines_lock:
+        if url not in _lock_engines:
+            _lock_engines[url] = create_engine(url, poolclass=NullPool)
+        return _lock_engines[url]
 
 
 def lock_path(runtime: Runtime, upload_id: str) -> Path:
@@ -642,22 +657,25 @@ async def _stream(
 
 
 def settle(runtime: Runtime, project_id: str, upload_id: str) -> TusUpload:
-    """Return an upload; one that is complete but no dataset yet (a crash) becomes one now.
+    """Return an upload as it stands; a complete one that is no dataset yet becomes one now.
 
-    The lock is waited for briefly: a request still writing leaves the row as it is.
+    A request cut off a moment ago may still be recording what it received: its lock is
+    waited for (a few seconds), so the offset answered is the one to continue from. A
+    complete upload without a dataset is one whose process died at its last byte.
 
     Raises:
         NotFoundError: no such upload in the project.
     """
     row = find_upload(runtime, project_id, upload_id)
-    if row.offset < row.length or row.dataset_id is not None or row.error is not None:
+    if row.dataset_id is not None or row.error is not None:
         return row
     lock = _Lock(runtime, upload_id)
     try:
-        if lock.acquire(1.0):
+        if lock.acquire():  # a request cut off is still recording what it received
             row = find_upload(runtime, project_id, upload_id)
-            with contextlib.suppress(LocevalError):  # recorded in the row's error
-                _settle(runtime, row)
+            if row.offset == row.length and row.dataset_id is None and row.error is None:
+                with contextlib.suppress(LocevalError):  # recorded in the row's error
+                    _settle(runtime, row)
     finally:
         lock.release()
     return row

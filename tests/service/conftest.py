@@ -39,7 +39,7 @@ from tests.harness.processes import (
     service_env,
 )
 from tests.harness.processes import wait_ready as harness_wait_ready
-from tests.harness.proxy import CuttingProxy, cutting_proxy
+from tests.harness.proxy import CuttingProxy
 from tests.service._api_fixtures import Api, open_api
 
 __all__ = [
@@ -206,7 +206,7 @@ def server_behind_proxy(
 ) -> Iterator[tuple[LiveServer, CuttingProxy]]:
     """A server whose public address is a cutting proxy (its upload addresses point at it)."""
     with (
-        cutting_proxy(0, cuts, stay_down=stay_down, bytes_per_s=bytes_per_s) as proxy,
+        CuttingProxy(0, cuts, stay_down=stay_down, bytes_per_s=bytes_per_s) as proxy,
         running_server(data_dir, env={"LOCEVAL_PUBLIC_URL": proxy.url}) as server,
     ):
         proxy.target = int(server.url.rsplit(":", 1)[1])

@@ -169,7 +169,10 @@ def test_every_route_needs_a_valid_key(world: World, method: str, template: str,
     before = world.snapshot()
     url = _fill(template, str(uuid.uuid4()))
     response = world.api.client.request(method, url, headers=headers, **body)
-    assert_problem(response, 401, type_="auth.unauthorized")
+    if method == "HEAD":  # a HEAD answer has no body (tus's HEAD /uploads/{id}): status only
+        assert response.status_code == 401
+    else:
+        assert_problem(response, 401, type_="auth.unauthorized")
     assert response.headers["www-authenticate"] == "Bearer"
     assert world.snapshot() == before
 

@@ -166,7 +166,7 @@ def test_upload_continues_after_cut_connections(tmp_path: Path, rng: np.random.G
             server=server, cache=tmp_path / "cache",
         )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
-    assert proxy.cut_at == cuts
+    assert proxy.cuts == cuts
     (dataset,) = json.loads(proc.stdout)
     assert dataset["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
     assert dataset["size_bytes"] == size
