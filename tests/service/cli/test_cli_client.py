@@ -22,9 +22,12 @@ import pytest
 
 from tests.factories import write_large_tum
 from tests.harness.ports import free_port
+from tests.service.cli.test_cli_map import _recording
 from tests.service.conftest import REPO, LiveServer, server_behind_proxy
 
 pytestmark = [pytest.mark.slow]
+
+__all__ = ["_recording"]  # the map test's recording (a fixture), imported for submit's
 
 GROUNDTRUTH = "fr2_desk_groundtruth.txt"
 ESTIMATE = "fr2_desk_ORB.txt"
@@ -245,3 +248,33 @@ def test_submit_writes_the_result_of_evaluate_and_uploads_once(
     assert again.stderr.count("held by the service") == 2, again.stderr
     assert _api(live_server, "/datasets")["count"] == 2
     assert _without_run(json.loads(again.stdout)) == _without_run(local)
+
+
+def test_submit_sends_the_files_of_options_map_and_building(
+    live_server: LiveServer, tmp_path: Path, recording: dict[str, Path]
+) -> None:
+    """``--map`` and ``--building`` name local files: submit uploads them and refers to them.
+
+    The map measured on the service is the one ``loceval evaluate`` measures (but the name of
+    its source: the service's is the dataset's file name).
+    """
+    folder = recording["folder"]
+    argv = (
+        "gt.txt", "slam.txt", "--name", "SLAM", "--map", "map.zip", "--building", "plan.dxf",
+        "--no-ci", "--json",
+    )  # fmt: skip
+    local = _run("evaluate", *argv, server=None, cache=tmp_path, cwd=folder)
+    assert local.returncode == 0, local.stderr
+    remote = _run(
+        "submit", *argv, "--server", live_server.url, server=live_server, cache=tmp_path,
+        cwd=folder,
+    )  # fmt: skip
+    assert remote.returncode == 0, remote.stderr
+    assert remote.stderr.count("uploaded as dataset") == 4, remote.stderr
+    kinds = {d["filename"]: d["kind"] for d in _api(live_server, "/datasets")["items"]}
+    assert set(kinds) == {"gt.txt", "slam.txt", "map.zip", "plan.dxf"}
+    on_service, here = json.loads(remote.stdout)["map"], json.loads(local.stdout)["map"]
+    # the figures are the same; the service names the map by its dataset's file only
+    assert on_service.pop("source") == "map.zip"
+    assert here.pop("source").startswith("map.zip")
+    assert on_service == here
