@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import email.utils
 from collections.abc import AsyncIterator
-from typing import Annotated, Final
+from typing import Any, Final
 
 import anyio.to_thread
-from fastapi import APIRouter, Depends, Header, Request, Response, status
+from fastapi import APIRouter, Depends, Request, Response, status
 from starlette.requests import ClientDisconnect
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -39,13 +39,41 @@ _EXPOSED: Final = (
 )
 
 
-def _version(tus_resumable: Annotated[str | None, Header()] = None) -> None:
+def _version(request: Request) -> None:
     """Refuse a request that does not speak tus 1.0.0 (412)."""
-    tus.check_version(tus_resumable)
+    tus.check_version(request.headers.get("tus-resumable"))
 
 
 router = APIRouter(prefix="/uploads", tags=["uploads"])
 _TUS = [Depends(_version)]
+_DIGITS = {"type": "string", "pattern": "^[0-9]{1,19}$"}
+
+
+def _header(
+    name: str, schema: dict[str, Any], description: str, *, required: bool = True
+) -> dict[str, Any]:
+    return {
+        "name": name,
+        "in": "header",
+        "required": required,
+        "schema": schema,
+        "description": description,
+    }
+
+
+_VERSION = _header(
+    "Tus-Resumable", {"type": "string", "enum": [tus.TUS_VERSION]}, "the protocol's version"
+)
+_CHECKSUM = _header(
+    "Upload-Checksum",
+    {"type": "string"},
+    "'sha1 BASE64', 'sha256 BASE64' or 'md5 BASE64': the digest of this body",
+    required=False,
+)
+_OCTETS = {
+    "required": False,
+    "content": {tus.OFFSET_MEDIA_TYPE: {"schema": {"type": "string", "format": "binary"}}},
+}
 
 
 def _http_date(row: TusUpload) -> str:
@@ -68,7 +96,9 @@ async def _body(request: Request) -> AsyncIterator[bytes]:
         raise UploadError(INTERRUPTED) from None
 
 
-@router.options("", status_code=status.HTTP_204_NO_CONTENT, responses=problems())
+@router.options(
+    "", status_code=status.HTTP_204_NO_CONTENT, response_class=Response, responses=problems()
+)
 def upload_options(runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """The server's tus capabilities: version, extensions, largest upload, checksums."""
     del project_id
@@ -86,16 +116,25 @@ def upload_options(runtime: RuntimeDep, project_id: ProjectDep) -> Response:
 @router.post(
     "",
     status_code=status.HTTP_201_CREATED,
+    response_class=Response,
     dependencies=_TUS,
     responses=problems(400, 412, 413, 415, 460, 507),
+    openapi_extra={
+        "parameters": [
+            _VERSION,
+            _header("Upload-Length", _DIGITS, "the file's size in bytes"),
+            _header(
+                "Upload-Metadata",
+                {"type": "string"},
+                "'filename B64,name B64,tags B64': each value base64 of UTF-8 text",
+                required=False,
+            ),
+            _CHECKSUM,
+        ],
+        "requestBody": _OCTETS,
+    },
 )
-async def create_upload(
-    request: Request,
-    runtime: RuntimeDep,
-    project_id: ProjectDep,
-    upload_length: Annotated[str | None, Header()] = None,
-    upload_metadata: Annotated[str | None, Header()] = None,
-) -> Response:
+async def create_upload(request: Request, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Create a resumable upload (tus creation; with a body, creation-with-upload).
 
     ``Upload-Length`` is the file's size; ``Upload-Metadata`` may carry ``filename``, the
@@ -104,7 +143,10 @@ async def create_upload(
     """
     row = await anyio.to_thread.run_sync(
         lambda: tus.create_upload(
-            runtime, project_id, length=upload_length, metadata=upload_metadata
+            runtime,
+            project_id,
+            length=request.headers.get("upload-length"),
+            metadata=request.headers.get("upload-metadata"),
         )
     )
     headers = {"Location": api_url(runtime.settings, "uploads", row.id), **_progress(row)}
@@ -127,7 +169,13 @@ async def create_upload(
     return Response(status_code=status.HTTP_201_CREATED, headers=headers)
 
 
-@router.head("/{upload_id}", dependencies=_TUS, responses=problems(404, 412))
+@router.head(
+    "/{upload_id}",
+    response_class=Response,
+    dependencies=_TUS,
+    responses=problems(404, 412),
+    openapi_extra={"parameters": [_VERSION]},
+)
 def upload_offset(upload_id: PathText, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """How many bytes of the upload the server holds (``Upload-Offset``)."""
     row = tus.settle(runtime, project_id, upload_id)
@@ -147,8 +195,17 @@ def upload_offset(upload_id: PathText, runtime: RuntimeDep, project_id: ProjectD
 @router.patch(
     "/{upload_id}",
     status_code=status.HTTP_204_NO_CONTENT,
+    response_class=Response,
     dependencies=_TUS,
     responses=problems(400, 404, 409, 412, 413, 415, 423, 460, 507),
+    openapi_extra={
+        "parameters": [
+            _VERSION,
+            _header("Upload-Offset", _DIGITS, "where the bytes go: the upload's offset"),
+            _CHECKSUM,
+        ],
+        "requestBody": {**_OCTETS, "required": True},
+    },
 )
 async def upload_bytes(
     upload_id: PathText, request: Request, runtime: RuntimeDep, project_id: ProjectDep
@@ -178,8 +235,10 @@ async def upload_bytes(
 @router.delete(
     "/{upload_id}",
     status_code=status.HTTP_204_NO_CONTENT,
+    response_class=Response,
     dependencies=_TUS,
     responses=problems(404, 412, 423),
+    openapi_extra={"parameters": [_VERSION]},
 )
 def delete_upload(upload_id: PathText, runtime: RuntimeDep, project_id: ProjectDep) -> Response:
     """Terminate an upload: its bytes go (a finished upload's dataset stays)."""
@@ -192,7 +251,7 @@ def read_upload(
     upload_id: PathText, runtime: RuntimeDep, project_id: ProjectDep
 ) -> ResumableUploadPublic:
     """An upload's progress and, once complete, the dataset it became."""
-    row = tus.settle(runtime, project_id, upload_id)
+    row = tus.settle(runtime, project_id, upload_id, wait=False)
     return upload_public(runtime, row)
 
 

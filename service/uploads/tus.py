@@ -644,8 +644,9 @@ async def _stream(
                 data, batch = bytes(batch), bytearray()
                 await anyio.to_thread.run_sync(_write, runtime, row, writer, hashes, data)
         if batch:
-            await anyio.to_thread.run_sync(_write, runtime, row, writer, hashes, bytes(batch))
-    except Exception:
+            data, batch = bytes(batch), bytearray()
+            await anyio.to_thread.run_sync(_write, runtime, row, writer, hashes, data)
+    except Exception:  # the body broke off (batch: its bytes since the last write), or a write
         with contextlib.suppress(LocevalError, OSError):  # the first error is the one to tell
             if batch:
                 await anyio.to_thread.run_sync(_write, runtime, row, writer, hashes, bytes(batch))
@@ -656,18 +657,21 @@ async def _stream(
 # -- the dataset ---------------------------------------------------------------------------
 
 
-def settle(runtime: Runtime, project_id: str, upload_id: str) -> TusUpload:
+def settle(runtime: Runtime, project_id: str, upload_id: str, *, wait: bool = True) -> TusUpload:
     """Return an upload as it stands; a complete one that is no dataset yet becomes one now.
 
     A request cut off a moment ago may still be recording what it received: its lock is
     waited for (a few seconds), so the offset answered is the one to continue from. A
     complete upload without a dataset is one whose process died at its last byte.
+    Without ``wait``, an unfinished upload is answered as recorded (a progress display).
 
     Raises:
         NotFoundError: no such upload in the project.
     """
     row = find_upload(runtime, project_id, upload_id)
     if row.dataset_id is not None or row.error is not None:
+        return row
+    if not wait and row.offset < row.length:  # progress as recorded, while it goes on
         return row
     lock = _Lock(runtime, upload_id)
     try:
