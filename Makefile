@@ -9,7 +9,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEVSTAMP := $(VENV)/.installed-dev
 
-.PHONY: setup setup-dev serve run demo test lint typecheck pytest bench clean lock vendor-swagger-ui vendor-three
+.PHONY: setup setup-dev serve run demo test lint typecheck pytest bench clean lock vendor-swagger-ui vendor-three vendor-tus-js-client
 
 LOCK_PYTHON := 3.11
 PIP_LOCKED := $(BIN)/python -m pip install --quiet --require-hashes --only-binary=:all:
@@ -96,6 +96,22 @@ vendor-three:
 	cp .vendor-three/package/build/three.module.min.js .vendor-three/package/LICENSE templates/vendor/three/
 	@echo "three $(THREE_VERSION): sha256 $$(sha256sum templates/vendor/three/three.module.min.js | cut -d' ' -f1)"
 	rm -rf .vendor-three
+
+# Refresh the vendored tus-js-client (templates/web/vendor/tus-js-client; see its README), the
+# page's resumable upload client: `make vendor-tus-js-client TUS_JS_CLIENT_VERSION=4.x.y`, then
+# run tests/service/api/test_web_upload_browser.py. npm checks the package against the registry's
+# sha512; the browser bundle and the licence are copied byte for byte with their SHA-256 sums.
+TUS_JS_CLIENT_VERSION ?= 4.3.1
+TUS_JS_CLIENT_DIR := templates/web/vendor/tus-js-client
+vendor-tus-js-client:
+	rm -rf .vendor-tus && mkdir .vendor-tus
+	cd .vendor-tus && npm pack --silent tus-js-client@$(TUS_JS_CLIENT_VERSION) >/dev/null \
+		&& tar xzf tus-js-client-$(TUS_JS_CLIENT_VERSION).tgz
+	mkdir -p $(TUS_JS_CLIENT_DIR)
+	cp .vendor-tus/package/dist/tus.min.js .vendor-tus/package/LICENSE $(TUS_JS_CLIENT_DIR)/
+	echo $(TUS_JS_CLIENT_VERSION) > $(TUS_JS_CLIENT_DIR)/VERSION
+	cd $(TUS_JS_CLIENT_DIR) && sha256sum tus.min.js LICENSE > SHA256SUMS
+	rm -rf .vendor-tus
 
 clean:
 	rm -rf $(VENV) out var .mypy_cache .ruff_cache

@@ -49,6 +49,7 @@ __all__ = [
     "Project",
     "Schedule",
     "ScheduleRun",
+    "TusUpload",
     "create_db_engine",
     "get_owned",
     "make_session_factory",
@@ -149,6 +150,37 @@ class Dataset(Base):
     inspection: Mapped[dict[str, Any]] = mapped_column(default=dict)
     storage_path: Mapped[str] = mapped_column(Text)
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+
+
+class TusUpload(Base):
+    """A resumable upload (tus 1.0, :mod:`service.uploads.tus`): its offset and its parts' state.
+
+    The bytes lie in the blob store (:mod:`service.blobs.resumable`); this row is the truth
+    about how many of them count, so any replica continues where another stopped. Once
+    complete, ``dataset_id`` names the dataset it became (or ``error`` why none).
+    """
+
+    __tablename__ = "tus_uploads"
+    __table_args__ = (Index("ix_tus_uploads_expires", "expires_at"),)
+
+    id: Mapped[str] = mapped_column(String(36), primary_key=True, default=new_id)
+    project_id: Mapped[str] = mapped_column(ForeignKey("projects.id", ondelete="CASCADE"))
+    length: Mapped[int] = mapped_column(BigInteger)
+    offset: Mapped[int] = mapped_column("upload_offset", BigInteger, default=0)
+    filename: Mapped[str] = mapped_column(Text, default="")
+    name: Mapped[str | None] = mapped_column(Text, default=None)
+    tags: Mapped[list[Any]] = mapped_column(default=list)
+    metadata_header: Mapped[str] = mapped_column(Text, default="")
+    """The ``Upload-Metadata`` as sent (HEAD answers it back)."""
+    state: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    """The backend's state of the parts (:class:`service.blobs.resumable.ResumableParts`)."""
+    dataset_id: Mapped[str | None] = mapped_column(String(36), default=None)
+    report: Mapped[dict[str, Any] | None] = mapped_column(default=None)
+    """What became of the upload (the ``upload`` notes of ``POST /datasets``)."""
+    error: Mapped[dict[str, Any] | None] = mapped_column(default=None)
+    """The problem document of a complete upload that could not become a dataset."""
+    created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+    expires_at: Mapped[dt.datetime] = mapped_column()
 
 
 class JobStatus(enum.StrEnum):

@@ -43,7 +43,12 @@ __all__ = [
     "ServiceUnavailableError",
     "StartupError",
     "StoreUnavailableError",
+    "TusVersionError",
+    "UploadChecksumError",
     "UploadError",
+    "UploadLockedError",
+    "UploadMediaTypeError",
+    "UploadOffsetError",
     "UploadTooLargeError",
     "WebhookRefusedError",
     "WebhookUnresolvedError",
@@ -121,6 +126,36 @@ class UploadTooLargeError(UploadError):
     """The upload is larger than the configured limit."""
 
     code: ClassVar[str] = "upload.too_large"
+
+
+class UploadChecksumError(UploadError):
+    """A resumable upload's request whose bytes do not match its ``Upload-Checksum``."""
+
+    code: ClassVar[str] = "upload.checksum_mismatch"
+
+
+class UploadMediaTypeError(UploadError):
+    """A resumable upload's request whose body is not ``application/offset+octet-stream``."""
+
+    code: ClassVar[str] = "upload.media_type"
+
+
+class TusVersionError(UploadError):
+    """A resumable upload's request without ``Tus-Resumable: 1.0.0`` (the protocol's version)."""
+
+    code: ClassVar[str] = "upload.tus_version"
+
+
+class UploadOffsetError(ConflictError):
+    """A resumable upload's request whose ``Upload-Offset`` is not where the upload stands."""
+
+    code: ClassVar[str] = "upload.offset_mismatch"
+
+
+class UploadLockedError(ConflictError):
+    """A resumable upload another request is writing to at the moment."""
+
+    code: ClassVar[str] = "upload.locked"
 
 
 class WebhookRefusedError(InputError):
@@ -212,6 +247,11 @@ def is_storage_full(exc: BaseException) -> bool:
 
 STATUS_BY_ERROR: Final[Mapping[type[LocevalError], int]] = {
     UploadTooLargeError: 413,
+    UploadChecksumError: 460,  # tus 1.0's checksum extension: "460 Checksum Mismatch"
+    UploadMediaTypeError: 415,
+    TusVersionError: 412,
+    UploadOffsetError: 409,
+    UploadLockedError: 423,
     UploadError: 400,
     InputError: 422,
     AssociationError: 422,

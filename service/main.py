@@ -14,7 +14,17 @@ from fastapi import APIRouter, FastAPI
 
 from loceval import __version__
 from service.adapters import OUTAGE_ERRORS, unavailable
-from service.api import comparisons, datasets, docs, evaluations, health, hops, schedules, web
+from service.api import (
+    comparisons,
+    datasets,
+    docs,
+    evaluations,
+    health,
+    hops,
+    schedules,
+    uploads,
+    web,
+)
 from service.api.metrics import MetricsMiddleware, create_metrics
 from service.api.metrics import router as metrics_router
 from service.api.middleware import ApiKeyMiddleware
@@ -107,10 +117,18 @@ def create_app(
     app.state.metrics = create_metrics(runtime)
     install_error_handlers(app, outages=OUTAGE_ERRORS, unavailable=unavailable)
     app.add_middleware(ApiKeyMiddleware)
+    app.add_middleware(uploads.TusHeadersMiddleware)  # outside the key's check: 401s too
     app.add_middleware(MetricsMiddleware, metrics=app.state.metrics)  # 401s counted too
     app.add_middleware(RequestLogMiddleware)  # added last: the outermost, it sees every request
+    _include_routes(app)
+    return app
+
+
+def _include_routes(app: FastAPI) -> None:
+    """Add every route: the API under /api/v1, then health, metrics, Hops, /docs, the page."""
     api = APIRouter(prefix="/api/v1")
     api.include_router(datasets.router)
+    api.include_router(uploads.router)
     api.include_router(evaluations.router)
     api.include_router(schedules.router)
     api.include_router(comparisons.router)
@@ -121,4 +139,3 @@ def create_app(
     app.include_router(docs.router)
     docs.document_examples(app)  # the answers' examples, shown by /docs
     app.include_router(web.router)
-    return app

@@ -87,6 +87,10 @@ class Settings(BaseSettings):
             many bytes where it lies, by ranged reads of its index and the wanted topics'
             messages, instead of copying it into the cache first (unless the cache holds it
             already, or its chunks are compressed); 0 reads every such file so.
+        upload_expiry_s: a resumable upload (``/api/v1/uploads``, tus) that receives no
+            bytes for this many seconds expires: a sweep every minute removes its parts
+            (from the data folder, or its multipart upload from the bucket). Each request
+            that writes to it moves its ``Upload-Expires`` on.
     """
 
     model_config = SettingsConfigDict(env_prefix="LOCEVAL_", extra="ignore")
@@ -111,6 +115,7 @@ class Settings(BaseSettings):
     blob_cache_bytes: Annotated[int, Field(ge=1 << 20, le=1 << 50)] = 20 * _GIB
     blob_redirect_s: Annotated[int, Field(ge=0, le=7 * 86400)] = 0
     blob_ranged_bytes: Annotated[int, Field(ge=0, le=1 << 50)] = 256 << 20
+    upload_expiry_s: Annotated[float, Field(gt=0, le=365 * 86400)] = 86400.0
 
     @field_validator("blob_url")
     @classmethod

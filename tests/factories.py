@@ -332,3 +332,17 @@ def assert_trajectories_close(
     if actual.quat_xyzw is not None and expected.quat_xyzw is not None:
         delta = Rotation.from_quat(actual.quat_xyzw).inv() * Rotation.from_quat(expected.quat_xyzw)
         np.testing.assert_allclose(delta.magnitude(), 0.0, rtol=0, atol=atol_rad)
+
+
+def write_large_tum(path: Path, size_bytes: int, rng: np.random.Generator) -> Path:
+    """Write a TUM trajectory of about ``size_bytes`` (a random walk at 100 Hz), by numpy.
+
+    For uploads large enough to be cut midway; each call's bytes differ (the walk is random).
+    """
+    n = max(10, size_bytes // 96)
+    stamps = 1_700_000_000.0 + np.arange(n) * 0.01
+    positions = np.cumsum(rng.normal(0.0, 0.01, size=(n, 3)), axis=0)
+    quats = rng.normal(size=(n, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    np.savetxt(path, np.column_stack([stamps, positions, quats]), fmt="%.9f")
+    return path

@@ -404,10 +404,11 @@ READ_KEYS: Final = RESULT_KEYS - {"estimates"}
 NOT_RESULTS: Final = {
     "exporters.grasshopper.loceval_paths": "ate",
     "service.results.paths": "ate",
+    "service.cli.submit": "verdict",
 }
 """Modules that read such a key of another document: the Grasshopper script and the service's
 reader of an evaluation's paths (for Hops) read the ATE runs of ``paths.3dm.json``'s paths,
-not the result document."""
+not the result document; ``loceval submit`` prints the API's summary rows (their verdict)."""
 
 
 def result_digs(root: Path, packages: Sequence[str]) -> list[str]:

@@ -145,12 +145,26 @@ async def create_dataset(
 def read_datasets(
     runtime: RuntimeDep,
     project_id: ProjectDep,
+    *,
     tag: Annotated[str | None, Query(max_length=50, pattern=NO_NUL)] = None,
+    sha256: Annotated[
+        str | None,
+        Query(
+            pattern=r"^[0-9a-fA-F]{64}$",
+            description="the file's SHA-256 (hex): the dataset holding these bytes, if any",
+        ),
+    ] = None,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
     offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0,
 ) -> DatasetsPublic:
-    """List the project's datasets, newest first (optionally those with a tag)."""
-    rows, count = datasets.list_datasets(runtime, project_id, tag=tag, limit=limit, offset=offset)
+    """List the project's datasets, newest first (optionally those with a tag or checksum).
+
+    ``?sha256=`` asks whether the project holds a file already (``loceval submit`` uploads
+    only the files it does not): one item, or none.
+    """
+    rows, count = datasets.list_datasets(
+        runtime, project_id, tag=tag, sha256=sha256, limit=limit, offset=offset
+    )
     return DatasetsPublic(items=[dataset_public(d) for d in rows], count=count)
 
 

@@ -18,7 +18,11 @@ from service.errors import (
     InsufficientStorageError,
     NotFoundError,
     ServiceUnavailableError,
+    TusVersionError,
+    UploadChecksumError,
     UploadError,
+    UploadLockedError,
+    UploadMediaTypeError,
     UploadTooLargeError,
 )
 
@@ -28,8 +32,13 @@ _DESCRIPTIONS = {
     400: "malformed request (not multipart, truncated body)",
     401: "no API key, or an unknown or revoked one",
     404: "no such resource in this key's project",
-    409: "conflict with the resource's state",
+    409: "conflict with the resource's state (a resumable upload: Upload-Offset is not "
+    "where it stands)",
+    412: "a resumable upload's request without 'Tus-Resumable: 1.0.0'",
     413: "upload larger than the limit",
+    415: "a resumable upload's bytes without 'Content-Type: application/offset+octet-stream'",
+    423: "another request is writing to this resumable upload (ask its offset, go on)",
+    460: "the request's bytes do not match its Upload-Checksum (nothing was kept)",
     422: "invalid request or unusable input (the detail says what to do)",
     503: "database or queue unreachable",
     507: "the server's storage is full or nearly so: nothing was saved (the detail says "
@@ -90,6 +99,29 @@ EXAMPLES: Final[dict[int, dict[str, Any]]] = {
             }
         ],
     },
+    412: problem_example(
+        TusVersionError,
+        412,
+        "This server speaks tus 1.0.0, and the request has no Tus-Resumable header; send "
+        "'Tus-Resumable: 1.0.0' (every tus client does).",
+    ),
+    415: problem_example(
+        UploadMediaTypeError,
+        415,
+        "Send the upload's bytes with 'Content-Type: application/offset+octet-stream'.",
+    ),
+    423: problem_example(
+        UploadLockedError,
+        423,
+        "Another request is writing to this upload at the moment; ask its offset again "
+        "(HEAD) in a moment and continue from there.",
+    ),
+    460: problem_example(
+        UploadChecksumError,
+        460,
+        "The request's bytes do not match its Upload-Checksum (sha1); nothing of it was "
+        "kept: send them again from the same offset.",
+    ),
     503: problem_example(
         ServiceUnavailableError,
         503,

@@ -25,7 +25,7 @@ from loceval.options import option
 from loceval.readers.source import TrajectoryFormat
 from service.schemas.evaluations import options_public
 
-__all__ = ["router"]
+__all__ = ["TUS_JS_CLIENT_DIR", "router"]
 
 router = APIRouter(include_in_schema=False)
 
@@ -39,7 +39,11 @@ _HEADERS: Final = {
 _ASSETS: Final = {
     "app.js": "text/javascript; charset=utf-8",
     "app.css": "text/css; charset=utf-8",
+    "vendor/tus-js-client/tus.min.js": "text/javascript; charset=utf-8",
 }
+TUS_JS_CLIENT_DIR: Final = Path(_WEB_DIR) / "vendor" / "tus-js-client"
+"""The vendored tus-js-client (``make vendor-tus-js-client``; see its README), relative to the
+templates folder: the page's resumable uploads."""
 
 
 @lru_cache(maxsize=8)
@@ -132,3 +136,16 @@ def app_css(request: Request) -> Response:
         The stylesheet as ``text/css``.
     """
     return _asset(request, "app.css")
+
+
+@router.get("/web/vendor/tus.min.js", include_in_schema=False)
+def tus_js(request: Request) -> Response:
+    """Return the vendored tus-js-client, the page's resumable upload client.
+
+    Args:
+        request: The incoming request; its app's settings name the templates folder.
+
+    Returns:
+        The browser bundle as ``text/javascript``, byte for byte as published.
+    """
+    return _asset(request, "vendor/tus-js-client/tus.min.js")

@@ -47,7 +47,7 @@ from service.blobs.base import (
 )
 from service.errors import InsufficientStorageError
 
-__all__ = ["STORAGE_FULL", "LocalBlobs", "LocalIncoming"]
+__all__ = ["STORAGE_FULL", "LocalBlobs", "LocalIncoming", "disk_full_refused"]
 
 _OWNED: Final = re.compile(r"([0-9a-f]{32})\.(.+)\.(part|publishing)")
 _PUBLISHING: Final = ".publishing"
@@ -73,13 +73,13 @@ class LocalIncoming(Incoming):
         if self._fh is None:
             msg = "the upload was committed or aborted"
             raise RuntimeError(msg)
-        with _disk_full_refused():
+        with disk_full_refused():
             self._fh.write(chunk)
 
     def commit(self) -> None:
         """See :meth:`Incoming.commit`."""
         if self._fh is not None:
-            with _disk_full_refused():
+            with disk_full_refused():
                 self._fh.flush()
                 os.fsync(self._fh.fileno())
             self._fh.close()
@@ -95,7 +95,7 @@ class LocalIncoming(Incoming):
 
 
 @contextlib.contextmanager
-def _disk_full_refused() -> Iterator[None]:
+def disk_full_refused() -> Iterator[None]:
     """Turn a write that failed for a full disk (ENOSPC, EDQUOT) into the 507 refusal."""
     try:
         yield

@@ -15,7 +15,7 @@ from loceval.errors import InputError
 from loceval.evaluation import EvaluationResult
 from loceval.readers import TrajectoryFormat, parse_source
 from service.cli.output import emit
-from service.cli.parser import EXIT_GATE
+from service.cli.parser import EXIT_GATE, check_names, systems_of
 from service.cli.progress import terminal_progress
 from service.jobs.mapjob import map_source
 from service.jobs.options import (
@@ -68,13 +68,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
     """Evaluate the estimates against the reference; print tables or JSON; write artifacts."""
     config = config_from_options(args, front_door="cli", device_transform=_device_file_offset(args))
     default_format = TrajectoryFormat(args.format) if args.format else None
-    if args.name and len(args.name) != len(args.estimates):
-        msg = (
-            f"Give --name once per estimate: {len(args.estimates)} estimates but "
-            f"{len(args.name)} names."
-        )
-        raise InputError(msg)
-    systems = _systems(args)
+    check_names(args)
+    systems = systems_of(args)
     export = export_options(args)
     plan = export
     if args.map is not None and plan is None:  # --json without --out still needs the plan
@@ -155,29 +150,23 @@ def gate_exit(
         args: the parsed arguments (``fail_on``, ``json``).
         document: ``result.to_dict()`` when it is already made.
     """
+    if not fail_on_from_options(args):
+        return 0
+    return document_gate_exit(document or result.to_dict(), args)
+
+
+def document_gate_exit(document: Mapping[str, object], args: argparse.Namespace) -> int:
+    """Judge ``--fail-on`` on a result document (``loceval submit``'s too); as :func:`gate_exit`."""
     fail_on = fail_on_from_options(args)
     if not fail_on:
         return 0
     from loceval.results.document import read_result  # noqa: PLC0415
     from loceval.results.gate import judge_gate  # noqa: PLC0415
 
-    gate = judge_gate(read_result(document or result.to_dict()), fail_on)
+    gate = judge_gate(read_result(document), fail_on)
     sys.stdout.flush()  # the line comes last, after everything printed before it
     emit(gate.line(), file=sys.stderr if args.json else None)
     return 0 if gate.passed else EXIT_GATE
-
-
-def _systems(args: argparse.Namespace) -> list[str | None]:
-    """Return each estimate's system from ``--system`` (given once per estimate, or never)."""
-    if not args.system:
-        return [None] * len(args.estimates)
-    if len(args.system) != len(args.estimates):
-        msg = (
-            f"Give --system once per estimate, in order like --name ('' for an estimate of "
-            f"no system): {len(args.estimates)} estimates but {len(args.system)} systems."
-        )
-        raise InputError(msg)
-    return [s.strip() or None for s in args.system]
 
 
 def _baseline(args: argparse.Namespace) -> Baseline | None:

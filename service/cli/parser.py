@@ -24,7 +24,17 @@ from service.cli.evo.hints import EVALUATE_EPILOG, evo_hint
 from service.cli.evo.parser import add_evo_commands
 from service.cli.usage import EXIT_INPUT, fail, unknown_arguments
 
-__all__ = ["EXIT_BUG", "EXIT_GATE", "EXIT_INPUT", "build_parser", "names", "numbers"]
+__all__ = [
+    "EXIT_BUG",
+    "EXIT_GATE",
+    "EXIT_INPUT",
+    "add_evaluation_arguments",
+    "build_parser",
+    "check_names",
+    "names",
+    "numbers",
+    "systems_of",
+]
 
 EXIT_BUG = 2
 EXIT_GATE = 3
@@ -75,6 +85,37 @@ class _FormatNames:
         from loceval.readers.source import TrajectoryFormat  # noqa: PLC0415
 
         return iter([f.value for f in TrajectoryFormat])
+
+
+def check_names(args: argparse.Namespace) -> None:
+    """``--name`` is given once per estimate, or not at all (``loceval submit``'s rule too).
+
+    Raises:
+        InputError: as many names as estimates are not given.
+    """
+    if args.name and len(args.name) != len(args.estimates):
+        msg = (
+            f"Give --name once per estimate: {len(args.estimates)} estimates but "
+            f"{len(args.name)} names."
+        )
+        raise InputError(msg)
+
+
+def systems_of(args: argparse.Namespace) -> list[str | None]:
+    """Return each estimate's system from ``--system`` (given once per estimate, or never).
+
+    Raises:
+        InputError: ``--system`` is given, but not once per estimate.
+    """
+    if not args.system:
+        return [None] * len(args.estimates)
+    if len(args.system) != len(args.estimates):
+        msg = (
+            f"Give --system once per estimate, in order like --name ('' for an estimate of "
+            f"no system): {len(args.estimates)} estimates but {len(args.system)} systems."
+        )
+        raise InputError(msg)
+    return [s.strip() or None for s in args.system]
 
 
 def numbers(text: str) -> tuple[float, ...]:
@@ -201,6 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_ranging(sub)
     _add_report(sub)
     _add_service(sub)
+    _add_client(sub)
     parser.description = _DESCRIPTION.format(commands=", ".join(sub.choices))
     return parser
 
@@ -215,8 +257,14 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
             "motive:take.csv@RigidBody, run.mcap@/amcl_pose, run.bag@tf:map:base_link."
         ),
     )
+    add_evaluation_arguments(ev)
+    ev.set_defaults(handler="service.cli.evaluate:run_evaluate")
+
+
+def add_evaluation_arguments(ev: argparse.ArgumentParser) -> None:
+    """Add the sources, names and options of ``loceval evaluate`` (``loceval submit``'s too)."""
     ev.epilog = EVALUATE_EPILOG
-    ev.flag_hint = evo_hint
+    ev.flag_hint = evo_hint  # type: ignore[attr-defined]  # read by _Parser with getattr
     ev.add_argument("reference", help="the ground truth source")
     ev.add_argument("estimates", nargs="+", metavar="estimate", help="estimate sources")
     ev.add_argument(
@@ -244,7 +292,6 @@ def _add_evaluate(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpar
         if spec.cli and spec.group != "ranging":
             add_option(ev, spec)
     _add_result_flags(ev)
-    ev.set_defaults(handler="service.cli.evaluate:run_evaluate")
 
 
 def _add_result_flags(parser: argparse.ArgumentParser) -> None:
@@ -385,3 +432,54 @@ def _add_service(sub: Any) -> None:  # noqa: ANN401  (argparse's private subpars
         help="the data folder to copy from (default: LOCEVAL_DATA_DIR)",
     )
     migrate.set_defaults(handler="service.cli.storage:run_storage_migrate")
+
+
+def _add_server(parser: argparse.ArgumentParser) -> None:
+    """Add ``--server`` of the commands that talk to a loceval service."""
+    parser.add_argument(
+        "--server",
+        required=True,
+        metavar="URL",
+        help="the loceval service, e.g. http://evalbox:8000 (the key: LOCEVAL_API_KEY)",
+    )
+    parser.add_argument(
+        "--chunk-mib",
+        type=float,
+        default=16.0,
+        metavar="MIB",
+        help="size of one upload part; a dropped connection sends at most this again (default: 16)",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _add_client(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparsers action)
+    upload = sub.add_parser(
+        "upload",
+        help="upload recordings to a loceval service, resumably (site laptops)",
+        description=(
+            "Upload files to a loceval service in parts (the tus protocol): a dropped "
+            "connection continues from where it broke, and running the same command again "
+            "continues an upload that stopped. Prints each dataset: id, name, kind. The key "
+            "of your project comes from LOCEVAL_API_KEY."
+        ),
+    )
+    upload.add_argument("files", nargs="+", metavar="FILE", help="the files to upload")
+    upload.add_argument("--tags", default=None, help="tags of the datasets, comma-separated")
+    upload.add_argument("--json", action="store_true", help="print the datasets as JSON")
+    _add_server(upload)
+    upload.set_defaults(handler="service.cli.upload:run_upload")
+
+    submit = sub.add_parser(
+        "submit",
+        help="evaluate on a loceval service: upload what it lacks, run, download the results",
+        description=(
+            "Evaluate on a loceval service with the options of `loceval evaluate`: each file "
+            "is looked up by its SHA-256 and uploaded only when the service does not hold it "
+            "yet; the evaluation's progress is shown and the chosen --formats are downloaded "
+            "into --out. Exit codes as `loceval evaluate`. The key of your project comes from "
+            "LOCEVAL_API_KEY."
+        ),
+    )
+    add_evaluation_arguments(submit)
+    _add_server(submit)
+    submit.set_defaults(handler="service.cli.submit:run_submit")

@@ -198,6 +198,7 @@ PERIODIC_TASKS: Final = (
             "service.jobs.tracking:recover",  # abandoned jobs queued again or failed
             "service.schedules.resource:tick",  # due schedules fired
             "service.jobs.retention:sweep_leftovers",  # abandoned uploads and staging folders
+            "service.uploads.tus:sweep_expired",  # resumable uploads past their expiry
         ),
     ),
     PeriodicTask(

@@ -30,7 +30,14 @@ from service.schemas.evaluations import MAX_TAGS, DatasetFields, UploadPublic
 from service.uploads.multipart import ReceivedFile, ReceivedForm
 from service.uploads.recordings import inspect_remote_upload, inspect_upload
 
-__all__ = ["delete_dataset", "list_datasets", "parse_tags", "store_form", "store_upload"]
+__all__ = [
+    "check_fields",
+    "delete_dataset",
+    "list_datasets",
+    "parse_tags",
+    "store_form",
+    "store_upload",
+]
 
 _BAG_SUFFIXES: Final = {
     b"#ROSBAG": ".bag",
@@ -51,6 +58,15 @@ def parse_tags(text: str | None) -> list[str]:
     """
     tags = list(dict.fromkeys(t.strip() for t in (text or "").split(",") if t.strip()))
     return _fields(tags=tags).tags
+
+
+def check_fields(*, name: str | None, tags: list[str]) -> DatasetFields:
+    """Check a dataset's name and tags against their limits before its bytes arrive.
+
+    Raises:
+        InvalidFieldsError: a name or tag over its limit (422 naming the field).
+    """
+    return _fields(name=name, tags=tags)
 
 
 def _fields(**values: object) -> DatasetFields:
@@ -282,12 +298,24 @@ def _has_tag(tag: str, dialect: str) -> ColumnElement[bool]:
 
 
 def list_datasets(
-    runtime: Runtime, project_id: str, *, tag: str | None, limit: int, offset: int
+    runtime: Runtime,
+    project_id: str,
+    *,
+    tag: str | None,
+    limit: int,
+    offset: int,
+    sha256: str | None = None,
 ) -> tuple[Sequence[Dataset], int]:
-    """Return a page of the project's datasets, newest first, and how many there are."""
+    """Return a page of the project's datasets, newest first, and how many there are.
+
+    ``sha256`` keeps the dataset holding those bytes (at most one per project): a client
+    asks whether the service holds a file before uploading it.
+    """
     where: list[ColumnElement[bool]] = [Dataset.project_id == project_id]
     if tag is not None:
         where.append(_has_tag(tag, runtime.engine.dialect.name))
+    if sha256 is not None:
+        where.append(Dataset.sha256 == sha256.lower())
     with runtime.sessions() as session:
         count = session.scalar(select(func.count()).select_from(Dataset).where(*where))
         rows = session.scalars(

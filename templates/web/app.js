@@ -1,5 +1,6 @@
 // loceval browser page: upload recordings, start evaluations, watch them, fetch the results.
-// Plain ES2020, no libraries. Every text that comes from the server is set with textContent.
+// Plain ES2020; one library, the vendored tus-js-client (window.tus) for resumable uploads.
+// Every text that comes from the server is set with textContent.
 "use strict";
 
 (() => {
@@ -440,7 +441,7 @@
       bar,
       message);
     const item = {
-      node, cancelled: false, xhr: null,
+      node, cancelled: false, abort: null,
       setProgress(fraction) {
         const pct = Math.max(0, Math.min(100, Math.round(fraction * 100)));
         fill.style.width = `${pct}%`;
@@ -451,12 +452,12 @@
         updateClearButton();
         status.textContent = text;
         message.textContent = detail;
-        setHidden(cancel, !["waiting", "uploading"].includes(name));
+        setHidden(cancel, !["waiting", "uploading", "waiting-network"].includes(name));
       },
     };
     cancel.addEventListener("click", () => {
       item.cancelled = true;
-      if (item.xhr) item.xhr.abort();
+      if (item.abort) item.abort();
       else item.setState("cancelled", "Cancelled");
     });
     return item;
@@ -476,72 +477,160 @@
     updateClearButton();
   }
 
+  // Uploads go through the service's resumable uploads (tus 1.0, /api/v1/uploads) with the
+  // vendored tus-js-client (web/vendor/tus.min.js): the file travels in parts; a dropped
+  // connection is retried from the offset the server holds, and when the browser says it is
+  // offline the upload waits for the network to come back. Each upload's address is kept in
+  // localStorage under the file's fingerprint (name, type, size, modification time, server),
+  // so choosing the same file again after a reload continues it instead of starting over.
+  const UPLOAD_CHUNK_BYTES = 8 * 1024 * 1024;
+  const UPLOAD_RETRY_DELAYS = [0, 1000, 2000, 4000, 8000, 15000, 30000, 30000, 60000, 60000];
+  const SPEED_WINDOW_MS = 8000;
+
+  function uploadEndpoint() {
+    return new URL(`${API}/uploads`, document.baseURI).href;
+  }
+
+  /** Speed over the last seconds and the time left, from the bytes sent so far. */
+  function rateMeter() {
+    const samples = [];
+    return {
+      reset() { samples.length = 0; },
+      text(sent, total) {
+        const now = performance.now();
+        samples.push([now, sent]);
+        while (samples.length > 2 && now - samples[0][0] > SPEED_WINDOW_MS) samples.shift();
+        const [t0, b0] = samples[0];
+        const seconds = (now - t0) / 1000;
+        if (seconds < 0.5 || sent <= b0) return "";
+        const speed = (sent - b0) / seconds;
+        return `${formatBytes(speed)}/s, ${formatDuration((total - sent) / speed)} left`;
+      },
+    };
+  }
+
+  function formatDuration(seconds) {
+    if (!Number.isFinite(seconds) || seconds < 0) return "—";
+    if (seconds < 60) return `${Math.max(1, Math.round(seconds))} s`;
+    if (seconds < 3600) return `${Math.floor(seconds / 60)} min ${Math.round(seconds % 60)} s`;
+    return `${Math.floor(seconds / 3600)} h ${Math.round((seconds % 3600) / 60)} min`;
+  }
+
   function upload({ file, tags, item }) {
     return new Promise((resolve) => {
-      const xhr = new XMLHttpRequest();
-      item.xhr = xhr;
-      item.setState("uploading", "Uploading… 0%");
-      updateClearButton();
-      xhr.open("POST", `${API}/datasets`);
-      xhr.setRequestHeader("Authorization", `Bearer ${state.key}`);
-      xhr.setRequestHeader("Accept", "application/json");
-      xhr.upload.onprogress = (event) => {
-        if (!event.lengthComputable || !event.total) return;
-        const fraction = event.loaded / event.total;
-        item.setProgress(fraction);
-        item.setState("uploading", `Uploading… ${Math.floor(fraction * 100)}%`);
-      };
-      xhr.upload.onload = () => {
-        item.setProgress(1);
-        item.setState("processing", "Reading the recording on the server…");
-      };
-      xhr.onload = () => {
-        const { status } = xhr;
-        if (status !== 401) state.keyVerified = true;
-        if (status === 200 || status === 201) {
+      const meter = rateMeter();
+      let waitingForNetwork = false;
+      const metadata = { filename: file.name };
+      if (tags) metadata.tags = tags;
+      const tusUpload = new window.tus.Upload(file, {
+        endpoint: uploadEndpoint(),
+        headers: { Authorization: `Bearer ${state.key}`, Accept: "application/json" },
+        metadata,
+        chunkSize: UPLOAD_CHUNK_BYTES,
+        retryDelays: UPLOAD_RETRY_DELAYS,
+        storeFingerprintForResuming: true,
+        removeFingerprintOnSuccess: true,
+        onShouldRetry(err) {
+          const status = err.originalResponse ? err.originalResponse.getStatus() : 0;
+          if (status === 0 && !navigator.onLine) {
+            waitingForNetwork = true; // the "online" event below restarts it
+            item.setState("waiting-network", "Waiting for the network…",
+              "The connection is gone. The upload continues where it stopped when the network is back.");
+            return false;
+          }
+          return status === 0 || status === 409 || status === 423 || status >= 500;
+        },
+        onProgress(sent, total) {
+          const fraction = total ? sent / total : 0;
+          item.setProgress(fraction);
+          const rate = meter.text(sent, total);
+          item.setState("uploading", `Uploading… ${Math.floor(fraction * 100)}%`,
+            `${formatBytes(sent)} of ${formatBytes(total)}${rate ? ` · ${rate}` : ""}`);
+          if (sent === total) item.setState("processing", "Reading the recording on the server…");
+        },
+        onSuccess(payload) {
+          window.removeEventListener("online", onOnline);
+          state.keyVerified = true;
           item.setProgress(1);
-          let dataset = null;
-          try {
-            dataset = JSON.parse(xhr.responseText);
-          } catch {
-            dataset = null;
-          }
-          const what = dataset ? describeDataset(dataset) : "";
-          const report = (dataset && dataset.upload) || {};
-          if (status === 200) {
-            const name = dataset && dataset.name ? ` as “${dataset.name}”` : "";
-            const added = Array.isArray(report.tags_added) && report.tags_added.length
-              ? ` Tags added to it: ${report.tags_added.join(", ")}.` : "";
-            const kept = report.name_kept ? ` It keeps its name “${report.name_kept}”.` : "";
-            item.setState("duplicate", "Already uploaded",
-              `These exact bytes were uploaded before${name}.${added}${kept} ${what}`.trim());
+          const response = payload && payload.lastResponse;
+          const datasetId = response ? response.getHeader("Loceval-Dataset") : null;
+          finished(datasetId).finally(resolve);
+        },
+        onError(err) {
+          if (waitingForNetwork) return; // kept for the "online" event
+          window.removeEventListener("online", onOnline);
+          const response = err.originalResponse;
+          const status = response ? response.getStatus() : 0;
+          if (status === 401) {
+            item.setState("error", "Not uploaded", UNAUTHORIZED);
+            onUnauthorized();
+          } else if (status) {
+            state.keyVerified = true;
+            item.setState("error", "Not uploaded", uploadProblemText(status, "", response.getBody()));
           } else {
-            // what the server changed (a file name sanitised or shortened), said once
-            const notes = Array.isArray(report.notes) ? report.notes.join(" ") : "";
-            item.setState("done", "Uploaded", `${what} ${notes}`.trim());
+            item.setState("error", "Not uploaded",
+              "The connection to the server broke and did not come back. Choose the same file again to continue the upload where it stopped.");
           }
-          scheduleDatasetsReload();
-        } else if (status === 401) {
-          item.setState("error", "Not uploaded", UNAUTHORIZED);
-          onUnauthorized();
-        } else {
-          item.setState("error", "Not uploaded", uploadProblemText(status, xhr.statusText, xhr.responseText));
-        }
-        resolve();
-      };
-      xhr.onerror = () => {
-        item.setState("error", "Not uploaded",
-          "The connection broke during the upload. The server may have refused a file this large, or it is not reachable.");
-        resolve();
-      };
-      xhr.onabort = () => {
+          resolve();
+        },
+      });
+      item.abort = () => {
+        window.removeEventListener("online", onOnline);
+        tusUpload.abort(true).catch(() => {}); // also removes the partial upload on the server
         item.setState("cancelled", "Cancelled");
         resolve();
       };
-      const form = new FormData();
-      form.append("file", file, file.name);
-      if (tags) form.append("tags", tags);
-      xhr.send(form);
+      function onOnline() {
+        if (!waitingForNetwork) return;
+        waitingForNetwork = false;
+        meter.reset();
+        item.setState("uploading", "Resuming…");
+        tusUpload.start();
+      }
+      window.addEventListener("online", onOnline);
+
+      async function finished(datasetId) {
+        let upload = null;
+        try {
+          const id = tusUpload.url ? tusUpload.url.split("/").pop() : null;
+          upload = id ? await api(`/uploads/${encodeURIComponent(id)}`) : null;
+        } catch {
+          upload = null;
+        }
+        let dataset = upload && upload.dataset;
+        if (!dataset && datasetId) {
+          try {
+            dataset = await api(`/datasets/${encodeURIComponent(datasetId)}`);
+          } catch {
+            dataset = null;
+          }
+        }
+        const what = dataset ? describeDataset(dataset) : "";
+        const report = (dataset && dataset.upload) || (upload && upload.upload) || {};
+        if (report.deduplicated) {
+          const name = dataset && dataset.name ? ` as “${dataset.name}”` : "";
+          item.setState("duplicate", "Already uploaded",
+            `These exact bytes were uploaded before${name}. ${what}`.trim());
+        } else {
+          const notes = Array.isArray(report.notes) ? report.notes.join(" ") : "";
+          item.setState("done", "Uploaded", `${what} ${notes}`.trim());
+        }
+        scheduleDatasetsReload();
+      }
+
+      item.setState("uploading", "Uploading… 0%");
+      updateClearButton();
+      tusUpload.findPreviousUploads().then((previous) => {
+        if (item.cancelled) return;
+        const endpoint = uploadEndpoint();
+        const same = previous.filter((p) => p.uploadUrl && p.uploadUrl.startsWith(endpoint));
+        if (same.length) {
+          same.sort((a, b) => String(b.creationTime).localeCompare(String(a.creationTime)));
+          tusUpload.resumeFromPreviousUpload(same[0]);
+          item.setState("uploading", "Resuming an earlier upload of this file…");
+        }
+        tusUpload.start();
+      }, () => tusUpload.start());
     });
   }
 

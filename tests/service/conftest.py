@@ -17,7 +17,7 @@ import re
 import subprocess
 import sys
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,6 +39,7 @@ from tests.harness.processes import (
     service_env,
 )
 from tests.harness.processes import wait_ready as harness_wait_ready
+from tests.harness.proxy import CuttingProxy
 from tests.service._api_fixtures import Api, open_api
 
 __all__ = [
@@ -193,6 +194,23 @@ def running_server(data_dir: Path, **kwargs: Any) -> Iterator[LiveServer]:
         yield server
     finally:
         server.stop()
+
+
+@contextlib.contextmanager
+def server_behind_proxy(
+    data_dir: Path,
+    cuts: Sequence[int] = (),
+    *,
+    stay_down: bool = False,
+    bytes_per_s: float | None = None,
+) -> Iterator[tuple[LiveServer, CuttingProxy]]:
+    """A server whose public address is a cutting proxy (its upload addresses point at it)."""
+    with (
+        CuttingProxy(0, cuts, stay_down=stay_down, bytes_per_s=bytes_per_s) as proxy,
+        running_server(data_dir, env={"LOCEVAL_PUBLIC_URL": proxy.url}) as server,
+    ):
+        proxy.target = int(server.url.rsplit(":", 1)[1])
+        yield server, proxy
 
 
 @pytest.fixture

@@ -169,7 +169,10 @@ def test_every_route_needs_a_valid_key(world: World, method: str, template: str,
     before = world.snapshot()
     url = _fill(template, str(uuid.uuid4()))
     response = world.api.client.request(method, url, headers=headers, **body)
-    assert_problem(response, 401, type_="auth.unauthorized")
+    if method == "HEAD":  # a HEAD answer has no body (tus's HEAD /uploads/{id}): status only
+        assert response.status_code == 401
+    else:
+        assert_problem(response, 401, type_="auth.unauthorized")
     assert response.headers["www-authenticate"] == "Bearer"
     assert world.snapshot() == before
 
@@ -181,7 +184,8 @@ def test_every_route_unknown_ids(world: World, method: str, template: str) -> No
     """Every /api/v1 route with ids answers 404 for ids that do not exist."""
     before = world.snapshot()
     url = _fill(template, str(uuid.uuid4()))
-    assert_problem(world.api.client.request(method, url, headers=world.api.headers), 404)
+    headers = {**world.api.headers, "Tus-Resumable": "1.0.0"}  # the uploads' protocol version
+    assert_problem(world.api.client.request(method, url, headers=headers), 404)
     assert world.snapshot() == before
 
 

@@ -98,3 +98,25 @@ def test_datasets_filter_by_tag_and_page_in_sql(
     (listing,) = [s for s in sql if "FROM datasets" in s and "count(" not in s]
     assert "LIMIT" in listing
     assert ("json_each" if database == "sqlite" else "@>") in listing
+
+
+def test_datasets_by_sha256(tmp_path: Path) -> None:
+    """?sha256= finds the project's dataset of those bytes (any case), else none; bad: 422."""
+    import hashlib
+
+    other = _TUM + b"3 3 0 0 0 0 0 1\n"
+    with open_api(tmp_path) as api:
+        held = api.dataset("gt.txt", _TUM)
+        api.dataset("other.txt", other)
+        digest = hashlib.sha256(_TUM).hexdigest()
+        found = api.client.get(f"/api/v1/datasets?sha256={digest.upper()}", headers=api.headers)
+        missing = api.client.get(
+            f"/api/v1/datasets?sha256={hashlib.sha256(b'x').hexdigest()}", headers=api.headers
+        )
+        bad = api.client.get("/api/v1/datasets?sha256=abc", headers=api.headers)
+    assert found.status_code == 200, found.text
+    assert found.json()["count"] == 1
+    assert [d["id"] for d in found.json()["items"]] == [held["id"]]
+    assert found.json()["items"][0]["sha256"] == digest
+    assert missing.json() == {"items": [], "count": 0}
+    assert bad.status_code == 422
