@@ -49,7 +49,7 @@ from sqlalchemy.engine import Connection
 from sqlalchemy.pool import NullPool
 
 from loceval.errors import LocevalError
-from service.blobs.resumable import ResumableParts, ResumableWriter, resumable_parts
+from service.blobs.resumable import ResumableWriter, resumable_parts
 from service.db import Dataset, TusUpload, new_id, utcnow
 from service.errors import (
     NotFoundError,
@@ -780,8 +780,3 @@ def sweep_expired(runtime: Runtime, *, now: dt.datetime | None = None) -> int:
             extra={"event": "uploads_expired", "uploads": removed},
         )
     return removed
-
-
-def parts_of(runtime: Runtime, upload_id: str) -> ResumableParts:
-    """Return where an upload's bytes lie (for tests and tools)."""
-    return resumable_parts(runtime.store, upload_id)
