@@ -506,6 +506,7 @@ def _write(
         point = writer.checkpoint()
         if point is not None:
             _record(runtime, row, *point)
+            writer.settled()
 
 
 def _save(runtime: Runtime, row: TusUpload, writer: ResumableWriter, hashes: _Hashes) -> None:
@@ -514,6 +515,7 @@ def _save(runtime: Runtime, row: TusUpload, writer: ResumableWriter, hashes: _Ha
         return
     offset, state = writer.finish(last=False)
     _record(runtime, row, offset, state)
+    writer.settled()
     hashes.keep(row.id, offset)
 
 
@@ -592,6 +594,7 @@ async def receive(
             def finish() -> None:
                 new, state = writer.finish(last=last)
                 _record(runtime, row, new, state)
+                writer.settled()
                 hashes.keep(row.id, new)
 
             await anyio.to_thread.run_sync(finish)
