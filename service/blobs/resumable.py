@@ -10,16 +10,17 @@ every replica reaches them:
   on completion it is renamed into the dataset's folder, never copied.
 - the bucket: an S3 multipart upload of ``tus/<id>``, in parts of
   :data:`~service.blobs.s3upload.PART_BYTES` (8 MiB; S3 wants 5 MiB but for the last). The
-  bytes of a request that end between two part boundaries are kept in the bucket as the
-  *tail* (``tus/<id>.tail/<part number>``), read back and prefixed to the next request's
-  bytes: a 2 GB file sent in 1 MB requests holds at most one part in memory, and the
+  bytes of a request that end between two part boundaries are kept in the bucket as one
+  *tail segment* of their own (``tus/<id>.tail/<offset>``); the segments are read back once,
+  when the next requests' bytes fill the part. A 2 GB file sent in 1 MB requests holds at
+  most one part in memory, writes and reads each byte of it at most once more, and the
   object is put together by the store (``CompleteMultipartUpload``), never copied through
-  this process. The state is ``{"upload_id", "parts": [[number, etag], ...], "tail": bytes,
-  "assembled": bool}``.
+  this process. The state is ``{"upload_id", "parts": [[number, etag], ...], "segments":
+  [[offset, size], ...], "tail": bytes, "assembled": bool}``.
 
 The database is the truth: a piece of the store is only ever referred to once it was
-written whole (a tail is only rewritten as a longer copy of itself), so a process killed
-anywhere leaves a state the next request continues from.
+written whole, and deleted only once the recorded state no longer refers to it, so a process
+killed anywhere leaves a state the next request continues from.
 """
 
 from __future__ import annotations
