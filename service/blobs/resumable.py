@@ -10,16 +10,17 @@ every replica reaches them:
   on completion it is renamed into the dataset's folder, never copied.
 - the bucket: an S3 multipart upload of ``tus/<id>``, in parts of
   :data:`~service.blobs.s3upload.PART_BYTES` (8 MiB; S3 wants 5 MiB but for the last). The
-  bytes of a request that end between two part boundaries are kept in the bucket as the
-  *tail* (``tus/<id>.tail/<part number>``), read back and prefixed to the next request's
-  bytes: a 2 GB file sent in 1 MB requests holds at most one part in memory, and the
+  bytes of a request that end between two part boundaries are kept in the bucket as one
+  *tail segment* of their own (``tus/<id>.tail/<offset>``); the segments are read back once,
+  when the next requests' bytes fill the part. A 2 GB file sent in 1 MB requests holds at
+  most one part in memory, writes and reads each byte of it at most once more, and the
   object is put together by the store (``CompleteMultipartUpload``), never copied through
-  this process. The state is ``{"upload_id", "parts": [[number, etag], ...], "tail": bytes,
-  "assembled": bool}``.
+  this process. The state is ``{"upload_id", "parts": [[number, etag], ...], "segments":
+  [[offset, size], ...], "tail": bytes, "assembled": bool}``.
 
 The database is the truth: a piece of the store is only ever referred to once it was
-written whole (a tail is only rewritten as a longer copy of itself), so a process killed
-anywhere leaves a state the next request continues from.
+written whole, and deleted only once the recorded state no longer refers to it, so a process
+killed anywhere leaves a state the next request continues from.
 """
 
 from __future__ import annotations
@@ -77,6 +78,9 @@ class ResumableWriter(abc.ABC):
         Args:
             last: the upload is complete with these bytes (the bucket sends its last part).
         """
+
+    def settled(self) -> None:  # noqa: B027  (a folder's writer leaves nothing behind)
+        """The state returned last is recorded: let go of what it no longer refers to."""
 
     def close(self) -> None:  # noqa: B027  (a folder's writer holds only its file)
         """Let go of what the writer holds (after :meth:`finish`, or instead of it)."""
@@ -258,43 +262,61 @@ def _bucket_incoming(store: S3Blobs, key: str, head: bytes) -> Incoming:
 
 
 class _BucketWriter(ResumableWriter):
+    """Whole parts into the multipart upload; the bytes past the last one as tail segments.
+
+    A request's bytes that end between two part boundaries are written as one more tail
+    segment (``tus/<id>.tail/<offset>``, only its own bytes): the segments are read back once,
+    when the bytes after them fill the part. Each byte is so written and read at most once
+    more, however small the requests are, and at most one part is held in memory.
+    """
+
     def __init__(self, parts: BucketParts, offset: int, state: dict[str, Any]) -> None:
         super().__init__(offset)
         from service.blobs.s3upload import PART_BYTES  # noqa: PLC0415
 
         self.part_bytes = PART_BYTES
-        self.parts_owner = parts
+        self.owner = parts
         self.upload_id: str | None = state.get("upload_id")
         self.parts: list[list[Any]] = [list(p) for p in state.get("parts", [])]
-        tail = int(state.get("tail", 0))
-        self.buffer = bytearray(parts.read_tail(len(self.parts) + 1, tail) if tail else b"")
-        self.base = len(self.parts) * self.part_bytes  # where the buffer starts
-        if self.base + len(self.buffer) != offset:
-            msg = f"the upload's state ({self.base} + {len(self.buffer)}) is not at {offset}"
+        self.segments: list[list[int]] = [list(g) for g in state.get("segments", [])]
+        self.pending = sum(size for _, size in self.segments)  # the recorded tail's bytes
+        base = len(self.parts) * self.part_bytes
+        if base + self.pending != offset:
+            msg = f"the upload's state ({base} + {self.pending}) is not at {offset}"
             raise RuntimeError(msg)
+        self.buffer = bytearray()
+        self.buffer_start = offset
         self._pool: ThreadPoolExecutor | None = None
         self._sent: list[tuple[int, Future[str]]] = []
         self._recorded = len(self.parts)
+        self._consumed: dict[int, list[list[int]]] = {}  # part number: segments read into it
 
     def _write(self, chunk: bytes) -> None:
         self.buffer += chunk
-        while len(self.buffer) >= self.part_bytes:
-            with memoryview(self.buffer) as view:
-                part = bytes(view[: self.part_bytes])
-            del self.buffer[: self.part_bytes]
-            self.base += self.part_bytes
-            self._send(part)
+        while self.pending + len(self.buffer) >= self.part_bytes:
+            self._send_part(self.part_bytes - self.pending)
 
-    def _send(self, data: bytes) -> None:
+    def _send_part(self, take: int) -> None:
+        """Send the tail segments and the first ``take`` bytes of the buffer as the next part."""
+        head = self.owner.read_segments(self.segments) if self.segments else b""
+        with memoryview(self.buffer) as view:
+            part = head + bytes(view[:take])
+        del self.buffer[:take]
+        self.buffer_start += take
+        number = len(self.parts) + len(self._sent) + 1
+        if self.segments:
+            self._consumed[number] = self.segments
+        self.segments, self.pending = [], 0
+        self._send(number, part)
+
+    def _send(self, number: int, data: bytes) -> None:
         if self.upload_id is None:
-            self.upload_id = self.parts_owner.create()
+            self.upload_id = self.owner.create()
         if self._pool is None:
             self._pool = ThreadPoolExecutor(_IN_FLIGHT, thread_name_prefix="loceval-tus")
         while sum(1 for _, f in self._sent if not f.done()) >= _IN_FLIGHT:
             next(f for _, f in self._sent if not f.done()).result()
-        number = len(self.parts) + len(self._sent) + 1
-        upload_id = self.upload_id
-        future = self._pool.submit(self.parts_owner.upload_part, upload_id, number, data)
+        future = self._pool.submit(self.owner.upload_part, self.upload_id, number, data)
         self._sent.append((number, future))
 
     def _collect(self, *, wait: bool) -> None:
@@ -303,27 +325,38 @@ class _BucketWriter(ResumableWriter):
             number, future = self._sent.pop(0)
             self.parts.append([number, future.result()])
 
-    def _state(self, tail: int) -> dict[str, Any]:
-        return {"upload_id": self.upload_id, "parts": self.parts, "tail": tail}
+    def _state(self) -> dict[str, Any]:
+        tail = sum(size for _, size in self.segments)
+        return {
+            "upload_id": self.upload_id,
+            "parts": self.parts,
+            "segments": self.segments,
+            "tail": tail,
+        }
 
     def checkpoint(self) -> tuple[int, dict[str, Any]] | None:
         self._collect(wait=False)
         if len(self.parts) == self._recorded:
             return None
         self._recorded = len(self.parts)
-        return len(self.parts) * self.part_bytes, self._state(0)
+        state = {"upload_id": self.upload_id, "parts": self.parts, "segments": [], "tail": 0}
+        return len(self.parts) * self.part_bytes, state
 
     def finish(self, *, last: bool) -> tuple[int, dict[str, Any]]:
-        if last and self.buffer:
-            self.base += len(self.buffer)
-            self._send(bytes(self.buffer))
-            self.buffer = bytearray()
+        if last and (self.pending or self.buffer):
+            self._send_part(len(self.buffer))  # the last part may be short
         self._collect(wait=True)
         self._recorded = len(self.parts)
-        tail = len(self.buffer)
-        if tail:  # the bytes past the last whole part (or a whole small upload)
-            self.parts_owner.write_tail(len(self.parts) + 1, bytes(self.buffer))
-        return self.offset, self._state(tail)
+        if self.buffer:  # the bytes past the last whole part: one more segment
+            self.owner.write_segment(self.buffer_start, bytes(self.buffer))
+            self.segments.append([self.buffer_start, len(self.buffer)])
+            self.buffer_start += len(self.buffer)
+            self.buffer = bytearray()
+        return self.offset, self._state()
+
+    def settled(self) -> None:
+        for number in [n for n in self._consumed if n <= self._recorded]:
+            self.owner.delete_segments(self._consumed.pop(number))
 
     def close(self) -> None:
         if self._pool is not None:
@@ -343,9 +376,6 @@ class BucketParts(ResumableParts):
     @property
     def _full_key(self) -> str:
         return self.store.prefix + self.key
-
-    def _tail_key(self, number: int) -> str:
-        return f"{self._full_key}.tail/{number}"
 
     def create(self) -> str:
         """Start the multipart upload; return its id."""
@@ -371,32 +401,49 @@ class BucketParts(ResumableParts):
             )
         return answer["ETag"]
 
-    def read_tail(self, number: int, size: int) -> bytes:
-        """Return the first ``size`` bytes of the tail that starts part ``number``."""
+    def _segment_key(self, offset: int) -> str:
+        return f"{self._full_key}.tail/{offset:020d}"
+
+    def read_segments(self, segments: list[list[int]]) -> bytes:
+        """Return the bytes of tail segments (``[offset, size]`` each), in order."""
         from service.blobs.s3client import store_errors  # noqa: PLC0415
 
+        data = bytearray()
         with store_errors():
-            answer = self.store.client.get_object(
-                Bucket=self.store.bucket, Key=self._tail_key(number), Range=f"bytes=0-{size - 1}"
-            )
-            data = answer["Body"].read()
-        if len(data) != size:
-            msg = f"the tail of upload {self.upload_id} holds {len(data)} bytes, not {size}"
+            for offset, size in segments:
+                answer = self.store.client.get_object(
+                    Bucket=self.store.bucket,
+                    Key=self._segment_key(offset),
+                    Range=f"bytes=0-{size - 1}",
+                )
+                data += answer["Body"].read()
+        if len(data) != sum(size for _, size in segments):
+            msg = f"the tail of upload {self.upload_id} holds {len(data)} bytes, not as recorded"
             raise RuntimeError(msg)
-        return data
+        return bytes(data)
 
-    def write_tail(self, number: int, data: bytes) -> None:
-        """Store the bytes that start part ``number`` (a longer copy of the earlier tail)."""
+    def write_segment(self, offset: int, data: bytes) -> None:
+        """Store the bytes of a request that start at ``offset`` past the last whole part."""
         from service.blobs.s3client import store_errors  # noqa: PLC0415
 
         with store_errors():
             self.store.client.put_object(
-                Bucket=self.store.bucket, Key=self._tail_key(number), Body=data
+                Bucket=self.store.bucket, Key=self._segment_key(offset), Body=data
             )
+
+    def delete_segments(self, segments: list[list[int]]) -> None:
+        """Delete tail segments that a recorded part holds now (a leftover goes at the end)."""
+        from botocore.exceptions import BotoCoreError, ClientError  # noqa: PLC0415
+
+        with contextlib.suppress(BotoCoreError, ClientError):
+            for offset, _ in segments:
+                self.store.client.delete_object(
+                    Bucket=self.store.bucket, Key=self._segment_key(offset)
+                )
 
     def begin(self) -> dict[str, Any]:
         """See :meth:`ResumableParts.begin`: a multipart upload of ``tus/<id>``."""
-        return {"upload_id": self.create(), "parts": [], "tail": 0}
+        return {"upload_id": self.create(), "parts": [], "segments": [], "tail": 0}
 
     def writer(self, offset: int, state: dict[str, Any]) -> ResumableWriter:
         """See :meth:`ResumableParts.writer`."""
@@ -422,9 +469,8 @@ class BucketParts(ResumableParts):
                         UploadId=str(state["upload_id"]),
                         MultipartUpload={"Parts": parts},  # type: ignore[typeddict-item]
                     )
-                else:  # smaller than a part: its tail is the whole file (or it is empty)
-                    tail = int(state.get("tail", 0))
-                    data = self.read_tail(1, tail) if tail else b""
+                else:  # no part was sent: the file is empty, or its tail holds it whole
+                    data = self.read_segments(state.get("segments", []))
                     client.put_object(Bucket=bucket, Key=self._full_key, Body=data)
                     if state.get("upload_id"):
                         with contextlib.suppress(Exception):

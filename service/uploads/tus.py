@@ -49,7 +49,7 @@ from sqlalchemy.engine import Connection
 from sqlalchemy.pool import NullPool
 
 from loceval.errors import LocevalError
-from service.blobs.resumable import ResumableParts, ResumableWriter, resumable_parts
+from service.blobs.resumable import ResumableWriter, resumable_parts
 from service.db import Dataset, TusUpload, new_id, utcnow
 from service.errors import (
     NotFoundError,
@@ -506,6 +506,7 @@ def _write(
         point = writer.checkpoint()
         if point is not None:
             _record(runtime, row, *point)
+            writer.settled()
 
 
 def _save(runtime: Runtime, row: TusUpload, writer: ResumableWriter, hashes: _Hashes) -> None:
@@ -514,6 +515,7 @@ def _save(runtime: Runtime, row: TusUpload, writer: ResumableWriter, hashes: _Ha
         return
     offset, state = writer.finish(last=False)
     _record(runtime, row, offset, state)
+    writer.settled()
     hashes.keep(row.id, offset)
 
 
@@ -592,6 +594,7 @@ async def receive(
             def finish() -> None:
                 new, state = writer.finish(last=last)
                 _record(runtime, row, new, state)
+                writer.settled()
                 hashes.keep(row.id, new)
 
             await anyio.to_thread.run_sync(finish)
@@ -780,8 +783,3 @@ def sweep_expired(runtime: Runtime, *, now: dt.datetime | None = None) -> int:
             extra={"event": "uploads_expired", "uploads": removed},
         )
     return removed
-
-
-def parts_of(runtime: Runtime, upload_id: str) -> ResumableParts:
-    """Return where an upload's bytes lie (for tests and tools)."""
-    return resumable_parts(runtime.store, upload_id)

@@ -148,6 +148,8 @@ def test_cut_connections_resume(
         upload = Upload(proxy.url, server.api_key, large_recording).start()
         upload.join()
         assert proxy.cuts == cuts  # each cut happened, mid-request
+        request.node.user_properties.append(("bytes_received", proxy.sent))
+        request.node.user_properties.append(("file_bytes", size))
         # what the server received: the file once, at most one part again per cut
         assert proxy.sent <= size + len(cuts) * CHUNK + HEADERS_SLACK, (proxy.sent, size)
         last = upload.uploader.request.response_headers
@@ -164,7 +166,7 @@ def test_cut_connections_resume(
 
 
 def test_killed_server_resumes_after_restart(
-    tmp_path: Path, proxy: CuttingProxy, large_recording: Path
+    tmp_path: Path, proxy: CuttingProxy, large_recording: Path, request: pytest.FixtureRequest
 ) -> None:
     size = large_recording.stat().st_size
     data_dir = tmp_path / "data"
@@ -180,6 +182,7 @@ def test_killed_server_resumes_after_restart(
         restarted = start_server(data_dir, api_key=server.api_key, env=env)
         proxy.target = int(restarted.url.rsplit(":", 1)[1])
         upload.join()
+        request.node.user_properties.append(("bytes_received", proxy.sent))
         assert proxy.sent <= size + CHUNK + HEADERS_SLACK, (proxy.sent, size)
         assert_dataset_is_the_file(upload_state(restarted, upload.upload_url()), large_recording)
     finally:
@@ -195,6 +198,7 @@ def test_second_replica_continues_with_postgres_and_bucket(  # noqa: PLR0917  (f
     postgres_url: str,
     seaweedfs: SeaweedFS,
     bucket: str,
+    request: pytest.FixtureRequest,
 ) -> None:
     size = large_recording.stat().st_size
     env = {
@@ -214,6 +218,7 @@ def test_second_replica_continues_with_postgres_and_bucket(  # noqa: PLR0917  (f
         first.kill()
         assert upload.thread.is_alive()
         upload.join()
+        request.node.user_properties.append(("bytes_received", proxy.sent))
         assert proxy.sent <= size + CHUNK + HEADERS_SLACK, (proxy.sent, size)
         assert_dataset_is_the_file(upload_state(second, upload.upload_url()), large_recording)
         assert open_multipart_uploads(seaweedfs, bucket) == []

@@ -52,12 +52,13 @@ def tus_js() -> tuple[str, Path]:
     return node, CLIENT_DIR / "upload.js"
 
 
-def test_tus_js_client_resumes_cut_connections(
+def test_tus_js_client_resumes_cut_connections(  # noqa: PLR0917  (fixtures)
     tmp_path: Path,
     proxy: CuttingProxy,
     backend: dict[str, str],
     large_recording: Path,
     tus_js: tuple[str, Path],
+    request: pytest.FixtureRequest,
 ) -> None:
     size = large_recording.stat().st_size
     cuts = [int(size * f) for f in (0.3, 0.6, 0.9)]
@@ -83,6 +84,8 @@ def test_tus_js_client_resumes_cut_connections(
         )
         assert done.returncode == 0, done.stderr
         assert proxy.cuts == cuts
+        request.node.user_properties.append(("bytes_received", proxy.sent))
+        request.node.user_properties.append(("file_bytes", size))
         assert proxy.sent <= size + len(cuts) * CHUNK + HEADERS_SLACK, (proxy.sent, size)
         url = json.loads(done.stdout.strip().splitlines()[-1])["url"]
         assert_dataset_is_the_file(upload_state(server, url), large_recording)
