@@ -26,27 +26,18 @@ uploads; finished ones are forgotten (their datasets stay).
 
 from __future__ import annotations
 
-import base64
-import binascii
 import contextlib
 import datetime as dt
-import fcntl
 import hashlib
 import logging
-import os
-import re
 import threading
-import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Final
 
 import anyio
 import anyio.to_thread
-from sqlalchemy import Engine, create_engine, select, text, update
-from sqlalchemy.engine import Connection
-from sqlalchemy.pool import NullPool
+from sqlalchemy import select, update
 
 from loceval.errors import LocevalError
 from service.blobs.resumable import ResumableWriter, resumable_parts
@@ -54,7 +45,6 @@ from service.db import Dataset, TusUpload, new_id, utcnow
 from service.errors import (
     NotFoundError,
     ServiceUnavailableError,
-    TusVersionError,
     UploadChecksumError,
     UploadError,
     UploadLockedError,
@@ -66,6 +56,17 @@ from service.errors import (
 from service.runtime import Runtime
 from service.uploads import datasets
 from service.uploads.multipart import ReceivedFile, check_free_space
+from service.uploads.tus_headers import (
+    CHECKSUM_ALGORITHMS,
+    EXTENSIONS,
+    OFFSET_MEDIA_TYPE,
+    TUS_VERSION,
+    check_version,
+    parse_checksum,
+    parse_int,
+    parse_metadata,
+)
+from service.uploads.tus_lock import UploadLock, locked
 
 __all__ = [
     "CHECKSUM_ALGORITHMS",
@@ -84,22 +85,8 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-TUS_VERSION: Final = "1.0.0"
-EXTENSIONS: Final = ("creation", "creation-with-upload", "termination", "checksum", "expiration")
-CHECKSUM_ALGORITHMS: Final = ("sha1", "sha256", "md5")
-OFFSET_MEDIA_TYPE: Final = "application/offset+octet-stream"
-METADATA_KEYS: Final = frozenset({"filename", "name", "tags"})
-_IGNORED_KEYS: Final = frozenset({"filetype"})  # what tus-js-client and Uppy send by habit
-_MAX_METADATA: Final = 8 * 1024
 _BATCH_BYTES: Final = 1 << 20
-_WAIT_S: Final = 5.0  # how long a request waits for another one's lock on the upload
 _SWEEP_BATCH: Final = 200
-_KEY: Final = re.compile(r"[A-Za-z0-9!#$%&'*+.^_`|~-]+")
-
-_lock_engines: dict[str, Engine] = {}
-"""An engine per database whose connections hold the uploads' advisory locks: apart from the
-runtime's pool, so uploads in progress never take the connections the requests need."""
-_lock_engines_lock = threading.Lock()
 
 _digests: dict[str, tuple[int, Any]] = {}
 """The SHA-256 of each upload this process received from its first byte: (offset, hash)."""
@@ -119,200 +106,11 @@ class Received:
     dataset_id: str | None
 
 
-# -- headers -------------------------------------------------------------------------------
-
-
-def check_version(value: str | None) -> None:
-    """Refuse a request without ``Tus-Resumable: 1.0.0``.
-
-    Raises:
-        TusVersionError: missing or another version (412).
-    """
-    if value is None or value.strip() != TUS_VERSION:
-        got = "no Tus-Resumable header" if value is None else f"Tus-Resumable {value!r}"
-        msg = (
-            f"This server speaks tus {TUS_VERSION}, and the request has {got}; send "
-            f"'Tus-Resumable: {TUS_VERSION}' (every tus client does)."
-        )
-        raise TusVersionError(msg)
-
-
-def _parse_metadata(header: str | None) -> dict[str, str]:
-    """Return ``Upload-Metadata``'s pairs (``key base64value``, comma-separated), decoded.
-
-    Raises:
-        UploadError: malformed, not UTF-8, a key twice, or a key this server does not read.
-    """
-    found: dict[str, str] = {}
-    if header is None or not header.strip():
-        return found
-    if len(header) > _MAX_METADATA:
-        msg = f"Upload-Metadata is longer than {_MAX_METADATA} characters; send less."
-        raise UploadError(msg)
-    for pair in header.split(","):
-        key, _, value = pair.strip().partition(" ")
-        if not _KEY.fullmatch(key) or " " in value.strip():
-            msg = (
-                "Upload-Metadata is malformed; send comma-separated 'key base64value' pairs "
-                "(keys filename, name and tags)."
-            )
-            raise UploadError(msg)
-        if key in found:
-            msg = f"Upload-Metadata names {key!r} twice; send it once."
-            raise UploadError(msg)
-        try:
-            found[key] = base64.b64decode(value.strip(), validate=True).decode("utf-8")
-        except (binascii.Error, UnicodeDecodeError):
-            msg = f"Upload-Metadata's {key!r} is not base64 of UTF-8 text; encode it so."
-            raise UploadError(msg) from None
-    unknown = sorted(set(found) - METADATA_KEYS - _IGNORED_KEYS)
-    if unknown:
-        msg = (
-            f"Upload-Metadata holds {', '.join(repr(k) for k in unknown)}, which this server "
-            "does not read; send only filename, name and tags (comma-separated)."
-        )
-        raise UploadError(msg)
-    return found
-
-
-def _parse_int(value: str | None, header: str) -> int:
-    """Return a header's non-negative integer.
-
-    Raises:
-        UploadError: missing or not a non-negative integer.
-    """
-    if value is None or not value.strip().isdigit() or len(value.strip()) > 19:
-        got = "it is missing" if value is None else f"not {value!r}"
-        msg = f"{header} must be a non-negative integer (bytes), {got}."
-        raise UploadError(msg)
-    return int(value.strip())
-
-
-def _parse_checksum(value: str | None) -> tuple[str, bytes] | None:
-    """Return ``Upload-Checksum``'s algorithm and digest, or None when it is not sent.
-
-    Raises:
-        UploadError: malformed, or an algorithm this server does not support (400).
-    """
-    if value is None:
-        return None
-    algorithm, _, encoded = value.strip().partition(" ")
-    if algorithm.lower() not in CHECKSUM_ALGORITHMS:
-        msg = (
-            f"Upload-Checksum's algorithm {algorithm!r} is not supported; use one of "
-            f"{', '.join(CHECKSUM_ALGORITHMS)}."
-        )
-        raise UploadError(msg)
-    try:
-        digest = base64.b64decode(encoded.strip(), validate=True)
-    except binascii.Error:
-        digest = b""
-    if len(digest) != hashlib.new(algorithm.lower(), usedforsecurity=False).digest_size:
-        msg = "Upload-Checksum must be 'ALGORITHM BASE64DIGEST' (the digest of this body)."
-        raise UploadError(msg)
-    return algorithm.lower(), digest
+# -- expiry --------------------------------------------------------------------------------
 
 
 def _expires(runtime: Runtime) -> dt.datetime:
     return utcnow() + dt.timedelta(seconds=runtime.settings.upload_expiry_s)
-
-
-# -- the lock ------------------------------------------------------------------------------
-
-
-class _Lock:
-    """One writer per upload, across threads, processes and replicas; gone with its holder."""
-
-    def __init__(self, runtime: Runtime, upload_id: str) -> None:
-        self.runtime = runtime
-        self.upload_id = upload_id
-        self._connection: Connection | None = None
-        self._fd: int | None = None
-        self._postgres = runtime.engine.dialect.name == "postgresql"
-        digest = hashlib.sha256(upload_id.encode()).digest()
-        self._key = int.from_bytes(digest[:8], "big", signed=True)
-        self.path = lock_path(runtime, upload_id)
-
-    def acquire(self, wait_s: float = _WAIT_S) -> bool:
-        """Take the lock, waiting up to ``wait_s``; return whether it was taken."""
-        deadline = time.monotonic() + wait_s
-        while not self._try():
-            if time.monotonic() >= deadline:
-                return False
-            time.sleep(0.05)
-        return True
-
-    def _try(self) -> bool:
-        if self._postgres:
-            if self._connection is None:
-                self._connection = _lock_engine(self.runtime.engine).connect()
-            taken = bool(
-                self._connection.scalar(text("SELECT pg_try_advisory_lock(:k)"), {"k": self._key})
-            )
-            self._connection.commit()
-            return taken
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            return False
-        try:
-            same = os.fstat(fd).st_ino == self.path.stat().st_ino
-        except FileNotFoundError:
-            same = False
-        if not same:  # deleted (the upload ended) between the open and the lock
-            os.close(fd)
-            return self._try()
-        self._fd = fd
-        return True
-
-    def release(self, *, remove: bool = False) -> None:
-        """Let go of the lock (``remove``: the upload is gone, its lock file goes too)."""
-        if self._connection is not None:
-            try:
-                self._connection.execute(text("SELECT pg_advisory_unlock(:k)"), {"k": self._key})
-                self._connection.commit()
-            except Exception:  # noqa: BLE001  (a broken connection: the server let the lock go)
-                self._connection.invalidate()
-            self._connection.close()
-            self._connection = None
-        if self._fd is not None:
-            if remove:
-                self.path.unlink(missing_ok=True)
-            os.close(self._fd)
-            self._fd = None
-
-
-def _lock_engine(engine: Engine) -> Engine:
-    """Return the engine of the advisory locks on ``engine``'s database (one connection each)."""
-    url = engine.url.render_as_string(hide_password=False)
-    with _lock_engines_lock:
-        if url not in _lock_engines:
-            _lock_engines[url] = create_engine(url, poolclass=NullPool)
-        return _lock_engines[url]
-
-
-def lock_path(runtime: Runtime, upload_id: str) -> Path:
-    """Return the lock file of an upload (without PostgreSQL)."""
-    return runtime.store.root / "tus" / f"{upload_id}.lock"
-
-
-@contextlib.contextmanager
-def _locked(runtime: Runtime, upload_id: str, wait_s: float = _WAIT_S) -> Iterator[_Lock]:
-    lock = _Lock(runtime, upload_id)
-    if not lock.acquire(wait_s):
-        lock.release()
-        msg = (
-            "Another request is writing to this upload at the moment; ask its offset again "
-            "(HEAD) in a moment and continue from there."
-        )
-        raise UploadLockedError(msg)
-    try:
-        yield lock
-    finally:
-        lock.release()
 
 
 # -- rows ----------------------------------------------------------------------------------
@@ -376,7 +174,7 @@ def create_upload(
             "Upload-Defer-Length)."
         )
         raise UploadError(msg)
-    size = _parse_int(length, "Upload-Length")
+    size = parse_int(length, "Upload-Length")
     limit = runtime.settings.max_upload_bytes
     if size > limit:
         msg = (
@@ -384,7 +182,7 @@ def create_upload(
             "(Tus-Max-Size); split the recording, or raise LOCEVAL_MAX_UPLOAD_BYTES on the server."
         )
         raise UploadTooLargeError(msg)
-    fields = _parse_metadata(metadata)
+    fields = parse_metadata(metadata)
     tags = datasets.parse_tags(fields.get("tags"))
     name = (fields.get("name") or "").strip() or None
     datasets.check_fields(name=name, tags=tags)
@@ -420,7 +218,7 @@ def delete_upload(runtime: Runtime, project_id: str, upload_id: str) -> None:
         UploadLockedError: a request is writing to it (423).
     """
     find_upload(runtime, project_id, upload_id)
-    with _locked(runtime, upload_id) as lock:
+    with locked(runtime, upload_id) as lock:
         row = find_upload(runtime, project_id, upload_id)
         _forget(runtime, row)
         lock.release(remove=True)
@@ -563,11 +361,11 @@ async def receive(
     if (content_type or "").split(";")[0].strip().lower() != OFFSET_MEDIA_TYPE:
         msg = f"Send the upload's bytes with 'Content-Type: {OFFSET_MEDIA_TYPE}'."
         raise UploadMediaTypeError(msg)
-    start = _parse_int(offset, "Upload-Offset")
-    expected = _parse_checksum(checksum)
-    declared = None if content_length is None else _parse_int(content_length, "Content-Length")
+    start = parse_int(offset, "Upload-Offset")
+    expected = parse_checksum(checksum)
+    declared = None if content_length is None else parse_int(content_length, "Content-Length")
     await anyio.to_thread.run_sync(find_upload, runtime, project_id, upload_id)
-    lock = _Lock(runtime, upload_id)
+    lock = UploadLock(runtime, upload_id)
     if not await anyio.to_thread.run_sync(lock.acquire):
         await anyio.to_thread.run_sync(lock.release)
         msg = (
@@ -676,7 +474,7 @@ def settle(runtime: Runtime, project_id: str, upload_id: str, *, wait: bool = Tr
         return row
     if not wait and row.offset < row.length:  # progress as recorded, while it goes on
         return row
-    lock = _Lock(runtime, upload_id)
+    lock = UploadLock(runtime, upload_id)
     try:
         if lock.acquire():  # a request cut off is still recording what it received
             row = find_upload(runtime, project_id, upload_id)
@@ -762,7 +560,7 @@ def sweep_expired(runtime: Runtime, *, now: dt.datetime | None = None) -> int:
             select(TusUpload.id).where(TusUpload.expires_at < cutoff).limit(_SWEEP_BATCH)
         ).all()
     for upload_id in ids:
-        lock = _Lock(runtime, upload_id)
+        lock = UploadLock(runtime, upload_id)
         if not lock.acquire(0.0):
             lock.release()
             continue
