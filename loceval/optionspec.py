@@ -367,6 +367,7 @@ TRIAL_OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "PATH",
         max_length=500,
         group="baseline",
+        label="Baseline",
     ),
     OptionSpec(
         "min_trial_coverage",
@@ -380,6 +381,7 @@ TRIAL_OPTIONS: Final[tuple[OptionSpec, ...]] = (
         "SHARE",
         minimum=0.0,
         maximum=1.0,
+        label="Least trial coverage",
     ),
 )
 """The rows of :data:`loceval.options.OPTIONS` about trials and the baseline (issue 41).
@@ -404,6 +406,7 @@ GATE_OPTIONS: Final[tuple[OptionSpec, ...]] = (
         min_length=1,
         max_length=3,
         group="export",
+        label="Fail on",
     ),
 )
 """The gate's option (issue 41), in :data:`loceval.options.OPTIONS` after the tolerance whose

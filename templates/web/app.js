@@ -953,7 +953,9 @@
       if (!FORM_GROUPS.has(doc.group) || optionField(doc.key)) continue;
       const input = otherOptionInput(doc);
       if (!input) continue;
-      const label = doc.label; // a short name; the help is the field's tooltip
+      // a short name (the help is the field's tooltip); a row without one: its words
+      const words = doc.words.replace(/^the /, "");
+      const label = doc.label || words.charAt(0).toUpperCase() + words.slice(1);
       const hint = doc.key === "baseline" ? "an earlier evaluation" : doc.bounds_hint || (doc.kind === "file" ? "an uploaded dataset" : "");
       fields.push(el("label", {
         className: doc.kind === "switch" ? "field field-switch" : "field",

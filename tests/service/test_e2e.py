@@ -21,8 +21,10 @@ import ifcopenshell
 import pypdf
 import pytest
 import rhino3dm
+from junitparser import JUnitXml
 
 from exporters import ARTIFACTS
+from tests.exporters.ci.test_summary_md import tables
 from tests.service.conftest import (
     LiveServer,
     assert_same_ate,
@@ -113,23 +115,42 @@ def _check_artifact(
         lines = content.decode("utf-8").splitlines()
         assert lines[0] == "x_m,y_m,distance_m,fitted_distance_m,clutter"
         assert lines[1].startswith("# no map was measured")
-    elif name == "report.html":
+    elif name in {"report.html", "report.pdf", "viewer.html"}:
+        _check_document(name, content, evaluation)
+    elif name.startswith("paths."):
+        _check_cad_artifact(name, content, evaluation, tmp_path)
+    elif name in {"junit.xml", "summary.md"}:
+        _check_ci_artifact(name, content, evaluation)
+    else:  # pragma: no cover  (a new artifact needs a check here)
+        pytest.fail(f"no check for the artifact {name!r}")
+
+
+def _check_document(name: str, content: bytes, evaluation: dict[str, Any]) -> None:
+    """Open a report or the viewer: HTML that is one closed file, a PDF whose text reads."""
+    if name == "report.html":
         assert content.lstrip().lower().startswith(b"<!doctype html")
     elif name == "report.pdf":
         reader = pypdf.PdfReader(io.BytesIO(content))
         text = "".join(page.extract_text() for page in reader.pages)
         assert "ATE" in text
         assert evaluation["result"]["estimates"][0]["name"] in text
-    elif name == "viewer.html":  # one closed file: its scene names every trajectory
+    else:  # viewer.html, one closed file: its scene names every trajectory
         text = content.decode("utf-8")
         assert text.lstrip().lower().startswith("<!doctype html")
         assert "default-src 'none'" in text
         for estimate in evaluation["result"]["estimates"]:
             assert json.dumps(estimate["name"])[1:-1] in text
-    elif name.startswith("paths."):
-        _check_cad_artifact(name, content, evaluation, tmp_path)
-    else:  # pragma: no cover  (a new artifact needs a check here)
-        pytest.fail(f"no check for the artifact {name!r}")
+
+
+def _check_ci_artifact(name: str, content: bytes, evaluation: dict[str, Any]) -> None:
+    """Read a CI file as CI systems do: a suite per estimate; a table naming each estimate."""
+    names = [e["name"] for e in evaluation["result"]["estimates"]]
+    if name == "junit.xml":
+        suites = [suite.name for suite in JUnitXml.fromstring(content.decode("utf-8"))]
+        assert suites == names
+    else:
+        cells = {cell for table in tables(content.decode("utf-8")) for row in table for cell in row}
+        assert set(names) <= cells
 
 
 def _check_cad_artifact(

@@ -196,7 +196,8 @@ def problem_json(_ctx: object, response: Any, case: Any) -> None:
     assert body["status"] == response.status_code, body
     assert isinstance(body["detail"], str), body
     assert body["detail"], body
-    assert "Traceback" not in response.text
+    # a traceback, not the word: a generated id "Traceback" is echoed in a 404's detail
+    assert "Traceback (most recent call last)" not in response.text
 
 
 def test_schema_is_the_served_one(api: Api) -> None:
@@ -298,6 +299,13 @@ def _unexpressible(case: Any) -> list[str]:
         rules.append("offset: its quaternion must have unit norm")
     if options.get("site_matrix") is not None:
         rules.append("site_matrix: a rotation with uniform scale and a translation")
+    fail_on = options.get("fail_on")
+    if isinstance(fail_on, list):  # a gate that could never close is refused
+        conditions = {c for c in fail_on if isinstance(c, str)}
+        if "worse" in conditions and options.get("baseline") is None:
+            rules.append("fail_on: worse judges a baseline, which must be given")
+        if {"fail", "undecided"} & conditions and not options.get("tolerance"):
+            rules.append("fail_on: fail and undecided judge a tolerance, which must be given")
     if body.get("webhook_url") is not None:
         # Whether a host resolves, and to a public address or one the administrator
         # allows (LOCEVAL_WEBHOOK_ALLOW), is the network's and the settings' to say.
