@@ -146,7 +146,10 @@ def summary_markdown(view: ResultsView) -> str:
         lines += [f"Tolerance: {markdown_text(view.tolerance)}.", ""]
     lines += [*_table(view), ""]
     lines += ["### Verdicts", ""]
-    lines += [f"- **{markdown_text(v.name)}**: {markdown_text(v.headline)}" for v in view.verdicts]
+    lines += [  # a headline may name its estimate already ("ORB: undecided: ..."): once
+        f"- **{markdown_text(v.name)}**: {markdown_text(v.headline.removeprefix(f'{v.name}: '))}"
+        for v in view.verdicts
+    ]
     lines.append("")
     lines += _systems(view)
     lines += _baseline(view)

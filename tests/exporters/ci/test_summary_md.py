@@ -145,3 +145,11 @@ def test_baseline_and_systems_tables() -> None:
     assert "Baseline: release-1.4 (a loceval result)." in text
     assert "Systems over their trials" in headings(text)
     assert "orb-3" in text  # the failed trial is named, not dropped
+
+
+def test_a_verdict_names_its_estimate_once(verdicts: EvaluationResult) -> None:
+    """The list item is "**name**: undecided: ...", not "**name**: name: undecided: ..."."""
+    text = _summary(verdicts)
+    for name in ("steady", "lost", "borderline"):
+        assert f"**{name}**: {name}: " not in text
+        assert f"**{name}**: " in text
