@@ -95,6 +95,20 @@ DATASET_UPLOADED: Final[dict[str, Any]] = {
     "upload": {"deduplicated": False, "tags_added": [], "name_kept": None, "notes": []},
 }
 
+RESUMABLE_UPLOAD: Final[dict[str, Any]] = {
+    "id": "6f1c2b0e-3a5d-4c8e-9b7a-2d4e6f8a0c1b",
+    "offset": 303_374,
+    "length": 303_374,
+    "filename": "fr2_desk_ORB.txt",
+    "name": None,
+    "tags": ["fr2", "desk"],
+    "expires": "2026-11-30T08:26:09.219220Z",
+    "dataset": DATASET,
+    "upload": DATASET_UPLOADED["upload"],
+    "error": None,
+}
+"""A resumable upload whose last byte has arrived: the dataset it became."""
+
 EVALUATION: Final[dict[str, Any]] = {
     "id": _EVALUATION_ID,
     "status": "succeeded",
@@ -268,6 +282,7 @@ BY_SCHEMA: Final[dict[str, dict[str, Any]]] = {
     "HopsAnswer": HOPS_ANSWER,
     "OptionPublic": OPTION,
     "ProgressPublic": PROGRESS,
+    "ResumableUploadPublic": RESUMABLE_UPLOAD,
     "SchedulePublic": SCHEDULE,
     "ScheduleRunPublic": SCHEDULE_RUN,
     "ScheduleWithSecret": SCHEDULE_WITH_SECRET,
