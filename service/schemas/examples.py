@@ -278,6 +278,7 @@ BY_SCHEMA: Final[dict[str, dict[str, Any]]] = {
     "ComparisonPublic": COMPARISON,
     "DatasetPublic": DATASET,
     "DatasetUploaded": DATASET_UPLOADED,
+    "EstimateRef": {**SOURCE, "system": None},
     "EvaluationPublic": EVALUATION,
     "HopsAnswer": HOPS_ANSWER,
     "OptionPublic": OPTION,
@@ -286,7 +287,6 @@ BY_SCHEMA: Final[dict[str, dict[str, Any]]] = {
     "SchedulePublic": SCHEDULE,
     "ScheduleRunPublic": SCHEDULE_RUN,
     "ScheduleWithSecret": SCHEDULE_WITH_SECRET,
-    "EstimateRef": {**SOURCE, "system": None},
     "SourceRef": SOURCE,
     "SummaryRow": SUMMARY_ROW,
 }
