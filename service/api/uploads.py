@@ -237,7 +237,7 @@ async def upload_bytes(
     status_code=status.HTTP_204_NO_CONTENT,
     response_class=Response,
     dependencies=_TUS,
-    responses=problems(404, 412, 423),
+    responses=problems(404, 412, 423, 507),
     openapi_extra={"parameters": [_VERSION]},
 )
 def delete_upload(upload_id: PathText, runtime: RuntimeDep, project_id: ProjectDep) -> Response:

@@ -46,14 +46,15 @@ def disk(tmp_path: Path) -> Iterator[Path]:
 def _fill(disk: Path, *, leave: int = 0) -> Path:
     """Write a filler file until only ``leave`` bytes are free (0: until the disk is full)."""
     filler = disk / "filler"
-    with filler.open("wb") as fh:
+    # unbuffered: a buffered file would keep the bytes the full disk refused and raise
+    # ENOSPC again when it is closed
+    with filler.open("wb", buffering=0) as fh:
         if leave:
             fh.write(b"\0" * (shutil.disk_usage(disk).free - leave))
             return filler
         try:
             while True:
                 fh.write(b"\0" * 65536)
-                fh.flush()
         except OSError:
             pass
     return filler
