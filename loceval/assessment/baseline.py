@@ -57,6 +57,7 @@ from typing import Final, Literal
 import numpy as np
 
 from loceval.core.arrays import FloatArray, StampsNs
+from loceval.core.quantities import signed_difference
 from loceval.errors import LocevalError
 
 __all__ = [
@@ -178,7 +179,7 @@ class BaselineDifference:
     def summary(self) -> str:
         """One sentence for the report."""
         label = BASELINE_METRICS.get(self.metric, self.metric)
-        d = _fmt(self.difference, self.unit)
+        d = signed_difference(self.difference, self.unit)
         words = {
             "better": "better than the baseline",
             "worse": "worse than the baseline",
@@ -187,7 +188,7 @@ class BaselineDifference:
         }[self.verdict]
         if self.interval is None:
             return f"{self.name}, {label}: {d} against the baseline, {words}."
-        lo, hi = (_fmt(v, self.unit) for v in self.interval)
+        lo, hi = (signed_difference(v, self.unit) for v in self.interval)
         kind = "paired" if self.paired else "unpaired"
         return f"{self.name}, {label}: {d} ({kind} 95 % interval {lo} to {hi}), {words}."
 
@@ -237,14 +238,6 @@ class BaselineComparison:
             "comparisons": [d.to_dict() for d in self.differences],
             "notes": list(self.notes),
         }
-
-
-def _fmt(value: float, unit: str) -> str:
-    if unit == "m" and abs(value) < 1.0:
-        return f"{value * 100:+.1f} cm"
-    if unit == "m":
-        return f"{value:+.3f} m"
-    return f"{value:+.3g}{'°' if unit == 'deg' else ' ' + unit}"
 
 
 def baseline_verdict(interval: tuple[float, float] | None) -> Verdict:

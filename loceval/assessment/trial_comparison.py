@@ -23,6 +23,7 @@ import numpy as np
 
 from loceval.assessment.trials import LEVEL, TRIAL_METRICS, finite_values
 from loceval.core.arrays import FloatArray
+from loceval.core.quantities import signed_difference
 
 if TYPE_CHECKING:
     from loceval.assessment.trials import SystemTrials
@@ -75,14 +76,14 @@ class SystemComparison:
     def summary(self) -> str:
         """One sentence for the report."""
         label = TRIAL_METRICS.get(self.metric, self.metric)
-        d = _fmt(self.difference, self.unit)
+        d = signed_difference(self.difference, self.unit)
         trials = f"{self.n_a} against {self.n_b} trials"
         if self.interval is None:
             return (
                 f"{self.a} vs {self.b}, {label}: median shift {d} over {trials}, too few "
                 "trials for a 95 % interval."
             )
-        lo, hi = (_fmt(v, self.unit) for v in self.interval)
+        lo, hi = (signed_difference(v, self.unit) for v in self.interval)
         if self.verdict == "within_noise":
             return (
                 f"{self.a} vs {self.b}, {label}: median shift {d} (interval {lo} to {hi}, "
@@ -90,7 +91,9 @@ class SystemComparison:
             )
         better, worse = (self.a, self.b) if self.verdict == "a_better" else (self.b, self.a)
         low, high = sorted(abs(v) for v in self.interval)
-        by, lo, hi = (_fmt(v, self.unit).lstrip("+") for v in (abs(self.difference), low, high))
+        by, lo, hi = (
+            signed_difference(v, self.unit).lstrip("+") for v in (abs(self.difference), low, high)
+        )
         return (
             f"{better}'s {label} is lower than {worse}'s by {by} over {trials} "
             f"(interval {lo} to {hi}, p = {self.p_value:.3g})."
@@ -113,14 +116,6 @@ class SystemComparison:
             "method": self.method,
             "summary": self.summary,
         }
-
-
-def _fmt(value: float, unit: str) -> str:
-    if unit == "m" and abs(value) < 1.0:
-        return f"{value * 100:+.1f} cm"
-    if unit == "m":
-        return f"{value:+.3f} m"
-    return f"{value:+.3g}{'°' if unit == 'deg' else ' ' + unit}"
 
 
 def _u_null_cdf(m: int, n: int) -> FloatArray:

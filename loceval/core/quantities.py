@@ -27,6 +27,7 @@ __all__ = [
     "decimals_for",
     "format_duration",
     "plus_minus",
+    "signed_difference",
 ]
 
 PLUS_MINUS: Final = "±"
@@ -99,6 +100,18 @@ def format_duration(seconds: float) -> str:
     if size >= 100.0:
         return f"{seconds:.0f} s"
     return f"{_three_digits(seconds)} s"
+
+
+def signed_difference(value: float, unit: str) -> str:
+    """Return a signed difference: lengths under a metre in cm (``"+1.9 cm"``), else ``unit``.
+
+    ``unit`` is ``"m"``, ``"deg"`` (written ``°``) or any other unit, written after a space.
+    """
+    if unit == "m" and abs(value) < 1.0:
+        return f"{value * 100:+.1f} cm"
+    if unit == "m":
+        return f"{value:+.3f} m"
+    return f"{value:+.3g}{'°' if unit == 'deg' else ' ' + unit}"
 
 
 def _three_digits(value: float) -> str:
