@@ -231,6 +231,26 @@ def export_errors_csv(result: EvaluationResult, options: ExportOptions) -> bytes
     return b"".join(errors_csv_chunks(result))
 
 
+def _estimate_rows(data: bytes, name: str) -> bytes | None:
+    """Return an estimate's rows of ``errors.csv`` without their first cell (None: no rows).
+
+    Vectorised: the rows are found by their first cell, quoted as written.
+
+    Raises:
+        ValueError: the file is not an ``errors.csv`` of this layout.
+    """
+    header, _, body = data.partition(b"\n")
+    if header.decode("utf-8", "replace").strip() != ",".join(ERRORS_CSV_COLUMNS):
+        msg = "Not an errors.csv of loceval: its header differs."
+        raise ValueError(msg)
+    prefix = _csv_cell(name) + b","
+    lines = np.asarray(body.split(b"\n"), dtype=np.bytes_)
+    mine = lines[np.char.startswith(lines, prefix)]
+    if not mine.size:
+        return None
+    return b"\n".join(mine.tolist()).replace(b"\n" + prefix, b"\n")[len(prefix) :]
+
+
 def read_ate_series(data: bytes, name: str) -> tuple[StampsNs, FloatArray]:
     """Read one estimate's ATE series back from an ``errors.csv`` this module wrote.
 
@@ -247,16 +267,9 @@ def read_ate_series(data: bytes, name: str) -> tuple[StampsNs, FloatArray]:
     Raises:
         ValueError: the file is not an ``errors.csv`` of this layout.
     """
-    header, _, body = data.partition(b"\n")
-    if header.decode("utf-8", "replace").strip() != ",".join(ERRORS_CSV_COLUMNS):
-        msg = "Not an errors.csv of loceval: its header differs."
-        raise ValueError(msg)
-    prefix = _csv_cell(name) + b","
-    lines = np.asarray(body.split(b"\n"), dtype=np.bytes_)
-    mine = lines[np.char.startswith(lines, prefix)]
-    if not mine.size:
+    block = _estimate_rows(data, name)
+    if block is None:
         return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
-    block = b"\n".join(mine.tolist()).replace(b"\n" + prefix, b"\n")[len(prefix) :]
     ate_column = ERRORS_CSV_COLUMNS.index("ate_m") - 1
     stamps = np.loadtxt(io.BytesIO(block), delimiter=",", usecols=0, dtype=np.int64, ndmin=1)
     ate = np.loadtxt(io.BytesIO(block), delimiter=",", usecols=ate_column, ndmin=1)
@@ -283,16 +296,9 @@ def read_error_series(data: bytes, name: str, column: str) -> tuple[StampsNs, Fl
     if column not in ERRORS_CSV_COLUMNS[-4:]:
         msg = f"No error column {column!r} in errors.csv."
         raise ValueError(msg)
-    header, _, body = data.partition(b"\n")
-    if header.decode("utf-8", "replace").strip() != ",".join(ERRORS_CSV_COLUMNS):
-        msg = "Not an errors.csv of loceval: its header differs."
-        raise ValueError(msg)
-    prefix = _csv_cell(name) + b","
-    lines = np.asarray(body.split(b"\n"), dtype=np.bytes_)
-    mine = lines[np.char.startswith(lines, prefix)]
-    if not mine.size:
+    block = _estimate_rows(data, name)
+    if block is None:
         return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.float64)
-    block = b"\n".join(mine.tolist()).replace(b"\n" + prefix, b"\n")[len(prefix) :]
     index = ERRORS_CSV_COLUMNS.index(column) - 1
     stamps = np.loadtxt(io.BytesIO(block), delimiter=",", usecols=0, dtype=np.int64, ndmin=1)
     values = np.atleast_1d(
