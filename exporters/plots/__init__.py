@@ -1,9 +1,11 @@
-"""Report plots: matplotlib figures rendered to self-contained SVG (HTML) and PNG (PDF).
+"""Report plots: self-contained SVG figures (the HTML and the PDF) and PNG (a WeasyPrint PDF).
 
-Split by concern: :mod:`~exporters.plots.figure` (colours, decimation, the figure and its
-encoding), :mod:`~exporters.plots.maps` (paths from above, error along the path, side
-views), :mod:`~exporters.plots.series` (errors over time, the CDF) and
-:mod:`~exporters.plots.render` (every plot of the report, in order).
+Split by concern: :mod:`~exporters.plots.svg` (the figure kit the common plots are drawn
+with), :mod:`~exporters.plots.mpl` (the matplotlib figures of the rarer ones),
+:mod:`~exporters.plots.figure` (colours, decimation, the figure and its encoding),
+:mod:`~exporters.plots.maps` (paths from above, error along the path, side views),
+:mod:`~exporters.plots.series` (errors over time, the CDF) and :mod:`~exporters.plots.render`
+(every plot of the report, in order).
 """
 
 from __future__ import annotations

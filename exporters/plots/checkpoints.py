@@ -19,9 +19,8 @@ from exporters.plots.figure import (
     Plot,
     encode_plot,
     estimate_colour,
-    new_figure,
-    style_axes,
 )
+from exporters.plots.mpl import new_figure, style_axes
 from exporters.plots.underlay import draw_floor_plan, floor_plan_note
 from loceval.checkpoint_evaluation import CheckpointEvaluation
 from loceval.core.arrays import FloatArray

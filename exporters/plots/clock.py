@@ -17,10 +17,9 @@ from exporters.plots.figure import (
     decimate_minmax,
     encode_plot,
     estimate_colour,
-    legend_above,
     new_figure,
-    style_axes,
 )
+from exporters.plots.svg.draw import Style
 from loceval.calibration.clock import TimeOffsetEstimate
 from loceval.calibration.drift import ClockDrift
 from loceval.core.quantities import plus_minus
@@ -56,32 +55,27 @@ def plot_clock_correlation(
     if not checked:
         return None
     fig = new_figure(5.0)
-    full, zoom = fig.subplots(2, 1)
+    full, zoom = fig.subplots(2)
     for k, clock in checked:
         colour = estimate_colour(k)
         name = result.estimates[k].name or f"estimate {k + 1}"
         scores = clock.scores
         kept = decimate_minmax(np.nan_to_num(scores, nan=-1.0), max_points)
-        full.plot(clock.lags_s[kept], scores[kept], color=colour, linewidth=1.0, label=name)
+        full.line(clock.lags_s[kept], scores[kept], Style(colour=colour, width=1.0), label=name)
         found = clock.estimated_s if clock.estimated_s is not None else clock.value_s
         near = np.abs(clock.lags_s - found) <= ZOOM_S
-        zoom.plot(
-            (clock.lags_s[near] - found) * 1e3,
-            scores[near],
-            color=colour,
-            linewidth=1.2,
-            marker=".",
-            markersize=3,
-        )
+        lags_ms, near_scores = (clock.lags_s[near] - found) * 1e3, scores[near]
+        zoom.line(lags_ms, near_scores, Style(colour=colour, width=1.2))
+        zoom.markers(lags_ms, near_scores, Style(colour=None, face=colour), size_pt=2.5)
         for candidate in clock.candidates_s:
-            full.axvline(candidate, color=colour, linestyle=":", linewidth=0.8)
-    zoom.axvline(0.0, color="#616161", linestyle=":", linewidth=1.0)
-    full.set_xlabel("time offset added to the estimate's stamps [s]")
-    zoom.set_xlabel("time offset minus the one found [ms]")
-    for ax in (full, zoom):
-        ax.set_ylabel("correlation")
-        style_axes(ax)
-    legend_above(fig, full)
+            full.vline(candidate, Style(colour=colour, width=0.8, dash="dotted"))
+            full.x.add(np.array([candidate]))
+    zoom.vline(0.0, Style(colour="#616161", width=1.0, dash="dotted"))
+    zoom.x.add(np.array([0.0]))
+    full.xlabel = "time offset added to the estimate's stamps [s]"
+    zoom.xlabel = "time offset minus the one found [ms]"
+    full.ylabel = zoom.ylabel = "correlation"
+    fig.legend_above(full)
     caption = (
         "Correlation of the motion signals (angular speed, or speed for position-only "
         "systems) at every time offset where the recordings overlap; dotted lines mark the "
@@ -125,7 +119,7 @@ def plot_clock_drift(
     if not checked:
         return None
     fig = new_figure(1.2 + 1.6 * len(checked))
-    axes = fig.subplots(len(checked), 1, squeeze=False)[:, 0]
+    axes = fig.subplots(len(checked))
     for ax, (k, clock, drift) in zip(axes, checked, strict=True):
         colour = estimate_colour(k)
         name = result.estimates[k].name or f"estimate {k + 1}"
@@ -136,26 +130,20 @@ def plot_clock_drift(
         for used, face in ((True, colour), (False, "white")):
             sel = ok & (w.used == used)
             if sel.any():
-                ax.errorbar(
+                ax.errorbars(
                     minutes[sel],
                     (w.offset_s[sel] - base_s) * 1e3,
-                    yerr=w.sigma_s[sel] * 1e3,
-                    fmt="o",
-                    markersize=3,
-                    color=colour,
-                    markerfacecolor=face,
-                    elinewidth=0.8,
-                    linewidth=0,
+                    w.sigma_s[sel] * 1e3,
+                    Style(colour=colour, width=0.8, face=face),
                     label=f"{name}: windows (1 sigma)" if used else "weighed less (outliers)",
                 )
         t = np.linspace(0.0, drift.duration_s, 400)
         stamps = drift.epoch_ns + np.rint(t * 1e9).astype(np.int64)
         fitted = drift.model(with_rate=True, with_steps=True, offset_s=base_s)
-        ax.plot(
+        ax.line(
             t / 60.0,
             fitted.varying_s(stamps) * 1e3,
-            color=colour,
-            linewidth=1.2,
+            Style(colour=colour, width=1.2),
             label="fitted: "
             + plus_minus(drift.rate_ppm, drift.sigma_rate_ppm, "ppm", sign=True)
             + (
@@ -167,18 +155,15 @@ def plot_clock_drift(
         applied = clock.model
         if applied.rate_ppm != drift.rate_ppm or len(applied.steps) != len(drift.steps):
             # The change applied along the run (its level is the time offset's business).
-            ax.plot(
+            ax.line(
                 t / 60.0,
                 applied.varying_s(stamps) * 1e3,
-                color="#616161",
-                linestyle="--",
-                linewidth=1.0,
+                Style(colour="#616161", width=1.0, dash="dashed"),
                 label="applied" if applied.varies else "applied: a constant offset",
             )
-        ax.set_ylabel("offset change [ms]")
-        style_axes(ax)
-        ax.legend(loc="best", fontsize=7, frameon=False)
-    axes[-1].set_xlabel("minutes along the run (the estimate's clock)")
+        ax.ylabel = "offset change [ms]"
+        ax.legend("best", size_pt=7.0)
+    axes[-1].xlabel = "minutes along the run (the estimate's clock)"
     caption = (
         "The time offset measured in windows along the run, as its change from the fitted "
         "line's offset at the estimate's first pose: a clock that runs fast or slow makes a "

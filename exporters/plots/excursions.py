@@ -7,19 +7,19 @@ band, with the drift it measured written above it ("45 s, 38 m: 0.02 -> 0.21 m")
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Final
+from typing import Final
 
 import numpy as np
 
 from exporters.plots.figure import seconds_since
+from exporters.plots.svg.axes import Axes
+from exporters.plots.svg.draw import Style
 from loceval.evaluation import EvaluationResult
-
-if TYPE_CHECKING:
-    from matplotlib.axes import Axes
 
 __all__ = ["excursion_note", "mark_excursions"]
 
 _EXCURSION_COLOUR: Final = "#6a1b9a"
+_HATCHED: Final = Style(colour=_EXCURSION_COLOUR, width=0.6, hatch=_EXCURSION_COLOUR)
 
 
 def mark_excursions(ax: Axes, result: EvaluationResult, t0_ns: int) -> None:
@@ -30,27 +30,25 @@ def mark_excursions(ax: Axes, result: EvaluationResult, t0_ns: int) -> None:
             key = (excursion.start_ns, excursion.end_ns)
             start, end = seconds_since(np.array(key, dtype=np.int64), t0_ns).tolist()
             if key not in seen:
-                ax.axvspan(
-                    start,
-                    end,
-                    facecolor="none",
-                    edgecolor=_EXCURSION_COLOUR,
-                    hatch="//",
-                    linewidth=0.6,
+                ax.xspans(
+                    np.array([start]),
+                    np.array([end]),
+                    _HATCHED,
                     label="excursion (outside the tracked room)" if not seen else None,
+                    z=1.2,
                 )
                 seen.add(key)
             before = "–" if excursion.error_before_m is None else f"{excursion.error_before_m:.2f}"
             after = "–" if excursion.error_after_m is None else f"{excursion.error_after_m:.2f}"
-            ax.annotate(
+            ax.text(
+                0.5 * (start + end),
+                1.0,
                 f"{estimate.name}: {end - start:.0f} s, {excursion.path_length_m:.0f} m: "
                 f"{before} → {after} m",
-                xy=(0.5 * (start + end), 1.0),
-                xycoords=("data", "axes fraction"),
-                ha="center",
-                va="bottom",
-                fontsize=7,
-                color=_EXCURSION_COLOUR,
+                coords=("data", "axes"),
+                offset_pt=(0.0, 1.0),
+                size_pt=7.0,
+                colour=_EXCURSION_COLOUR,
             )
 
 

@@ -1,8 +1,11 @@
 """The report plots' drawing kit: colours, decimation, figures and their SVG/PNG encoding.
 
-Every plot is drawn on a :class:`matplotlib.figure.Figure` built directly: no pyplot, no
-backend switch, no rcParams changes and no display, so nothing is shared between renders
-and no GUI backend is needed. Long series are decimated for *drawing only*: a line never
+The report's own figures (the maps, the error series, the CDF, the clock plots) are drawn
+by the figure kit of :mod:`exporters.plots.svg`: SVG written from NumPy arrays, no
+matplotlib to import or to run (a report's figures took most of its second). Figures drawn
+less often (trials, ranging, maps of a robot, checkpoints, summaries) are still matplotlib
+figures, built by :mod:`exporters.plots.mpl`, which is imported only when one is drawn;
+:func:`encode_plot` encodes either. Long series are decimated for *drawing only*: a line never
 carries more than ``max_points`` vertices, while every statistic in the report is
 computed from all poses by the core.
 
@@ -10,34 +13,28 @@ Colours follow the framework paper's Fig. 5: ground truth cyan, the first estima
 magenta (RTAB-Map there), the second green (ISAAC there), further estimates in other
 distinct colours.
 
-The drawing helpers (:func:`new_figure`, :func:`style_axes`, :func:`encode_plot`, ...) are
-shared by the plot modules of this package and the summary report's
-(:mod:`exporters.summary.plots`); the package itself re-exports only what its callers use.
+The drawing helpers (:func:`new_figure`, :func:`encode_plot`, ...) are shared by the plot
+modules of this package and the summary report's (:mod:`exporters.summary.plots`); the
+package itself re-exports only what its callers use.
 """
 
 from __future__ import annotations
 
 import base64
-import contextlib
-import io
-import operator
-import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Literal, TypeAlias
+from typing import TYPE_CHECKING, Literal, TypeAlias
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.figure import Figure
-from matplotlib.layout_engine import PlaceHolderLayoutEngine
-from matplotlib.lines import Line2D
 
 from exporters.colours import ESTIMATE_COLOURS, estimate_colour
-from exporters.plots.layout import lay_out
-from exporters.plots.png import rgb_png
+from exporters.plots.svg.canvas import WIDTH_IN, Figure, png_of_svg
 from loceval.core.arrays import BoolArray, FloatArray, IntArray, StampsNs
 from loceval.core.gaps import path_breaks
 from loceval.evaluation import EvaluationResult
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure as MplFigure
 
 __all__ = [
     "DEFAULT_MAX_POINTS",
@@ -48,7 +45,6 @@ __all__ = [
     "NS_PER_S",
     "PNG_DPI",
     "RASTER_DPI",
-    "RASTER_MIN_POINTS",
     "REFERENCE_COLOUR",
     "SIDE_VIEW_MIN_Z_SPAN_M",
     "TOLERANCE_COLOUR",
@@ -61,15 +57,11 @@ __all__ = [
     "decimate_uniform",
     "encode_plot",
     "estimate_colour",
-    "is_dense",
-    "keep_every_vertex",
-    "legend_above",
     "new_figure",
     "number_figures",
     "path_jumps",
     "reference_losses",
     "seconds_since",
-    "style_axes",
     "with_nan_breaks",
 ]
 
@@ -91,12 +83,8 @@ MIN_GAP_WIDTH_SHARE = 0.003
 ENVELOPE_DIVISOR = 5
 """A series longer than ``max_points`` is drawn as a band of ``max_points / 5`` buckets
 (about one per pixel column of the plot): each bucket's smallest and largest value."""
-RASTER_MIN_POINTS = 500
-"""An error-coloured path with more segments is embedded as a bitmap inside the SVG (axes,
-labels and the colour bar stay vector): thousands of separately coloured SVG segments
-would make the HTML and the PDF large and slow to draw."""
 RASTER_DPI = 150
-"""Resolution of those bitmaps."""
+"""Resolution of the bitmaps a matplotlib figure embeds in its SVG (a robot's map)."""
 
 PNG_DPI = 200
 """Resolution of PNG plots (print quality on A4: the PDF WeasyPrint lays out of HTML templates
@@ -110,8 +98,6 @@ NS_PER_S = 1_000_000_000
 """Nanoseconds per second."""
 MIN_ERROR_AXIS = 0.01
 """Smallest upper limit of an error axis, in the error's unit."""
-WIDTH_IN = 7.0
-"""Width of every figure, inches."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -244,122 +230,31 @@ def path_jumps(result: EvaluationResult, stamps_ns: StampsNs) -> BoolArray:
     return path_breaks(stamps_ns, min_gap_ns=_min_gap_ns(result), losses=reference_losses(result))
 
 
-def is_dense(vertices: FloatArray | IntArray) -> bool:
-    """Whether a line of these vertices is drawn rasterized (more than RASTER_MIN_POINTS)."""
-    return int(vertices.shape[0]) > RASTER_MIN_POINTS
-
-
-_SVG_NUMBER = re.compile(rb"(\d\.\d\d)\d+")
-_SVG_PATH_DATA = re.compile(rb' d="[^"]*"')
-
-
-def _svg(fig: Figure) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="svg", dpi=RASTER_DPI, metadata={"Date": None, "Creator": "loceval"})
-    # Path coordinates are points (1/72 in); matplotlib writes six decimals. Two (1/7200 in)
-    # are far below what any screen or printer shows and make the SVG a third smaller.
-    return _SVG_PATH_DATA.sub(_two_decimals, buf.getvalue())
-
-
-_FIRST_GROUP = operator.itemgetter(1)
-"""A match's first group, as a callable ``re.sub`` calls without a template to expand."""
-
-
-def _two_decimals(path_data: re.Match[bytes]) -> bytes:
-    """Return an SVG path's ``d`` attribute with its numbers cut to two decimals."""
-    return _SVG_NUMBER.sub(_FIRST_GROUP, path_data.group(0))
-
-
-def _png(fig: Figure) -> bytes:
-    """Encode the figure as an opaque RGB PNG at :data:`PNG_DPI`.
-
-    The figure is drawn into an RGBA buffer and encoded without its alpha channel
-    (:func:`exporters.plots.png.rgb_png`): every figure has an opaque white background,
-    so the picture is the same, and WeasyPrint would otherwise split the alpha off into a
-    soft mask, decoding and encoding each image once more.
-    """
-    buf = io.BytesIO()
-    fig.savefig(buf, format="rgba", dpi=PNG_DPI)
-    width = int(fig.get_figwidth() * PNG_DPI)  # matplotlib's canvas size: truncated
-    rgba = np.frombuffer(buf.getbuffer(), dtype=np.uint8).reshape(-1, width, 4)
-    return rgb_png(rgba, dpi=PNG_DPI, software="loceval")
+def new_figure(height_in: float) -> Figure:
+    """Return an empty figure of the report's width, ``height_in`` inches high (the kit's)."""
+    return Figure(height_in=height_in, width_in=WIDTH_IN)
 
 
 def encode_plot(
-    fig: Figure, formats: Sequence[ImageFormat], *, key: str, title: str, caption: str
+    fig: Figure | MplFigure,
+    formats: Sequence[ImageFormat],
+    *,
+    key: str,
+    title: str,
+    caption: str,
 ) -> Plot:
-    """Encode a finished figure in the requested formats (laid out once, drawn once per format)."""
-    svg = png = None
-    _lay_out_once(fig)
-    if "svg" in formats:
-        svg = _svg(fig)
-    if "png" in formats:
-        png = _png(fig)
-    return Plot(key=key, title=title, caption=caption, svg=svg, png=png)
+    """Encode a finished figure in the requested formats (laid out once, drawn once per format).
 
-
-def _lay_out_once(fig: Figure) -> None:
-    """Lay the figure out once, with the fixed layout (:func:`exporters.plots.layout.lay_out`).
-
-    The figure has no layout engine (:func:`new_figure`), so every format is then drawn
-    once, at the same positions: a figure's SVG and PNG show one layout. A figure made with
-    an engine of its own (or a matplotlibrc asking for one) has it run once and removed.
+    ``fig`` is a figure of the kit (:func:`new_figure`) or a matplotlib figure
+    (:func:`exporters.plots.mpl.new_figure`).
     """
-    engine = fig.get_layout_engine()
-    if engine is not None and not isinstance(engine, PlaceHolderLayoutEngine):
-        if fig.axes:
-            with contextlib.suppress(ValueError):  # as Figure.draw: axes too small to lay out
-                engine.execute(fig)
-        fig.set_layout_engine("none")
-        return
-    lay_out(fig)
+    if not isinstance(fig, Figure):
+        from exporters.plots.mpl import encode_figure  # noqa: PLC0415  (matplotlib: lazily)
 
-
-def keep_every_vertex(lines: Sequence[Line2D]) -> None:
-    """Switch off matplotlib's path simplification for these lines.
-
-    A line is already decimated to ``max_points`` vertices; simplification would further
-    drop vertices it finds collinear, so a 1.5 Hz AMCL path of 129 poses showed 108.
-    """
-    for line in lines:
-        line.get_path().should_simplify = False
-
-
-def new_figure(height_in: float) -> Figure:
-    """Return an empty figure of the report's width, ``height_in`` inches high.
-
-    It has no layout engine: :func:`encode_plot` lays it out once, with the fixed layout of
-    :mod:`exporters.plots.layout` (constrained layout cost as much as the drawing).
-    """
-    fig = Figure(figsize=(WIDTH_IN, height_in), dpi=150)
-    fig.set_layout_engine("none")  # whatever a matplotlibrc asks for
-    return fig
-
-
-def style_axes(ax: Axes) -> None:
-    """Give the axes the report's light grid and no top or right spine."""
-    ax.grid(visible=True, color="#e0e0e0", linewidth=0.6)
-    ax.set_axisbelow(True)
-    for side in ("top", "right"):
-        ax.spines[side].set_visible(False)
-
-
-def legend_above(fig: Figure, ax: Axes) -> None:
-    """Put the legend of ``ax`` above the figure, in one row if it fits, else two."""
-    handles, labels = ax.get_legend_handles_labels()
-    # One row when it fits the figure's width (about 95 characters at 8 pt), else two, or as
-    # many as the longest labels need to stay within the width (a summary's run labels).
-    ncols = len(labels) if sum(len(t) + 6 for t in labels) <= 95 else -(-len(labels) // 2)
-    widest = max((len(t) + 6 for t in labels), default=1)
-    ncols = min(ncols, max(95 // widest, 1))
-    fig.legend(
-        handles,
-        labels,
-        loc="upper center",
-        bbox_to_anchor=(0.5, 1.0),
-        bbox_transform=fig.transFigure,
-        borderaxespad=0.3,
-        ncols=max(ncols, 1),
-        frameon=False,
-        fontsize=8,
+        svg, png = encode_figure(fig, formats, png_dpi=PNG_DPI, svg_dpi=RASTER_DPI)
+        return Plot(key=key, title=title, caption=caption, svg=svg, png=png)
+    svg_doc = fig.svg()
+    png = png_of_svg(svg_doc, dpi=PNG_DPI, software="loceval") if "png" in formats else None
+    return Plot(
+        key=key, title=title, caption=caption, svg=svg_doc if "svg" in formats else None, png=png
     )

@@ -22,9 +22,8 @@ from exporters.plots.figure import (
     Plot,
     decimate_uniform,
     encode_plot,
-    new_figure,
-    style_axes,
 )
+from exporters.plots.mpl import new_figure, style_axes
 from loceval.evaluation import EvaluationResult
 
 if TYPE_CHECKING:

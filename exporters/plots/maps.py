@@ -5,12 +5,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.collections import LineCollection
-from matplotlib.colors import BoundaryNorm, ListedColormap
 
 from exporters.cad.building import FRAME_BUILDING_UP_TO
-from exporters.colours import error_bins, scale_words
+from exporters.colours import error_bins, hex_colour, scale_words
 from exporters.plots.figure import (
     DEFAULT_MAX_POINTS,
     MAX_SPAN_MARKERS,
@@ -25,14 +22,13 @@ from exporters.plots.figure import (
     decimate_uniform,
     encode_plot,
     estimate_colour,
-    is_dense,
-    keep_every_vertex,
-    legend_above,
     new_figure,
     path_jumps,
-    style_axes,
     with_nan_breaks,
 )
+from exporters.plots.svg.axes import Axes
+from exporters.plots.svg.canvas import ColourBar
+from exporters.plots.svg.draw import Style
 from exporters.plots.underlay import draw_floor_plan, floor_plan_note
 from loceval.core.arrays import FloatArray
 from loceval.evaluation import EstimateResult, EvaluationResult
@@ -98,15 +94,13 @@ def _draw_reference_xy(
     a, b = _drawn_axes(result, result.reference, axes_ij, max_points)
     # Under an error-coloured path the truth is a wide band; over noisy estimates it is
     # drawn last and thinner, so it stays visible.
-    lines = ax.plot(
+    ax.line(
         a,
         b,
-        color=REFERENCE_COLOUR,
-        linewidth=1.5 if on_top else 2.2,
-        zorder=4 if on_top else 2,
+        Style(colour=REFERENCE_COLOUR, width=1.5 if on_top else 2.2),
+        z=4 if on_top else 2,
         label=_reference_label(result),
     )
-    keep_every_vertex(lines)
 
 
 def _drawn_axes(
@@ -135,29 +129,23 @@ def _draw_estimate(
 ) -> None:
     e = result.estimates[k]
     a, b = _drawn_axes(result, e.aligned, axes_ij, max_points)
-    lines = ax.plot(
+    ax.line(
         a,
         b,
-        color=estimate_colour(k),
-        linewidth=1.0,
-        alpha=0.85,
+        Style(colour=estimate_colour(k), width=1.0, alpha=0.85),
         label=e.name or f"estimate {k + 1}",
     )
-    keep_every_vertex(lines)
 
 
 def _mark_start(ax: Axes, result: EvaluationResult) -> None:
     start = result.reference.positions_xyz[0]
-    ax.plot(
-        [start[0]],
-        [start[1]],
-        marker="o",
-        markersize=7,
-        markerfacecolor="white",
-        markeredgecolor="black",
-        linestyle="none",
+    ax.markers(
+        start[:1],
+        start[1:2],
+        Style(colour="#000000", width=1.0, face="#ffffff"),
+        size_pt=7.0,
         label="start",
-        zorder=5,
+        z=5,
     )
 
 
@@ -174,17 +162,15 @@ def plot_overlay_xy(
     under the paths in light grey.
     """
     fig = new_figure(_xy_figure_height(result, plot_width_in=WIDTH_IN - 0.8, floor_plan=floor_plan))
-    ax = fig.add_subplot()
+    (ax,) = fig.subplots()
     building = draw_floor_plan(ax, floor_plan, _paths_xy(result))
     _draw_reference_xy(ax, result, max_points, on_top=True)
     for k in range(len(result.estimates)):
         _draw_estimate(ax, result, k, max_points)
     _mark_start(ax, result)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    style_axes(ax)
-    legend_above(fig, ax)
+    ax.equal = True
+    ax.xlabel, ax.ylabel = "x [m]", "y [m]"
+    fig.legend_above(ax)
     names = ", ".join(e.name or f"estimate {k + 1}" for k, e in enumerate(result.estimates))
     return encode_plot(
         fig,
@@ -227,59 +213,41 @@ def plot_ate_path(
     top = max([1.5 * inner[-1]] if inner else [1.0])
     top = max(top, float(ate.max()) if ate.size else 0.0)
     bounds = [0.0, *inner, top]
-    cmap = ListedColormap([tuple(c / 255.0 for c in b.color_rgb) for b in bins])
-    norm = BoundaryNorm(bounds, cmap.N)
     tolerance = e.verdict.tolerance.distance_m if e.verdict is not None else None
     fig = new_figure(_xy_figure_height(result, plot_width_in=WIDTH_IN - 1.8, floor_plan=floor_plan))
-    ax = fig.add_subplot()
+    (ax,) = fig.subplots()
     building = draw_floor_plan(ax, floor_plan, _paths_xy(result))
     _draw_reference_xy(ax, result, max_points)
-    collection = LineCollection(
-        list(segments[keep_segment]),
-        cmap=cmap,
-        norm=norm,
-        linewidths=1.8,
-        capstyle="round",
-        zorder=3,
-        rasterized=is_dense(segments),
+    # each segment in its bin's colour (the bins' upper bounds, increasing)
+    classes = np.searchsorted(np.asarray(inner), seg_err[keep_segment], side="right")
+    ax.segments(
+        segments[keep_segment], classes, [hex_colour(b.color_rgb) for b in bins], width=1.8, z=3
     )
-    collection.set_array(seg_err[keep_segment])
-    ax.add_collection(collection)
-    ax.update_datalim(xy)
-    ax.autoscale_view()
-    colorbar = fig.colorbar(collection, ax=ax, shrink=0.85, ticks=bounds[:-1], use_gridspec=False)
-    colorbar.ax.set_yticklabels([f"{b:g}" for b in bounds[:-1]])
-    # the caption says what the colours mean (the tolerance in words)
-    colorbar.set_label("ATE [m]" if tolerance is not None else "ATE [m] (bins as in the CAD files)")
-    if tolerance is not None:
-        colorbar.ax.axhline(tolerance, color="black", linewidth=1.2)
-        colorbar.ax.text(
-            -0.15,
-            tolerance,
-            "tolerance",
-            transform=colorbar.ax.get_yaxis_transform(),
-            ha="right",
-            va="center",
-            fontsize=7,
-        )
+    ax.x.add(xy[:, 0])
+    ax.y.add(xy[:, 1])
+    fig.colour_bar(
+        ax,
+        ColourBar(
+            bounds=bounds,
+            colours=[hex_colour(b.color_rgb) for b in bins],
+            # the caption says what the colours mean (the tolerance in words)
+            label="ATE [m]" if tolerance is not None else "ATE [m] (bins as in the CAD files)",
+            marker=tolerance,
+            marker_label="tolerance",
+        ),
+    )
     for number, x, y in failing_span_markers(e):
-        ax.annotate(
+        ax.text(
+            x,
+            y,
             str(number),
-            (x, y),
-            xytext=(9, 9),
-            textcoords="offset points",
-            fontsize=8,
-            fontweight="bold",
-            ha="center",
-            va="center",
-            bbox={"boxstyle": "circle,pad=0.25", "fc": "white", "ec": TOLERANCE_COLOUR},
-            arrowprops={"arrowstyle": "-", "color": TOLERANCE_COLOUR, "linewidth": 0.8},
-            zorder=6,
+            offset_pt=(9.0, 9.0),
+            size_pt=8.0,
+            bold=True,
+            circle=TOLERANCE_COLOUR,
         )
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    style_axes(ax)
+    ax.equal = True
+    ax.xlabel, ax.ylabel = "x [m]", "y [m]"
     caption = (
         f"{name}'s aligned path coloured by its absolute trajectory error (ATE) at each "
         f"pose, over the ground truth in cyan. {scale_words(result)}"
@@ -307,15 +275,13 @@ def plot_side_views(
 ) -> Plot:
     """Side views (x-z and y-z) of the reference and every aligned estimate."""
     fig = new_figure(5.2)
-    axes = fig.subplots(2, 1)
+    axes = fig.subplots(2)
     for ax, (i, label) in zip(axes, ((0, "x"), (1, "y")), strict=True):
         _draw_reference_xy(ax, result, max_points, axes_ij=(i, 2), on_top=True)
         for k in range(len(result.estimates)):
             _draw_estimate(ax, result, k, max_points, axes_ij=(i, 2))
-        ax.set_xlabel(f"{label} [m]")
-        ax.set_ylabel("z [m]")
-        style_axes(ax)
-    legend_above(fig, axes[0])
+        ax.xlabel, ax.ylabel = f"{label} [m]", "z [m]"
+    fig.legend_above(axes[0])
     return encode_plot(
         fig,
         formats,

@@ -1,15 +1,17 @@
-"""Every plot of the evaluation report, in report order."""
+"""Every plot of the evaluation report, in report order.
+
+The plots drawn for every evaluation use the figure kit (:mod:`exporters.plots.svg`); those
+of trials, ranging and a robot's map are matplotlib figures, whose modules are imported
+only when the evaluation has them (matplotlib takes a third of a second to import).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
 from exporters.plots.figure import DEFAULT_MAX_POINTS, ImageFormat, Plot
-from exporters.plots.mapplan import plot_map, plot_map_history
 from exporters.plots.maps import is_3d, plot_ate_path, plot_overlay_xy, plot_side_views
-from exporters.plots.ranging import plot_ranging
 from exporters.plots.series import plot_ate_over_time, plot_error_cdf, plot_rpe_over_time
-from exporters.plots.trials import plot_trials
 from loceval.core.arrays import FloatArray
 from loceval.evaluation import EvaluationResult
 
@@ -44,10 +46,19 @@ def render_plots(
     plots.append(plot_ate_over_time(result, max_points=max_points, formats=formats))
     plots.append(plot_rpe_over_time(result, max_points=max_points, formats=formats))
     plots.append(plot_error_cdf(result, max_points=max_points, formats=formats))
-    plots.extend(plot_trials(result, formats=formats))
+    if any(s.metrics for s in result.systems):
+        from exporters.plots.trials import plot_trials  # noqa: PLC0415  (matplotlib)
+
+        plots.extend(plot_trials(result, formats=formats))
     if is_3d(result):
         plots.append(plot_side_views(result, max_points=max_points, formats=formats))
-    plots.extend(plot_ranging(result, max_points=max_points, formats=formats))
-    plots.extend(plot_map(result, max_points=max_points, formats=formats))
-    plots.extend(plot_map_history(result, formats=formats))
+    if result.ranging is not None:
+        from exporters.plots.ranging import plot_ranging  # noqa: PLC0415  (matplotlib)
+
+        plots.extend(plot_ranging(result, max_points=max_points, formats=formats))
+    if result.map is not None:
+        from exporters.plots.mapplan import plot_map, plot_map_history  # noqa: PLC0415
+
+        plots.extend(plot_map(result, max_points=max_points, formats=formats))
+        plots.extend(plot_map_history(result, formats=formats))
     return tuple(plots)

@@ -5,9 +5,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.collections import PolyCollection
-from matplotlib.figure import Figure
 
 from exporters.plots.excursions import excursion_note, mark_excursions
 from exporters.plots.figure import (
@@ -23,15 +20,15 @@ from exporters.plots.figure import (
     decimate_uniform,
     encode_plot,
     estimate_colour,
-    keep_every_vertex,
-    legend_above,
     new_figure,
     path_jumps,
     reference_losses,
     seconds_since,
-    style_axes,
     with_nan_breaks,
 )
+from exporters.plots.svg.axes import Axes
+from exporters.plots.svg.canvas import Figure
+from exporters.plots.svg.draw import Style
 from loceval.core.arrays import BoolArray, FloatArray
 from loceval.evaluation import EvaluationConfig, EvaluationResult
 from loceval.metrics.pose_errors import ErrorSeries
@@ -59,27 +56,11 @@ def _shade_gaps(ax: Axes, result: EvaluationResult, t0_ns: int) -> None:
     min_width = MIN_GAP_WIDTH_SHARE * total_s
     centre = 0.5 * (starts + ends)
     half = 0.5 * np.maximum(ends - starts, min_width)
-    starts, ends = centre - half, centre + half
-    boxes = np.stack(
-        [
-            np.stack([starts, np.zeros_like(starts)], axis=1),
-            np.stack([starts, np.ones_like(starts)], axis=1),
-            np.stack([ends, np.ones_like(starts)], axis=1),
-            np.stack([ends, np.zeros_like(starts)], axis=1),
-        ],
-        axis=1,
-    )
-    ax.add_collection(
-        PolyCollection(
-            list(boxes),
-            transform=ax.get_xaxis_transform(),
-            facecolors=GAP_COLOUR,
-            edgecolors=GAP_COLOUR,
-            alpha=0.35,
-            linewidths=0.5,
-            label="tracking loss (reference gap)",
-        ),
-        autolim=False,
+    ax.xspans(
+        centre - half,
+        centre + half,
+        Style(colour=GAP_COLOUR, width=0.5, face=GAP_COLOUR, alpha=0.35),
+        label="tracking loss (reference gap)",
     )
 
 
@@ -140,7 +121,7 @@ def _draw_series(
             path_jumps(result, series.stamps_ns),
             np.arange(len(series), dtype=np.intp),
         )
-        keep_every_vertex(ax.plot(t, v, color=colour, linewidth=0.8, label=name))
+        ax.line(t, v, Style(colour=colour, width=0.8), label=name)
         return
     # Too many samples to draw one by one: a light band between each bucket's smallest and
     # largest error (every peak survives) under a line of the bucket means. At print
@@ -152,8 +133,8 @@ def _draw_series(
         path_jumps(result, series.stamps_ns),
         buckets=max_points // ENVELOPE_DIVISOR,
     )
-    ax.fill_between(t, lo, hi, color=colour, alpha=0.3, linewidth=0.0)
-    ax.plot(t, mean, color=colour, linewidth=0.9, label=name)
+    ax.band(t, lo, hi, Style(colour=None, width=0.0, face=colour, alpha=0.3))
+    ax.line(t, mean, Style(colour=colour, width=0.9), label=name)
 
 
 def _time_plot(
@@ -165,7 +146,7 @@ def _time_plot(
 ) -> Figure:
     t0_ns = int(result.reference.stamps_ns[0])
     fig = new_figure(1.2 + 1.45 * len(rows))
-    axes = fig.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
+    axes = fig.subplots(len(rows), sharex=True)
     for r, (label, series_list) in enumerate(rows):
         ax = axes[r]
         _shade_gaps(ax, result, t0_ns)
@@ -176,20 +157,17 @@ def _time_plot(
                 _draw_series(ax, result, series, k, t0_ns=t0_ns, max_points=max_points)
         tol = result.config.tolerance
         if r == tolerance_row and tol is not None:
-            ax.axhline(
+            ax.hline(
                 tol.distance_m,
-                color=TOLERANCE_COLOUR,
-                linestyle="--",
-                linewidth=1.0,
+                Style(colour=TOLERANCE_COLOUR, width=1.0, dash="dashed"),
                 label=f"tolerance {tol.distance_m:g} m",
             )
-        ax.set_ylabel(label)
+        ax.ylabel = label
         # A floor on the axis range: rounding noise (1e-14 °) must not look like an error.
-        ax.set_ylim(0.0, max(ax.get_ylim()[1], MIN_ERROR_AXIS))
-        style_axes(ax)
+        ax.set_ylim(0.0, at_least=MIN_ERROR_AXIS)
         if r == 0:
-            legend_above(fig, ax)
-    axes[-1].set_xlabel(time_axis_label(result.reference))
+            fig.legend_above(ax)
+    axes[-1].xlabel = time_axis_label(result.reference)
     return fig
 
 
@@ -295,7 +273,7 @@ def plot_error_cdf(
 ) -> Plot:
     """Cumulative distribution of ATE with the thresholds (the reference-system paper's Fig. 7)."""
     fig = new_figure(4.0)
-    ax = fig.add_subplot()
+    (ax,) = fig.subplots()
     thresholds = result.config.thresholds_m
     for k, e in enumerate(result.estimates):
         values, shares = e.ate_translation.cdf()
@@ -303,41 +281,35 @@ def plot_error_cdf(
         ax.step(
             values[kept],
             100.0 * shares[kept],
-            where="post",
-            color=estimate_colour(k),
-            linewidth=1.2,
+            Style(colour=estimate_colour(k), width=1.2),
             label=e.name or f"estimate {k + 1}",
         )
-        shares_at = [100.0 * e.within[t] for t in thresholds if t in e.within]
-        ax.plot(
-            [t for t in thresholds if t in e.within],
-            shares_at,
-            linestyle="none",
-            marker="o",
-            markersize=4,
-            color=estimate_colour(k),
+        within = [t for t in thresholds if t in e.within]
+        ax.markers(
+            np.array(within),
+            np.array([100.0 * e.within[t] for t in within]),
+            Style(colour=None, face=estimate_colour(k)),
+            size_pt=4.0,
         )
     for t in thresholds:
-        ax.axvline(t, color="#616161", linestyle=":", linewidth=1.0)
+        ax.vline(t, Style(colour="#616161", width=1.0, dash="dotted"))
+    ax.x.add(np.asarray(thresholds, dtype=np.float64))
     tol = result.config.tolerance
     if tol is not None:
-        ax.plot(
-            [tol.distance_m],
-            [100.0 * tol.share],
-            marker="P",
-            markersize=9,
-            color=TOLERANCE_COLOUR,
-            linestyle="none",
+        ax.markers(
+            np.array([tol.distance_m]),
+            np.array([100.0 * tol.share]),
+            Style(colour=None, face=TOLERANCE_COLOUR),
+            shape="P",
+            size_pt=9.0,
             label=f"tolerance: {tol}",
-            zorder=5,
+            z=5,
         )
-    ax.set_xlim(left=0.0)
+    ax.set_xlim(0.0)
     ax.set_ylim(0.0, 101.0)
     _label_thresholds(ax, thresholds)
-    ax.set_xlabel("ATE [m]")
-    ax.set_ylabel("poses with error ≤ x [%]")
-    style_axes(ax)
-    ax.legend(loc="lower right", fontsize=8, frameon=True, framealpha=0.9)
+    ax.xlabel, ax.ylabel = "ATE [m]", "poses with error ≤ x [%]"
+    ax.legend("lower right")
     caption = (
         "Share of poses whose error is at most the value on the x-axis; dotted lines are the "
         "thresholds, dots the shares within them."
@@ -364,7 +336,8 @@ def _label_thresholds(ax: Axes, thresholds: Sequence[float]) -> None:
     the previous label on that row; a label with no room (or outside the axis) is left out,
     its dotted line stays.
     """
-    lo, hi = ax.get_xlim()
+    ax.settle_limits()  # the labels go where the thresholds lie on the x axis as it will be
+    lo, hi = ax.view_x
     last = [-1.0] * _LABEL_ROWS
     for t in sorted(thresholds):  # a handful of thresholds
         frac = (t - lo) / (hi - lo) if hi > lo else 0.0
@@ -376,13 +349,12 @@ def _label_thresholds(ax: Axes, thresholds: Sequence[float]) -> None:
         last[row] = frac
         ax.text(
             t,
-            1.01 + 0.055 * row,
+            1.0,
             f"{t:g} m",
-            transform=ax.get_xaxis_transform(),
-            ha="center",
-            va="bottom",
-            fontsize=7,
-            color="#424242",
+            coords=("data", "axes"),
+            offset_pt=(0.0, 2.0 + 9.0 * row),
+            size_pt=7.0,
+            colour="#424242",
         )
 
 

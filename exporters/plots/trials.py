@@ -20,10 +20,8 @@ from exporters.plots.figure import (
     Plot,
     encode_plot,
     estimate_colour,
-    legend_above,
-    new_figure,
-    style_axes,
 )
+from exporters.plots.mpl import legend_above, new_figure, style_axes
 from loceval.assessment.trials import TRIAL_METRICS, SystemTrials
 from loceval.evaluation import EvaluationResult
 

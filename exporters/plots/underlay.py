@@ -12,11 +12,9 @@ caption mentions the building only when some of it lies in the figure
 
 from __future__ import annotations
 
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
-from matplotlib.axes import Axes
-from matplotlib.collections import LineCollection
 
 from exporters.cad.building import (
     FRAME_BUILDING_UP_TO,
@@ -25,7 +23,11 @@ from exporters.cad.building import (
     section_segments,
 )
 from exporters.options import ExportOptions
+from exporters.plots.svg.axes import Axes as KitAxes
 from loceval.core.arrays import FloatArray
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = [
     "FLOOR_PLAN_GID",
@@ -36,8 +38,8 @@ __all__ = [
 ]
 
 FLOOR_PLAN_GID: Final = "floor-plan"
-"""The SVG group id of the floor plan's lines (one ``<path>`` per segment)."""
-_GREY: Final = "0.8"
+"""The SVG group id of the floor plan's lines."""
+_GREY: Final = "#cccccc"
 _LINE_WIDTH: Final = 0.6
 
 
@@ -64,11 +66,11 @@ def floor_plan_segments(heights_m: FloatArray, options: ExportOptions) -> FloatA
     return section_segments(underlay, z_m, site=placed.site)
 
 
-def draw_floor_plan(ax: Axes, segments: FloatArray | None, paths_xy: FloatArray) -> bool:
+def draw_floor_plan(ax: KitAxes | Axes, segments: FloatArray | None, paths_xy: FloatArray) -> bool:
     """Draw the floor plan as light grey lines under everything; frame it with the paths.
 
     Args:
-        ax: the plan-view axes.
+        ax: the plan-view axes: the figure kit's (:mod:`exporters.plots.svg`) or matplotlib's.
         segments: (K, 2, 2) floor-plan segments (evaluation frame, metres), or None.
         paths_xy: (N, 2) the points the figure shows (paths or control points).
 
@@ -78,25 +80,48 @@ def draw_floor_plan(ax: Axes, segments: FloatArray | None, paths_xy: FloatArray)
     if segments is None or not len(segments):
         return False
     ends = segments.reshape(-1, 2)
-    lines = LineCollection(
-        list(segments), colors=_GREY, linewidths=_LINE_WIDTH, zorder=0, label="_floor plan"
-    )
-    lines.set_gid(FLOOR_PLAN_GID)
-    ax.add_collection(lines, autolim=False)
-    if not len(paths_xy):
-        ax.update_datalim(ends)
-        return True
-    lo, hi = paths_xy.min(axis=0), paths_xy.max(axis=0)
-    paths_size = max(float(np.linalg.norm(hi - lo)), 1.0)
-    building_size = float(np.linalg.norm(ends.max(axis=0) - ends.min(axis=0)))
-    if building_size <= FRAME_BUILDING_UP_TO * paths_size:
-        ax.update_datalim(ends)  # the outer walls are in the figure
+    if isinstance(ax, KitAxes):
+        ax.segments(
+            segments,
+            np.zeros(len(segments), dtype=np.intp),
+            [_GREY],
+            width=_LINE_WIDTH,
+            z=0.0,
+            group=FLOOR_PLAN_GID,
+            autolim=False,
+        )
+    else:
+        from matplotlib.collections import LineCollection  # noqa: PLC0415  (matplotlib's plots)
+
+        lines = LineCollection(
+            list(segments), colors=_GREY, linewidths=_LINE_WIDTH, zorder=0, label="_floor plan"
+        )
+        lines.set_gid(FLOOR_PLAN_GID)
+        ax.add_collection(lines, autolim=False)
+    framed = _frames_building(segments, paths_xy)
+    if framed:  # the outer walls are in the figure
+        if isinstance(ax, KitAxes):
+            ax.x.add(ends[:, 0])
+            ax.y.add(ends[:, 1])
+        else:
+            ax.update_datalim(ends)
         return True
     # a campus: the figure keeps the paths' extent; some of the plan may lie in it
+    lo, hi = paths_xy.min(axis=0), paths_xy.max(axis=0)
     margin = 0.05 * (hi - lo)
     seg_lo, seg_hi = segments.min(axis=1), segments.max(axis=1)
     overlaps = np.all((seg_hi >= lo - margin) & (seg_lo <= hi + margin), axis=1)
     return bool(overlaps.any())
+
+
+def _frames_building(segments: FloatArray, paths_xy: FloatArray) -> bool:
+    """Whether the figure takes in the whole building (not far larger than the paths)."""
+    if not len(paths_xy):
+        return True
+    ends = segments.reshape(-1, 2)
+    paths_size = max(float(np.linalg.norm(np.ptp(paths_xy, axis=0))), 1.0)
+    building_size = float(np.linalg.norm(ends.max(axis=0) - ends.min(axis=0)))
+    return building_size <= FRAME_BUILDING_UP_TO * paths_size
 
 
 def floor_plan_note(drawn: bool) -> str:  # noqa: FBT001  (the one argument)

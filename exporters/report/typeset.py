@@ -25,9 +25,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
 from exporters.errors import ExportError, ExportUnavailableError
+from exporters.plots.svg.metrics import typst_fonts
 
 if TYPE_CHECKING:
-    import typst
+    pass
 
 __all__ = [
     "DOCUMENT_INPUT",
@@ -102,25 +103,9 @@ def check_typst() -> None:
         raise ExportUnavailableError(msg) from err
 
 
-@functools.cache
-def _fonts() -> typst.Fonts:
-    """DejaVu Sans (and Mono) from matplotlib's font folder, loaded once per process.
-
-    The system's fonts are not searched (a machine without fonts typesets the same PDF);
-    Typst's own embedded fonts stay available as a fallback for rare symbols.
-    """
-    import matplotlib as mpl  # noqa: PLC0415  (loceval[report]: the figures' fonts)
-    import typst  # noqa: PLC0415
-
-    folder = Path(mpl.get_data_path()) / "fonts" / "ttf"
-    return typst.Fonts(
-        include_system_fonts=False, include_embedded_fonts=True, font_paths=[str(folder)]
-    )
-
-
 def preload_fonts() -> None:
     """Read the fonts now (the service's job processes start with them read)."""
-    _fonts()
+    typst_fonts()
 
 
 def typst_available() -> bool:
@@ -159,7 +144,7 @@ def typeset_pdf(template: Path, view: object, *, label: str) -> bytes:
         pdf, warnings = typst.compile_with_warnings(
             template,
             root=template.parent,
-            font_paths=_fonts(),
+            font_paths=typst_fonts(),
             sys_inputs=inputs,
             format="pdf",
         )

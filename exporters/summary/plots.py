@@ -21,10 +21,8 @@ from exporters.plots.figure import (
     decimate_uniform,
     encode_plot,
     estimate_colour,
-    legend_above,
-    new_figure,
-    style_axes,
 )
+from exporters.plots.mpl import legend_above, new_figure, style_axes
 from exporters.summary.model import (
     UTC,
     SummaryInput,

@@ -30,6 +30,7 @@ MODULES: Final = (
     "exporters.plots.maps",
     "exporters.plots.series",
     "exporters.plots.render",
+    "exporters.plots.mpl",  # matplotlib: the trials', ranging and map plots
     "exporters.report.render",
     "exporters.report.typeset",
     "jinja2",

@@ -6,10 +6,16 @@ the HTML prints (a paragraph, a table cell, a caption, a heading, a list item) i
 whole in the PDF's text, and the PDF has no text that is not one of those blocks. It knows
 nothing of any one report: a section, sentence or number one template shows and the other
 does not is a difference.
+
+The figures are the same SVG documents in both (an ``<img>`` in the HTML, an image in the
+PDF); their texts (tick labels, axis labels, legends, notes) are set as text, so the PDF's
+text has them too: each ``<text>`` of an embedded SVG figure counts as a block of the HTML.
 """
 
 from __future__ import annotations
 
+import base64
+import html as html_module
 import re
 import subprocess
 from html.parser import HTMLParser
@@ -30,6 +36,8 @@ _SPACED_CLASSES = frozenset({"badge"})
 _CONTENTS_LEADER = re.compile(r"(?: ?\.){3,} ?\d+(?= |$)")
 """The dot leader and page number of an entry of the PDF's contents list."""
 _LIST_MARKER = re.compile(r"(?<!\S)•(?!\S)")
+_SVG_FIGURE = "data:image/svg+xml;base64,"
+_SVG_TEXT = re.compile(r"<text\b[^>]*>(.*?)</text>", re.DOTALL)
 """A list item's bullet: drawn by the stylesheet in the HTML, a glyph in the PDF."""
 
 
@@ -58,6 +66,11 @@ class _Blocks(HTMLParser):
         if tag in _VOID:
             if tag == "br" and (buffer := self._buffer()) is not None:
                 buffer.append(" ")
+            src = dict(attrs).get("src") or ""
+            if tag == "img" and src.startswith(_SVG_FIGURE) and not self._hidden():
+                svg = base64.b64decode(src.removeprefix(_SVG_FIGURE)).decode()
+                texts = (normalise(html_module.unescape(t)) for t in _SVG_TEXT.findall(svg))
+                self.blocks.extend(t for t in texts if t)
             return
         hidden = tag in _SKIPPED or bool(classes & _HIDDEN_CLASSES)
         spaced = bool(classes & _SPACED_CLASSES)

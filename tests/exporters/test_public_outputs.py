@@ -33,7 +33,7 @@ from .conftest import Validator
 pytestmark = pytest.mark.public_data
 
 NS = 1_000_000_000
-_COMMAND = re.compile(r"[ML]")
+_NUMBER = re.compile(r"-?\d+(?:\.\d+)?")
 
 
 @pytest.fixture(scope="module")
@@ -55,13 +55,14 @@ def fr2(public_data: Path) -> EvaluationResult:
 def _svg_line(svg: bytes, colour: str) -> tuple[int, int]:
     """Return (vertices, pieces) of the longest stroked path of one colour in an SVG.
 
-    matplotlib writes a line broken by NaN as one ``<path>`` whose pieces each start with
-    ``M`` and continue with ``L``; the legend's sample line is a separate, short path.
+    The figure kit writes a line broken by NaN as one ``<path>`` whose pieces each start with
+    ``M`` (then ``L`` and implicit line-tos: a vertex is a pair of numbers); the legend's
+    sample line is a separate, short path.
     """
-    pattern = r'<path d="([^"]*)"[^>]*style="[^"]*stroke: ?' + colour
+    pattern = r'<path d="([^"]*)"[^>]*stroke="' + colour
     paths = [m.group(1) for m in re.finditer(pattern, svg.decode("utf-8"))]
     longest = max(paths, key=len)
-    return len(_COMMAND.findall(longest)), longest.count("M")
+    return len(_NUMBER.findall(longest)) // 2, longest.count("M")
 
 
 def test_nav2_amcl_is_a_line_in_the_plots(nav2: EvaluationResult) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import itertools
 import re
 from pathlib import Path
 
@@ -28,12 +29,22 @@ from tests.exporters.ifcfactory import GRID_CONVERSION, ROOM_X_M, ROOM_Y_M, WALL
 
 
 def floor_plan_paths(svg: bytes) -> list[str]:
-    """Return the ``d`` attributes of the paths in the SVG's floor-plan group."""
+    """Return the segments drawn in the SVG's floor-plan group, ``"x0 y0 x1 y1"`` each.
+
+    matplotlib writes one ``<path>`` a segment; the figure kit one path whose pieces each
+    start with ``M`` and run on through the segments that meet (implicit line-tos).
+    """
     text = svg.decode()
     match = re.search(rf'<g id="{FLOOR_PLAN_GID}">(.*?)</g>', text, flags=re.DOTALL)
     if match is None:
         return []
-    return re.findall(r'<path d="([^"]*)"', match.group(1))
+    drawn = []
+    for data in re.findall(r'<path d="([^"]*)"', match.group(1)):
+        for piece in re.findall(r"M([^M]*)", data):
+            numbers = re.findall(r"-?[\d.]+", piece)
+            points = [f"{x} {y}" for x, y in zip(numbers[::2], numbers[1::2], strict=True)]
+            drawn.extend(f"{a} {b}" for a, b in itertools.pairwise(points))
+    return drawn
 
 
 def test_ifc_room_is_the_floor_plan_of_the_paths(

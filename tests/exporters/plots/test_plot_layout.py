@@ -1,10 +1,13 @@
-"""The figures' fixed layout (exporters.plots.layout) fits every decoration, as constrained did.
+"""The figures' fixed layouts fit every decoration, as constrained layout did.
 
 Each figure the report, the summary and the control-point report draw is laid out by
-measuring its texts, not by matplotlib's constrained layout. Checked here with matplotlib's
-own full measure (``get_tightbbox``, what constrained layout walks): no tick label, axis
-label, title, note or legend runs off the figure, none lies on another axes' plotting area,
-a figure's legend sits above every axes, and a colour bar stands clear of its plot.
+measuring its texts: the figure kit's (:mod:`exporters.plots.svg`) by DejaVu's advance
+widths, matplotlib's (:mod:`exporters.plots.layout`) instead of its constrained layout.
+Checked here: matplotlib's figures with matplotlib's own full measure (``get_tightbbox``,
+what constrained layout walks), the kit's with the box of every text it drew. No tick
+label, axis label, title, note or legend runs off the figure, none lies on another axes'
+plotting area, a figure's legend sits above every axes, and a colour bar stands clear of
+its plot.
 """
 
 from __future__ import annotations
@@ -18,7 +21,9 @@ from matplotlib.figure import Figure
 from matplotlib.transforms import Bbox
 
 from exporters.options import ExportOptions
-from exporters.plots import figure as figure_module
+from exporters.plots import mpl as mpl_module
+from exporters.plots.svg.canvas import Figure as KitFigure
+from exporters.plots.svg.draw import Box
 from exporters.report import render_report_plots
 from loceval.evaluation import EvaluationResult
 
@@ -27,19 +32,64 @@ TOLERANCE_PX = 1.5
 
 def _figures(
     monkeypatch: pytest.MonkeyPatch, draw: Callable[[], object]
-) -> Iterator[tuple[str, Figure]]:
+) -> Iterator[tuple[str, Figure | KitFigure]]:
     """Run ``draw`` and yield each figure it laid out, by its position in the run."""
-    laid: list[Figure] = []
-    lay_out = figure_module._lay_out_once
+    laid: list[Figure | KitFigure] = []
+    lay_out = mpl_module._lay_out_once
+    svg = KitFigure.svg
 
     def keep(fig: Figure) -> None:
         lay_out(fig)
         laid.append(fig)
 
-    monkeypatch.setattr(figure_module, "_lay_out_once", keep)
+    def keep_kit(fig: KitFigure) -> bytes:
+        laid.append(fig)
+        return svg(fig)
+
+    monkeypatch.setattr(mpl_module, "_lay_out_once", keep)
+    monkeypatch.setattr(KitFigure, "svg", keep_kit)
     draw()
     monkeypatch.undo()
     yield from ((f"figure {n}", fig) for n, fig in enumerate(laid, start=1))
+
+
+def _inside(box: Box, page: Box) -> bool:
+    slack = TOLERANCE_PX
+    return (
+        box.left >= page.left - slack
+        and box.top >= page.top - slack
+        and box.right <= page.right + slack
+        and box.bottom <= page.bottom + slack
+    )
+
+
+def _meet(a: Box, b: Box) -> bool:
+    return (
+        min(a.right, b.right) - max(a.left, b.left) > TOLERANCE_PX
+        and min(a.bottom, b.bottom) - max(a.top, b.top) > TOLERANCE_PX
+    )
+
+
+def _check_kit(name: str, fig: KitFigure) -> list[str]:
+    """What of a kit figure is cut off or lies where it should not (empty when it fits).
+
+    Every text the figure drew (``Figure.text_boxes``): on the page; an axes' texts off
+    every other axes' plotting area; the legend above and the colour bar's texts beside
+    every plotting area. Points, against a slack of 1.5 points.
+    """
+    page = Box(0.0, 0.0, fig.width_pt, fig.height_pt)
+    areas = {f"axes {k}": ax.box for k, ax in enumerate(fig.axes)}
+    problems = []
+    for owner, boxes in fig.text_boxes.items():
+        for box in boxes:
+            if not _inside(box, page):
+                problems.append(f"{name}: a text of {owner} runs off the figure: {box}")
+            problems += [
+                f"{name}: a text of {owner} lies on {other}: {box}"
+                for other, area in areas.items()
+                if other != owner and _meet(box, area)
+            ]
+    return problems
 
 
 def _overlap(a: Bbox, b: Bbox) -> bool:
@@ -126,5 +176,9 @@ def test_every_decoration_fits(case: str, tmp_path: Path, monkeypatch: pytest.Mo
     """Every figure of the case keeps its labels, notes and legend on the figure, apart."""
     figures = list(_figures(monkeypatch, _cases(tmp_path)[case]))
     assert figures
-    problems = [p for name, fig in figures for p in _check(name, fig)]
+    problems = [
+        p
+        for name, fig in figures
+        for p in (_check_kit(name, fig) if isinstance(fig, KitFigure) else _check(name, fig))
+    ]
     assert problems == [], "\n".join(problems)

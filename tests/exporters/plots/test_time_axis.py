@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from matplotlib.figure import Figure
 
 from exporters.plots import series
+from exporters.plots.svg.canvas import Figure
 from loceval.evaluation import EvaluationConfig, evaluate
 from loceval.readers.kitti import read_kitti
 from loceval.readers.tum import read_tum
@@ -21,7 +21,7 @@ def _x_labels(monkeypatch: pytest.MonkeyPatch, result: object) -> list[str]:
     encode = series.encode_plot
 
     def recording(fig: Figure, *args: object, **kwargs: object) -> object:
-        labels.append(fig.axes[-1].get_xlabel())
+        labels.append(fig.axes[-1].xlabel)
         return encode(fig, *args, **kwargs)
 
     monkeypatch.setattr(series, "encode_plot", recording)

@@ -333,7 +333,7 @@ def test_tracking_loss_is_shaded(rng: np.random.Generator) -> None:
     res = evaluate(truth.select(keep), [est])
     plot = plot_ate_over_time(res)
     assert plot.svg is not None
-    # matplotlib writes each drawn text as an SVG comment beside its glyphs.
+    # the figure kit writes each text as an SVG <text> element.
     assert b"tracking loss (reference gap)" in plot.svg
     assert "Grey bands are tracking loss of the reference" in plot.caption
     assert "A break in a line" in plot.caption

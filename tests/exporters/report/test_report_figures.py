@@ -12,14 +12,13 @@ from typing import Any
 
 import numpy as np
 import pytest
-from matplotlib.figure import Figure
-from matplotlib.layout_engine import ConstrainedLayoutEngine
 from PIL import Image
 
 from exporters import write_artifacts
 from exporters.options import ExportOptions
 from exporters.plots import figure as figure_module
 from exporters.plots.figure import PNG_DPI, WIDTH_IN
+from exporters.plots.svg.canvas import Figure as KitFigure
 from exporters.report import render_report_html, render_report_plots
 from exporters.report.provenance import yaw_pitch_roll_deg
 from loceval.core.rotation import Rotation
@@ -118,40 +117,39 @@ def test_yaw_pitch_roll_of_a_rotation_matrix(
 def test_each_figure_is_laid_out_once_and_drawn_once_per_format(
     two_estimates: EvaluationResult, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """One fixed layout per figure, shared by its SVG and PNG, no constrained layout, and no
-    draw that renders nothing (savefig makes one to lay out a figure that has an engine)."""
-    layouts: list[Figure] = []
-    draws: list[Figure] = []
-    constrained: list[Figure] = []
-    lay_out, draw = figure_module.lay_out, Figure.draw
-    execute = ConstrainedLayoutEngine.execute
+    """One fixed layout per figure and one drawing, its SVG; the PNG is that SVG rasterised.
 
-    def counted_layout(fig: Figure) -> None:
+    The report's figures are the figure kit's (no matplotlib figure, no constrained layout);
+    a figure asked for in both formats is laid out and drawn once.
+    """
+    layouts: list[KitFigure] = []
+    drawings: list[KitFigure] = []
+    rasterised: list[bytes] = []
+    lay_out, svg, png_of_svg = KitFigure.lay_out, KitFigure.svg, figure_module.png_of_svg
+
+    def counted_layout(fig: KitFigure) -> None:
         layouts.append(fig)
         lay_out(fig)
 
-    def counted_draw(self: Figure, renderer: Any) -> None:
-        draws.append(self)
-        draw(self, renderer)
+    def counted_svg(fig: KitFigure) -> bytes:
+        drawings.append(fig)
+        return svg(fig)
 
-    def counted_constrained(self: ConstrainedLayoutEngine, fig: Figure) -> None:
-        constrained.append(fig)
-        execute(self, fig)
+    def counted_png(document: bytes, **kwargs: Any) -> bytes:
+        rasterised.append(document)
+        return png_of_svg(document, **kwargs)
 
-    monkeypatch.setattr(figure_module, "lay_out", counted_layout)
-    monkeypatch.setattr(Figure, "draw", counted_draw)
-    monkeypatch.setattr(ConstrainedLayoutEngine, "execute", counted_constrained)
+    monkeypatch.setattr(KitFigure, "lay_out", counted_layout)
+    monkeypatch.setattr(KitFigure, "svg", counted_svg)
+    monkeypatch.setattr(figure_module, "png_of_svg", counted_png)
     plots = render_report_plots(two_estimates, ExportOptions(), formats=("svg", "png"))
 
     drawn = [*plots.figures, *([plots.clock] if plots.clock is not None else [])]
     assert len(drawn) >= 5
     assert len(layouts) == len(drawn)
     assert len(set(map(id, layouts))) == len(layouts)
-    assert constrained == []  # the constrained layout engine runs for none of them
-    assert len(draws) == 2 * len(drawn)  # one SVG and one PNG each
-    assert {id(fig): draws.count(fig) for fig in draws} == {id(fig): 2 for fig in layouts}
-    for fig in layouts:
-        assert fig.get_layout_engine() is None  # nothing left to lay the figure out again
+    assert [id(fig) for fig in drawings] == [id(fig) for fig in layouts]  # one drawing each
+    assert rasterised == [plot.svg for plot in drawn]  # the PNG shows the SVG's drawing
     for plot in drawn:
         assert plot.svg is not None
         assert plot.png is not None

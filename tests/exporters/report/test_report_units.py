@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import pytest
-from matplotlib.figure import Figure
 
 from exporters.plots.series import _label_thresholds
+from exporters.plots.svg.canvas import Figure
 from exporters.report.provenance import _window
 from exporters.report.view import MM_BELOW_M, length_unit
 from loceval.registration.alignment import AlignWindow
@@ -45,9 +45,9 @@ def test_alignment_window_in_words(text: str | None, words: str) -> None:
 
 def test_threshold_labels_never_overlap() -> None:
     """On a 0-20 m axis, 0.05/0.1/0.15 m stack on rows; a fourth close one is left out."""
-    fig = Figure()
-    ax = fig.add_subplot()
+    (ax,) = Figure(height_in=4.0).subplots()
     ax.set_xlim(0.0, 20.0)
     _label_thresholds(ax, [0.05, 0.1, 0.15, 0.2, 10.0])
-    placed = [(t.get_text(), round(t.get_position()[1], 3)) for t in ax.texts]
-    assert placed == [("0.05 m", 1.01), ("0.1 m", 1.065), ("0.15 m", 1.12), ("10 m", 1.01)]
+    # each row 9 points above the one below it (the labels are 7 points high)
+    placed = [(t.string, t.offset_pt[1]) for t in ax.texts]
+    assert placed == [("0.05 m", 2.0), ("0.1 m", 11.0), ("0.15 m", 20.0), ("10 m", 2.0)]
