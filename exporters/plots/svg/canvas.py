@@ -13,7 +13,7 @@ formats show one drawing.
 from __future__ import annotations
 
 import io
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Final
 
 import numpy as np
@@ -39,7 +39,7 @@ from exporters.plots.svg.draw import (
     text_box,
     u,
 )
-from exporters.plots.svg.metrics import text_width_pt
+from exporters.plots.svg.metrics import fit_text, text_width_pt
 
 __all__ = ["WIDTH_IN", "ColourBar", "Figure", "png_of_svg"]
 
@@ -134,8 +134,10 @@ class Figure:
         entries = self.legend_from.legend_entries if self.legend_from is not None else []
         if not entries:
             return 0.0
-        sized = [(e, _HANDLE_PT + 4.0 + text_width_pt(e.label, _LEGEND_PT)) for e in entries]
         room = self.width_pt - 2 * PAD_PT
+        label_room = room - _HANDLE_PT - 4.0
+        entries = [replace(e, label=fit_text(e.label, _LEGEND_PT, label_room)) for e in entries]
+        sized = [(e, _HANDLE_PT + 4.0 + text_width_pt(e.label, _LEGEND_PT)) for e in entries]
         row: list[tuple[LegendEntry, float]] = []
         for entry, width in sized:  # a handful of entries
             used = sum(w for _, w in row) + _ENTRY_GAP_PT * len(row)

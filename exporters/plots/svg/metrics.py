@@ -25,7 +25,7 @@ from exporters.plots.svg._glyph_widths import BOLD, REGULAR, UNITS_PER_EM
 if TYPE_CHECKING:
     import typst
 
-__all__ = ["font_folder", "text_width_pt", "typst_fonts"]
+__all__ = ["fit_text", "font_folder", "text_width_pt", "typst_fonts"]
 
 _FALLBACK: Final = "M"
 
@@ -36,6 +36,22 @@ def text_width_pt(text: str, size_pt: float, *, bold: bool = False) -> float:
     fallback = table[_FALLBACK]
     units = sum(table.get(c, fallback) for c in text)
     return units * size_pt / UNITS_PER_EM
+
+
+def fit_text(text: str, size_pt: float, width_pt: float) -> str:
+    """Return ``text``, cut with an ellipsis if it is wider than ``width_pt`` (a long name)."""
+    if text_width_pt(text, size_pt) <= width_pt:
+        return text
+    table = REGULAR
+    fallback = table[_FALLBACK]
+    room = width_pt * UNITS_PER_EM / size_pt - table.get("…", fallback)
+    widths = [table.get(c, fallback) for c in text]  # one name's characters
+    cut = 0
+    used = 0
+    while cut < len(widths) and used + widths[cut] <= room:
+        used += widths[cut]
+        cut += 1
+    return text[:cut].rstrip() + "…"
 
 
 def font_folder() -> Path:

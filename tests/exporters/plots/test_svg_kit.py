@@ -221,3 +221,17 @@ def test_shared_x_labels_only_the_lowest_plot() -> None:
     assert not top.show_xticklabels
     assert bottom.show_xticklabels
     assert top.box.bottom < bottom.box.top
+
+
+def test_a_long_name_is_cut_to_the_legends_width() -> None:
+    """An estimate named at length ends in an ellipsis; the legend stays on the figure."""
+    fig = Figure(height_in=3.0)
+    (ax,) = fig.subplots()
+    name = "a very long estimate name from a site team's bag file " * 4
+    ax.line(np.array([0.0, 1.0]), np.array([0.0, 1.0]), Style(), label=name)
+    fig.legend_above(ax)
+    root = ET.fromstring(fig.svg())  # noqa: S314  (our own SVG)
+    (label,) = [t.text for t in root.iter(f"{SVG}text") if t.text and t.text.startswith("a very")]
+    assert label.endswith("…")
+    assert name.startswith(label[:-1])
+    assert all(box.right <= fig.width_pt for box in fig.text_boxes["legend"])
