@@ -21,13 +21,16 @@ MARGIN: Final = 0.05
 def padded_limits(lo: float, hi: float, margin: float = MARGIN) -> tuple[float, float]:
     """Return the automatic limits of data spanning ``lo`` to ``hi``: 5 % of the span beyond.
 
-    A single value (or none: ``lo > hi``) gets a unit span around it, as no scale can be
-    read from it.
+    A single value gets 5 % of itself on either side (0: ±0.05), as no scale can be read
+    from it; no value at all (``lo > hi``) gets 0 to 1. A tiny span is still a span: errors
+    of 1e-14 (rounding noise) get limits of that size, which a floor on the axis then
+    lifts (``Axes.set_ylim(at_least=...)``).
     """
     if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
         return 0.0, 1.0
-    if hi - lo <= 1e-12 * max(abs(lo), abs(hi), 1.0):
-        half = 0.5 if lo == 0 else 0.05 * abs(lo)
+    largest = max(abs(lo), abs(hi))
+    if hi - lo <= 1e-15 * largest or largest == 0.0:
+        half = 0.05 * largest if largest else 0.05
         return lo - half, hi + half
     pad = margin * (hi - lo)
     return lo - pad, hi + pad

@@ -96,8 +96,9 @@ def test_ticks_are_round_and_labelled_alike(
 def test_limits_pad_the_data_and_survive_one_value() -> None:
     """5 % of the span beyond the data; a single value gets a span of its own."""
     assert padded_limits(0.0, 10.0) == pytest.approx((-0.5, 10.5))
-    lo, hi = padded_limits(3.0, 3.0)
-    assert lo < 3.0 < hi
+    assert padded_limits(3.0, 3.0) == pytest.approx((2.85, 3.15))
+    assert padded_limits(0.0, 0.0) == pytest.approx((-0.05, 0.05))
+    assert padded_limits(0.0, 1e-14) == pytest.approx((-5e-16, 1.05e-14))  # noise stays small
     assert padded_limits(float("inf"), -float("inf")) == (0.0, 1.0)
 
 
