@@ -138,9 +138,6 @@ def create_ranging(runtime: Runtime, project_id: str, body: RangingCreate) -> Ev
         check_selector(datasets[body.reference.dataset_id], body.reference, "reference")
         _check_radio(datasets[body.anchors], datasets[ranges.dataset_id], ranges)
         check_ranging_options(options)
-        if options.map is not None:
-            msg = "A map is measured in a trajectory evaluation, not a ranging one; leave it out."
-            raise InputError(msg, option="map")
         request = body.model_dump(mode="json")
         request["estimates"] = [
             {"dataset_id": ranges.dataset_id, "selector": ranges.selector, "name": solver}
@@ -180,7 +177,8 @@ def check_ranging_options(options: EvaluationOptions) -> None:
     """Fail now on ranging option values the job could not use.
 
     Raises:
-        InputError: a device offset is given, or an option's value cannot be used.
+        InputError: a device offset, a map, a baseline or a trials' coverage is given (a
+            ranging evaluation has no use for them), or an option's value cannot be used.
     """
     if options.offset or options.device is not None:
         msg = (
@@ -188,6 +186,21 @@ def check_ranging_options(options: EvaluationOptions) -> None:
             "reference body frame as the tag offset."
         )
         raise InputError(msg, option="tag_offset_xyz")
+    if options.map is not None:
+        msg = "A map is measured in a trajectory evaluation, not a ranging one; leave it out."
+        raise InputError(msg, option="map")
+    if options.baseline is not None:
+        msg = (
+            "A baseline is compared with the estimates of a trajectory evaluation; a ranging "
+            "evaluation's solvers have none: leave it out."
+        )
+        raise InputError(msg, option="baseline")
+    if "min_trial_coverage" in options.model_fields_set:
+        msg = (
+            "The trials' coverage counts the trials of a named system in a trajectory "
+            "evaluation; a ranging evaluation has none: leave it out."
+        )
+        raise InputError(msg, option="min_trial_coverage")
     check_options(options)
 
 

@@ -120,6 +120,12 @@ def test_bad_requests_are_4xx(api: Api, uploads: dict[str, str]) -> None:
     assert_problem(_post(api, solver), 422, detail="solve")
     device = {**base, "options": {**CHEAP, "offset": "0 0 0.2"}}
     assert_problem(_post(api, device), 422, detail="takes no device offset")
+    baseline = {**base, "options": {**CHEAP, "baseline": "earlier/result.json"}}
+    problem = assert_problem(_post(api, baseline), 422, detail="solvers have none")
+    assert problem["option"] == "options.baseline"
+    coverage = {**base, "options": {**CHEAP, "min_trial_coverage": 0.8}}
+    problem = assert_problem(_post(api, coverage), 422, detail="has none: leave it out")
+    assert problem["option"] == "options.min_trial_coverage"
     assert api.evaluation_count() == 0
 
 
