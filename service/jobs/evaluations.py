@@ -29,6 +29,7 @@ from service.errors import (
 )
 from service.jobs.kinds import EVALUATION, RANGING, TRAJECTORY
 from service.jobs.options import (
+    CONTROL_POINTS_NO_TOLERANCE,
     config_from_options,
     export_from_options,
     ranging_from_options,
@@ -97,6 +98,8 @@ def create_evaluation(
         ]:
             check_selector(datasets[ref.dataset_id], ref, role)
         _check_visits(datasets, body)
+        if options.tolerance is not None and _is_points(datasets[body.reference.dataset_id]):
+            raise InputError(CONTROL_POINTS_NO_TOLERANCE, option="tolerance")
         if options.building is not None:
             _check_building(datasets[options.building])
         if map_ref is not None:
@@ -311,6 +314,11 @@ def visits_dataset_id(visits: str) -> str | None:
     return None if text.lower() == "auto" else text
 
 
+def _is_points(dataset: Dataset) -> bool:
+    """Whether a dataset is a control-point survey (its evaluation scores points)."""
+    return dataset.inspection.get("format") == "points"
+
+
 def _check_visits(datasets: dict[str, Dataset], body: EvaluationCreate) -> None:
     """A visits dataset must be a visits table, and the reference control points."""
     dataset_id = visits_dataset_id(body.options.visits)
@@ -324,7 +332,7 @@ def _check_visits(datasets: dict[str, Dataset], body: EvaluationCreate) -> None:
         )
         raise InputError(msg, option="visits")
     reference = datasets[body.reference.dataset_id]
-    if reference.inspection.get("format") != "points":
+    if not _is_points(reference):
         msg = (
             f"Visits apply to a control-point reference, and the reference {reference.name!r} "
             "is a trajectory; leave the visits at auto."

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
     from loceval.radio_evaluation import RangingConfig
 
 __all__ = [
+    "CONTROL_POINTS_NO_TOLERANCE",
     "OptionValues",
     "artifact_names",
     "check_device_choice",
@@ -50,6 +51,14 @@ __all__ = [
     "ranging_from_options",
     "typed_value",
 ]
+
+
+CONTROL_POINTS_NO_TOLERANCE: Final = (
+    "A tolerance verdict is judged along a trajectory, and the reference is a control-point "
+    "survey: its points are scored by the Hilti tiers and the recall within each threshold, "
+    "with no verdict to gate on; leave the tolerance (and the gate on it) out."
+)
+"""Why a control-point evaluation refuses a tolerance (a gate on it would pass unjudged)."""
 
 
 OptionValues = Mapping[str, Any]

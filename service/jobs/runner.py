@@ -30,6 +30,7 @@ from loceval.readers import (
     sniff_format,
 )
 from loceval.trajectory import Trajectory
+from service.jobs.options import CONTROL_POINTS_NO_TOLERANCE
 
 if TYPE_CHECKING:
     from exporters import ArtifactCallback
@@ -240,7 +241,8 @@ def evaluation_job(
 
     Raises:
         InputError: an input of the other kind: a visits table beside a trajectory
-            reference, or a map beside a control-point survey.
+            reference; a map, a baseline, trials or a tolerance beside a control-point
+            survey.
     """
     if is_control_points(reference.spec):
         if baseline is not None or any(e.system for e in estimates):
@@ -255,6 +257,8 @@ def evaluation_job(
                 "control-point survey; evaluate the map with a trajectory reference."
             )
             raise InputError(msg, option="map")
+        if config.tolerance is not None:
+            raise InputError(CONTROL_POINTS_NO_TOLERANCE, option="tolerance")
         return ControlPointJob(
             reference=reference,
             config=config,

@@ -114,6 +114,24 @@ def test_visits_must_be_a_visits_table(api: Api, recording: StopAndGo, tmp_path:
     assert_problem(response, 422, detail=r"^options\.visits: The visits dataset 'est.txt' is a")
 
 
+def test_a_tolerance_is_refused_beside_control_points(
+    api: Api, recording: StopAndGo, tmp_path: Path
+) -> None:
+    """Control points have no tolerance verdict: a tolerance (and a gate on it) is a 422.
+
+    Before, the tolerance was ignored and ``fail_on: fail`` passed a 20 mm error against a
+    10 mm tolerance: a gate that judged nothing.
+    """
+    del recording
+    folder = tmp_path / "in"
+    survey = _upload(api, folder, "survey.csv")["id"]
+    estimate = _upload(api, folder, "est.txt")["id"]
+    response = api.evaluate(_body(survey, estimate, tolerance="0.01@95", fail_on=["fail"]))
+    problem = assert_problem(response, 422, detail="no verdict to gate on")
+    assert problem["option"] == "options.tolerance"
+    assert api.evaluation_count() == 0
+
+
 def test_bad_visits_fail_the_job_with_a_problem(
     api: Api, recording: StopAndGo, tmp_path: Path
 ) -> None:

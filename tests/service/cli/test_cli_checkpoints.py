@@ -184,6 +184,25 @@ def test_text_tables_and_alignment_points(
     assert out.count("(alignment)") == 12
 
 
+def test_a_gate_on_control_points_is_refused(
+    recording: StopAndGo, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--tolerance (and --fail-on) beside a survey exit 1 and say why: no verdict to judge.
+
+    The estimate's errors are about 22 mm; a 10 mm tolerance with ``--fail-on fail`` passed
+    before, as the gate found no verdict to fail.
+    """
+    del recording
+    code, _, err = _run(
+        capsys, "evaluate", f"points:{tmp_path / 'survey.csv'}", tmp_path / "est.txt",
+        "--align", "none", "--tolerance", "0.01@95", "--fail-on", "fail", "--json",
+    )  # fmt: skip
+    assert code == 1
+    assert "--tolerance" in err
+    assert "no verdict to gate on" in err
+    assert "Traceback" not in err
+
+
 def test_inspect_lists_the_points(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """loceval inspect of a survey names the kind, the point count and the extent."""
     write_points(tmp_path / "survey.csv", grid_points())
