@@ -7,7 +7,7 @@ Large documents (tens of thousands of curves) are laid out to a depth (``levels`
 outer containers indented, everything deeper one compact line each. Python's JSON encoder
 is written in C only without indentation, so a document indented all the way down is
 encoded item by item in Python, seven times slower. Items a writer has already encoded
-(:class:`JSONText`: the curves of tens of thousands of ATE runs, each its own line) are
+(:class:`JSONItems`: the curves of tens of thousands of ATE runs, each its own line) are
 placed as they are.
 """
 
@@ -19,15 +19,16 @@ from collections.abc import Iterator, Mapping
 
 from exporters.errors import ExportError
 
-__all__ = ["JSONText", "finite_json"]
+__all__ = ["JSONItems", "finite_json"]
 
 
-class JSONText(str):
-    """A container already encoded as one compact line of JSON (as :func:`json.dumps` does).
+class JSONItems(list[str]):
+    """A list whose items are JSON text already, each a container in one compact line.
 
-    :func:`finite_json` places it as it is, where it would lay out a container beyond its
-    ``levels`` in one line; it may stand at any level, as an item of a list or a dict. The
-    writer that made it answers for its numbers being finite.
+    What :func:`json.dumps` writes for each item, made by a writer of tens of thousands of
+    them at once; :func:`finite_json` lays the list out as it would lay out the list of
+    those containers, placing each item as it is. The writer answers for its numbers being
+    finite.
     """
 
     __slots__ = ()
@@ -70,16 +71,17 @@ def finite_json(
         raise ExportError(msg) from err
 
 
-_CONTAINERS = (Mapping, list, tuple, JSONText)
-
-
 def _layered(value: object, levels: int, indent: int, depth: int) -> str:
     """Return ``value`` as JSON, its outer ``levels`` of containers over lines."""
-    items = _items(value)
-    if levels <= 0 or not any(isinstance(item, _CONTAINERS) for item in items):
-        return _compact(value)
     inner = "\n" + " " * (indent * (depth + 1))
     outer = "\n" + " " * (indent * depth)
+    if isinstance(value, JSONItems):  # containers already, each one line
+        if levels <= 0 or not value:
+            return _compact(value)
+        return "[" + inner + ("," + inner).join(value) + outer + "]"
+    items = _items(value)
+    if levels <= 0 or not any(isinstance(item, Mapping | list | tuple) for item in items):
+        return _compact(value)
     if isinstance(value, Mapping):
         lines = [
             f"{json.dumps(key)}: {_layered(item, levels - 1, indent, depth + 1)}"
@@ -92,9 +94,9 @@ def _layered(value: object, levels: int, indent: int, depth: int) -> str:
 
 def _compact(value: object) -> str:
     """Return ``value`` as one line of JSON, as :func:`json.dumps` does."""
-    if isinstance(value, JSONText):
-        return str(value)
-    if not _holds_text(value):
+    if isinstance(value, JSONItems):
+        return "[" + ", ".join(value) + "]"
+    if not _holds_items(value):
         return json.dumps(value, allow_nan=False)  # the C encoder: no indentation
     if isinstance(value, Mapping):
         pairs = [f"{json.dumps(key)}: {_compact(item)}" for key, item in value.items()]
@@ -102,9 +104,13 @@ def _compact(value: object) -> str:
     return "[" + ", ".join(_compact(item) for item in _items(value)) + "]"
 
 
-def _holds_text(value: object) -> bool:
-    """Return whether ``value`` is or holds a :class:`JSONText` at any depth."""
-    return isinstance(value, JSONText) or any(_holds_text(item) for item in _items(value))
+def _holds_items(value: object) -> bool:
+    """Return whether ``value`` is or holds :class:`JSONItems` at any depth."""
+    if isinstance(value, JSONItems):
+        return True
+    return any(
+        _holds_items(item) for item in _items(value) if isinstance(item, Mapping | list | tuple)
+    )
 
 
 def _items(value: object) -> list[object]:

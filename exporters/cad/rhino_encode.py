@@ -23,6 +23,7 @@ rhino3dm as before (:func:`encode_polylines` gives the same result either way).
 from __future__ import annotations
 
 import base64
+import binascii
 import functools
 import itertools
 import json
@@ -33,7 +34,7 @@ from typing import Any, Final
 import numpy as np
 import rhino3dm as _rhino3dm
 
-from exporters.cad.jsondoc import JSONText
+from exporters.cad.jsondoc import JSONItems
 from exporters.cad.records import Bytes, constant, fill_crc32, interleave, rows
 from loceval.core.arrays import FloatArray, IntArray
 
@@ -191,41 +192,39 @@ def encode_polylines(runs: Sequence[FloatArray]) -> list[dict[str, object]]:
 
 def curve_items_json(
     archives: PolylineArchives, items: Sequence[Mapping[str, object]], which: IntArray
-) -> list[JSONText]:
+) -> JSONItems:
     """Return ``{**items[which[r]], "curve": Encode() of curve r}`` of every curve as JSON.
 
-    Each is the text :func:`json.dumps` gives that dict (one compact line); the item's
-    fields are encoded once and every curve's base64 placed into them.
+    Each is the text :func:`json.dumps` gives that dict (one compact line); the items are
+    encoded once and every curve's base64 placed into them.
     """
     header = _header()
     if header is None:  # a rhino3dm that writes another layout: its own encoding
-        return [
-            JSONText(
-                json.dumps(
-                    {**items[k], "curve": polyline_curve(archives.curve_vertices(r)).Encode()}
-                )
-            )
+        return JSONItems(
+            json.dumps({**items[k], "curve": polyline_curve(archives.curve_vertices(r)).Encode()})
             for r, k in enumerate(which.tolist())
-        ]
+        )
     # "\u0000" marks where the data goes: base64 needs no escapes, and no field holds it
     texts = [json.dumps({**item, "curve": {**header, "data": "\0"}}) for item in items]
     parts = [text.split('"\\u0000"') for text in texts]
-    if any(len(p) != 2 for p in parts):  # an item whose fields hold the mark: encode each
-        return [
-            JSONText(json.dumps({**items[k], "curve": {**header, "data": data}}))
+    if any(len(p) != 2 for p in parts):  # a field holds the mark: each dict encoded
+        return JSONItems(
+            json.dumps({**items[k], "curve": {**header, "data": data}})
             for k, data in zip(which.tolist(), _base64(archives), strict=True)
-        ]
-    return [
-        JSONText(f'{parts[k][0]}"{data}"{parts[k][1]}')
+        )
+    before = [f'{p[0]}"' for p in parts]
+    after = [f'"{p[1]}' for p in parts]
+    return JSONItems(
+        before[k] + data + after[k]
         for k, data in zip(which.tolist(), _base64(archives), strict=True)
-    ]
+    )
 
 
 def _base64(archives: PolylineArchives) -> list[str]:
     """Return each curve's archive in base64."""
     view = archives.data.data  # a memoryview: its slices copy nothing
     return [
-        base64.b64encode(view[a:b]).decode("ascii")
+        binascii.b2a_base64(view[a:b], newline=False).decode("ascii")
         for a, b in itertools.pairwise(archives.offsets.tolist())
     ]
 

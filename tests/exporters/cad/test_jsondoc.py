@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from exporters.cad.jsondoc import JSONText, finite_json
+from exporters.cad.jsondoc import JSONItems, finite_json
 from exporters.errors import ExportError
 
 
@@ -60,20 +60,22 @@ def test_layered_documents_refuse_non_finite_numbers_deep_down() -> None:
 
 @pytest.mark.parametrize("levels", [0, 1, 2, 3, 4])
 def test_encoded_items_are_placed_as_the_containers_they_encode(levels: int) -> None:
-    """A JSONText item gives the text its container gives, at any level."""
+    """JSONItems give the text their list of containers gives, at any level."""
+    ate = [{"bin": 0, "curve": {"data": "AA=="}}, {"bin": 1}]
     document = {
         "paths": [
-            {"name": "a", "ate": [{"bin": 0, "curve": {"data": "AA=="}}, {"bin": 1}]},
-            {"name": "b", "ate": [], "pair": [{"x": [1, 2]}, 3]},
+            {"name": "a", "ate": ate},
+            {"name": "b", "ate": [], "pair": [{"x": [ate, 2]}, 3]},
         ],
     }
     encoded = {
         "paths": [
+            {"name": "a", "ate": JSONItems(json.dumps(item) for item in ate)},
             {
-                "name": "a",
-                "ate": [JSONText(json.dumps(item)) for item in document["paths"][0]["ate"]],
+                "name": "b",
+                "ate": JSONItems(),
+                "pair": [{"x": [JSONItems(map(json.dumps, ate)), 2]}, 3],
             },
-            {"name": "b", "ate": [], "pair": [JSONText(json.dumps({"x": [1, 2]})), 3]},
         ],
     }
     expected = finite_json(document, indent=1, levels=levels)
