@@ -63,18 +63,22 @@ class ATERunArrays:
         """Return the number of runs."""
         return len(self.bin_index)
 
+    def first_of_each_bin(self) -> IntArray:
+        """Return the index of the first run of each bin present, in run order."""
+        _, first = np.unique(self.bin_index, return_index=True)
+        out: IntArray = np.sort(first).astype(np.intp)
+        return out
+
     def runs(self) -> list[ATERun]:
         """Return each run as an :class:`ATERun` (views into these arrays)."""
-        if not len(self):
-            return []
-        cuts = self.offsets[1:-1]
+        vertices, local = self.vertices, self.local_vertices
         return [
-            ATERun(path=self.path, piece=k, bin_index=b, vertices=v, local_vertices=lv)
-            for k, b, v, lv in zip(
+            ATERun(self.path, k, b, vertices[start:stop], local[start:stop])
+            for k, b, start, stop in zip(
                 self.piece.tolist(),
                 self.bin_index.tolist(),
-                np.split(self.vertices, cuts),
-                np.split(self.local_vertices, cuts),
+                self.offsets[:-1].tolist(),
+                self.offsets[1:].tolist(),
                 strict=True,
             )
         ]

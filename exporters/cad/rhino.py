@@ -41,7 +41,7 @@ from exporters.cad.excursions import EXCURSION_LAYER, EXCURSION_RGB, placed_excu
 from exporters.cad.georef import set_earth_anchor
 from exporters.cad.jsondoc import finite_json
 from exporters.cad.placement import Marker, PlacedPath, Placement, layer_name, place_evaluation
-from exporters.cad.rhino_bulk import RunBlock, first_of_each_bin, splice_runs
+from exporters.cad.rhino_bulk import RunBlock, splice_runs
 from exporters.cad.rhino_encode import (
     PolylineArchives,
     curve_items_json,
@@ -303,7 +303,7 @@ def _placeholders(placement: Placement, path: PlacedPath) -> dict[int, uuid.UUID
     """Return the index and object id of the run that stands for each bin, once per path."""
 
     def choose() -> dict[int, uuid.UUID]:
-        first = first_of_each_bin(placement.ate_run_arrays(path).bin_index)
+        first = placement.ate_run_arrays(path).first_of_each_bin()
         return {index: uuid.uuid4() for index in first.tolist()}  # one per bin
 
     return placement.shared(("rhino.placeholders", id(path)), choose)

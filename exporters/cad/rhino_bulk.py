@@ -40,7 +40,7 @@ from exporters.cad.records import Bytes, constant, fill_crc32, interleave, rows
 from exporters.cad.rhino_encode import PolylineArchives
 from loceval.core.arrays import IntArray
 
-__all__ = ["RunBlock", "first_of_each_bin", "splice_runs"]
+__all__ = ["RunBlock", "splice_runs"]
 
 _CHUNK: Final = struct.Struct("<Iq")  # a chunk's typecode and its length (or short value)
 _START: Final = 32  # the file's fixed header; its chunks follow
@@ -65,7 +65,7 @@ class RunBlock:
         archives: each run's curve.
         bin_index: (R,) each run's ATE bin.
         placeholders: run index -> the id rhino3dm wrote that run's placeholder under (the
-            first run of each bin, :func:`first_of_each_bin`, added in run order).
+            first run of each bin, ``ATERunArrays.first_of_each_bin``, added in run order).
     """
 
     archives: PolylineArchives
@@ -78,13 +78,6 @@ class _Record:
     start: int
     stop: int
     object_id: bytes
-
-
-def first_of_each_bin(bin_index: IntArray) -> IntArray:
-    """Return the index of the first run of each bin present, in run order."""
-    _, first = np.unique(bin_index, return_index=True)
-    out: IntArray = np.sort(first).astype(np.intp)
-    return out
 
 
 def splice_runs(data: bytes, blocks: Sequence[RunBlock]) -> bytes | None:
