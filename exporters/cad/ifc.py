@@ -281,7 +281,7 @@ class IfcBuilder:
         markers = placement.markers()
         for path in placement.paths:
             elements.append(self._path(path))
-            if path.estimate is not None and placement.ate_runs(path):
+            if path.estimate is not None and len(placement.ate_run_arrays(path)):
                 elements.append(self._ate(path))
             elements += [self._marker(m, k) for k, m in enumerate(markers) if m.path == path.name]
         elements += add_map(self) + add_excursions(self)
