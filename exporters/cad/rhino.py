@@ -11,7 +11,10 @@ one text dot per tracking loss on ``loceval::<title>::tracking loss``. With a me
 its wall cells are point clouds per distance bin on ``...::map walls``; each stretch
 outside the tracked room (:mod:`exporters.cad.excursions`) is a purple curve and a text dot
 with its label on ``loceval::<title>::excursions``. The model units are the output units;
-document user text carries the evaluation metadata and the ATE legend.
+document user text carries the evaluation metadata and the ATE legend. rhino3dm builds and
+writes the model with one placeholder per ATE bin; the tens of thousands of ATE runs are
+laid out as object records with NumPy and spliced into its file
+(:mod:`exporters.cad.rhino_bulk`).
 
 Rhino stores doubles, so curves are in absolute model coordinates and drop onto the
 building model with File > Import. The base point (the reference's bounding-box centre in
@@ -21,12 +24,14 @@ base point.
 The JSON (``paths.3dm.json``) carries the same curves encoded by ``CommonObject.Encode()``
 (``{version, archive3dm, opennurbs, data}``, what RhinoCommon's ``CommonObject.FromJSON``
 and Rhino.Compute decode) with name, colour, layer and units, the ATE runs and the
-markers; ``grasshopper/loceval_paths.py`` reads it and bakes it to the same layers.
+markers; ``grasshopper/loceval_paths.py`` reads it and bakes it to the same layers. The
+runs' curves are encoded once per path (:mod:`exporters.cad.rhino_encode`) for both files.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import tempfile
 import uuid
 from collections.abc import Callable, Mapping
@@ -58,6 +63,8 @@ from loceval.evaluation import EvaluationResult
 # rhino3dm's bundled stubs mark writable properties (ModelUnitSystem, Name, LayerIndex, ...)
 # read-only and lack overloads the library has; use the module untyped.
 rhino3dm: Any = _rhino3dm
+
+logger = logging.getLogger(__name__)
 
 __all__ = [
     "FORMAT",
@@ -123,6 +130,11 @@ def export_3dm(
     ]
     spliced = splice_runs(data, blocks) if blocks else data
     if spliced is None:  # this rhino3dm lays out its records otherwise: it writes every run
+        logger.warning(
+            "rhino3dm %s writes object records in a layout paths.3dm's ATE runs are not "
+            "spliced into; it writes each run itself (slower, the same model)",
+            getattr(rhino3dm, "__version__", "?"),
+        )
         return write_3dm(lambda: _model(placement, bulk=False))
     return spliced
 
