@@ -37,7 +37,7 @@ from ezdxf.filemanagement import new as new_drawing
 from ezdxf.layouts.layout import Modelspace
 from ezdxf.lldxf.const import DXFError
 
-from exporters.cad.dxf_bulk import BulkPolylines
+from exporters.cad.dxf_bulk import BulkPolylines, ColouredPieces
 from exporters.cad.dxf_map import add_excursion_layer, add_map_layers
 from exporters.cad.georef import add_geodata
 from exporters.cad.placement import RGB, Marker, PlacedPath, Placement, place_evaluation
@@ -258,9 +258,13 @@ def _add_ate_layer(
     name = f"{path.layer} ATE"
     _layer(doc, name, path.color_rgb, f"loceval: {path.name} coloured by ATE")
     bins = placement.ate_bins()
-    colours = [(_nearest_aci(b.color_rgb), _int_rgb(b.color_rgb)) for b in bins]
-    runs = placement.ate_runs(path)
-    bulk.add_coloured(msp, name, [(r.vertices, *colours[r.bin_index]) for r in runs])
+    aci = np.array([_nearest_aci(b.color_rgb) for b in bins], dtype=np.intp)
+    true_color = np.array([_int_rgb(b.color_rgb) for b in bins], dtype=np.intp)
+    runs = placement.ate_run_arrays(path)  # tens of thousands: as arrays, no object per run
+    pieces = ColouredPieces(
+        runs.vertices, runs.offsets, aci[runs.bin_index], true_color[runs.bin_index]
+    )
+    bulk.add_coloured(msp, name, pieces)
     x, y, z = corner
     y -= text_h
     msp.add_text(

@@ -49,7 +49,7 @@ from numpy.typing import NDArray
 from exporters.cad.building import read_building
 from exporters.cad.excursions import EXCURSION_LAYER, EXCURSION_RGB, placed_excursions
 from exporters.cad.gltf_scene import Z_UP_TO_Y_UP, GlbScene, linear_rgba, node_matrix
-from exporters.cad.placement import ATERun, Marker, Placement, place_evaluation
+from exporters.cad.placement import ATERunArrays, Marker, Placement, place_evaluation
 from exporters.colours import map_bins, scale_words
 from exporters.options import ExportOptions
 from loceval.core.arrays import FloatArray
@@ -93,8 +93,8 @@ def export_glb(
         ]
         extras = {**path.metadata(), "units": "m", "output_units": placement.units.value}
         scene.add_lines(path.name, pieces, linear_rgba(path.color_rgb), extras)
-        runs = placement.ate_runs(path)
-        if runs:
+        runs = placement.ate_run_arrays(path)
+        if len(runs):
             ate_nodes.append((path, runs))
     for path, runs in ate_nodes:
         strips, colours = _ate_strips(runs, bin_rgb, per_metre)
@@ -172,23 +172,18 @@ def _add_excursions(scene: _SceneBuilder, placement: Placement) -> None:
 
 
 def _ate_strips(
-    runs: list[ATERun], bin_rgb: NDArray[np.float32], per_metre: float
+    runs: ATERunArrays, bin_rgb: NDArray[np.float32], per_metre: float
 ) -> tuple[list[NDArray[np.float32]], list[NDArray[np.float32]]]:
-    """Join an estimate's ATE runs into one strip per piece, with a colour per vertex."""
-    strips: list[NDArray[np.float32]] = []
-    colours: list[NDArray[np.float32]] = []
-    for piece, group in itertools.groupby(runs, key=lambda run: run.piece):  # per piece
-        del piece
-        members = list(group)
-        strips.append(
-            (np.concatenate([r.local_vertices for r in members]) / per_metre).astype(np.float32)
-        )
-        colours.append(
-            np.concatenate(
-                [np.repeat(bin_rgb[r.bin_index][None, :], len(r.vertices), 0) for r in members]
-            )
-        )
-    return strips, colours
+    """Join an estimate's ATE runs into one strip per piece, with a colour per vertex.
+
+    The runs of a piece lie one after another in ``runs``' vertices (each with its joining
+    vertex), so a strip is one slice of them; its colours, each run's bin colour repeated.
+    """
+    bounds = runs.offsets[np.flatnonzero(np.diff(runs.piece, prepend=-1, append=-1))]
+    local = (runs.local_vertices / per_metre).astype(np.float32)
+    colours = np.repeat(bin_rgb[runs.bin_index], np.diff(runs.offsets), axis=0)
+    pairs = list(itertools.pairwise(bounds.tolist()))  # one per piece (tracking losses)
+    return [local[a:b] for a, b in pairs], [colours[a:b] for a, b in pairs]
 
 
 class _SceneBuilder(GlbScene):

@@ -281,7 +281,7 @@ class IfcBuilder:
         markers = placement.markers()
         for path in placement.paths:
             elements.append(self._path(path))
-            if path.estimate is not None and placement.ate_runs(path):
+            if path.estimate is not None and len(placement.ate_run_arrays(path)):
                 elements.append(self._ate(path))
             elements += [self._marker(m, k) for k, m in enumerate(markers) if m.path == path.name]
         elements += add_map(self) + add_excursions(self)
@@ -368,26 +368,30 @@ class IfcBuilder:
         f, placement = self.f, self.placement
         bins = placement.ate_bins()
         items = []
-        runs = TextRuns(representation=0)
-        for run in placement.ate_runs(path):  # one curve per colour run
-            if self.text_runs and run.bin_index in runs.prototypes:  # written as text
-                runs.order.append(None)
-                runs.bins.append(run.bin_index)
-                runs.coordinates.append(run.vertices)
-                runs.sizes.append(len(run.vertices))
-                continue
-            point_list = self.point_list(self.coords(run.vertices))
+        runs = placement.ate_run_arrays(path)
+        # ifcopenshell makes the first run of each bin (every run without text runs)
+        made = runs.first_of_each_bin() if self.text_runs else np.arange(len(runs))
+        group = TextRuns(representation=0, order=[None] * len(runs))
+        for index in made.tolist():  # a few: one per bin
+            vertices = runs.vertices[runs.offsets[index] : runs.offsets[index + 1]]
+            point_list = self.point_list(self.coords(vertices))
             curve = f.create_entity("IfcIndexedPolyCurve", Points=point_list, SelfIntersect=False)
-            b = bins[run.bin_index]
+            bin_index = int(runs.bin_index[index])
+            b = bins[bin_index]
             styled = self.style(curve, f"{path.layer} ATE {b.label}", b.color_rgb)
             (style,) = styled.Styles
             entities = (point_list, curve, style.CurveColour, style, styled)
             p, c, k, s, y = (int(e.id()) for e in entities)
-            runs.prototypes[run.bin_index] = Prototype((p, c, k, s, y))
-            runs.order.append(int(curve.id()))
+            group.prototypes[bin_index] = Prototype((p, c, k, s, y))
+            group.order[index] = int(curve.id())
             items.append(curve)
-        if runs.coordinates:  # the text runs' file coordinates, mapped at once
-            runs.coordinates = [self.coords(np.concatenate(runs.coordinates))]
+        text = np.ones(len(runs), dtype=bool)
+        text[made] = False
+        counts = np.diff(runs.offsets)
+        group.bins = runs.bin_index[text]
+        group.sizes = counts[text]
+        # the text runs' file coordinates, mapped at once
+        group.coordinates = self.coords(runs.vertices[np.repeat(text, counts)])
         legend = scale_words(placement.result)
         annotation = add_annotation(
             self,
@@ -397,9 +401,9 @@ class IfcBuilder:
             representation=("Curve3D", items),
             key=f"ate/{path.name}",
         )
-        if runs.bins:
-            runs.representation = int(annotation.Representation.Representations[0].id())
-            self.run_groups.append(runs)
+        if len(group.bins):
+            group.representation = int(annotation.Representation.Representations[0].id())
+            self.run_groups.append(group)
         scale: dict[str, object] = {"Legend": legend}
         scale |= {f"Bin{k}": f"{b.label}: {hex_colour(b.color_rgb)}" for k, b in enumerate(bins, 1)}
         self.pset(annotation, "Loceval_ATE", scale)

@@ -18,18 +18,21 @@ and number.
 from __future__ import annotations
 
 import re
+import string
 from dataclasses import dataclass, field
 from typing import Final
 
 import numpy as np
 
 from exporters.errors import ExportError
-from loceval.core.arrays import FloatArray
+from loceval.core.arrays import FloatArray, IntArray
 
 __all__ = ["PLACEHOLDER_TEXT", "Prototype", "TextRuns", "coordinate_lists", "write_runs"]
 
 PLACEHOLDER_TEXT: Final = "((0.,0.,0.),(0.,0.,0.))"
 """How ifcopenshell writes a point list's two-point placeholder (see ``IfcBuilder``)."""
+_BODY: Final = 5
+"""The template slot of a point list's coordinates (after the five ids)."""
 _TOKEN: Final = re.compile(r"'(?:[^']|'')*'|#(\d+)")
 """A STEP string (quotes doubled inside) or an entity reference."""
 
@@ -53,22 +56,22 @@ class TextRuns:
         representation: the id of the annotation's ``IfcShapeRepresentation``.
         order: per run in order, its prototype's curve id, or None for a text run.
         prototypes: by bin index.
-        bins: the bin index of each text run.
-        coordinates: the text runs' vertices, one after another, in file coordinates.
-        sizes: the text runs' vertex counts.
+        bins: (T,) the bin index of each text run.
+        coordinates: (V, 3) the text runs' vertices, one after another, in file coordinates.
+        sizes: (T,) the text runs' vertex counts.
     """
 
     representation: int
     order: list[int | None] = field(default_factory=list)
     prototypes: dict[int, Prototype] = field(default_factory=dict)
-    bins: list[int] = field(default_factory=list)
-    coordinates: list[FloatArray] = field(default_factory=list)
-    sizes: list[int] = field(default_factory=list)
+    bins: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    coordinates: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+    sizes: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
 
 
-def coordinate_lists(points: FloatArray, sizes: list[int]) -> list[str]:
+def coordinate_lists(points: FloatArray, sizes: IntArray) -> list[str]:
     """Return each run's coordinates as STEP text ``(x,y,z),...`` (6 decimals), in bulk."""
-    if not sizes:
+    if not len(sizes):
         return []
     flat = np.ascontiguousarray(points, dtype=np.float64).reshape(-1).tolist()
     vertex = ("(%.6f,%.6f,%.6f)\n" * len(points) % tuple(flat)).split("\n")
@@ -99,20 +102,48 @@ def write_runs(text: str, groups: list[TextRuns], first_id: int) -> tuple[str, s
     next_id = first_id
     for group in groups:
         templates = {b: _templates(p, lines) for b, p in group.prototypes.items()}
-        bodies = coordinate_lists(
-            np.concatenate(group.coordinates) if group.coordinates else np.empty((0, 3)),
-            group.sizes,
+        bodies = coordinate_lists(group.coordinates, group.sizes)
+        first = next_id + 5 * np.arange(len(group.bins))  # five entities per run
+        out.append(_text_runs(templates, group.bins, first, bodies))
+        next_id += 5 * len(group.bins)
+        text = _complete_items(text, lines, group, (first + 1).tolist())
+    return text, "".join(out)
+
+
+def _text_runs(
+    templates: dict[int, str], bins: IntArray, first: IntArray, bodies: list[str]
+) -> str:
+    """Return the text runs' lines: each its bin's template with its ids and coordinates.
+
+    The templates become %-formats (their slots in one order for every bin, as one
+    ifcopenshell prototype of each bin gives), so every run is filled by one ``%``
+    operation over all of them; slots in another order are filled run by run.
+    """
+    formats = {b: _percent_format(t) for b, t in templates.items()}
+    orders = {slots for _, slots in formats.values()}
+    if len(orders) != 1:  # bins whose lines differ in shape: one format call per run
+        return "".join(
+            templates[b].format(*range(k, k + 5), body)
+            for b, k, body in zip(bins.tolist(), first.tolist(), bodies, strict=True)
         )
-        curves: list[int] = []
-        for b, body in zip(group.bins, bodies, strict=True):  # five lines per run
-            ids = range(next_id, next_id + 5)
-            point_list, rest = templates[b]
-            out.append(point_list.format(ids[0], body))
-            out.extend(line.format(*ids) for line in rest)
-            curves.append(ids[1])
-            next_id += 5
-        text = _complete_items(text, lines, group, curves)
-    return text, "".join(f"{line}\n" for line in out)
+    (slots,) = orders
+    values: list[object] = [None] * (len(slots) * len(bins))
+    for j, slot in enumerate(slots):  # a dozen slots: ids and the coordinates
+        values[j :: len(slots)] = bodies if slot == _BODY else (first + slot).tolist()
+    present = sorted(formats)
+    texts = np.array([formats[b][0] for b in present], dtype=object)
+    return "".join(texts[np.searchsorted(present, bins)].tolist()) % tuple(values)
+
+
+def _percent_format(template: str) -> tuple[str, tuple[int, ...]]:
+    """Return a ``str.format`` template as a %-format and the order of its slots."""
+    pieces, slots = [], []
+    for literal, slot, _, _ in string.Formatter().parse(template):
+        pieces.append(literal.replace("%", "%%"))
+        if slot is not None:
+            pieces.append("%s")
+            slots.append(int(slot))
+    return "".join(pieces), tuple(slots)
 
 
 def _lines(text: str, ids: set[int]) -> dict[int, str]:
@@ -126,11 +157,10 @@ def _lines(text: str, ids: set[int]) -> dict[int, str]:
     return found
 
 
-def _templates(prototype: Prototype, lines: dict[int, str]) -> tuple[str, list[str]]:
-    """Return the prototype's lines with its ids as slots ``{0}`` .. ``{4}``.
+def _templates(prototype: Prototype, lines: dict[int, str]) -> str:
+    """Return the prototype's five lines with its ids as slots ``{0}`` .. ``{4}``.
 
-    The point list's template takes its id and its coordinates (``{1}``); the other four
-    take the five new ids.
+    Each line ends in a newline; the point list's coordinates are the slot ``{5}``.
     """
     slot = {old: k for k, old in enumerate(prototype.ids)}
 
@@ -154,8 +184,9 @@ def _templates(prototype: Prototype, lines: dict[int, str]) -> tuple[str, list[s
         msg = "the IFC text's point list placeholder is not where expected; please report this."
         raise ExportError(msg)
     before, after = head.split(PLACEHOLDER_TEXT, 1)
-    point_list = template(before) + "({1})" + template(after)
-    return point_list, [template(lines[i]) for i in prototype.ids[1:]]
+    point_list = template(before) + f"({{{_BODY}}})" + template(after)
+    rest = [template(lines[i]) for i in prototype.ids[1:]]
+    return "".join(f"{line}\n" for line in [point_list, *rest])
 
 
 def _complete_items(

@@ -6,7 +6,9 @@ a computation) is refused with a message naming where, never written as invalid 
 Large documents (tens of thousands of curves) are laid out to a depth (``levels``): the
 outer containers indented, everything deeper one compact line each. Python's JSON encoder
 is written in C only without indentation, so a document indented all the way down is
-encoded item by item in Python, seven times slower.
+encoded item by item in Python, seven times slower. Items a writer has already encoded
+(:class:`JSONItems`: the curves of tens of thousands of ATE runs, each its own line) are
+placed as they are.
 """
 
 from __future__ import annotations
@@ -17,7 +19,19 @@ from collections.abc import Iterator, Mapping
 
 from exporters.errors import ExportError
 
-__all__ = ["finite_json"]
+__all__ = ["JSONItems", "finite_json"]
+
+
+class JSONItems(list[str]):
+    """A list whose items are JSON text already, each a container in one compact line.
+
+    What :func:`json.dumps` writes for each item, made by a writer of tens of thousands of
+    them at once; :func:`finite_json` lays the list out as it would lay out the list of
+    those containers, placing each item as it is. The writer answers for its numbers being
+    finite.
+    """
+
+    __slots__ = ()
 
 
 def finite_json(
@@ -59,16 +73,15 @@ def finite_json(
 
 def _layered(value: object, levels: int, indent: int, depth: int) -> str:
     """Return ``value`` as JSON, its outer ``levels`` of containers over lines."""
-    if isinstance(value, Mapping):
-        items: list[object] = list(value.values())
-    elif isinstance(value, list | tuple):
-        items = list(value)
-    else:
-        items = []
-    if levels <= 0 or not any(isinstance(item, Mapping | list | tuple) for item in items):
-        return json.dumps(value, allow_nan=False)  # the C encoder: no indentation
     inner = "\n" + " " * (indent * (depth + 1))
     outer = "\n" + " " * (indent * depth)
+    if isinstance(value, JSONItems):  # containers already, each one line
+        if levels <= 0 or not value:
+            return _compact(value)
+        return "[" + inner + ("," + inner).join(value) + outer + "]"
+    items = _items(value)
+    if levels <= 0 or not any(isinstance(item, Mapping | list | tuple) for item in items):
+        return _compact(value)
     if isinstance(value, Mapping):
         lines = [
             f"{json.dumps(key)}: {_layered(item, levels - 1, indent, depth + 1)}"
@@ -77,6 +90,36 @@ def _layered(value: object, levels: int, indent: int, depth: int) -> str:
         return "{" + inner + ("," + inner).join(lines) + outer + "}"
     lines = [_layered(item, levels - 1, indent, depth + 1) for item in items]
     return "[" + inner + ("," + inner).join(lines) + outer + "]"
+
+
+def _compact(value: object) -> str:
+    """Return ``value`` as one line of JSON, as :func:`json.dumps` does."""
+    if isinstance(value, JSONItems):
+        return "[" + ", ".join(value) + "]"
+    if not _holds_items(value):
+        return json.dumps(value, allow_nan=False)  # the C encoder: no indentation
+    if isinstance(value, Mapping):
+        pairs = [f"{json.dumps(key)}: {_compact(item)}" for key, item in value.items()]
+        return "{" + ", ".join(pairs) + "}"
+    return "[" + ", ".join(_compact(item) for item in _items(value)) + "]"
+
+
+def _holds_items(value: object) -> bool:
+    """Return whether ``value`` is or holds :class:`JSONItems` at any depth."""
+    if isinstance(value, JSONItems):
+        return True
+    return any(
+        _holds_items(item) for item in _items(value) if isinstance(item, Mapping | list | tuple)
+    )
+
+
+def _items(value: object) -> list[object]:
+    """Return the values of a dict or the items of a list (nothing for anything else)."""
+    if isinstance(value, Mapping):
+        return list(value.values())
+    if isinstance(value, list | tuple):
+        return list(value)
+    return []
 
 
 def _non_finite(value: object, path: str) -> Iterator[tuple[str, float]]:

@@ -26,6 +26,7 @@ from typing import Final, TypeVar, cast
 
 import numpy as np
 
+from exporters.cad.ate_runs import ATERun, ATERunArrays, cut_ate_runs, no_ate_runs
 from exporters.cad.building import FloorPlan, georeferenced_options, read_underlay
 from exporters.cad.site import (
     BUILDING_SUFFIXES,
@@ -63,6 +64,7 @@ __all__ = [
     "RGB",
     "ATEBin",
     "ATERun",
+    "ATERunArrays",
     "Marker",
     "PathKind",
     "PlacedPath",
@@ -182,26 +184,6 @@ class Marker:
 
 
 @dataclass(frozen=True, slots=True, eq=False)
-class ATERun:
-    """A stretch of an estimate's path whose ATE stays in one bin.
-
-    Attributes:
-        path: name of the estimate's path.
-        piece: which continuous piece of the path it lies on.
-        bin_index: index into the placement's :meth:`Placement.ate_bins`.
-        vertices: (K, 3) model coordinates in the output units (K >= 2; consecutive runs
-            of one piece share their joining vertex).
-        local_vertices: (K, 3) ``vertices`` minus the placement's base point.
-    """
-
-    path: str
-    piece: int
-    bin_index: int
-    vertices: FloatArray
-    local_vertices: FloatArray
-
-
-@dataclass(frozen=True, slots=True, eq=False)
 class Placement:
     """The polylines of one evaluation in model coordinates (what every CAD file shows).
 
@@ -295,51 +277,28 @@ class Placement:
         The reference (no ATE) has none. Cut once per path of this placement.
         """
         if not any(p is path for p in self.paths):  # not one of ours: nothing to share
-            return self._ate_runs(path)
-        return list(self.shared(("ate_runs", id(path)), lambda: self._ate_runs(path)))
+            return self._ate_run_arrays(path).runs()
+        return list(self.shared(("ate_runs", id(path)), lambda: self.ate_run_arrays(path).runs()))
 
-    def _ate_runs(self, path: PlacedPath) -> list[ATERun]:
+    def ate_run_arrays(self, path: PlacedPath) -> ATERunArrays:
+        """Return :meth:`ate_runs` as flat arrays (what writers of many runs take), once."""
+        if not any(p is path for p in self.paths):  # not one of ours: nothing to share
+            return self._ate_run_arrays(path)
+        return self.shared(("ate_run_arrays", id(path)), lambda: self._ate_run_arrays(path))
+
+    def _ate_run_arrays(self, path: PlacedPath) -> ATERunArrays:
         est = path.estimate
         if est is None or len(est.aligned) == 0:
-            return []
-        bins = self.ate_bins()
-        edges = np.array([b.high_m for b in bins[:-1]])
-        which = np.searchsorted(edges, est.ate_translation.values, side="left")
-        model = self.to_model(est.aligned.positions_xyz)
-        jump = _jumps(self.result, est.aligned.stamps_ns)
-        piece = np.concatenate(([0], np.cumsum(jump)))
-        change = (np.diff(which) != 0) | jump
-        starts = np.concatenate(([0], np.flatnonzero(change) + 1))
-        ends = np.concatenate((starts[1:], [len(which)]))
-        # a run continues to the next run's first vertex unless a break lies between
-        ends = np.where((ends < len(which)) & ~np.append(jump, True)[ends - 1], ends + 1, ends)
-        tolerance = self.simplify_m * self.units.per_metre
-        drawn = ends - starts >= 2
-        starts, ends = starts[drawn], ends[drawn]
-        if not len(starts):
-            return []
-        # every run simplified in one work list (thousands of short runs on a noisy path)
-        keep, _ = simplify_rdp_runs(model, starts, ends, tolerance)
-        # every run's kept vertices gathered at once (runs share their joining vertex),
-        # then cut into views: no array is built per run
-        kept = np.flatnonzero(keep)
-        first, last = np.searchsorted(kept, starts), np.searchsorted(kept, ends)
-        sizes = last - first
-        offsets = np.cumsum(sizes)
-        gather = kept[np.arange(offsets[-1]) - np.repeat(offsets - sizes - first, sizes)]
-        vertices = model[gather]
-        local = vertices - self.base_point
-        cuts = offsets[:-1]
-        return [
-            ATERun(path=path.name, piece=k, bin_index=b, vertices=v, local_vertices=lv)
-            for k, b, v, lv in zip(
-                piece[starts].tolist(),
-                which[starts].tolist(),
-                np.split(vertices, cuts),
-                np.split(local, cuts),
-                strict=True,
-            )
-        ]
+            return no_ate_runs(path.name)
+        edges = np.array([b.high_m for b in self.ate_bins()[:-1]])
+        return cut_ate_runs(
+            path.name,
+            self.to_model(est.aligned.positions_xyz),
+            np.searchsorted(edges, est.ate_translation.values, side="left"),
+            _jumps(self.result, est.aligned.stamps_ns),
+            tolerance=self.simplify_m * self.units.per_metre,
+            base_point=self.base_point,
+        )
 
     def markers(self) -> list[Marker]:
         """Return one marker per tracking loss and one per greatest error, numbered by rank.

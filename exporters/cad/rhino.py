@@ -11,7 +11,10 @@ one text dot per tracking loss on ``loceval::<title>::tracking loss``. With a me
 its wall cells are point clouds per distance bin on ``...::map walls``; each stretch
 outside the tracked room (:mod:`exporters.cad.excursions`) is a purple curve and a text dot
 with its label on ``loceval::<title>::excursions``. The model units are the output units;
-document user text carries the evaluation metadata and the ATE legend.
+document user text carries the evaluation metadata and the ATE legend. rhino3dm builds and
+writes the model with one placeholder per ATE bin; the tens of thousands of ATE runs are
+laid out as object records with NumPy and spliced into its file
+(:mod:`exporters.cad.rhino_bulk`).
 
 Rhino stores doubles, so curves are in absolute model coordinates and drop onto the
 building model with File > Import. The base point (the reference's bounding-box centre in
@@ -21,13 +24,16 @@ base point.
 The JSON (``paths.3dm.json``) carries the same curves encoded by ``CommonObject.Encode()``
 (``{version, archive3dm, opennurbs, data}``, what RhinoCommon's ``CommonObject.FromJSON``
 and Rhino.Compute decode) with name, colour, layer and units, the ATE runs and the
-markers; ``grasshopper/loceval_paths.py`` reads it and bakes it to the same layers.
+markers; ``grasshopper/loceval_paths.py`` reads it and bakes it to the same layers. The
+runs' curves are encoded once per path (:mod:`exporters.cad.rhino_encode`) for both files.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import tempfile
+import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, Final
@@ -40,7 +46,14 @@ from exporters.cad.excursions import EXCURSION_LAYER, EXCURSION_RGB, placed_excu
 from exporters.cad.georef import set_earth_anchor
 from exporters.cad.jsondoc import finite_json
 from exporters.cad.placement import Marker, PlacedPath, Placement, layer_name, place_evaluation
-from exporters.cad.rhino_encode import encode_polylines, point_list, polyline_curve
+from exporters.cad.rhino_bulk import RunBlock, splice_runs
+from exporters.cad.rhino_encode import (
+    PolylineArchives,
+    curve_items_json,
+    decoded_polyline,
+    point_list,
+    polyline_archives,
+)
 from exporters.colours import hex_colour, map_bins, scale_words
 from exporters.errors import ExportError
 from exporters.options import ExportOptions, Units
@@ -50,6 +63,8 @@ from loceval.evaluation import EvaluationResult
 # rhino3dm's bundled stubs mark writable properties (ModelUnitSystem, Name, LayerIndex, ...)
 # read-only and lack overloads the library has; use the module untyped.
 rhino3dm: Any = _rhino3dm
+
+logger = logging.getLogger(__name__)
 
 __all__ = [
     "FORMAT",
@@ -107,7 +122,21 @@ def export_3dm(
         ExportError: rhino3dm could not build or write the model.
     """
     placement = placement or place_evaluation(result, options)
-    return write_3dm(lambda: _model(placement))
+    data = write_3dm(lambda: _model(placement))
+    blocks = [
+        RunBlock(_ate_archives(placement, path), runs.bin_index, _placeholders(placement, path))
+        for path in placement.paths
+        if len(runs := placement.ate_run_arrays(path))
+    ]
+    spliced = splice_runs(data, blocks) if blocks else data
+    if spliced is None:  # this rhino3dm lays out its records otherwise: it writes every run
+        logger.warning(
+            "rhino3dm %s writes object records in a layout paths.3dm's ATE runs are not "
+            "spliced into; it writes each run itself (slower, the same model)",
+            getattr(rhino3dm, "__version__", "?"),
+        )
+        return write_3dm(lambda: _model(placement, bulk=False))
+    return spliced
 
 
 def write_3dm(build: Callable[[], Any]) -> bytes:
@@ -164,13 +193,12 @@ def export_3dm_json(
             entry["layer"] = layer_path(placement, path)
             entry["curves"] = [curve.Encode() for curve in _pieces(placement, path)]
             entry["ate_layer"] = f"{entry['layer']}::ATE"
-            runs = placement.ate_runs(path)
             # tens of thousands of runs: encoded with NumPy, as rhino3dm would (rhino_encode)
-            curves = encode_polylines([run.vertices for run in runs])
-            entry["ate"] = [
-                {"bin": run.bin_index, "color": colours[run.bin_index], "curve": curve}
-                for run, curve in zip(runs, curves, strict=True)
-            ]
+            entry["ate"] = curve_items_json(
+                _ate_archives(placement, path),
+                [{"bin": k, "color": colour} for k, colour in enumerate(colours)],
+                placement.ate_run_arrays(path).bin_index,
+            )
             paths.append(entry)
     except RuntimeError as err:
         msg = f"rhino3dm could not encode a curve ({err}); please report this."
@@ -203,7 +231,12 @@ def export_3dm_json(
     ).encode()
 
 
-def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped here)
+def _model(placement: Placement, *, bulk: bool = True) -> Any:  # noqa: ANN401  (untyped)
+    """Build the model; with ``bulk``, each ATE layer holds only its runs' placeholders.
+
+    :func:`export_3dm` puts every run in their place once the model is written
+    (:mod:`exporters.cad.rhino_bulk`); without ``bulk`` rhino3dm adds every run itself.
+    """
     model = rhino3dm.File3dm()
     model.ApplicationName = "loceval"
     settings = model.Settings
@@ -244,9 +277,7 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
         by_bin = [
             _bin_attributes(f"{path.name} ATE", b.label, b.color_rgb, ate_layer) for b in bins
         ]
-        for run in placement.ate_runs(path):  # one curve per colour run
-            # a PolylineCurve made by the model from the points: no curve object to copy
-            model.Objects.AddPolyline(point_list(run.vertices), by_bin[run.bin_index])
+        _add_ate_runs(model, placement, path, by_bin, bulk=bulk)
         worst = [m for m in markers if m.kind == "worst" and m.path == path.name]
         if worst:
             _add_dots(model, worst, _add_layer(model, "markers", path.color_rgb, layer))
@@ -256,6 +287,48 @@ def _model(placement: Placement) -> Any:  # noqa: ANN401  (rhino3dm is untyped h
     _add_map(model, placement, evaluation)
     _add_excursions(model, placement, evaluation)
     return model
+
+
+def _add_ate_runs(
+    model: Any,  # noqa: ANN401
+    placement: Placement,
+    path: PlacedPath,
+    by_bin: list[Any],
+    *,
+    bulk: bool,
+) -> None:
+    """Add an estimate's ATE runs, or with ``bulk`` the placeholders of its bins."""
+    if bulk:  # the first run of each bin, under the id the splice finds it by
+        runs = placement.ate_run_arrays(path)
+        for index, object_id in _placeholders(placement, path).items():
+            attributes = by_bin[int(runs.bin_index[index])]
+            attributes.Id = object_id
+            vertices = runs.vertices[runs.offsets[index] : runs.offsets[index + 1]]
+            model.Objects.AddPolyline(point_list(vertices), attributes)
+        return
+    for run in placement.ate_runs(path):  # one curve per colour run
+        # a PolylineCurve made by the model from the points: no curve object to copy
+        model.Objects.AddPolyline(point_list(run.vertices), by_bin[run.bin_index])
+
+
+def _placeholders(placement: Placement, path: PlacedPath) -> dict[int, uuid.UUID]:
+    """Return the index and object id of the run that stands for each bin, once per path."""
+
+    def choose() -> dict[int, uuid.UUID]:
+        first = placement.ate_run_arrays(path).first_of_each_bin()
+        return {index: uuid.uuid4() for index in first.tolist()}  # one per bin
+
+    return placement.shared(("rhino.placeholders", id(path)), choose)
+
+
+def _ate_archives(placement: Placement, path: PlacedPath) -> PolylineArchives:
+    """Return the curves of a path's ATE runs (the .3dm and its JSON both carry them), once."""
+
+    def build() -> PolylineArchives:
+        runs = placement.ate_run_arrays(path)
+        return polyline_archives(runs.vertices, runs.offsets)
+
+    return placement.shared(("rhino.ate_archives", id(path)), build)
 
 
 def _bin_attributes(name: str, label: str, rgb: tuple[int, int, int], layer: int) -> Any:  # noqa: ANN401
@@ -378,7 +451,7 @@ def _pieces(placement: Placement, path: PlacedPath) -> list[Any]:
 
 def _curve(vertices: FloatArray, user_strings: Mapping[str, str]) -> Any:  # noqa: ANN401
     """A polyline curve through ``vertices`` carrying its path's user strings."""
-    curve = polyline_curve(vertices)
+    curve = decoded_polyline(vertices)
     for key, value in user_strings.items():
         curve.SetUserString(key, value)
     return curve

@@ -9,7 +9,7 @@ TUM tools and evo.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Final
 
 import numpy as np
@@ -111,6 +111,9 @@ class ErrorSeries:
     values: FloatArray
     stamps_ns: StampsNs
     unit: str
+    # the statistics, computed on first use: every table, report and CI file of a run asks
+    # for them again (seven times each in a report's table), and the values are read-only
+    _stats: ErrorStats | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         """Make the arrays read-only copies."""
@@ -127,8 +130,12 @@ class ErrorSeries:
 
     @property
     def stats(self) -> ErrorStats:
-        """Return the summary statistics."""
-        return ErrorStats.of(self.values)
+        """Return the summary statistics (computed once)."""
+        stats = self._stats
+        if stats is None:
+            stats = ErrorStats.of(self.values)
+            object.__setattr__(self, "_stats", stats)
+        return stats
 
     def cdf(self) -> tuple[FloatArray, FloatArray]:
         """Return the empirical CDF: sorted errors and the share of errors ≤ each, (N,)."""

@@ -25,6 +25,7 @@ from tests.exporters.conftest import expected_paths, with_reference_loss
 
 ezdxf = pytest.importorskip("ezdxf")
 from exporters.cad import dxf  # noqa: E402  (after the importorskip of its library)
+from exporters.cad.dxf_bulk import BulkPolylines, ColouredPieces  # noqa: E402
 
 SITE = "2000.25 -1500.5 12.3 30"
 NAMES = ["OptiTrack", "RTAB-Map", "ISAAC"]
@@ -315,3 +316,30 @@ def test_bulk_vertices_equal_ezdxf_byte_for_byte(
     assert fast.count("\nVERTEX\n") == slow.count("\nVERTEX\n") > 1000
     assert fast.count("\nPOLYLINE\n") == slow.count("\nPOLYLINE\n") > 20  # ATE runs as text
     assert _without_stamps(fast) == _without_stamps(slow)
+
+
+def test_bulk_pieces_equal_ezdxf_with_signed_zeros_and_shared_numbers() -> None:
+    """Pieces as arrays, numbers shared and -0.0 beside 0.0: the text ezdxf writes itself."""
+    path = np.array([[0.0, -0.0, 1e300], [1.5, 2.25, -0.0], [1 / 3, 0.0, 7.0]])
+    pieces = [(path[:2], 1, 0xFF0000), (path[1:], 3, 0x00FF00), (path[::-1], 1, 0xFF0000)]
+
+    def written(*, bulk: bool) -> str:
+        doc = ezdxf.new("R2013", setup=False)
+        msp = doc.modelspace()
+        stream = io.StringIO()
+        if bulk:
+            writer = BulkPolylines(doc)
+            writer.add(msp, path, {"layer": "path"})
+            writer.add_coloured(msp, "ate", ColouredPieces.of(pieces))
+            doc.write(stream)
+            return writer.splice(stream.getvalue())
+        msp.add_polyline3d(path.tolist(), dxfattribs={"layer": "path"})
+        for vertices, aci, rgb in pieces:
+            attribs = {"layer": "ate", "color": aci, "true_color": rgb}
+            msp.add_polyline3d(vertices.tolist(), dxfattribs=attribs)
+        doc.write(stream)
+        return stream.getvalue()
+
+    fast = written(bulk=True)
+    assert "\n-0.0\n" in fast
+    assert _without_stamps(fast) == _without_stamps(written(bulk=False))

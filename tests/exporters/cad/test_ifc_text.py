@@ -101,3 +101,16 @@ def test_the_runs_follow_the_placement(two_estimates: EvaluationResult) -> None:
         assert len(representation.Items) == len(runs)
         for item, run in zip(representation.Items, runs, strict=True):
             np.testing.assert_allclose(np.array(item.Points.CoordList), run.vertices, atol=5e-7)
+
+
+def test_names_with_percent_signs_are_written_as_they_are(
+    two_estimates: EvaluationResult,
+) -> None:
+    """Names holding ``%`` and ``%s`` (the text runs are filled by one %-format): as slow."""
+    result = _renamed(two_estimates, ["100 % {1}", "50%s %(x)s %%"])
+    options = ExportOptions(site=parse_site(SITE), evaluation_id="ev-7")
+    fast = ifcopenshell.file.from_string(_written(result, options, text_runs=True))
+    slow = ifcopenshell.file.from_string(_written(result, options, text_runs=False))
+    assert _annotations(fast) == _annotations(slow)
+    names = {item[2] for annotation in _annotations(fast) for item in annotation[3]}
+    assert any(name.startswith("50%s %(x)s %% ATE") for name in names)

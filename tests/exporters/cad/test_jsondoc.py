@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from exporters.cad.jsondoc import finite_json
+from exporters.cad.jsondoc import JSONItems, finite_json
 from exporters.errors import ExportError
 
 
@@ -56,3 +56,27 @@ def test_layered_documents_refuse_non_finite_numbers_deep_down() -> None:
     document = {"paths": [{"ate": [{"curve": {"x": [0.0, math.nan]}}]}]}
     with pytest.raises(ExportError, match=r"at \$\.paths\[0\]\.ate\[0\]\.curve\.x\[1\]"):
         finite_json(document, indent=1, levels=2)
+
+
+@pytest.mark.parametrize("levels", [0, 1, 2, 3, 4])
+def test_encoded_items_are_placed_as_the_containers_they_encode(levels: int) -> None:
+    """JSONItems give the text their list of containers gives, at any level."""
+    ate = [{"bin": 0, "curve": {"data": "AA=="}}, {"bin": 1}]
+    document = {
+        "paths": [
+            {"name": "a", "ate": ate},
+            {"name": "b", "ate": [], "pair": [{"x": [ate, 2]}, 3]},
+        ],
+    }
+    encoded = {
+        "paths": [
+            {"name": "a", "ate": JSONItems(json.dumps(item) for item in ate)},
+            {
+                "name": "b",
+                "ate": JSONItems(),
+                "pair": [{"x": [JSONItems(map(json.dumps, ate)), 2]}, 3],
+            },
+        ],
+    }
+    expected = finite_json(document, indent=1, levels=levels)
+    assert finite_json(encoded, indent=1, levels=levels) == expected
