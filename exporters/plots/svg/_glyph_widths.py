@@ -7,7 +7,7 @@ the fonts (DejaVu fonts licence, see matplotlib's LICENSE_DEJAVU). Do not edit.
 from typing import Final
 
 UNITS_PER_EM: Final = 2048
-_REGULAR_CHARACTERS: Final = (
+_CHARACTERS: Final = (
     " !\"#$%&'()*+,-./0123456789:;<=>?@ABCDEFG"
     "HIJKLMNOPQRSTUVWXYZ[\\]^_`abcdefghijklmno"
     "pqrstuvwxyz{|}~\xa0¡¢£¤¥¦§¨©ª«¬\xad®¯°±²³´µ¶·¸"
@@ -46,19 +46,7 @@ _REGULAR_WIDTHS: Final = """
 1298 1233 1185 1351 1183 1351 1715 1024 2048 651 651 1061 1061 2048 1208 1716
 1716 1716 1716 1716 1716 1716 1716 1716 1716 1706 1305 1370 1716 1716
 """
-REGULAR: Final = dict(zip(_REGULAR_CHARACTERS, map(int, _REGULAR_WIDTHS.split()), strict=True))
-_BOLD_CHARACTERS: Final = (
-    " !\"#$%&'()*+,-./0123456789:;<=>?@ABCDEFG"
-    "HIJKLMNOPQRSTUVWXYZ[\\]^_`abcdefghijklmno"
-    "pqrstuvwxyz{|}~\xa0¡¢£¤¥¦§¨©ª«¬\xad®¯°±²³´µ¶·¸"
-    "¹º»¼½¾¿ÀÁÂÃÄÅÆÇÈÉÊËÌÍÎÏÐÑÒÓÔÕÖ×ØÙÚÛÜÝÞßà"
-    "áâãäåæçèéêëìíîïðñòóôõö÷øùúûüýþÿĀāĂăĄąĆćĈ"
-    "ĉĊċČčĎďĐđĒēĔĕĖėĘęĚěĜĝĞğĠġĢģĤĥĦħĨĩĪīĬĭĮįİ"
-    "ıĲĳĴĵĶķĸĹĺĻļĽľĿŀŁłŃńŅņŇňŉŊŋŌōŎŏŐőŒœŔŕŖŗŘ"
-    "řŚśŜŝŞşŠšŢţŤťŦŧŨũŪūŬŭŮůŰűŲųŴŵŶŷŸŹźŻżŽžſΑ"
-    "ΒΓΔΕΖΗΘΙΚΛΜΝΞΟΠΡΣΤΥΦΧΨΩΪΫάέήίΰαβγδεζηθικ"
-    "λμνξοπρςστυφχψω–—‘’“”…•→←↑↓↔≤≥−≈≠∞√∆✓✗"
-)
+REGULAR: Final = dict(zip(_CHARACTERS, map(int, _REGULAR_WIDTHS.split()), strict=True))
 _BOLD_WIDTHS: Final = """
 713 934 1067 1716 1425 2052 1786 627 936 936 1071 1716 778 850 778 748
 1425 1425 1425 1425 1425 1425 1425 1425 1425 1425 819 819 1716 1716 1716 1188
@@ -86,4 +74,4 @@ _BOLD_WIDTHS: Final = """
 1595 1307 1383 1602 1321 1626 1780 1024 2048 778 778 1346 1346 2048 1309 1716
 1716 1716 1716 1716 1716 1716 1716 1716 1716 1706 1366 1427 1716 1716
 """
-BOLD: Final = dict(zip(_BOLD_CHARACTERS, map(int, _BOLD_WIDTHS.split()), strict=True))
+BOLD: Final = dict(zip(_CHARACTERS, map(int, _BOLD_WIDTHS.split()), strict=True))

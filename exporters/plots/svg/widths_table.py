@@ -61,18 +61,18 @@ def generated_table() -> str:
         "",
         f"UNITS_PER_EM: Final = {units}",
     ]
+    bold = {c: bold.get(c, regular[c]) for c in regular}  # one character list for both
+    chars = "".join(regular)
+    lines.append("_CHARACTERS: Final = (")
+    lines.extend(f"    {_quoted(chars[i : i + 40])}" for i in range(0, len(chars), 40))
+    lines.append(")")
     for name, table in (("REGULAR", regular), ("BOLD", bold)):
-        chars = "".join(table)
-        lines.append(f"_{name}_CHARACTERS: Final = (")
-        lines.extend(f"    {_quoted(chars[i : i + 40])}" for i in range(0, len(chars), 40))
-        lines.append(")")
         numbers = [str(w) for w in table.values()]
         lines.append(f'_{name}_WIDTHS: Final = """')
         lines.extend(" ".join(numbers[i : i + 16]) for i in range(0, len(numbers), 16))
         lines.append('"""')
         lines.append(
-            f"{name}: Final = dict(zip(_{name}_CHARACTERS, map(int, _{name}_WIDTHS.split()), "
-            "strict=True))"
+            f"{name}: Final = dict(zip(_CHARACTERS, map(int, _{name}_WIDTHS.split()), strict=True))"
         )
     return "\n".join(lines) + "\n"
 
