@@ -237,13 +237,22 @@ def _bucket_incoming(store: S3Blobs, key: str, head: bytes) -> Incoming:
 
     Its object exists already (the multipart upload was completed by :meth:`assemble`); the
     tus row, not a pending marker, tells that it is not yet a dataset, so publishing writes
-    nothing, and aborting it (identical bytes stored already) deletes the object.
+    only the held messages beside it (an MCAP file seen whole by this process), and aborting
+    it (identical bytes stored already) deletes the object.
     """
-    from service.blobs.s3upload import S3Incoming  # noqa: PLC0415
+    from service.blobs.s3client import store_errors  # noqa: PLC0415
+    from service.blobs.s3upload import S3Incoming, held_key  # noqa: PLC0415
 
     class _Assembled(S3Incoming):
         def publish(self, dataset_id: str) -> None:
             del dataset_id
+            if self.held is not None:  # an MCAP file's tf and poses, kept as it streamed in
+                with store_errors():
+                    self.store.client.put_object(
+                        Bucket=self.store.bucket,
+                        Key=self.store.prefix + held_key(self.key),
+                        Body=self.held.to_bytes(),
+                    )
             self.published = True
 
         def abort(self) -> None:

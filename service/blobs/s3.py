@@ -59,7 +59,13 @@ from service.blobs.cache import InputCache
 from service.blobs.lease import LEASE_S, Lease, claim_slot
 from service.blobs.ranged import ObjectFile
 from service.blobs.s3client import make_client, store_errors, unless_missing
-from service.blobs.s3upload import PART_BYTES, S3Incoming, held_key, pending_key
+from service.blobs.s3upload import (
+    PART_BYTES,
+    UPLOAD_PREFIXES,
+    S3Incoming,
+    held_key,
+    pending_key,
+)
 from service.errors import StartupError
 from service.settings import Settings, parse_blob_url
 
@@ -207,7 +213,7 @@ class S3Blobs(Blobs):
         del dataset_id
         with store_errors():
             self.client.delete_object(Bucket=self.bucket, Key=self.prefix + storage_path)
-            if storage_path.startswith("uploads/"):
+            if storage_path.startswith(UPLOAD_PREFIXES):
                 for key in (held_key(storage_path), pending_key(storage_path)):
                     self.client.delete_object(Bucket=self.bucket, Key=self.prefix + key)
 
@@ -255,7 +261,11 @@ class S3Blobs(Blobs):
         if self.cache.holds(sha256, filename, size):
             return None
         key = self.prefix + storage_path
-        held = self.prefix + held_key(storage_path) if storage_path.startswith("uploads/") else None
+        held = (
+            self.prefix + held_key(storage_path)
+            if storage_path.startswith(UPLOAD_PREFIXES)
+            else None
+        )
         file = ObjectFile(self.client, self.bucket, key, name=filename, size=size, held_key=held)
         return file if serves_by_index(file) else None
 

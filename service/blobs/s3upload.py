@@ -19,7 +19,14 @@ from service.blobs.s3client import store_errors
 if TYPE_CHECKING:
     from mypy_boto3_s3 import S3Client
 
-__all__ = ["PART_BYTES", "Bucket", "S3Incoming", "held_key", "pending_key"]
+__all__ = [
+    "PART_BYTES",
+    "UPLOAD_PREFIXES",
+    "Bucket",
+    "S3Incoming",
+    "held_key",
+    "pending_key",
+]
 
 PART_BYTES: Final = 8 << 20
 """The size of an upload's parts (S3 wants at least 5 MiB but for the last)."""
@@ -172,8 +179,14 @@ class S3Incoming(Incoming):
                 )
 
 
+UPLOAD_PREFIXES: Final = ("uploads/", "tus/")
+"""Where uploads lie in the bucket: ``POST /datasets``'s and the resumable uploads'."""
+
+
 def held_key(upload_key: str) -> str:
     """Return the key of an upload's held messages (``uploads/I/U`` -> ``held/I/U``).
+
+    A resumable upload's: ``tus/U`` -> ``held/tus/U``.
 
     An MCAP upload's tf and pose messages, kept as it streamed through the API
     (:meth:`loceval.readers.rosbag.HeldMessages.to_bytes`): an evaluation reads them in one

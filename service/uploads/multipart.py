@@ -42,6 +42,7 @@ __all__ = [
     "ReceivedForm",
     "UploadBody",
     "check_free_space",
+    "mcap_scan",
     "receive_multipart",
 ]
 
@@ -245,7 +246,7 @@ class _Receiver:
                 msg = f"Too many files in one request (at most {self.max_files}); send fewer."
                 raise UploadError(msg)
             self._fh = self.store.open_incoming()
-            self._scan = _scan() if self.store.reads_in_place else None
+            self._scan = mcap_scan() if self.store.reads_in_place else None
             self._digest = hashlib.sha256()
             self._size = 0
         else:
@@ -331,7 +332,7 @@ class _Receiver:
         self.form.discard()
 
 
-def _scan() -> McapScan:
+def mcap_scan() -> McapScan:
     """Return a scan that keeps an MCAP upload's tf and pose messages as they stream past.
 
     Imported here: the bag readers (rosbags) load only in an API that stores into a bucket.

@@ -17,7 +17,10 @@ One request writes to an upload at a time: a lock that dies with its holder (a P
 advisory lock on its connection; else a ``flock`` in the data folder) guards it, and a second
 writer is told 423 (tus clients try again). The SHA-256 is computed as the bytes stream in;
 a process that did not see them all (a restart, another replica) reads the assembled file
-once more to compute it.
+once more to compute it. Into a bucket, an MCAP file's tf and pose messages are kept as they
+stream in, as ``POST /datasets`` keeps them (:class:`loceval.readers.rosbag.McapScan`), and
+stored beside the object, so an evaluation reads them in one request; an upload a process
+did not see whole is stored without them (its evaluations read the bag's index instead).
 
 Unfinished uploads expire ``upload_expiry_s`` after their last write: :func:`sweep_expired`
 (every minute in the queue's consumers) removes their parts and aborts their multipart
@@ -33,7 +36,7 @@ import logging
 import threading
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import TYPE_CHECKING, Any, Final
 
 import anyio
 import anyio.to_thread
@@ -55,7 +58,7 @@ from service.errors import (
 )
 from service.runtime import Runtime
 from service.uploads import datasets
-from service.uploads.multipart import ReceivedFile, check_free_space
+from service.uploads.multipart import ReceivedFile, check_free_space, mcap_scan
 from service.uploads.tus_headers import (
     CHECKSUM_ALGORITHMS,
     EXTENSIONS,
@@ -67,6 +70,9 @@ from service.uploads.tus_headers import (
     parse_metadata,
 )
 from service.uploads.tus_lock import UploadLock, locked
+
+if TYPE_CHECKING:
+    from loceval.readers.rosbag import McapScan
 
 __all__ = [
     "CHECKSUM_ALGORITHMS",
@@ -90,6 +96,9 @@ _SWEEP_BATCH: Final = 200
 
 _digests: dict[str, tuple[int, Any]] = {}
 """The SHA-256 of each upload this process received from its first byte: (offset, hash)."""
+_scans: dict[str, tuple[int, McapScan]] = {}
+"""The held messages of each upload into a bucket this process received from its first byte
+(offset, scan), when no request carried a checksum (a scan cannot take bytes back)."""
 _digests_lock = threading.Lock()
 
 
@@ -236,6 +245,7 @@ def _forget(runtime: Runtime, row: TusUpload) -> None:
             session.commit()
     with _digests_lock:
         _digests.pop(row.id, None)
+        _scans.pop(row.id, None)
 
 
 def _published(runtime: Runtime, row: TusUpload) -> Dataset | None:
@@ -257,11 +267,19 @@ def _published(runtime: Runtime, row: TusUpload) -> Dataset | None:
 
 
 class _Hashes:
-    """The digests of one request's bytes: the upload's SHA-256 (when known) and its checksum."""
+    """The digests of one request's bytes: the upload's SHA-256 (when known) and its checksum.
 
-    def __init__(self, upload_id: str, start: int, checksum: tuple[str, bytes] | None) -> None:
+    Into a bucket it also carries the upload's :class:`~loceval.readers.rosbag.McapScan`
+    (when this process saw every byte before and no checksum is asked: a body a checksum
+    refuses would already be in the scan).
+    """
+
+    def __init__(
+        self, upload_id: str, start: int, checksum: tuple[str, bytes] | None, *, scan: bool
+    ) -> None:
         with _digests_lock:
             known = _digests.get(upload_id)
+            scanned = _scans.pop(upload_id, None)  # only this request may feed it now
         self.sha256 = known[1].copy() if known is not None and known[0] == start else None
         if start == 0:
             self.sha256 = hashlib.sha256()
@@ -270,12 +288,19 @@ class _Hashes:
             if checksum is None
             else hashlib.new(checksum[0], usedforsecurity=False)  # the client's choice
         )
+        self.scan = scanned[1] if scanned is not None and scanned[0] == start else None
+        if start == 0 and scan:
+            self.scan = mcap_scan()
+        if self.check is not None:
+            self.scan = None
 
     def update(self, data: bytes) -> None:
         if self.sha256 is not None:
             self.sha256.update(data)
         if self.check is not None:
             self.check.update(data)
+        if self.scan is not None:
+            self.scan.feed(data)
 
     def verify(self, expected: tuple[str, bytes] | None) -> None:
         """Refuse a body that does not match its ``Upload-Checksum`` (460)."""
@@ -288,10 +313,12 @@ class _Hashes:
         raise UploadChecksumError(msg)
 
     def keep(self, upload_id: str, offset: int) -> None:
-        """Remember the upload's SHA-256 up to ``offset`` for its next request."""
-        if self.sha256 is not None:
-            with _digests_lock:
+        """Remember the upload's SHA-256 (and scan) up to ``offset`` for its next request."""
+        with _digests_lock:
+            if self.sha256 is not None:
                 _digests[upload_id] = (offset, self.sha256.copy())
+            if self.scan is not None:
+                _scans[upload_id] = (offset, self.scan)
 
 
 def _write(
@@ -384,7 +411,7 @@ async def receive(
             resumable_parts(runtime.store, row.id).writer, row.offset, row.state
         )
         try:
-            hashes = _Hashes(row.id, start, expected)
+            hashes = _Hashes(row.id, start, expected, scan=runtime.store.reads_in_place)
             await _stream(runtime, row, writer, hashes, body)
             hashes.verify(expected)
             last = writer.offset == row.length
@@ -511,6 +538,9 @@ def _settle(runtime: Runtime, row: TusUpload) -> str | None:
         raise error from None
     with _digests_lock:
         known = _digests.pop(row.id, None)
+        scanned = _scans.pop(row.id, None)
+    if scanned is not None and scanned[0] == row.length:  # every byte seen: its tf and poses
+        incoming.held = scanned[1].finish()
     if known is not None and known[0] == row.length:
         sha256 = known[1].hexdigest()
     else:  # another process received some of it: read it back once
@@ -519,7 +549,7 @@ def _settle(runtime: Runtime, row: TusUpload) -> str | None:
             digest.update(chunk)
         sha256 = digest.hexdigest()
     _record(runtime, row, row.offset, {**state, "sha256": sha256})
-    received = ReceivedFile("file", row.filename, incoming, row.length, sha256)
+    received = ReceivedFile("file", row.filename, incoming, row.length, sha256, incoming.held)
     try:
         dataset, report = datasets.store_upload(
             runtime, row.project_id, received, name=row.name, tags=list(row.tags)

@@ -21,9 +21,11 @@ import numpy as np
 import pytest
 
 import tests.bagfactory as bf
+from service.uploads import tus
 from tests.service._api_fixtures import open_api
 from tests.service.blobs.conftest import Gate, SeaweedFS, object_keys, open_multipart_uploads
 from tests.service.conftest import start_server
+from tests.service.uploads.test_tus_protocol import create, patch
 
 IMAGES = 120
 IMAGE_SIDE = 256  # rgb8: 196 KB an image, 23.6 MB of images in all
@@ -136,6 +138,43 @@ def test_an_evaluation_without_held_messages_reads_the_index_and_matches(
     assert fetched < 2 * len(content) / 10, f"{fetched} of {len(content)} bytes fetched"
     assert damaged["estimates"] == missing["estimates"]
     assert damaged["estimates"][0]["matched"] == 399  # of 400: one lies past the reference
+
+
+def test_a_resumable_upload_keeps_the_held_messages_too(
+    seaweedfs: SeaweedFS, bucket: str, gate: Gate, rng: np.random.Generator, tmp_path: Path
+) -> None:
+    """A camera bag sent by tus in PATCHes that cut its records and 8 MiB parts keeps its tf
+    and poses as ``POST /datasets`` does (``held/tus/<id>``): its evaluation fetches a
+    fraction of the bag, and deleting the dataset deletes them. A process that did not see
+    the upload from its first byte stores none, and the evaluation reads the index."""
+    mcap = _camera_bag(tmp_path, rng)
+    content = mcap.read_bytes()
+    step = 3_000_001  # an odd size: every request ends inside a record
+    with open_api(tmp_path / "s3", blob_url=f"s3://{bucket}/site", blob_ranged_bytes=0) as api:
+        path = create(api, len(content), filename="cam.mcap")
+        for start in range(0, len(content), step):
+            answer = patch(api, path, start, content[start : start + step])
+            assert answer.status_code == 204, answer.text
+        dataset_id = answer.headers["loceval-dataset"]
+        upload = path.rsplit("/", 1)[1]
+        assert object_keys(seaweedfs, bucket, "site/held/") == [f"site/held/tus/{upload}"]
+        before = gate.answered_bytes
+        result = _evaluate(api, dataset_id)
+        fetched = gate.answered_bytes - before
+        assert result["estimates"][0]["matched"] == 399
+        deleted = api.client.delete(f"/api/v1/datasets/{dataset_id}", headers=api.headers)
+        assert deleted.status_code == 204, deleted.text
+        assert object_keys(seaweedfs, bucket, "site/held/") == []
+        assert fetched < len(content) / 10, f"{fetched} of {len(content)} bytes fetched"
+
+        again = create(api, len(content), filename="cam.mcap")
+        patch(api, again, 0, content[:step])
+        tus._scans.clear()  # what another replica, or this one restarted, never had
+        answer = patch(api, again, step, content[step:])
+        assert answer.status_code == 204, answer.text
+        assert object_keys(seaweedfs, bucket, "site/held/") == []
+        unheld = _evaluate(api, answer.headers["loceval-dataset"])
+    assert unheld["estimates"] == result["estimates"]
 
 
 def _wait_until(condition: Callable[[], object], timeout: float) -> bool:
