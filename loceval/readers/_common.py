@@ -109,8 +109,8 @@ def build_trajectory(
     lines = np.arange(1, n + 1) if line_numbers is None else line_numbers
     notes = list(warnings)
     _reject_nonfinite(positions_xyz, lines, where=where, what="position")
-    huge = np.flatnonzero(np.abs(positions_xyz).max(axis=1) > MAX_COORDINATE_M)
-    if huge.size:
+    if float(np.abs(positions_xyz).max()) > MAX_COORDINATE_M:  # (the rows only when one is)
+        huge = np.flatnonzero(np.abs(positions_xyz).max(axis=1) > MAX_COORDINATE_M)
         i = int(huge[0])
         msg = (
             f"{where}, line {int(lines[i])}: a position is beyond ±{MAX_COORDINATE_M:g} m "
@@ -208,6 +208,8 @@ def _nudged(stamps_ns: StampsNs, first: np.ndarray) -> StampsNs | None:
 
 
 def _reject_nonfinite(values: FloatArray, lines: IntArray, *, where: str, what: str) -> None:
+    if np.isfinite(values).all():  # the rows are looked for only when one is bad
+        return
     bad_rows = np.flatnonzero(~np.isfinite(values).all(axis=1))
     if bad_rows.size:
         i = int(bad_rows[0])
