@@ -16,6 +16,7 @@ from contextvars import ContextVar
 import numpy as np
 
 from loceval.core.arrays import FloatArray, IntArray, StampsNs
+from loceval.core.norms import row_norms
 from loceval.errors import ReaderError
 from loceval.trajectory import MAX_COORDINATE_M, MIN_POSES, Trajectory
 
@@ -121,7 +122,7 @@ def build_trajectory(
     if quat_xyzw is not None:
         _reject_nonfinite(quat_xyzw, lines, where=where, what="quaternion")
         with np.errstate(over="ignore"):  # a 1e308 component: norm inf, refused below
-            norms = np.linalg.norm(quat_xyzw, axis=1)
+            norms = row_norms(quat_xyzw)
         bad = np.flatnonzero(np.abs(norms - 1.0) > QUAT_NORM_TOLERANCE)
         if bad.size:
             i = int(bad[0])
