@@ -106,7 +106,8 @@ def _autocorrelations(rows: FloatArray) -> FloatArray:
     centred = rows - rows.mean(axis=1, keepdims=True)
     size = _fast_size(2 * n - 1)  # >= 2n - 1: no circular overlap
     spectrum = np.fft.rfft(centred, size, axis=1)  # numpy's FFT: scipy.fft costs its import
-    acov = np.fft.irfft(spectrum.real**2 + spectrum.imag**2, size, axis=1)[:, :n] / n
+    power = (spectrum.real**2 + spectrum.imag**2).astype(np.complex128)  # (irfft's cast: slow)
+    acov = np.fft.irfft(power, size, axis=1)[:, :n] / n
     out = np.zeros(rows.shape)
     out[:, 0] = 1.0
     scale = np.maximum(1.0, np.abs(rows).max(axis=1))
