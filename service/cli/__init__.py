@@ -27,7 +27,6 @@ from typing import TYPE_CHECKING, cast
 from loceval.errors import LocevalError
 from service.cli.output import emit
 from service.cli.parser import EXIT_BUG, EXIT_INPUT, build_parser
-from service.redact import scrub
 
 if TYPE_CHECKING:
     import argparse
@@ -51,6 +50,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         return int(_handler(args.handler)(args))
     except LocevalError as err:
+        from service.redact import scrub  # noqa: PLC0415  (errors only: it loads tempfile)
+
         emit(f"loceval: error: {scrub(describe(err))}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
