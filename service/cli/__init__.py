@@ -47,7 +47,8 @@ EXIT_BROKEN_PIPE = 141
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     try:
-        args = build_parser().parse_args(argv)
+        words = sys.argv[1:] if argv is None else list(argv)
+        args = build_parser(words[0] if words else None).parse_args(words)
         return int(_handler(args.handler)(args))
     except LocevalError as err:
         from service.redact import scrub  # noqa: PLC0415  (errors only: it loads tempfile)
