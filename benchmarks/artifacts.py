@@ -23,6 +23,16 @@ with this tree's run, so both see the same load. The rows:
   ``GET /evaluations/{id}`` and to every artifact, with a warm worker (one evaluation
   first, not counted).
 
+Issue 43's target for the ``200k/50k --json`` row is CPU time: at most a twelfth of evo's
+(``python -m benchmarks.artifacts --evo DIR --workdir DIR_OF_THE_PAIR --baseline CHECKOUT``;
+to time the row alone: ``PYTHONPATH=$PWD /usr/bin/time -f '%e %U %S' .venv/bin/python -m
+service.cli evaluate REF EST --json``). On the two vCPUs of the test machines threads bought
+wall time with CPU time (the 21 MB reference parsed in two threads: 0.14 s wall and 0.235 s
+CPU; on one: 0.19 s and 0.19 s), so tables under 64 MiB and error series under 200,000 are
+handled on one thread. Measured on 2026-11-29 against ca96e43 (load 1.6 to 3.3): 0.744 s ->
+0.560 s CPU, evo 7.04 s, 12.6x (12.8x wall); 21 interleaved runs of the row alone: 0.795 s
+-> 0.576 s median CPU.
+
 Multi-core machines: the artifacts are written one after another in one process (one
 core's throughput, as the two vCPUs of the test machines give); on more cores the CAD
 files and the PDF layout could run in parallel processes, which these figures do not count.

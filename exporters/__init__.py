@@ -8,8 +8,6 @@ when their artifact is asked for, so the CLI starts fast without matplotlib or C
 from __future__ import annotations
 
 import importlib
-import shutil
-import tempfile
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -253,6 +251,8 @@ def write_artifacts(
     wanted = list(ARTIFACTS) if names is None else list(dict.fromkeys(names))
     for name in wanted:
         _artifact(name)  # every name is checked before anything is rendered
+    import shutil  # noqa: PLC0415  (loaded when artifacts are written, not for --json)
+
     out_dir = out_dir.resolve()
     staging = _staging_folder(out_dir)
     try:
@@ -283,6 +283,8 @@ def _staging_folder(out_dir: Path) -> Path:
             "the artifacts."
         )
         raise ExportOptionsError(msg)
+    import tempfile  # noqa: PLC0415  (loaded when artifacts are written, not for --json)
+
     try:
         out_dir.parent.mkdir(parents=True, exist_ok=True)
         return Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))

@@ -106,7 +106,8 @@ def _autocorrelations(rows: FloatArray) -> FloatArray:
     centred = rows - rows.mean(axis=1, keepdims=True)
     size = _fast_size(2 * n - 1)  # >= 2n - 1: no circular overlap
     spectrum = np.fft.rfft(centred, size, axis=1)  # numpy's FFT: scipy.fft costs its import
-    acov = np.fft.irfft(spectrum.real**2 + spectrum.imag**2, size, axis=1)[:, :n] / n
+    power = (spectrum.real**2 + spectrum.imag**2).astype(np.complex128)  # (irfft's cast: slow)
+    acov = np.fft.irfft(power, size, axis=1)[:, :n] / n
     out = np.zeros(rows.shape)
     out[:, 0] = 1.0
     scale = np.maximum(1.0, np.abs(rows).max(axis=1))
@@ -304,6 +305,30 @@ class BlockBootstrap:
         out /= n
         return out[0] if np.ndim(series) == 1 else out
 
+    def shares(self, holds: BoolArray) -> FloatArray:
+        """Return each resample's share of values for which each row of ``holds`` holds.
+
+        The same numbers as :meth:`means` of the rows as 0.0 and 1.0 (its sums of whole
+        numbers are exact), from integer sums, which are several times quicker.
+
+        Args:
+            holds: (m, n) per-position indicators.
+
+        Returns:
+            (m, resamples) shares over the n resampled values.
+        """
+        n, b = self.n, self.block
+        last = n - (self.starts.shape[1] - 1) * b
+        inner, final = self.starts[:, :-1], self.starts[:, -1]
+        counts = np.empty((holds.shape[0], self.resamples), dtype=np.int64)
+        cums = np.zeros(n + b + 1, dtype=np.int64)
+        for row, values in enumerate(holds):  # one row per threshold, not per pose
+            np.cumsum(np.concatenate([values, values[:b]]), out=cums[1:])
+            full = cums[b : b + n] - cums[:n]
+            counts[row] = np.take(full, inner).sum(axis=1) + (cums[last + final] - cums[final])
+        out: FloatArray = counts / n
+        return out
+
     def median_interval(self, values: FloatArray) -> tuple[float, float]:
         """Return the 95 % percentile interval of the resampled (lower) median.
 
@@ -327,11 +352,11 @@ class BlockBootstrap:
         )
 
         def reached(idx: IntArray) -> BoolArray:
-            shares = self.means((x[None, :] <= order[idx][:, None]).astype(np.float64))
+            shares = self.shares(x[None, :] <= order[idx][:, None])
             out: BoolArray = (shares >= need).sum(axis=1) >= wanted
             return out
 
-        f_star = self.means((x <= order[half - 1]).astype(np.float64))
+        f_star = self.shares((x <= order[half - 1])[None, :])[0]
         q_lo, q_hi = quantiles(f_star, [_ALPHA / 2, 1 - _ALPHA / 2])
         f_m = float(np.count_nonzero(x <= order[half - 1])) / n
         guess = n * (0.5 + f_m - np.array([q_hi, q_lo]))

@@ -10,6 +10,7 @@ import numpy as np
 
 from loceval.assessment.uncertainty import check_tolerance
 from loceval.core.arrays import BoolArray
+from loceval.core.norms import row_norms
 from loceval.errors import InputError
 from loceval.metrics.pose_errors import ErrorSeries, share_within
 from loceval.trajectory import Trajectory
@@ -180,7 +181,7 @@ def failing_spans(
     first_worst = np.full(len(starts), n, dtype=np.intp)
     hit = np.flatnonzero(is_worst)
     np.minimum.at(first_worst, run_id[hit], hit)
-    steps = np.linalg.norm(np.diff(reference.positions_xyz, axis=0), axis=1)
+    steps = row_norms(np.diff(reference.positions_xyz, axis=0))
     travelled = np.concatenate(([0.0], np.cumsum(steps)))  # no stretch crosses a break
     order = np.lexsort((starts, -worst))  # the worst first, ties by time
     a, b, w = starts[order], ends[order], first_worst[order]

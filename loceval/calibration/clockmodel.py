@@ -17,6 +17,7 @@ from loceval.core.arrays import BoolArray, FloatArray, IntArray
 from loceval.trajectory import Trajectory
 
 __all__ = [
+    "MAX_RATE_PPM",
     "SIGNIFICANT_Z",
     "ClockDrift",
     "ClockModel",
@@ -26,6 +27,8 @@ __all__ = [
     "slope_of_rate",
 ]
 
+MAX_RATE_PPM = 1_000.0
+"""The fastest drift searched and accepted, ppm (0.1 %: no crystal, a mistaken clock)."""
 SIGNIFICANT_Z = 3.0
 """A rate (or a step) counts when it exceeds this many sigma."""
 

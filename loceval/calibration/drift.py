@@ -66,6 +66,7 @@ from loceval.calibration._drift_windows import (
     motion_signals,
 )
 from loceval.calibration.clockmodel import (
+    MAX_RATE_PPM,
     SIGNIFICANT_Z,
     ClockDrift,
     ClockModel,
@@ -101,8 +102,6 @@ __all__ = [
     "slope_of_rate",
 ]
 
-MAX_RATE_PPM = 1_000.0
-"""The fastest drift searched and accepted, ppm (0.1 %: no crystal, a mistaken clock)."""
 MAX_STEP_S = 0.5
 """The largest step searched, seconds, beyond the drift's own span."""
 TARGET_WINDOWS = 64

@@ -17,6 +17,7 @@ import numpy as np
 from loceval.calibration.common import NS_PER_S, PoseSampler, rotvec_of
 from loceval.core.arrays import BoolArray, FloatArray
 from loceval.core.geometry import compose_quat, conjugate_quat
+from loceval.core.norms import row_norms
 from loceval.errors import AssociationError, InputError
 from loceval.trajectory import Trajectory
 
@@ -118,7 +119,7 @@ def motion_signal(
     else:
         p = sampler.positions_at(t)
         step = p[2:] - p[:-2]
-    values[1:-1] = np.linalg.norm(step, axis=1) / (2.0 * dt_s)
+    values[1:-1] = row_norms(step) / (2.0 * dt_s)
     # Both ends valid and no gap between them (the sampler's gap count is per interval).
     mask[1:-1] = sampler.valid(t[1:-1], margin_s=dt_s)
     mask &= ok

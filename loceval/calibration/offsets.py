@@ -38,7 +38,7 @@ from loceval.trajectory import MAX_OFFSET_M
 
 if TYPE_CHECKING:
     from loceval.calibration.clock import TimeOffsetEstimate
-    from loceval.calibration.drift import ClockModel
+    from loceval.calibration.clockmodel import ClockModel
     from loceval.calibration.handeye import DeviceOffsetComparison, DeviceOffsetEstimate
     from loceval.trajectory import Trajectory
 
@@ -103,7 +103,7 @@ class OffsetCheck:
 
     def clock(self, estimate: Trajectory) -> ClockModel:
         """The time offset applied along ``estimate``'s run (its first stamp the epoch)."""
-        from loceval.calibration.drift import ClockModel  # noqa: PLC0415
+        from loceval.calibration.clockmodel import ClockModel  # noqa: PLC0415
 
         if self.time_offset is not None:
             return dataclasses.replace(self.time_offset.model, offset_s=self.time_offset_s)

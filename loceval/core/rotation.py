@@ -24,6 +24,7 @@ from typing import Final
 import numpy as np
 
 from loceval.core.arrays import FloatArray, IntArray
+from loceval.core.norms import row_norms
 
 __all__ = ["Rotation", "compose_quat", "conjugate_quat"]
 
@@ -118,7 +119,7 @@ class Rotation:
             ValueError: a quaternion has zero norm.
         """
         quat = np.asarray(quat_xyzw, dtype=np.float64)
-        norm = np.linalg.norm(quat, axis=-1, keepdims=True)
+        norm = row_norms(quat)[..., None]
         if np.any(norm == 0.0):
             msg = "A quaternion has zero norm and names no rotation."
             raise ValueError(msg)
@@ -157,7 +158,7 @@ class Rotation:
     def from_rotvec(cls, rotvec: FloatArray) -> Rotation:
         """Return the rotations of (3,) or (N, 3) rotation vectors (axis times angle, rad)."""
         v = np.asarray(rotvec, dtype=np.float64)
-        angle = np.linalg.norm(v, axis=-1, keepdims=True)
+        angle = row_norms(v)[..., None]
         small = angle <= _SMALL_ANGLE_RAD
         angle2 = angle * angle
         # sin(a/2)/a, with its series 1/2 - a²/48 + a⁴/3840 near zero.
@@ -225,7 +226,7 @@ class Rotation:
     def as_rotvec(self) -> FloatArray:
         """Return (N, 3) or (3,) rotation vectors (axis times angle in [0, π], rad)."""
         quat = _canonical(self.quat_xyzw)
-        sin_half = np.linalg.norm(quat[..., :3], axis=-1, keepdims=True)
+        sin_half = row_norms(quat[..., :3])[..., None]
         angle = 2.0 * np.arctan2(sin_half, quat[..., 3:])
         small = angle <= _SMALL_ANGLE_RAD
         angle2 = angle * angle
@@ -240,7 +241,7 @@ class Rotation:
 
     def magnitude(self) -> FloatArray:
         """Return the rotation angles in [0, π] rad, (N,) (a 0-d array for one rotation)."""
-        sin_half = np.linalg.norm(self.quat_xyzw[..., :3], axis=-1)
+        sin_half = row_norms(self.quat_xyzw[..., :3])
         out: FloatArray = 2.0 * np.arctan2(sin_half, np.abs(self.quat_xyzw[..., 3]))
         return out
 
@@ -310,5 +311,5 @@ def _quat_from_orthogonal(m: FloatArray) -> FloatArray:
         ]
     )  # (case, component, N)
     quat = candidates[choice, :, np.arange(m.shape[0])]
-    out: FloatArray = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+    out: FloatArray = quat / row_norms(quat)[:, None]
     return out

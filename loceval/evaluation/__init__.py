@@ -10,15 +10,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from loceval._version import __version__
-from loceval.assessment.spaces import Building, locate_verdict
-from loceval.assessment.trial_comparison import SystemComparison, compare_all_systems
-from loceval.assessment.trials import (
-    FailedTrial,
-    SystemTrials,
-    group_evaluated_trials,
-    tracked_share,
-    trial_figures,
-)
 from loceval.assessment.verdict import FailingSpan, Tolerance, Verdict, tolerance_verdict_of
 from loceval.calibration.offsets import OffsetCheck, check_offsets, parse_offset
 from loceval.core.arrays import IntArray
@@ -41,10 +32,13 @@ from loceval.registration.alignment import Alignment, AlignMethod, align
 from loceval.registration.association import Association, associate, association_notes
 from loceval.trajectory import Trajectory
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # the trials' and the building's modules load when an evaluation has them
     from loceval.assessment.assess import Assessment
     from loceval.assessment.baseline import BaselineComparison
     from loceval.assessment.comparison import Comparison
+    from loceval.assessment.spaces import Building
+    from loceval.assessment.trial_comparison import SystemComparison
+    from loceval.assessment.trials import FailedTrial, SystemTrials
     from loceval.assessment.uncertainty import IntervalStats
     from loceval.maps import MapEvaluation
     from loceval.radio.ranging import RangingResult
@@ -171,6 +165,8 @@ class EvaluationResult:
 
         See :func:`loceval.assessment.spaces.locate_verdict`.
         """
+        from loceval.assessment.spaces import locate_verdict  # noqa: PLC0415
+
         estimates = tuple(
             replace(e, verdict=locate_verdict(e.verdict, e.reference.positions_xyz, building))
             if e.verdict is not None
@@ -289,30 +285,23 @@ def evaluate(
         if system is None:
             results.append(_evaluate_one(reference, estimate, config, recorded=recorded))
             continue
-        try:  # a trial that fails is counted under its system; the others go on
-            one = _evaluate_one(reference, estimate, config, recorded=recorded)
-        except LocevalError as err:
-            failed.append(
-                FailedTrial(estimate.name or f"estimate {k + 1}", system, err.code, str(err))
-            )
-            continue
-        tracked = tracked_share(
-            reference.stamps_ns, one.association.reference.stamps_ns, min_gap_ns=min_gap_ns
+        trial = _evaluate_trial(
+            reference,
+            estimate,
+            config,
+            recorded=recorded,
+            system=system,
+            label=estimate.name or f"estimate {k + 1}",
         )
-        results.append(replace(one, system=system, coverage=tracked))
+        if isinstance(trial, EstimateResult):
+            results.append(trial)
+        else:  # a trial that fails is counted under its system; the others go on
+            failed.append(trial)
     if not results:
         reasons = "; ".join(f"{f.name}: {f.reason}" for f in failed)
         msg = f"Every trial failed, so there is nothing to evaluate ({reasons})."
         raise InputError(msg)
-    trial_systems = group_evaluated_trials(
-        [
-            (trial_figures(e.name, e.system, _series_of(e)), e.coverage or 0.0)
-            for e in results
-            if e.system is not None
-        ],
-        failed,
-        min_coverage=config.min_trial_coverage,
-    )
+    trial_systems, system_comparisons = _systems(results, failed, config)
     comparisons = None
     comparison_notes: tuple[str, ...] = ()
     if not config.no_ci:
@@ -338,8 +327,56 @@ def evaluate(
         comparisons=comparisons,
         comparison_notes=comparison_notes,
         systems=trial_systems,
-        system_comparisons=compare_all_systems(trial_systems),
+        system_comparisons=system_comparisons,
     )
+
+
+def _evaluate_trial(
+    reference: Trajectory,
+    estimate: Trajectory,
+    config: EvaluationConfig,
+    *,
+    recorded: Trajectory,
+    system: str,
+    label: str,
+) -> EstimateResult | FailedTrial:
+    """Evaluate a trial of ``system``, or return it failed (a LocevalError) under ``label``."""
+    from loceval.assessment.trials import FailedTrial, tracked_share  # noqa: PLC0415
+
+    try:
+        one = _evaluate_one(reference, estimate, config, recorded=recorded)
+    except LocevalError as err:
+        return FailedTrial(label, system, err.code, str(err))
+    min_gap_ns = round(config.max_gap_s * _NS_PER_S)
+    tracked = tracked_share(
+        reference.stamps_ns, one.association.reference.stamps_ns, min_gap_ns=min_gap_ns
+    )
+    return replace(one, system=system, coverage=tracked)
+
+
+def _systems(
+    results: Sequence[EstimateResult], failed: list[FailedTrial], config: EvaluationConfig
+) -> tuple[tuple[SystemTrials, ...], tuple[SystemComparison, ...]]:
+    """Group the trials by system and compare every two systems; none without trials.
+
+    The trials' modules load only for an evaluation that has trials.
+    """
+    trials = [e for e in results if e.system is not None]
+    if not trials and not failed:
+        return (), ()
+    from loceval.assessment.trial_comparison import compare_all_systems  # noqa: PLC0415
+    from loceval.assessment.trials import group_evaluated_trials, trial_figures  # noqa: PLC0415
+
+    systems = group_evaluated_trials(
+        [
+            (trial_figures(e.name, e.system, _series_of(e)), e.coverage or 0.0)
+            for e in trials
+            if e.system is not None  # (for the type checker: every trial has one)
+        ],
+        failed,
+        min_coverage=config.min_trial_coverage,
+    )
+    return systems, compare_all_systems(systems)
 
 
 def _series_of(e: EstimateResult) -> dict[str, ErrorSeries | None]:

@@ -19,6 +19,7 @@ import numpy as np
 
 from loceval.core.arrays import FloatArray, StampsNs
 from loceval.core.geometry import SimilarityTransform
+from loceval.core.norms import row_norms
 from loceval.trajectory import Trajectory
 
 __all__ = ["Excursion", "find_excursions"]
@@ -92,7 +93,7 @@ def find_excursions(
     """
     stamps = estimate.stamps_ns + np.int64(offset_ns)
     xyz = transform.apply_positions(estimate.positions_xyz)
-    step = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
+    step = row_norms(np.diff(xyz, axis=0))
     walked = np.concatenate([[0.0], np.cumsum(step)])
     min_ns = round(min_excursion_s * _NS_PER_S)
     out = []

@@ -16,6 +16,7 @@ import numpy as np
 
 from loceval.core.arrays import FloatArray, IntArray, StampsNs
 from loceval.core.geometry import compose_quat, conjugate_quat, relative_angle_deg
+from loceval.core.norms import row_norms
 from loceval.core.quantiles import median as median_of
 from loceval.core.rotation import Rotation
 from loceval.errors import MetricError
@@ -189,7 +190,7 @@ def compute_ate(
         Translation errors and rotation errors (None for position-only sources).
     """
     _require_matched(reference, aligned)
-    translation = np.linalg.norm(aligned.positions_xyz - reference.positions_xyz, axis=1)
+    translation = row_norms(aligned.positions_xyz - reference.positions_xyz)
     ate_t = ErrorSeries(translation, reference.stamps_ns, "m")
     if reference.quat_xyzw is None or aligned.quat_xyzw is None:
         return ate_t, None
@@ -327,7 +328,7 @@ def compute_rpe(
     q_pos, p_pos = reference.positions_xyz, aligned.positions_xyz
     if reference.quat_xyzw is None or aligned.quat_xyzw is None:
         diff = (p_pos[j] - p_pos[i]) - (q_pos[j] - q_pos[i])
-        return ErrorSeries(np.linalg.norm(diff, axis=1), stamps, "m"), None
+        return ErrorSeries(row_norms(diff), stamps, "m"), None
     rq = Rotation.from_quat(reference.quat_xyzw)
     rp = Rotation.from_quat(aligned.quat_xyzw)
     # E = dQ^-1 dP with dQ = Q_i^-1 Q_j, dP = P_i^-1 P_j. Its translation is
@@ -336,7 +337,7 @@ def compute_rpe(
     # so it has the same angle: one composition over the poses, one over the pairs.
     dq_t = rq[i].apply(q_pos[j] - q_pos[i], inverse=True)
     dp_t = rp[i].apply(p_pos[j] - p_pos[i], inverse=True)
-    err_t = np.linalg.norm(dp_t - dq_t, axis=1)
+    err_t = row_norms(dp_t - dq_t)
     w = compose_quat(reference.quat_xyzw, conjugate_quat(aligned.quat_xyzw))
     err_r = relative_angle_deg(w[j], w[i])
     return ErrorSeries(err_t, stamps, "m"), ErrorSeries(err_r, stamps, "deg")
@@ -402,9 +403,9 @@ def compute_drift(
         # The relative pose's translation error, as in compute_rpe (norm kept by rotation).
         dq_body = Rotation.from_quat(reference.quat_xyzw[i_idx]).apply(dq_t, inverse=True)
         dp_body = Rotation.from_quat(aligned.quat_xyzw[i_idx]).apply(dp_t, inverse=True)
-        err = np.linalg.norm(dp_body - dq_body, axis=1)
+        err = row_norms(dp_body - dq_body)
     else:
-        err = np.linalg.norm(dp_t - dq_t, axis=1)
+        err = row_norms(dp_t - dq_t)
     order = np.argsort(reference.stamps_ns[i_idx], kind="stable")
     return ErrorSeries((100.0 * err / seg_len)[order], reference.stamps_ns[i_idx][order], "%")
 

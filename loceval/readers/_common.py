@@ -16,6 +16,7 @@ from contextvars import ContextVar
 import numpy as np
 
 from loceval.core.arrays import FloatArray, IntArray, StampsNs
+from loceval.core.norms import row_norms
 from loceval.errors import ReaderError
 from loceval.trajectory import MAX_COORDINATE_M, MIN_POSES, Trajectory
 
@@ -109,8 +110,8 @@ def build_trajectory(
     lines = np.arange(1, n + 1) if line_numbers is None else line_numbers
     notes = list(warnings)
     _reject_nonfinite(positions_xyz, lines, where=where, what="position")
-    huge = np.flatnonzero(np.abs(positions_xyz).max(axis=1) > MAX_COORDINATE_M)
-    if huge.size:
+    if float(np.abs(positions_xyz).max()) > MAX_COORDINATE_M:  # (the rows only when one is)
+        huge = np.flatnonzero(np.abs(positions_xyz).max(axis=1) > MAX_COORDINATE_M)
         i = int(huge[0])
         msg = (
             f"{where}, line {int(lines[i])}: a position is beyond ±{MAX_COORDINATE_M:g} m "
@@ -121,7 +122,7 @@ def build_trajectory(
     if quat_xyzw is not None:
         _reject_nonfinite(quat_xyzw, lines, where=where, what="quaternion")
         with np.errstate(over="ignore"):  # a 1e308 component: norm inf, refused below
-            norms = np.linalg.norm(quat_xyzw, axis=1)
+            norms = row_norms(quat_xyzw)
         bad = np.flatnonzero(np.abs(norms - 1.0) > QUAT_NORM_TOLERANCE)
         if bad.size:
             i = int(bad[0])
@@ -208,6 +209,8 @@ def _nudged(stamps_ns: StampsNs, first: np.ndarray) -> StampsNs | None:
 
 
 def _reject_nonfinite(values: FloatArray, lines: IntArray, *, where: str, what: str) -> None:
+    if np.isfinite(values).all():  # the rows are looked for only when one is bad
+        return
     bad_rows = np.flatnonzero(~np.isfinite(values).all(axis=1))
     if bad_rows.size:
         i = int(bad_rows[0])

@@ -16,6 +16,7 @@ Each command lives in its own module, imported only when that command runs: ``lo
 
 from __future__ import annotations
 
+import gc
 import importlib
 import os
 import sys
@@ -26,12 +27,11 @@ from typing import TYPE_CHECKING, cast
 from loceval.errors import LocevalError
 from service.cli.output import emit
 from service.cli.parser import EXIT_BUG, EXIT_INPUT, build_parser
-from service.redact import scrub
 
 if TYPE_CHECKING:
     import argparse
 
-__all__ = ["OUT_OF_MEMORY", "main"]
+__all__ = ["OUT_OF_MEMORY", "main", "run"]
 
 OUT_OF_MEMORY = (
     "The command ran out of memory and stopped; evaluate shorter recordings or fewer "
@@ -47,9 +47,12 @@ EXIT_BROKEN_PIPE = 141
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit code."""
     try:
-        args = build_parser().parse_args(argv)
+        words = sys.argv[1:] if argv is None else list(argv)
+        args = build_parser(words[0] if words else None).parse_args(words)
         return int(_handler(args.handler)(args))
     except LocevalError as err:
+        from service.redact import scrub  # noqa: PLC0415  (errors only: it loads tempfile)
+
         emit(f"loceval: error: {scrub(describe(err))}", file=sys.stderr)
         return EXIT_INPUT
     except KeyboardInterrupt:
@@ -69,6 +72,22 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return EXIT_BUG
+
+
+def run() -> int:
+    """Run the ``loceval`` command (:func:`main`) in a process that ends with it.
+
+    When the process exits, the interpreter's collector walks every object still alive
+    (numpy's, every module's, the evaluation's) to find garbage in reference cycles: about
+    0.03 s of CPU after a 200,000-pose evaluation, a twentieth of the whole command, for
+    memory the process returns to the system anyway. Freezing them (``gc.freeze``) leaves
+    them out of that walk; ``atexit`` handlers still run, and objects freed by their
+    reference counts (open files among them) are still closed. Tests call :func:`main`,
+    which freezes nothing.
+    """
+    code = main()
+    gc.freeze()
+    return code
 
 
 def describe(err: LocevalError) -> str:

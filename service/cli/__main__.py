@@ -2,6 +2,6 @@
 
 import sys
 
-from service.cli import main
+from service.cli import run
 
-sys.exit(main())
+sys.exit(run())

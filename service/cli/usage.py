@@ -10,7 +10,6 @@ any bad input. This module is pure Python: the parser imports it without numpy.
 from __future__ import annotations
 
 import argparse
-import difflib
 from collections.abc import Callable, Sequence
 from typing import Final, NoReturn
 
@@ -47,6 +46,8 @@ def nearest_option(parser: argparse.ArgumentParser, flag: str) -> str | None:
     """
     known = parser._option_string_actions  # noqa: SLF001  (argparse keeps them there)
     options = [o for o in known if o.startswith("--") == flag.startswith("--")]
+    import difflib  # noqa: PLC0415  (a mistyped flag only)
+
     found = difflib.get_close_matches(flag, options, n=1, cutoff=_CUTOFF)
     return found[0] if found else None
 

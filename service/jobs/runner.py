@@ -17,7 +17,6 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, overload
 
-from loceval.assessment.trials import FailedTrial
 from loceval.checkpoints.config import CheckpointConfig
 from loceval.errors import InputError, LocevalError
 from loceval.evaluation import EvaluationConfig, EvaluationResult, ProgressCallback, evaluate
@@ -36,6 +35,7 @@ if TYPE_CHECKING:
     from exporters import ArtifactCallback
     from exporters.options import ExportOptions
     from loceval.assessment.baseline import Baseline
+    from loceval.assessment.trials import FailedTrial
     from loceval.checkpoint_evaluation import CheckpointEvaluation
     from loceval.controlpoints import ControlPoints, Visits
     from loceval.radio_evaluation import RangingConfig
@@ -388,6 +388,8 @@ def _run_trajectories(job: TrajectoryJob, report: ProgressCallback) -> Evaluatio
         try:  # a trial that cannot be read failed; the other trials go on
             estimates.append(source.read(stamp=job.stamp))
         except LocevalError as err:
+            from loceval.assessment.trials import FailedTrial  # noqa: PLC0415  (trials only)
+
             failed.append(FailedTrial(source.name, source.system, err.code, str(err)))
             continue
         systems.append(source.system)
@@ -562,11 +564,8 @@ def file_provenance(
         info.update(sha256=sha256, bytes=size)
     elif path.is_file():
         if sha256 is None:
-            digest = hashlib.sha256()
-            with path.open("rb") as fh:
-                for chunk in iter(lambda: fh.read(1 << 20), b""):
-                    digest.update(chunk)
-            sha256 = digest.hexdigest()
+            with path.open("rb") as fh:  # read into one reused buffer: no fresh memory per block
+                sha256 = hashlib.file_digest(fh, "sha256").hexdigest()
         info["sha256"] = sha256
         info["bytes"] = path.stat().st_size
     return info

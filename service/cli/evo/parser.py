@@ -16,7 +16,7 @@ from typing import Any, Final
 
 from service.cli.usage import EXIT_INPUT, fail, unknown_arguments
 
-__all__ = ["FORMATS", "RELATIONS", "UNSUPPORTED", "add_evo_commands"]
+__all__ = ["EVO_COMMANDS", "FORMATS", "RELATIONS", "UNSUPPORTED", "add_evo_commands"]
 
 FORMATS: Final = ("tum", "kitti", "euroc", "bag", "bag2", "mcap")
 """evo's format words; the bags take a file and two topics."""
@@ -171,6 +171,10 @@ def _add_metric(sub: Any, name: str, *, rpe: bool) -> None:  # noqa: ANN401
             sub_cmd.add_argument("est_file", help="the estimate")
         _common(sub_cmd, rpe=rpe)
         sub_cmd.set_defaults(handler=f"service.cli.evo.metric:run_{name}", metric=name)
+
+
+EVO_COMMANDS: Final = ("ape", "rpe", "res")
+"""The evo-style commands :func:`add_evo_commands` adds, in its order."""
 
 
 def add_evo_commands(sub: Any) -> None:  # noqa: ANN401  (argparse's private subparsers action)

@@ -115,6 +115,7 @@ def test_declines_what_it_does_not_read(text: bytes, delimiter: str | None) -> N
 
 def test_threaded_chunks_give_the_serial_result(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(_plain, "_CHUNK_BYTES", 64)
+    monkeypatch.setattr(_plain, "_THREADS_FROM", 4)
     monkeypatch.setattr(_plain.os, "cpu_count", lambda: 2)
     lines = [f"{1_700_000_000_000 + 7 * k},{k * 0.25}" for k in range(300)]
     lines.insert(150, "")  # a blank line halfway: later rows keep their line numbers
@@ -133,6 +134,7 @@ def test_threaded_chunks_give_the_serial_result(monkeypatch: pytest.MonkeyPatch)
 
 def test_threaded_chunks_decline_a_bad_late_line(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(_plain, "_CHUNK_BYTES", 64)
+    monkeypatch.setattr(_plain, "_THREADS_FROM", 4)
     monkeypatch.setattr(_plain.os, "cpu_count", lambda: 2)
     data = "".join(f"{k} {k}.5\n" for k in range(300)).encode() + b"7 nan\n"
     assert parse_plain(data, delimiter=None) is None

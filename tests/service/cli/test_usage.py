@@ -13,7 +13,7 @@ from collections.abc import Iterator
 import pytest
 
 from service.cli import main
-from service.cli.parser import build_parser
+from service.cli.parser import build_parser, command_names
 from tests.cli_contract import error_line, run_cli
 
 
@@ -119,3 +119,38 @@ def test_help_lists_every_command(capsys: pytest.CaptureFixture[str]) -> None:
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     assert "storage" in sub.choices
     assert f"The loceval command line: {', '.join(sub.choices)}." in out
+
+
+def _help(parser: argparse.ArgumentParser) -> str:
+    return parser.format_help()
+
+
+def _defaults(parser: argparse.ArgumentParser) -> dict[str, object]:
+    """Every argument's default and the command's own (its handler), as parsing sets them."""
+    return {**{a.dest: a.default for a in parser._actions}, **parser._defaults}
+
+
+def test_the_command_table_names_every_command_in_the_help_order() -> None:
+    """command_names() is the full parser's list of commands, in its order."""
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert command_names() == list(sub.choices)
+
+
+@pytest.mark.parametrize("command", command_names())
+def test_a_command_built_alone_parses_and_helps_as_in_the_full_parser(command: str) -> None:
+    """build_parser(COMMAND) has COMMAND with the same flags, defaults and help as the full one."""
+    full, alone = (
+        next(a for a in p._actions if isinstance(a, argparse._SubParsersAction)).choices[command]
+        for p in (build_parser(), build_parser(command))
+    )
+    assert _help(alone) == _help(full)
+    assert _defaults(alone) == _defaults(full)
+    assert build_parser(command).description == build_parser().description
+
+
+def test_an_unknown_first_word_builds_every_command() -> None:
+    """A mistyped command (or --help) gets the full parser, whose error lists every command."""
+    sub = next(
+        a for a in build_parser("evalute")._actions if isinstance(a, argparse._SubParsersAction)
+    )
+    assert list(sub.choices) == command_names()
