@@ -33,10 +33,9 @@ import contextlib
 import datetime as dt
 import hashlib
 import logging
-import threading
 from collections.abc import AsyncIterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Final
+from typing import Any, Final
 
 import anyio
 import anyio.to_thread
@@ -48,7 +47,6 @@ from service.db import Dataset, TusUpload, new_id, utcnow
 from service.errors import (
     NotFoundError,
     ServiceUnavailableError,
-    UploadChecksumError,
     UploadError,
     UploadLockedError,
     UploadMediaTypeError,
@@ -57,8 +55,9 @@ from service.errors import (
     problem_for,
 )
 from service.runtime import Runtime
-from service.uploads import datasets
-from service.uploads.multipart import ReceivedFile, check_free_space, mcap_scan
+from service.uploads import datasets, tus_hashes
+from service.uploads.multipart import ReceivedFile, check_free_space
+from service.uploads.tus_hashes import Hashes
 from service.uploads.tus_headers import (
     CHECKSUM_ALGORITHMS,
     EXTENSIONS,
@@ -70,9 +69,6 @@ from service.uploads.tus_headers import (
     parse_metadata,
 )
 from service.uploads.tus_lock import UploadLock, locked
-
-if TYPE_CHECKING:
-    from loceval.readers.rosbag import McapScan
 
 __all__ = [
     "CHECKSUM_ALGORITHMS",
@@ -93,13 +89,6 @@ logger = logging.getLogger(__name__)
 
 _BATCH_BYTES: Final = 1 << 20
 _SWEEP_BATCH: Final = 200
-
-_digests: dict[str, tuple[int, Any]] = {}
-"""The SHA-256 of each upload this process received from its first byte: (offset, hash)."""
-_scans: dict[str, tuple[int, McapScan]] = {}
-"""The held messages of each upload into a bucket this process received from its first byte
-(offset, scan), when no request carried a checksum (a scan cannot take bytes back)."""
-_digests_lock = threading.Lock()
 
 
 @dataclass(frozen=True, slots=True)
@@ -243,9 +232,7 @@ def _forget(runtime: Runtime, row: TusUpload) -> None:
         if obj is not None:
             session.delete(obj)
             session.commit()
-    with _digests_lock:
-        _digests.pop(row.id, None)
-        _scans.pop(row.id, None)
+    tus_hashes.forget(row.id)
 
 
 def _published(runtime: Runtime, row: TusUpload) -> Dataset | None:
@@ -266,63 +253,8 @@ def _published(runtime: Runtime, row: TusUpload) -> Dataset | None:
 # -- receiving -----------------------------------------------------------------------------
 
 
-class _Hashes:
-    """The digests of one request's bytes: the upload's SHA-256 (when known) and its checksum.
-
-    Into a bucket it also carries the upload's :class:`~loceval.readers.rosbag.McapScan`
-    (when this process saw every byte before and no checksum is asked: a body a checksum
-    refuses would already be in the scan).
-    """
-
-    def __init__(
-        self, upload_id: str, start: int, checksum: tuple[str, bytes] | None, *, scan: bool
-    ) -> None:
-        with _digests_lock:
-            known = _digests.get(upload_id)
-            scanned = _scans.pop(upload_id, None)  # only this request may feed it now
-        self.sha256 = known[1].copy() if known is not None and known[0] == start else None
-        if start == 0:
-            self.sha256 = hashlib.sha256()
-        self.check = (
-            None
-            if checksum is None
-            else hashlib.new(checksum[0], usedforsecurity=False)  # the client's choice
-        )
-        self.scan = scanned[1] if scanned is not None and scanned[0] == start else None
-        if start == 0 and scan:
-            self.scan = mcap_scan()
-        if self.check is not None:
-            self.scan = None
-
-    def update(self, data: bytes) -> None:
-        if self.sha256 is not None:
-            self.sha256.update(data)
-        if self.check is not None:
-            self.check.update(data)
-        if self.scan is not None:
-            self.scan.feed(data)
-
-    def verify(self, expected: tuple[str, bytes] | None) -> None:
-        """Refuse a body that does not match its ``Upload-Checksum`` (460)."""
-        if expected is None or self.check is None or self.check.digest() == expected[1]:
-            return
-        msg = (
-            f"The request's bytes do not match its Upload-Checksum ({expected[0]}); "
-            "nothing of it was kept: send them again from the same offset."
-        )
-        raise UploadChecksumError(msg)
-
-    def keep(self, upload_id: str, offset: int) -> None:
-        """Remember the upload's SHA-256 (and scan) up to ``offset`` for its next request."""
-        with _digests_lock:
-            if self.sha256 is not None:
-                _digests[upload_id] = (offset, self.sha256.copy())
-            if self.scan is not None:
-                _scans[upload_id] = (offset, self.scan)
-
-
 def _write(
-    runtime: Runtime, row: TusUpload, writer: ResumableWriter, hashes: _Hashes, data: bytes
+    runtime: Runtime, row: TusUpload, writer: ResumableWriter, hashes: Hashes, data: bytes
 ) -> None:
     """Append a batch; record the durable progress unless a checksum must match first."""
     writer.write(data)
@@ -334,7 +266,7 @@ def _write(
             writer.settled()
 
 
-def _save(runtime: Runtime, row: TusUpload, writer: ResumableWriter, hashes: _Hashes) -> None:
+def _save(runtime: Runtime, row: TusUpload, writer: ResumableWriter, hashes: Hashes) -> None:
     """Keep what a request sent before it broke off (not with a checksum: unverifiable)."""
     if hashes.check is not None:
         return
@@ -411,7 +343,7 @@ async def receive(
             resumable_parts(runtime.store, row.id).writer, row.offset, row.state
         )
         try:
-            hashes = _Hashes(row.id, start, expected, scan=runtime.store.reads_in_place)
+            hashes = Hashes(row.id, start, expected, scan=runtime.store.reads_in_place)
             await _stream(runtime, row, writer, hashes, body)
             hashes.verify(expected)
             last = writer.offset == row.length
@@ -458,7 +390,7 @@ async def _stream(
     runtime: Runtime,
     row: TusUpload,
     writer: ResumableWriter,
-    hashes: _Hashes,
+    hashes: Hashes,
     body: AsyncIterator[bytes],
 ) -> None:
     """Write the body in batches of 1 MiB (in a thread: the store's writes block)."""
@@ -536,9 +468,7 @@ def _settle(runtime: Runtime, row: TusUpload) -> str | None:
         error = UploadError(msg)
         _record(runtime, row, row.offset, row.state, error=problem_for(error))
         raise error from None
-    with _digests_lock:
-        known = _digests.pop(row.id, None)
-        scanned = _scans.pop(row.id, None)
+    known, scanned = tus_hashes.settled(row.id)
     if scanned is not None and scanned[0] == row.length:  # every byte seen: its tf and poses
         incoming.held = scanned[1].finish()
     if known is not None and known[0] == row.length:

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import tests.bagfactory as bf
-from service.uploads import tus
+from service.uploads import tus_hashes
 from tests.service._api_fixtures import open_api
 from tests.service.blobs.conftest import Gate, SeaweedFS, object_keys, open_multipart_uploads
 from tests.service.conftest import start_server
@@ -169,7 +169,7 @@ def test_a_resumable_upload_keeps_the_held_messages_too(
 
         again = create(api, len(content), filename="cam.mcap")
         patch(api, again, 0, content[:step])
-        tus._scans.clear()  # what another replica, or this one restarted, never had
+        tus_hashes.clear()  # what another replica, or this one restarted, never had
         answer = patch(api, again, step, content[step:])
         assert answer.status_code == 204, answer.text
         assert object_keys(seaweedfs, bucket, "site/held/") == []

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from service.db import TusUpload
-from service.uploads import tus
+from service.uploads import tus, tus_hashes
 from tests.factories import make_trajectory, write_tum
 from tests.service._api_fixtures import Api, assert_problem, open_api
 
@@ -309,7 +309,7 @@ def test_a_process_that_saw_part_of_the_bytes_reads_them_back(api: Api, recordin
     """The SHA-256 of bytes another replica (or an earlier process) received is computed."""
     path = create(api, len(recording))
     patch(api, path, 0, recording[:4000])
-    tus._digests.clear()  # what a restart forgets
+    tus_hashes.clear()  # what a restart forgets
     answer = patch(api, path, 4000, recording[4000:])
     dataset = api.client.get(
         f"/api/v1/datasets/{answer.headers['loceval-dataset']}", headers=api.headers
