@@ -69,9 +69,7 @@ def plot_clock_correlation(
         zoom.markers(lags_ms, near_scores, Style(colour=None, face=colour), size_pt=2.5)
         for candidate in clock.candidates_s:
             full.vline(candidate, Style(colour=colour, width=0.8, dash="dotted"))
-            full.x.add(np.array([candidate]))
     zoom.vline(0.0, Style(colour="#616161", width=1.0, dash="dotted"))
-    zoom.x.add(np.array([0.0]))
     full.xlabel = "time offset added to the estimate's stamps [s]"
     zoom.xlabel = "time offset minus the one found [ms]"
     full.ylabel = zoom.ylabel = "correlation"

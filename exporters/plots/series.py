@@ -293,7 +293,6 @@ def plot_error_cdf(
         )
     for t in thresholds:
         ax.vline(t, Style(colour="#616161", width=1.0, dash="dotted"))
-    ax.x.add(np.asarray(thresholds, dtype=np.float64))
     tol = result.config.tolerance
     if tol is not None:
         ax.markers(

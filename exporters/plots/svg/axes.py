@@ -128,7 +128,7 @@ class Axes:
         self.drawn_xy.append((x, y))
         self._add(
             z,
-            lambda: self._path(path_data(self._points(x, y)), style),
+            lambda: styled_path(path_data(self._points(x, y)), style),
             label,
             LegendEntry(label or "", "line", style),
         )
@@ -152,7 +152,7 @@ class Axes:
         self.y.add(np.concatenate([lo[ok], hi[ok]]))
         self._add(
             z,
-            lambda: self._path(polygon_data(self._points(x, hi), self._points(x, lo), ok), style),
+            lambda: styled_path(polygon_data(self._points(x, hi), self._points(x, lo), ok), style),
             None,
             None,
         )
@@ -184,7 +184,7 @@ class Axes:
         )
         self._add(
             z,
-            lambda: self._path(marker_path(self._points(x[ok], y[ok]), shape, size_pt), marker),
+            lambda: styled_path(marker_path(self._points(x[ok], y[ok]), shape, size_pt), marker),
             label,
             LegendEntry(label or "", "marker", marker),
         )
@@ -201,7 +201,7 @@ class Axes:
         x, y, bar = x[ok], y[ok], bar[ok]
         ends = np.stack([np.stack([x, y - bar], 1), np.stack([x, y + bar], 1)], axis=1)
         line = Style(colour=style.colour, width=0.8)
-        self._add(2.4, lambda: self._path(segment_data(self._segments(ends)), line), None, None)
+        self._add(2.4, lambda: styled_path(segment_data(self._segments(ends)), line), None, None)
         self.markers(x, y, style, size_pt=4.5, label=label)
         if label:
             self.legend_entries[-1] = LegendEntry(label, "errorbar", self.legend_entries[-1].style)
@@ -229,7 +229,7 @@ class Axes:
                 picked = segments[classes == c]
                 if len(picked):
                     style = Style(colour=colour, width=width, cap="round")
-                    parts.append(self._path(segment_data(self._segments(picked)), style))
+                    parts.append(styled_path(segment_data(self._segments(picked)), style))
             body = "".join(parts)
             return f'<g id="{group}">{body}</g>' if group else body
 
@@ -240,7 +240,7 @@ class Axes:
         self.y.add(np.array([y]))
         self._add(
             z,
-            lambda: self._path(
+            lambda: styled_path(
                 segment_data(self._to_pt_segments([[self.view_x[0], y], [self.view_x[1], y]])),
                 style,
             ),
@@ -249,10 +249,11 @@ class Axes:
         )
 
     def vline(self, x: float, style: Style, *, z: float = 1.8) -> None:
-        """A vertical line from the bottom to the top of the plot at ``x``."""
+        """A vertical line from the bottom to the top of the plot at ``x`` (in the limits)."""
+        self.x.add(np.array([x]))
         self._add(
             z,
-            lambda: self._path(
+            lambda: styled_path(
                 segment_data(self._to_pt_segments([[x, self.view_y[0]], [x, self.view_y[1]]])),
                 style,
             ),
@@ -281,7 +282,7 @@ class Axes:
             top = self._points(np.concatenate([starts, ends]), np.full(2 * n, hi))
             bottom = self._points(np.concatenate([starts, ends]), np.full(2 * n, lo))
             corners = np.stack([bottom[:n], top[:n], top[n:], bottom[n:]], axis=1)
-            return self._path(segment_data(corners, closed=True), style)
+            return styled_path(segment_data(corners, closed=True), style)
 
         self._add(z, draw, label, LegendEntry(label or "", "patch", style))
 
@@ -398,10 +399,6 @@ class Axes:
         points = np.concatenate([self._points(x, y) for x, y in self.drawn_xy])
         out: FloatArray = points[np.isfinite(points).all(axis=1)]
         return out
-
-    @staticmethod
-    def _path(data: str, style: Style) -> str:
-        return styled_path(data, style)
 
     def drawn_marks(self) -> list[str]:
         """The marks' SVG, in order of depth (then of drawing)."""

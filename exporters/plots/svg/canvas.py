@@ -37,6 +37,7 @@ from exporters.plots.svg.draw import (
     styled_path,
     svg_text,
     text_box,
+    text_point,
     u,
 )
 from exporters.plots.svg.metrics import fit_text, text_width_pt
@@ -320,15 +321,13 @@ class Figure:
             if text.circle:
                 parts.append(circled(text, at, boxes))
                 continue
-            box = text_box(text, at)
-            anchor_x = {"start": box.left, "middle": box.left + 0.5 * box.width, "end": box.right}
             parts.append(
                 svg_text(
                     text.string,
-                    anchor_x[text.anchor],
-                    box.bottom,
+                    *text_point(text, at),
                     size_pt=text.size_pt,
                     anchor=text.anchor,
+                    baseline=text.baseline,
                     colour=text.colour,
                     bold=text.bold,
                     boxes=boxes,

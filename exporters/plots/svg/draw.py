@@ -265,18 +265,39 @@ def marker_path(points: FloatArray, shape: str, size_pt: float) -> str:
     return (f"M{{}} {{}}{arcs}" * len(xy)).format(*xy.ravel().tolist())
 
 
+def _extent(
+    string: str, size_pt: float, anchor: str, baseline: str, *, bold: bool
+) -> tuple[float, float, float]:
+    """How a line of text lies about its anchor point, points.
+
+    Returns:
+        ``(width, along, across)``: its width (DejaVu's advance widths); where it starts
+        along its line from the point (``anchor``: the point is its start, middle or end);
+        where its baseline lies across from the point (``baseline``: the point is the
+        bottom, middle or top edge of its box, ascent plus descent high).
+    """
+    width = text_width_pt(string, size_pt, bold=bold)
+    along = {"start": 0.0, "middle": -0.5, "end": -1.0}[anchor] * width
+    across = {"bottom": -_DESCENT, "middle": 0.5 - _DESCENT, "top": _ASCENT}[baseline] * size_pt
+    return width, along, across
+
+
+def text_point(text: Text, at: tuple[float, float]) -> tuple[float, float]:
+    """Where an axes' text is set: its point ``at`` (points) moved by its offset (up is +)."""
+    return at[0] + text.offset_pt[0], at[1] - text.offset_pt[1]
+
+
 def text_box(text: Text, at: tuple[float, float]) -> Box:
     """The box a text takes when its anchor point is ``at`` (points), as the SVG sets it."""
-    width = text_width_pt(text.string, text.size_pt, bold=text.bold)
-    x, y = at[0] + text.offset_pt[0], at[1] - text.offset_pt[1]
-    left = {"start": x, "middle": x - 0.5 * width, "end": x - width}[text.anchor]
+    x, y = text_point(text, at)
+    width, along, across = _extent(
+        text.string, text.size_pt, text.anchor, text.baseline, bold=text.bold
+    )
     height = (_ASCENT + _DESCENT) * text.size_pt
-    top = {"bottom": y - height, "middle": y - 0.5 * height, "top": y}[text.baseline]
     if text.circle:
-        pad = 0.25 * text.size_pt
-        side = max(width, height) + 2 * pad
+        side = max(width, height) + 0.5 * text.size_pt  # a quarter of the size's pad round
         return Box(x - 0.5 * side, y - 0.5 * side, side, side)
-    return Box(left, top, width, height)
+    return Box(x + along, y + across - _ASCENT * text.size_pt, width, height)
 
 
 def svg_text(
@@ -298,16 +319,14 @@ def svg_text(
     ``baseline="bottom"`` puts its right edge at ``x``, ``"top"`` its left edge. ``boxes``
     receives the box the text takes.
     """
-    shift = {"bottom": -_DESCENT, "middle": 0.5 - _DESCENT, "top": _ASCENT}[baseline]
-    width = text_width_pt(string, size_pt, bold=bold)
+    width, along, across = _extent(string, size_pt, anchor, baseline, bold=bold)
     thick = (_ASCENT + _DESCENT) * size_pt
-    along = {"start": 0.0, "middle": -0.5, "end": -1.0}[anchor] * width
     if rotate:  # the text runs up from y; the baseline is a vertical line at x_pt
-        x_pt, y_pt = x + shift * size_pt, y
+        x_pt, y_pt = x + across, y
         transform = f' transform="rotate(-90 {u(x_pt)} {u(y_pt)})"'
         box = Box(x_pt - _ASCENT * size_pt, y - along - width, thick, width)
     else:
-        x_pt, y_pt = x, y + shift * size_pt
+        x_pt, y_pt = x, y + across
         transform = ""
         box = Box(x + along, y_pt - _ASCENT * size_pt, width, thick)
     if boxes is not None:
