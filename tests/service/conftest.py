@@ -14,10 +14,11 @@ from __future__ import annotations
 import contextlib
 import json
 import re
+import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -51,6 +52,7 @@ __all__ = [
     "free_port",
     "running_server",
     "service_env",
+    "start_cut_upload",
     "start_server",
     "start_worker",
     "submit",
@@ -58,6 +60,7 @@ __all__ = [
     "upload",
     "wait_for_evaluation",
     "wait_ready",
+    "wait_until",
 ]
 READY_TIMEOUT_S = 90.0  # a loaded CI machine imports the app in tens of seconds
 EVALUATION_TIMEOUT_S = 180.0
@@ -175,6 +178,49 @@ def start_server(
     url = f"http://127.0.0.1:{port}"
     wait_ready(url, service)
     return LiveServer(url=url, api_key=api_key, data_dir=data_dir, env=full_env, service=service)
+
+
+def start_cut_upload(
+    server: LiveServer,
+    body: bytes,
+    *,
+    declared: int,
+    filename: str,
+    content_type: str = "application/octet-stream",
+    timeout_s: float = 30,
+) -> socket.socket:
+    """Start ``POST /datasets`` of a file that never ends: send its first bytes, keep it open.
+
+    The form declares ``declared`` bytes (its Content-Length) and sends the part's headers
+    and ``body``; the caller closes the connection (the client went away) or kills the
+    server, then looks at what the service kept.
+    """
+    boundary = "loceval-cut-boundary"
+    head = (
+        f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="{filename}"\r\n'
+        f"Content-Type: {content_type}\r\n\r\n"
+    ).encode()
+    port = int(server.url.rsplit(":", 1)[1])
+    request = (
+        "POST /api/v1/datasets HTTP/1.1\r\n"
+        f"Host: 127.0.0.1:{port}\r\n"
+        f"Authorization: Bearer {server.api_key}\r\n"
+        f"Content-Type: multipart/form-data; boundary={boundary}\r\n"
+        f"Content-Length: {declared}\r\n\r\n"
+    ).encode()
+    sock = socket.create_connection(("127.0.0.1", port), timeout=timeout_s)
+    sock.sendall(request + head + body)
+    return sock
+
+
+def wait_until(condition: Callable[[], object], timeout: float) -> bool:
+    """Whether ``condition()`` turns true within ``timeout`` seconds (asked every 50 ms)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return bool(condition())
 
 
 def start_worker(data_dir: Path, env: Mapping[str, str] | None = None) -> ServiceProcess:

@@ -11,9 +11,7 @@ a data folder. The bytes fetched are counted by a relay between the service and 
 from __future__ import annotations
 
 import hashlib
-import socket
-import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +22,7 @@ import tests.bagfactory as bf
 from service.uploads import tus_hashes
 from tests.service._api_fixtures import open_api
 from tests.service.blobs.conftest import Gate, SeaweedFS, object_keys, open_multipart_uploads
-from tests.service.conftest import start_server
+from tests.service.conftest import start_cut_upload, start_server, wait_until
 from tests.service.uploads.test_tus_protocol import create, patch
 
 IMAGES = 120
@@ -177,15 +175,6 @@ def test_a_resumable_upload_keeps_the_held_messages_too(
     assert unheld["estimates"] == result["estimates"]
 
 
-def _wait_until(condition: Callable[[], object], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return bool(condition())
-
-
 def test_a_connection_dropped_mid_upload_leaves_no_object_and_no_open_upload(
     seaweedfs: SeaweedFS, bucket: str, tmp_path: Path
 ) -> None:
@@ -195,25 +184,12 @@ def test_a_connection_dropped_mid_upload_leaves_no_object_and_no_open_upload(
     env = {"LOCEVAL_BLOB_URL": f"s3://{bucket}/site", **seaweedfs.env()}
     server = start_server(tmp_path / "data", env=env, args=("--no-consumer",))
     try:
-        boundary = "loceval-dropped-boundary"
-        head = (
-            f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="big.mcap"\r\n'
-            "Content-Type: application/octet-stream\r\n\r\n"
-        ).encode()
-        port = int(server.url.rsplit(":", 1)[1])
-        request = (
-            "POST /api/v1/datasets HTTP/1.1\r\n"
-            f"Host: 127.0.0.1:{port}\r\n"
-            f"Authorization: Bearer {server.api_key}\r\n"
-            f"Content-Type: multipart/form-data; boundary={boundary}\r\n"
-            f"Content-Length: {160 << 20}\r\n\r\n"
-        ).encode()
-        with socket.create_connection(("127.0.0.1", port), timeout=30) as sock:
-            sock.sendall(request + head + np.random.default_rng(11).bytes(40 << 20))
-            assert _wait_until(lambda: open_multipart_uploads(seaweedfs, bucket), 60), (
+        body = np.random.default_rng(11).bytes(40 << 20)
+        with start_cut_upload(server, body, declared=160 << 20, filename="big.mcap"):
+            assert wait_until(lambda: open_multipart_uploads(seaweedfs, bucket), 60), (
                 "the upload never reached the bucket"
             )
-        assert _wait_until(lambda: not open_multipart_uploads(seaweedfs, bucket), 60), (
+        assert wait_until(lambda: not open_multipart_uploads(seaweedfs, bucket), 60), (
             "the dropped upload's multipart upload stayed open"
         )
         leftovers = [k for k in object_keys(seaweedfs, bucket) if "/instances/" not in k]

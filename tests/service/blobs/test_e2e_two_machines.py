@@ -33,12 +33,14 @@ from tests.service.conftest import (
     ServiceProcess,
     assert_same_ate,
     cli_json,
+    start_cut_upload,
     start_server,
     start_worker,
     submit,
     succeeded,
     upload,
     wait_for_evaluation,
+    wait_until,
 )
 
 pytestmark = [pytest.mark.slow]
@@ -152,33 +154,12 @@ def _wait_for_run(client: Any, schedule_id: str, timeout: float = 240) -> dict[s
     pytest.fail(f"no finished run of {schedule_id} within {timeout} s: {runs}")
 
 
-def _wait_until(condition: Any, timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return bool(condition())
-
-
 def _start_upload(server: LiveServer, size: int) -> socket.socket:
     """Send the first ``size`` bytes of a much larger upload and keep the connection open."""
-    boundary = "loceval-killed-boundary"
-    head = (
-        f'--{boundary}\r\nContent-Disposition: form-data; name="file"; filename="big.txt"\r\n'
-        "Content-Type: text/plain\r\n\r\n"
-    ).encode()
-    port = int(server.url.rsplit(":", 1)[1])
-    request = (
-        "POST /api/v1/datasets HTTP/1.1\r\n"
-        f"Host: 127.0.0.1:{port}\r\n"
-        f"Authorization: Bearer {server.api_key}\r\n"
-        f"Content-Type: multipart/form-data; boundary={boundary}\r\n"
-        f"Content-Length: {size * 4}\r\n\r\n"
-    ).encode()
-    sock = socket.create_connection(("127.0.0.1", port), timeout=30)
-    sock.sendall(request + head + np.random.default_rng(7).bytes(size))
-    return sock
+    body = np.random.default_rng(7).bytes(size)
+    return start_cut_upload(
+        server, body, declared=size * 4, filename="big.txt", content_type="text/plain"
+    )
 
 
 def test_api_killed_mid_upload_leaves_no_object_and_no_open_upload(
@@ -190,7 +171,7 @@ def test_api_killed_mid_upload_leaves_no_object_and_no_open_upload(
     sock: socket.socket | None = None
     try:
         sock = _start_upload(first, 40 << 20)
-        assert _wait_until(lambda: open_multipart_uploads(seaweedfs, bucket), 60), (
+        assert wait_until(lambda: open_multipart_uploads(seaweedfs, bucket), 60), (
             "the upload never reached the bucket"
         )
     finally:
@@ -255,7 +236,7 @@ def test_a_second_api_on_the_same_host_keeps_the_first_ones_upload(
         ).encode()
         with socket.create_connection(("127.0.0.1", port), timeout=120) as sock:
             sock.sendall(request + body[: 10 << 20])
-            assert _wait_until(lambda: open_multipart_uploads(seaweedfs, bucket), 60), (
+            assert wait_until(lambda: open_multipart_uploads(seaweedfs, bucket), 60), (
                 "the upload never reached the bucket"
             )
             second = start_server(
@@ -342,7 +323,7 @@ def test_a_store_outage_puts_the_job_back_and_it_succeeds_once_the_store_returns
                 assert seen["status"] in {"queued", "running"}, seen  # never failed
                 return "object store could not be reached" in seen["progress"]["stage"]
 
-            assert _wait_until(put_back, timeout=120), client.get(url).json()
+            assert wait_until(put_back, timeout=120), client.get(url).json()
             waiting = client.get(url).json()
             assert waiting["attempts"] == 0  # the outage's run is not counted
             gate.open()

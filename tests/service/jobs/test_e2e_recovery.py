@@ -10,9 +10,7 @@ from __future__ import annotations
 
 import datetime as dt
 import signal
-import socket
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -24,11 +22,13 @@ from service.db import Evaluation, EvaluationStatus, create_db_engine, make_sess
 from tests.service.conftest import (
     LiveServer,
     running_server,
+    start_cut_upload,
     start_server,
     submit,
     succeeded,
     upload,
     wait_for_evaluation,
+    wait_until,
 )
 
 pytestmark = [pytest.mark.slow]
@@ -191,40 +191,23 @@ def _incoming_parts(server: LiveServer) -> list[Path]:
     return sorted((server.data_dir / "incoming").glob("*.part"))
 
 
-def _wait_until(condition: Callable[[], object], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return bool(condition())
-
-
 def test_upload_cut_off_mid_body_leaves_nothing(live_server: LiveServer) -> None:
     """A client that vanishes mid-upload leaves no dataset and no .part file behind."""
-    boundary = "loceval-cut-off-boundary"
-    head = (
-        f"--{boundary}\r\n"
-        'Content-Disposition: form-data; name="file"; filename="cut.txt"\r\n'
-        "Content-Type: text/plain\r\n\r\n"
-    ).encode()
     lines = b"".join(f"{1000 + k * 0.01:.2f} {k} 0 0 0 0 0 1\n".encode() for k in range(80_000))
-    sent = head + lines  # ~2.5 MB: the server writes it to incoming/ in 1 MB batches
-    declared = len(sent) + 10_000_000
-    port = int(live_server.url.rsplit(":", 1)[1])
-    request = (
-        "POST /api/v1/datasets HTTP/1.1\r\n"
-        f"Host: 127.0.0.1:{port}\r\n"
-        f"Authorization: Bearer {live_server.api_key}\r\n"
-        f"Content-Type: multipart/form-data; boundary={boundary}\r\n"
-        f"Content-Length: {declared}\r\n\r\n"
-    ).encode()
-    with socket.create_connection(("127.0.0.1", port), timeout=10) as sock:
-        sock.sendall(request + sent)
-        assert _wait_until(lambda: _incoming_parts(live_server), 10), (
+    # ~2.5 MB: the server writes it to incoming/ in 1 MB batches
+    declared = len(lines) + 10_000_000
+    with start_cut_upload(
+        live_server,
+        lines,
+        declared=declared,
+        filename="cut.txt",
+        content_type="text/plain",
+        timeout_s=10,
+    ):
+        assert wait_until(lambda: _incoming_parts(live_server), 10), (
             "the upload never reached incoming/"
         )
-    assert _wait_until(lambda: not _incoming_parts(live_server), 10), _incoming_parts(live_server)
+    assert wait_until(lambda: not _incoming_parts(live_server), 10), _incoming_parts(live_server)
     with live_server.client() as client:
         assert client.get("/api/v1/datasets").json() == {"items": [], "count": 0}
         assert client.get("/readyz").status_code == 200
